@@ -1,0 +1,425 @@
+"""Pinhole cameras in the project convention, and the conversions every loader needs.
+
+Convention (shared/ARCHITECTURE.md): OpenCV camera axes (x right, y down, z forward); extrinsics
+stored world-to-camera as a 4×4 matrix ``w2c`` (COLMAP's and gsplat's ``viewmats``); ``K`` in
+pixels with pixel centres at +0.5 (pixel (i, j) covers [j, j+1) × [i, i+1) and is sampled at its
+centre).  Loaders convert at their boundary with the constructors here, nowhere else.
+
+Numbers are float64 numpy arrays: poses are small and precision matters more than speed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from setdiff_bench.errors import CameraError
+
+QuaternionOrder = Literal["wxyz", "xyzw"]
+ORTHONORMAL_TOLERANCE = 1e-4
+QUATERNION_NORM_TOLERANCE = 1e-3
+OPENGL_TO_OPENCV = np.diag([1.0, -1.0, -1.0, 1.0])
+
+
+@dataclass(frozen=True)
+class Distortion:
+    """Lens distortion kept on a camera; ``model`` follows COLMAP names (``OPENCV``: k1 k2 p1 p2)."""
+
+    model: str
+    params: tuple[float, ...]
+
+    def is_zero(self) -> bool:
+        return all(abs(p) == 0.0 for p in self.params)
+
+
+@dataclass(frozen=True, eq=False)
+class Camera:
+    """A pinhole camera (optionally with OpenCV distortion).
+
+    Attributes:
+        K: ``(3, 3)`` intrinsics in pixels, ``[[fx, s, cx], [0, fy, cy], [0, 0, 1]]``.
+        w2c: ``(4, 4)`` world-to-camera rigid transform, OpenCV axes.
+        width, height: image size in pixels.
+        distortion: ``None`` for an ideal pinhole.
+        source: where the camera came from (file and record), named in every error.
+    """
+
+    K: np.ndarray
+    w2c: np.ndarray
+    width: int
+    height: int
+    distortion: Distortion | None = None
+    source: str = field(default="", compare=False)
+
+    def __post_init__(self) -> None:
+        K = np.array(self.K, dtype=np.float64, copy=True)
+        w2c = np.array(self.w2c, dtype=np.float64, copy=True)
+        where = self.source or "camera"
+        if K.shape != (3, 3):
+            raise CameraError(f"intrinsics must be 3x3, got shape {K.shape}", where)
+        if w2c.shape == (3, 4):
+            w2c = np.vstack([w2c, [0.0, 0.0, 0.0, 1.0]])
+        if w2c.shape != (4, 4):
+            raise CameraError(f"extrinsics must be 4x4 (or 3x4), got shape {w2c.shape}", where)
+        if not (np.isfinite(K).all() and np.isfinite(w2c).all()):
+            raise CameraError("camera has NaN or infinite values", where)
+        if not np.allclose(w2c[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
+            raise CameraError(f"extrinsics last row must be [0 0 0 1], got {w2c[3].tolist()}", where)
+        check_rotation(w2c[:3, :3], where)
+        if not (K[0, 0] > 0 and K[1, 1] > 0):
+            raise CameraError(f"focal lengths must be positive, got fx={K[0, 0]:g} fy={K[1, 1]:g}", where)
+        if not np.allclose(K[2], [0.0, 0.0, 1.0]) or K[1, 0] != 0.0:
+            raise CameraError(f"intrinsics must be upper triangular with last row [0 0 1], got {K.tolist()}", where)
+        if int(self.width) != self.width or int(self.height) != self.height or self.width <= 0 or self.height <= 0:
+            raise CameraError(f"image size must be positive integers, got {self.width}x{self.height}", where)
+        K.setflags(write=False)
+        w2c.setflags(write=False)
+        object.__setattr__(self, "K", K)
+        object.__setattr__(self, "w2c", w2c)
+        object.__setattr__(self, "width", int(self.width))
+        object.__setattr__(self, "height", int(self.height))
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def R(self) -> np.ndarray:
+        """``(3, 3)`` world-to-camera rotation."""
+        return self.w2c[:3, :3]
+
+    @property
+    def t(self) -> np.ndarray:
+        """``(3,)`` world-to-camera translation."""
+        return self.w2c[:3, 3]
+
+    @property
+    def c2w(self) -> np.ndarray:
+        """``(4, 4)`` camera-to-world transform, OpenCV axes."""
+        return invert_rigid(self.w2c)
+
+    @property
+    def center(self) -> np.ndarray:
+        """``(3,)`` camera centre in world coordinates (metres or the scene's unit)."""
+        return -self.R.T @ self.t
+
+    @property
+    def view_direction(self) -> np.ndarray:
+        """``(3,)`` unit optical axis (camera +z) in world coordinates."""
+        return self.R[2].copy()
+
+    @property
+    def fx(self) -> float:
+        return float(self.K[0, 0])
+
+    @property
+    def fy(self) -> float:
+        return float(self.K[1, 1])
+
+    @property
+    def cx(self) -> float:
+        return float(self.K[0, 2])
+
+    @property
+    def cy(self) -> float:
+        return float(self.K[1, 2])
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """``(height, width)``."""
+        return self.height, self.width
+
+    # ------------------------------------------------------------------ constructors
+    @classmethod
+    def from_c2w(cls, c2w: np.ndarray, K: np.ndarray, width: int, height: int, *,
+                 distortion: Distortion | None = None, source: str = "") -> Camera:
+        """From an OpenCV-axes camera-to-world ``(4, 4)`` or ``(3, 4)`` matrix."""
+        c2w = np.asarray(c2w, dtype=np.float64)
+        if c2w.shape == (3, 4):
+            c2w = np.vstack([c2w, [0.0, 0.0, 0.0, 1.0]])
+        if c2w.shape != (4, 4):
+            raise CameraError(f"camera-to-world must be 4x4, got shape {c2w.shape}", source or "camera")
+        if not np.isfinite(c2w).all():
+            raise CameraError("camera has NaN or infinite values", source or "camera")
+        check_rotation(c2w[:3, :3], source or "camera")
+        return cls(K, invert_rigid(c2w), width, height, distortion, source)
+
+    @classmethod
+    def from_opengl_c2w(cls, c2w: np.ndarray, K: np.ndarray, width: int, height: int, *,
+                        distortion: Distortion | None = None, source: str = "") -> Camera:
+        """From an OpenGL/Blender/nerfstudio camera-to-world (x right, y up, z back)."""
+        c2w = np.asarray(c2w, dtype=np.float64)
+        if c2w.shape == (3, 4):
+            c2w = np.vstack([c2w, [0.0, 0.0, 0.0, 1.0]])
+        if c2w.shape != (4, 4):
+            raise CameraError(f"camera-to-world must be 4x4, got shape {c2w.shape}", source or "camera")
+        return cls.from_c2w(c2w @ OPENGL_TO_OPENCV, K, width, height, distortion=distortion, source=source)
+
+    @classmethod
+    def from_quaternion(cls, quaternion: Sequence[float], translation: Sequence[float], K: np.ndarray,
+                        width: int, height: int, *, order: QuaternionOrder,
+                        direction: Literal["w2c", "c2w"] = "w2c", distortion: Distortion | None = None,
+                        source: str = "") -> Camera:
+        """From a rotation quaternion and a translation.
+
+        Args:
+            quaternion: four numbers in the named ``order`` (``"wxyz"`` scalar-first: COLMAP,
+                nuScenes; ``"xyzw"`` scalar-last: Para-Lane ``lidar_poses.txt``, scipy).
+            translation: ``(3,)``.
+            direction: whether ``(q, t)`` map world→camera (COLMAP) or camera→world.
+        """
+        R = quaternion_to_matrix(quaternion, order=order, source=source or "camera")
+        T = np.eye(4)
+        T[:3, :3] = R
+        T[:3, 3] = np.asarray(translation, dtype=np.float64)
+        if direction == "c2w":
+            return cls.from_c2w(T, K, width, height, distortion=distortion, source=source)
+        return cls(K, T, width, height, distortion, source)
+
+    @classmethod
+    def from_pycolmap(cls, image: object, camera: object, *, source: str = "") -> Camera:
+        """From a ``pycolmap.Image`` and its ``pycolmap.Camera`` (PINHOLE, SIMPLE_PINHOLE, OPENCV, ...).
+
+        Distortion parameters are kept on the camera (never silently dropped); the undistortion
+        policy is the loader's (see ``setdiff_bench.loaders.colmap``).
+        """
+        pose = image.cam_from_world() if callable(image.cam_from_world) else image.cam_from_world
+        w2c = np.vstack([np.asarray(pose.matrix(), dtype=np.float64), [0.0, 0.0, 0.0, 1.0]])
+        K, distortion = intrinsics_from_colmap(camera.model.name, list(camera.params), source=source)
+        return cls(K, w2c, int(camera.width), int(camera.height), distortion, source)
+
+    # ------------------------------------------------------------------ derived cameras
+    def resized(self, width: int, height: int) -> Camera:
+        """The same camera for an image resampled to ``width × height`` (K scaled per axis)."""
+        sx, sy = width / self.width, height / self.height
+        K = self.K.copy()
+        K[0, :] *= sx
+        K[1, :] *= sy
+        return Camera(K, self.w2c, width, height, self.distortion, self.source)
+
+    def cropped(self, left: int, top: int, width: int, height: int) -> Camera:
+        """The camera of the crop ``[left, left + width) × [top, top + height)``."""
+        if left < 0 or top < 0 or left + width > self.width or top + height > self.height:
+            raise CameraError(f"crop {left},{top},{width}x{height} outside image {self.width}x{self.height}",
+                              self.source or "camera")
+        K = self.K.copy()
+        K[0, 2] -= left
+        K[1, 2] -= top
+        return Camera(K, self.w2c, width, height, self.distortion, self.source)
+
+    def with_w2c(self, w2c: np.ndarray) -> Camera:
+        """Same intrinsics, new extrinsics."""
+        return Camera(self.K, w2c, self.width, self.height, self.distortion, self.source)
+
+    def with_world_transform(self, rotation: np.ndarray, translation: np.ndarray, scale: float) -> Camera:
+        """The camera after the world is mapped by ``x' = scale · (rotation @ x + translation)``.
+
+        Camera-frame coordinates scale by the same factor, so pixel projections are unchanged.
+        """
+        rotation = np.asarray(rotation, dtype=np.float64)
+        translation = np.asarray(translation, dtype=np.float64)
+        R_new = self.R @ rotation.T
+        t_new = scale * (self.t - R_new @ translation)
+        w2c = np.eye(4)
+        w2c[:3, :3] = R_new
+        w2c[:3, 3] = t_new
+        return self.with_w2c(w2c)
+
+    # ------------------------------------------------------------------ projection
+    def world_to_camera(self, points: np.ndarray) -> np.ndarray:
+        """``(P, 3)`` world points → ``(P, 3)`` camera-frame points."""
+        points = np.asarray(points, dtype=np.float64)
+        return points @ self.R.T + self.t
+
+    def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Project world points to pixels.
+
+        Args:
+            points: ``(P, 3)`` world coordinates.
+
+        Returns:
+            ``uv`` ``(P, 2)`` continuous pixel coordinates (pixel (i, j)'s centre is (j + 0.5, i + 0.5)),
+            and ``depth`` ``(P,)`` camera-frame z.  Points behind the camera get NaN pixels.
+        """
+        cam = self.world_to_camera(points)
+        z = cam[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xn = np.where(z > 0, cam[:, 0] / z, np.nan)
+            yn = np.where(z > 0, cam[:, 1] / z, np.nan)
+        if self.distortion is not None and not self.distortion.is_zero():
+            xn, yn = apply_distortion(self.distortion, xn, yn)
+        u = self.K[0, 0] * xn + self.K[0, 1] * yn + self.K[0, 2]
+        v = self.K[1, 1] * yn + self.K[1, 2]
+        return np.stack([u, v], axis=1), z
+
+    def unproject(self, uv: np.ndarray, depth: np.ndarray) -> np.ndarray:
+        """Pixels with camera-frame depth z → ``(P, 3)`` world points (distortion inverted if present)."""
+        uv = np.asarray(uv, dtype=np.float64)
+        depth = np.asarray(depth, dtype=np.float64)
+        xn, yn = self.pixel_to_normalized(uv)
+        cam = np.stack([xn * depth, yn * depth, depth], axis=1)
+        return (cam - self.t) @ self.R
+
+    def pixel_to_normalized(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pixel coordinates → normalised image-plane coordinates (x/z, y/z), undistorting if needed."""
+        uv = np.asarray(uv, dtype=np.float64)
+        yn = (uv[:, 1] - self.K[1, 2]) / self.K[1, 1]
+        xn = (uv[:, 0] - self.K[0, 2] - self.K[0, 1] * yn) / self.K[0, 0]
+        if self.distortion is not None and not self.distortion.is_zero():
+            xn, yn = invert_distortion(self.distortion, xn, yn)
+        return xn, yn
+
+    def describe(self) -> str:
+        return f"Camera({self.width}x{self.height}, f=({self.fx:.2f},{self.fy:.2f}), c={self.center.round(3).tolist()})"
+
+
+# ---------------------------------------------------------------------- helpers
+def check_rotation(R: np.ndarray, where: str) -> None:
+    """Raise :class:`CameraError` unless ``R`` is orthonormal within 1e-4 with determinant +1."""
+    R = np.asarray(R, dtype=np.float64)
+    if not np.isfinite(R).all():
+        raise CameraError("rotation has NaN or infinite values", where)
+    error = float(np.abs(R @ R.T - np.eye(3)).max())
+    if error > ORTHONORMAL_TOLERANCE:
+        raise CameraError(f"rotation is not orthonormal (max |R·Rᵀ − I| = {error:.2e} > {ORTHONORMAL_TOLERANCE:g})",
+                          where)
+    det = float(np.linalg.det(R))
+    if det < 0:
+        raise CameraError(f"rotation has determinant {det:.4f} (a reflection, expected +1)", where)
+
+
+def invert_rigid(T: np.ndarray) -> np.ndarray:
+    """Inverse of a ``(4, 4)`` rigid transform ``[R t; 0 1]`` → ``[Rᵀ −Rᵀt; 0 1]``."""
+    T = np.asarray(T, dtype=np.float64)
+    out = np.eye(4)
+    out[:3, :3] = T[:3, :3].T
+    out[:3, 3] = -T[:3, :3].T @ T[:3, 3]
+    return out
+
+
+def quaternion_to_matrix(q: Sequence[float], *, order: QuaternionOrder, source: str = "quaternion",
+                         tolerance: float = QUATERNION_NORM_TOLERANCE) -> np.ndarray:
+    """Unit quaternion → ``(3, 3)`` rotation.
+
+    Args:
+        q: four numbers; ``order`` names their layout explicitly (``"wxyz"`` or ``"xyzw"``).
+        tolerance: largest accepted deviation of the norm from 1 (the input is then renormalised).
+
+    Raises:
+        CameraError: wrong length, non-finite, or norm off by more than ``tolerance``.
+    """
+    q = np.asarray(q, dtype=np.float64).reshape(-1)
+    if q.shape != (4,):
+        raise CameraError(f"quaternion must have 4 numbers, got {q.size}", source)
+    if not np.isfinite(q).all():
+        raise CameraError("quaternion has NaN or infinite values", source)
+    if order == "xyzw":
+        x, y, z, w = q
+    elif order == "wxyz":
+        w, x, y, z = q
+    else:
+        raise ValueError(f"unknown quaternion order {order!r}; use 'wxyz' or 'xyzw'")
+    norm = float(np.sqrt(w * w + x * x + y * y + z * z))
+    if abs(norm - 1.0) > tolerance:
+        raise CameraError(f"quaternion ({order}) has norm {norm:.6f}, not 1 within {tolerance:g}", source)
+    w, x, y, z = w / norm, x / norm, y / norm, z / norm
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def matrix_to_quaternion(R: np.ndarray, *, order: QuaternionOrder) -> np.ndarray:
+    """``(3, 3)`` rotation → unit quaternion with non-negative scalar part, in the named order."""
+    R = np.asarray(R, dtype=np.float64)
+    trace = np.trace(R)
+    if trace > 0:
+        s = 2.0 * np.sqrt(trace + 1.0)
+        w, x, y, z = 0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s
+    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
+        w, x, y, z = (R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s
+    elif R[1, 1] > R[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2])
+        w, x, y, z = (R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s
+    else:
+        s = 2.0 * np.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
+        w, x, y, z = (R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s
+    q = np.array([w, x, y, z])
+    q /= np.linalg.norm(q)
+    if q[0] < 0:
+        q = -q
+    return q if order == "wxyz" else q[[1, 2, 3, 0]]
+
+
+def intrinsics_matrix(fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
+    """``(3, 3)`` pinhole K."""
+    return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+
+
+def intrinsics_from_colmap(model: str, params: Sequence[float], *, source: str = "") -> tuple[np.ndarray, Distortion | None]:
+    """COLMAP camera model + params → ``(K, distortion)``.
+
+    Supported: SIMPLE_PINHOLE (f cx cy), PINHOLE (fx fy cx cy), SIMPLE_RADIAL (f cx cy k),
+    RADIAL (f cx cy k1 k2), OPENCV (fx fy cx cy k1 k2 p1 p2).
+    """
+    p = [float(v) for v in params]
+    counts = {"SIMPLE_PINHOLE": 3, "PINHOLE": 4, "SIMPLE_RADIAL": 4, "RADIAL": 5, "OPENCV": 8}
+    if model not in counts:
+        raise CameraError(f"unsupported COLMAP camera model {model}; supported: {', '.join(counts)}",
+                          source or "camera")
+    if len(p) != counts[model]:
+        raise CameraError(f"{model} needs {counts[model]} parameters, got {len(p)}", source or "camera")
+    if model == "SIMPLE_PINHOLE":
+        return intrinsics_matrix(p[0], p[0], p[1], p[2]), None
+    if model == "PINHOLE":
+        return intrinsics_matrix(*p), None
+    if model == "SIMPLE_RADIAL":
+        return intrinsics_matrix(p[0], p[0], p[1], p[2]), Distortion("OPENCV", (p[3], 0.0, 0.0, 0.0))
+    if model == "RADIAL":
+        return intrinsics_matrix(p[0], p[0], p[1], p[2]), Distortion("OPENCV", (p[3], p[4], 0.0, 0.0))
+    return intrinsics_matrix(*p[:4]), Distortion("OPENCV", tuple(p[4:8]))
+
+
+def apply_distortion(distortion: Distortion, xn: np.ndarray, yn: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """OpenCV radial-tangential distortion (k1 k2 p1 p2) of normalised coordinates."""
+    k1, k2, p1, p2 = (list(distortion.params) + [0.0] * 4)[:4]
+    r2 = xn * xn + yn * yn
+    radial = 1.0 + k1 * r2 + k2 * r2 * r2
+    xd = xn * radial + 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn)
+    yd = yn * radial + p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn
+    return xd, yd
+
+
+def invert_distortion(distortion: Distortion, xd: np.ndarray, yd: np.ndarray,
+                      iterations: int = 20) -> tuple[np.ndarray, np.ndarray]:
+    """Undo :func:`apply_distortion` by fixed-point iteration (as OpenCV's ``undistortPoints``)."""
+    k1, k2, p1, p2 = (list(distortion.params) + [0.0] * 4)[:4]
+    xn, yn = xd.copy(), yd.copy()
+    for _ in range(iterations):
+        r2 = xn * xn + yn * yn
+        radial = 1.0 + k1 * r2 + k2 * r2 * r2
+        dx = 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn)
+        dy = p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn
+        xn = (xd - dx) / radial
+        yn = (yd - dy) / radial
+    return xn, yn
+
+
+def look_at(center: Sequence[float], target: Sequence[float], up: Sequence[float] = (0.0, 0.0, 1.0)) -> np.ndarray:
+    """``(4, 4)`` OpenCV world-to-camera matrix of a camera at ``center`` looking at ``target``.
+
+    ``up`` is the world's up direction; the camera's −y axis points along its projection.
+    """
+    center = np.asarray(center, dtype=np.float64)
+    forward = np.asarray(target, dtype=np.float64) - center
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, np.asarray(up, dtype=np.float64))
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    R = np.stack([right, down, forward])  # rows: camera axes in world coordinates
+    w2c = np.eye(4)
+    w2c[:3, :3] = R
+    w2c[:3, 3] = -R @ center
+    return w2c

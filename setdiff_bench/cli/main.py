@@ -1,0 +1,67 @@
+"""Entry point of the ``setdiff-bench`` console script.
+
+Every :class:`~setdiff_bench.errors.SetDiffBenchError` becomes one line on stderr
+(``setdiff-bench <verb>: error: <file>: <problem>``) and exit code 2, with no traceback; argparse
+usage errors also exit 2.  Set ``SETDIFF_DEBUG=1`` to see tracebacks.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import pkgutil
+import sys
+from collections.abc import Sequence
+from types import ModuleType
+
+import setdiff_bench.cli as cli_package
+from setdiff_bench import __version__
+from setdiff_bench.errors import SetDiffBenchError
+
+
+def verb_modules() -> list[ModuleType]:
+    """Every module in ``setdiff_bench.cli`` that defines a verb, sorted by verb name."""
+    modules = []
+    for info in pkgutil.iter_modules(cli_package.__path__):
+        if info.name.startswith("_") or info.name == "main":
+            continue
+        module = importlib.import_module(f"setdiff_bench.cli.{info.name}")
+        if hasattr(module, "VERB") and hasattr(module, "run"):
+            modules.append(module)
+    return sorted(modules, key=lambda m: m.VERB)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="setdiff-bench",
+        description="Benchmark and enhance 3D Gaussian Splatting renders far from the recorded trajectory.",
+    )
+    parser.add_argument("--version", action="version", version=f"setdiff-bench {__version__}")
+    sub = parser.add_subparsers(dest="verb", metavar="VERB", required=True)
+    for module in verb_modules():
+        verb_parser = sub.add_parser(module.VERB, help=module.HELP, description=getattr(module, "DESCRIPTION",
+                                                                                            module.HELP))
+        module.add_arguments(verb_parser)
+        verb_parser.set_defaults(_run=module.run)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Parse ``argv`` and run the verb; returns the process exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args._run(args) or 0)
+    except SetDiffBenchError as error:
+        if os.environ.get("SETDIFF_DEBUG"):
+            raise
+        print(f"setdiff-bench {args.verb}: error: {error.one_line()}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"setdiff-bench {args.verb}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Rasterisation backends: ``torch_ref`` (pure PyTorch, any device) and ``gsplat`` (CUDA)."""

@@ -1,0 +1,187 @@
+"""The shared vocabulary of the data path: Camera, Frame, Scene, ViewSet, Packet.
+
+Shapes follow shared/ARCHITECTURE.md: images are float32 ``(V, 3, H, W)`` in [0, 1]; C-maps
+``(V, 3, H, W)`` in the packet's normalised frame; alphas ``(V, 1, H, W)`` in [0, 1]; masks
+bool ``(V, 1, H, W)`` (True = evaluate).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from setdiff_bench.cameras import Camera, Distortion
+from setdiff_bench.errors import DatasetError
+
+__all__ = ["Camera", "Distortion", "Frame", "Packet", "Scene", "ViewSet"]
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One captured image of a scene.
+
+    Attributes:
+        name: key unique within the scene (usually the image file name relative to its folder).
+        image_path: absolute path of the image file.
+        camera: the camera, project convention (OpenCV axes, world-to-camera).
+        timestamp_us: capture time in integer microseconds, or ``None`` when unknown.
+        sensor: camera channel (``CAM_FRONT``, ``front_left``, ...), ``""`` when there is one camera.
+        traversal: traversal, lane or clip identifier (``"lane0"``, ``"clip_1"``), ``""`` when unknown.
+        mask_path: evaluation mask (255 = keep, 0 = ignore), or ``None``.
+        split: the dataset's own designation (``"train"``/``"test"``) where it defines one, else ``None``.
+        metadata: loader-specific extras (e.g. nuScenes ``sample_data`` token, ``is_key_frame``).
+    """
+
+    name: str
+    image_path: Path
+    camera: Camera
+    timestamp_us: int | None = None
+    sensor: str = ""
+    traversal: str = ""
+    mask_path: Path | None = None
+    split: str | None = None
+    metadata: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A scene as a loader returns it: frames sorted deterministically, plus optional sparse points.
+
+    Attributes:
+        dataset: dataset key (``euvs``, ``paralane``, ``nuscenes``, ``dl3dv``, ``synthetic``, ...).
+        name: scene name, unique in the dataset.
+        root: the scene folder (or dataset root for table-based datasets).
+        frames: every frame, sorted by the loader's documented order.
+        points3d: ``(P, 3)`` float64 sparse points in world coordinates (SfM, LiDAR), or ``None``.
+        points_rgb: ``(P, 3)`` uint8 colours of ``points3d``, or ``None``.
+        metadata: dataset-level extras (e.g. EUVS level, lane order).
+    """
+
+    dataset: str
+    name: str
+    root: Path
+    frames: tuple[Frame, ...]
+    points3d: np.ndarray | None = None
+    points_rgb: np.ndarray | None = None
+    metadata: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        seen: set[str] = set()
+        for frame in self.frames:
+            if frame.name in seen:
+                raise DatasetError(f"duplicate frame name {frame.name!r} in scene {self.name!r}", self.root)
+            seen.add(frame.name)
+
+    def frame(self, name: str) -> Frame:
+        """The frame called ``name``."""
+        for frame in self.frames:
+            if frame.name == name:
+                return frame
+        raise DatasetError(f"scene {self.name!r} has no frame {name!r}", self.root)
+
+    @property
+    def frame_names(self) -> tuple[str, ...]:
+        return tuple(frame.name for frame in self.frames)
+
+    @property
+    def sensors(self) -> tuple[str, ...]:
+        """Distinct camera channels, in order of first appearance."""
+        return tuple(dict.fromkeys(frame.sensor for frame in self.frames))
+
+    @property
+    def traversals(self) -> tuple[str, ...]:
+        """Distinct traversals / lanes, in order of first appearance."""
+        return tuple(dict.fromkeys(frame.traversal for frame in self.frames))
+
+    def select(self, names: Sequence[str]) -> tuple[Frame, ...]:
+        """Frames in the order of ``names``."""
+        by_name = {frame.name: frame for frame in self.frames}
+        missing = [name for name in names if name not in by_name]
+        if missing:
+            raise DatasetError(f"scene {self.name!r} has no frames {missing[:5]}", self.root)
+        return tuple(by_name[name] for name in names)
+
+
+@dataclass
+class ViewSet:
+    """The views of one role (references or targets) in a packet, stacked.
+
+    Attributes:
+        names: ``V`` frame names.
+        images: ``(V, 3, H, W)`` float32 in [0, 1]: clean captures for references, 3DGS renders for targets.
+        cmaps: ``(V, 3, H, W)`` float32 C-maps (Eq. 1) in the packet's normalised frame.
+        alphas: ``(V, 1, H, W)`` float32 accumulated opacity of the render.
+        cameras: ``V`` cameras in the packet's normalised frame.
+        timestamps_us: ``V`` capture times (``None`` where unknown).
+    """
+
+    names: tuple[str, ...]
+    images: torch.Tensor
+    cmaps: torch.Tensor
+    alphas: torch.Tensor
+    cameras: tuple[Camera, ...]
+    timestamps_us: tuple[int | None, ...] = ()
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    @property
+    def K(self) -> torch.Tensor:
+        """``(V, 3, 3)`` float32 intrinsics."""
+        return torch.from_numpy(np.stack([c.K for c in self.cameras])).float()
+
+    @property
+    def w2c(self) -> torch.Tensor:
+        """``(V, 4, 4)`` float32 normalised world-to-camera matrices."""
+        return torch.from_numpy(np.stack([c.w2c for c in self.cameras])).float()
+
+    def subset(self, indices: Sequence[int]) -> ViewSet:
+        """The views at ``indices``, in that order."""
+        idx = list(indices)
+        return ViewSet(
+            names=tuple(self.names[i] for i in idx),
+            images=self.images[idx],
+            cmaps=self.cmaps[idx],
+            alphas=self.alphas[idx],
+            cameras=tuple(self.cameras[i] for i in idx),
+            timestamps_us=tuple(self.timestamps_us[i] for i in idx) if self.timestamps_us else (),
+        )
+
+
+@dataclass
+class Packet:
+    """N clean references + M rendered targets of one scene, normalised into the first target's frame.
+
+    Ground truth and masks are not here: they stay with the runner and never reach an enhancer.
+
+    Attributes:
+        packet_id: unique id in its store.
+        dataset, protocol, group, split, scene: where the packet comes from.
+        references: the N reference views (clean images).
+        targets: the M target views (3DGS renders).
+        scale: the factor world units were multiplied by during normalisation.
+    """
+
+    packet_id: str
+    dataset: str
+    protocol: str
+    group: str
+    split: str
+    scene: str
+    references: ViewSet
+    targets: ViewSet
+    scale: float = 1.0
+    metadata: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def height(self) -> int:
+        return int(self.targets.images.shape[-2])
+
+    @property
+    def width(self) -> int:
+        return int(self.targets.images.shape[-1])
