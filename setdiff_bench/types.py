@@ -18,7 +18,7 @@ import torch
 from setdiff_bench.cameras import Camera, Distortion
 from setdiff_bench.errors import DatasetError
 
-__all__ = ["Camera", "Distortion", "Frame", "Packet", "Scene", "ViewSet"]
+__all__ = ["Camera", "Distortion", "Frame", "Packet", "Scene", "TrainingSample", "ViewSet"]
 
 
 @dataclass(frozen=True)
@@ -185,3 +185,18 @@ class Packet:
     @property
     def width(self) -> int:
         return int(self.targets.images.shape[-1])
+
+
+@dataclass
+class TrainingSample:
+    """One training example: a packet plus what only the trainer may see.
+
+    Attributes:
+        packet: references (clean) and targets (renders) with C-maps and normalised cameras.
+        target_gt: ``(M, 3, H, W)`` float32 ground-truth images of the targets, in [0, 1].
+        target_masks: ``(M, 1, H, W)`` bool, True where the loss is evaluated.
+    """
+
+    packet: Packet
+    target_gt: torch.Tensor
+    target_masks: torch.Tensor

@@ -1,0 +1,1 @@
+"""Enhancers: methods that turn a packet's target renders into improved images (see ``base``)."""
