@@ -330,6 +330,21 @@ def quaternion_to_matrix(q: Sequence[float], *, order: QuaternionOrder, source: 
     ])
 
 
+def rigid_from_quaternion(quaternion: Sequence[float], translation: Sequence[float], *, order: QuaternionOrder,
+                          source: str = "transform") -> np.ndarray:
+    """``(4, 4)`` rigid transform ``[R(q) t; 0 1]`` from a pose record (quaternion norm checked).
+
+    For chains of dataset poses, e.g. nuScenes camera-to-world
+    ``rigid_from_quaternion(ego_pose...) @ rigid_from_quaternion(calibrated_sensor...)``.
+    """
+    T = np.eye(4)
+    T[:3, :3] = quaternion_to_matrix(quaternion, order=order, source=source)
+    t = np.asarray(translation, dtype=np.float64).reshape(-1)
+    if t.shape != (3,) or not np.isfinite(t).all():
+        raise CameraError(f"translation must be 3 finite numbers, got {np.asarray(translation).tolist()}", source)
+    T[:3, 3] = t
+    return T
+
 def matrix_to_quaternion(R: np.ndarray, *, order: QuaternionOrder) -> np.ndarray:
     """``(3, 3)`` rotation → unit quaternion with non-negative scalar part, in the named order."""
     R = np.asarray(R, dtype=np.float64)
