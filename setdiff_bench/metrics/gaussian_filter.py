@@ -1,0 +1,98 @@
+"""Separable Gaussian filtering of image batches: a differentiable torch path and a fast OpenCV path.
+
+SSIM needs five local means (x, y, x², y², xy) under an 11-tap Gaussian window.  PyTorch's CPU
+depthwise convolution is slow for this shape (about 0.2 s for 15 maps of 576×1024 on 2 cores), while
+OpenCV's SIMD ``sepFilter2D`` does the same work ~10× faster; so inference on CPU uses OpenCV and
+everything that needs gradients, or runs on a GPU, uses ``torch.nn.functional.conv2d``.  Both paths
+compute the same correlation with the same kernel (they agree to float rounding, ~1e-7; tested).
+
+Borders: ``"valid"`` returns only the pixels whose window lies inside the image, ``(H-k+1) × (W-k+1)``
+(tf / dm_pix / skimage); ``"same"`` zero-pads so the output is ``H × W`` (3DGS); ``"reflect"`` mirrors the
+image without repeating the edge pixel (``numpy``/``torch`` "reflect", OpenCV ``BORDER_REFLECT_101``) and
+returns ``H × W`` (torchmetrics ≥ 1.x, which averages that whole map).
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Literal
+
+import cv2
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from setdiff_bench.errors import UsageError
+
+Border = Literal["valid", "same", "reflect"]
+BORDERS: tuple[str, ...] = ("valid", "same", "reflect")
+Backend = Literal["auto", "torch", "opencv"]
+
+
+@functools.lru_cache(maxsize=16)
+def gaussian_window_1d(window_size: int = 11, sigma: float = 1.5) -> np.ndarray:
+    """Normalised 1-D Gaussian taps ``exp(-d²/2σ²)``, ``d = i - (k-1)/2``; float64 array of length ``k``.
+
+    Equal to dm_pix / torchmetrics / 3DGS ``gaussian()`` and, for σ=1.5, to scipy's 11-tap kernel
+    (truncate 3.5) that skimage uses.
+    """
+    if window_size < 1 or window_size % 2 == 0:
+        raise UsageError(f"gaussian window size must be a positive odd integer, got {window_size}")
+    if not sigma > 0:
+        raise UsageError(f"gaussian sigma must be > 0, got {sigma}")
+    offsets = np.arange(window_size, dtype=np.float64) - (window_size - 1) / 2
+    taps = np.exp(-0.5 * (offsets / sigma) ** 2)
+    return taps / taps.sum()
+
+
+def use_opencv(*tensors: torch.Tensor, backend: Backend = "auto") -> bool:
+    """Whether the OpenCV path applies: CPU float32/float64 tensors that need no gradient (or forced)."""
+    if backend == "torch":
+        return False
+    eligible = all(t.device.type == "cpu" and t.dtype in (torch.float32, torch.float64) for t in tensors)
+    needs_grad = torch.is_grad_enabled() and any(t.requires_grad for t in tensors)
+    if backend == "opencv":
+        if not eligible or needs_grad:
+            raise UsageError("backend='opencv' needs CPU float32/float64 tensors without gradients")
+        return True
+    if backend != "auto":
+        raise UsageError(f"unknown filter backend {backend!r}; expected 'auto', 'torch' or 'opencv'")
+    return eligible and not needs_grad
+
+
+def blur_torch(maps: torch.Tensor, window_size: int, sigma: float, border: Border) -> torch.Tensor:
+    """Differentiable separable Gaussian filter with ``conv2d`` (any device, any float dtype).
+
+    Args:
+        maps: ``(B, C, H, W)`` tensor; every channel is filtered independently.
+        window_size, sigma: Gaussian window (taps, standard deviation in pixels).
+        border: ``"valid"`` → ``(B, C, H-k+1, W-k+1)``; ``"same"`` (zero padding) and ``"reflect"``
+            → ``(B, C, H, W)``.
+    """
+    channels = maps.shape[1]
+    taps = torch.as_tensor(gaussian_window_1d(window_size, sigma), dtype=maps.dtype, device=maps.device)
+    pad = window_size // 2 if border == "same" else 0
+    if border == "reflect":
+        half = window_size // 2
+        maps = F.pad(maps, (half, half, half, half), mode="reflect")
+    rows = taps.view(1, 1, 1, window_size).expand(channels, 1, 1, window_size)
+    cols = taps.view(1, 1, window_size, 1).expand(channels, 1, window_size, 1)
+    out = F.conv2d(maps, rows, padding=(0, pad), groups=channels)
+    return F.conv2d(out, cols, padding=(pad, 0), groups=channels)
+
+
+def blur_opencv(plane: np.ndarray, window_size: int, sigma: float, border: Border) -> np.ndarray:
+    """OpenCV separable Gaussian filter of one ``(H, W)`` float32/float64 plane.
+
+    Zero padding (``BORDER_CONSTANT``) for ``"same"``, ``BORDER_REFLECT_101`` for ``"reflect"``; for
+    ``"valid"`` the ``k//2`` border rows and columns are cropped (a view), so the padding never reaches the
+    result.  Returns ``(H', W')``.
+    """
+    taps = gaussian_window_1d(window_size, sigma).astype(plane.dtype)
+    depth = cv2.CV_32F if plane.dtype == np.float32 else cv2.CV_64F
+    border_type = cv2.BORDER_REFLECT_101 if border == "reflect" else cv2.BORDER_CONSTANT
+    out = cv2.sepFilter2D(plane, depth, taps, taps, borderType=border_type)
+    if border == "valid":
+        half = window_size // 2
+        out = out[half: out.shape[0] - half, half: out.shape[1] - half]
+    return out
