@@ -10,7 +10,8 @@ poses wins, in this order):
 
 Scenes are searched in ``root`` itself, its children and grandchildren, so ``root`` may be the
 dataset root (``1K/<hash>``), one batch folder or one scene; the batch (``1K`` …) is recorded in
-``Scene.metadata["batch"]``.  Scenes are named by their folder (the 64-hex hash) and must be unique.
+``Scene.metadata["batch"]``.  Scenes are named by their folder (the 64-hex hash), must be unique, and
+are listed in lexicographic order of the hash.
 
 Poses (``poses``): ``"auto"`` (default) uses the COLMAP model when there is one (world-to-camera,
 OpenCV; unambiguous), else ``transforms.json`` (nerfstudio reader, OpenGL → OpenCV, ``applied_transform``
@@ -75,11 +76,11 @@ def _scene_dirs(base: Path, images_dir: str | None) -> dict[str, Path]:
         wanted = images_dir or "images*"
         raise DatasetError(f"no DL3DV scenes found (expected [<batch>/]<hash>/{wanted}/ with colmap/sparse/0 or "
                            "transforms.json)", base)
-    return dict(sorted(found.items(), key=lambda item: natural_key(item[0])))
+    return dict(sorted(found.items()))  # plain order: natural order would split hex hashes at digits
 
 
 def list_scenes(root: str | os.PathLike[str], *, images_dir: str = "images_4") -> list[str]:
-    """Scene hashes under ``root`` that hold ``images_dir`` and poses, in natural order."""
+    """Scene hashes under ``root`` that hold ``images_dir`` and poses, in lexicographic order."""
     return list(_scene_dirs(dataset_root(root), images_dir))
 
 
