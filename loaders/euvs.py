@@ -21,8 +21,9 @@ Rules implemented here:
   source dataset's map frame) are attached as ``metadata["gt_w2c"]`` when present; ``poses="gt"``
   uses them for the cameras (intrinsics from ``sparse/0``) instead of the SfM poses.  That file is
   not a COLMAP model (no cameras file, ten fields per line), so it is parsed here.
-* Level: the ``level`` option when given; else inferred: (1) the nearest folder between the root
-  and the scene named ``Level N`` / ``level_N`` / ``LevelN_small`` (case-insensitive) gives N; (2)
+* Level: the ``level`` option when given; else inferred: (1) the nearest folder from the scene's
+  parent up to the root (inclusive; the parent alone when the root is the scene) named ``Level N`` /
+  ``level_N`` / ``LevelN_small`` (case-insensitive) gives N; (2)
   a scene name starting with ``MARS_`` is level 3 (only Level 3 uses MARS, §1.1); (3) otherwise
   unknown (``None``).  ``Scene.metadata["level_source"]`` records which rule applied.
 * Image sizes are read from the headers and must equal the camera size.
@@ -79,8 +80,11 @@ def infer_level(root: Path, scene_dir: Path) -> tuple[int | None, str | None]:
     Returns:
         ``(level, source)`` with source ``"folder"``, ``"name"`` or ``None`` when unknown.
     """
-    parts = scene_dir.relative_to(root).parts[:-1] if scene_dir != root else ()
-    for part in reversed((root.name, *parts)):
+    if scene_dir == root:  # the root is the scene itself: look at its parent folder only
+        candidates: tuple[str, ...] = (root.parent.name,)
+    else:
+        candidates = (root.name, *scene_dir.relative_to(root).parts[:-1])
+    for part in reversed(candidates):
         match = LEVEL_FOLDER.match(part)
         if match:
             return int(match.group(1)), "folder"

@@ -71,6 +71,8 @@ def test_level_given_inferred_from_name_or_unknown(tmp_path):
     assert scenes["level_2/nuplan_vegas_location_8"].metadata["level"] == 2
     assert scenes["nuplan_boston_location_3"].metadata["level"] is None
     assert scenes["nuplan_boston_location_3"].metadata["train_set"] == "training_set.txt"
+    [alone] = load_scenes("euvs", tmp_path / "level_2" / "nuplan_vegas_location_8")  # root = the scene
+    assert (alone.name, alone.metadata["level"]) == ("nuplan_vegas_location_8", 2)
     [given] = load_scenes("euvs", tmp_path, ["nuplan_boston_location_3"], level=1)
     assert (given.metadata["level"], given.metadata["level_source"]) == (1, "given")
 
