@@ -46,7 +46,7 @@ class RenderOutput:
 def render(gaussians: GaussianModel, cameras: Sequence[Camera] | Camera, backend: Backend = "torch", *,
            with_geometry: bool = True, sh_degree: int | None = None, background: Sequence[float] | None = None,
            cmap_bound: float | None = None, cmap_center: Sequence[float] = (0.0, 0.0, 0.0),
-           near: float = 0.01, far: float = 1e10, eps2d: float = 0.3, tile_size: int = 16) -> RenderOutput:
+           near: float = 0.01, far: float = 1e10, eps2d: float = 0.3, tile_size: int = 8) -> RenderOutput:
     """Render Gaussians from one or more cameras of the same size.
 
     Args:

@@ -11,7 +11,7 @@ ops and nerfacc) and no maintained CPU 3DGS rasteriser exists.  It follows the 3
 * front-to-back compositing by camera-space depth of the centres; a pixel stops at the Gaussian
   whose inclusion would bring transmittance below 1e-4 (that Gaussian excluded, as in the CUDA code).
 
-Memory stays bounded: Gaussians are binned into 16×16 tiles (only tiles a Gaussian's
+Memory stays bounded: Gaussians are binned into 8×8 tiles (only tiles a Gaussian's
 opacity-aware 3σ box touches), tiles with similar list lengths are batched together, and long lists
 are walked in chunks carrying transmittance — never an H·W·N tensor.  All feature channels
 (RGB, C-map xyz, depth) are composited with one set of weights in one pass.
@@ -20,6 +20,9 @@ are walked in chunks carrying transmittance — never an H·W·N tensor.  All fe
 from __future__ import annotations
 
 import math
+import os
+import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import torch
@@ -27,6 +30,8 @@ import torch
 ALPHA_MAX = 0.99
 ALPHA_MIN = 1.0 / 255.0
 TRANSMITTANCE_MIN = 1e-4
+LOG_TRANSMITTANCE_MIN = math.log(TRANSMITTANCE_MIN)
+COMPILE_MIN_WORK = 2_000_000  # pixel-Gaussian pairs per render above which torch.compile pays off
 
 
 @dataclass
@@ -114,8 +119,8 @@ def project(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor, opac
     return Projection(means2d, conics, z, opacities, radii, valid)
 
 
-def rasterize(proj: Projection, features: torch.Tensor, width: int, height: int, *, tile_size: int = 16,
-              chunk_elements: int = 1 << 22) -> tuple[torch.Tensor, torch.Tensor]:
+def rasterize(proj: Projection, features: torch.Tensor, width: int, height: int, *, tile_size: int = 8,
+              chunk_elements: int = 1 << 22, max_chunk: int = 64) -> tuple[torch.Tensor, torch.Tensor]:
     """Composite per-Gaussian features front to back.
 
     Args:
@@ -123,6 +128,7 @@ def rasterize(proj: Projection, features: torch.Tensor, width: int, height: int,
         features: ``(N, C)`` per-Gaussian values (colour, world xyz, depth, ...).
         width, height: image size.  tile_size: tile edge in pixels.
         chunk_elements: upper bound on ``tiles × pixels × gaussians`` evaluated at once (memory knob).
+        max_chunk: Gaussians per tile per step; tiles stop early once every pixel has terminated.
 
     Returns:
         ``image (C, H, W)`` = Σ wᵢ fᵢ and ``alpha (1, H, W)`` = Σ wᵢ, with wᵢ = αᵢ Πⱼ<ᵢ(1 − αⱼ).
@@ -136,28 +142,26 @@ def rasterize(proj: Projection, features: torch.Tensor, width: int, height: int,
 
     sorted_ids, tile_starts, tile_counts = _bin_gaussians(proj, tiles_x, tiles_y, tile_size)
     if sorted_ids.numel():
-        # Dummy Gaussian at index N pads short lists: zero opacity, so zero weight.
+        # One table row per Gaussian: centre (2), conic (3), opacity (1), features (C), 1 (for alpha).
+        # A zero row at index N pads short lists: zero opacity, so zero weight.
         n = features.shape[0]
-        mx = torch.cat([proj.means2d[:, 0], proj.means2d.new_zeros(1)])
-        my = torch.cat([proj.means2d[:, 1], proj.means2d.new_zeros(1)])
-        ca, cb, cc = (torch.cat([proj.conics[:, i], proj.conics.new_zeros(1)]) for i in range(3))
-        op = torch.cat([proj.opacities, proj.opacities.new_zeros(1)])
-        feat = torch.cat([features, features.new_zeros(1, channels)])
+        table = torch.cat([proj.means2d, proj.conics, proj.opacities[:, None], features,
+                           features.new_ones(n, 1)], dim=1)
+        table = torch.cat([table, table.new_zeros(1, table.shape[1])])
         local = torch.arange(pix, device=device)
         offset_x = (local % tile_size).to(dtype) + 0.5
         offset_y = (local // tile_size).to(dtype) + 0.5
         order = torch.argsort(tile_counts, descending=True)
         counts_sorted = tile_counts[order]
+        step = _chunk_step_function(sorted_ids.numel() * pix)
         active = int((counts_sorted > 0).sum())
         start = 0
         while start < active:
-            longest = int(counts_sorted[start])
-            k_chunk = max(1, min(longest, chunk_elements // pix))
-            batch = max(1, chunk_elements // (pix * k_chunk))
+            batch = max(1, chunk_elements // (pix * max_chunk))
             tiles = order[start:start + batch][: active - start]
             start += tiles.numel()
-            out[tiles] = _composite_tiles(tiles, tile_starts, tile_counts, sorted_ids, n, mx, my, ca, cb, cc, op, feat,
-                                          offset_x, offset_y, tiles_x, tile_size, k_chunk)
+            out[tiles] = _composite_tiles(tiles, tile_starts, tile_counts, sorted_ids, n, table,
+                                          offset_x, offset_y, tiles_x, tile_size, max_chunk, step)
     image = out.reshape(tiles_y, tiles_x, tile_size, tile_size, channels + 1)
     image = image.permute(4, 0, 2, 1, 3).reshape(channels + 1, tiles_y * tile_size, tiles_x * tile_size)
     image = image[:, :height, :width]
@@ -195,42 +199,97 @@ def _bin_gaussians(proj: Projection, tiles_x: int, tiles_y: int, tile_size: int
 
 
 def _composite_tiles(tiles: torch.Tensor, tile_starts: torch.Tensor, tile_counts: torch.Tensor,
-                     sorted_ids: torch.Tensor, dummy: int, mx: torch.Tensor, my: torch.Tensor, ca: torch.Tensor,
-                     cb: torch.Tensor, cc: torch.Tensor, op: torch.Tensor, feat: torch.Tensor,
-                     offset_x: torch.Tensor, offset_y: torch.Tensor, tiles_x: int, tile_size: int,
-                     k_chunk: int) -> torch.Tensor:
-    """Composite a batch of B tiles → ``(B, P, C + 1)`` (features then alpha)."""
+                     sorted_ids: torch.Tensor, dummy: int, table: torch.Tensor, offset_x: torch.Tensor,
+                     offset_y: torch.Tensor, tiles_x: int, tile_size: int, k_chunk: int,
+                     step: Callable[..., tuple[torch.Tensor, torch.Tensor, torch.Tensor]]) -> torch.Tensor:
+    """Composite a batch of B tiles → ``(B, P, C + 1)`` (features then alpha).
+
+    Tiles whose pixels have all terminated, or whose lists are exhausted, leave the batch early.
+    """
     B = tiles.numel()
-    device, dtype = feat.device, feat.dtype
+    device, dtype = table.device, table.dtype
+    pix = offset_x.numel()
     px = ((tiles % tiles_x) * tile_size).to(dtype)[:, None] + offset_x[None, :]  # (B, P)
     py = ((tiles // tiles_x) * tile_size).to(dtype)[:, None] + offset_y[None, :]
     starts, counts = tile_starts[tiles], tile_counts[tiles]
-    longest = int(counts.max())
-    log_t = torch.zeros(B, px.shape[1], device=device, dtype=dtype)  # log transmittance so far
-    done = torch.zeros(B, px.shape[1], device=device, dtype=torch.bool)
-    acc = torch.zeros(B, px.shape[1], feat.shape[1] + 1, device=device, dtype=dtype)
-    log_t_min = math.log(TRANSMITTANCE_MIN)
-    for k0 in range(0, longest, k_chunk):
-        k = torch.arange(k0, min(k0 + k_chunk, longest), device=device)
-        inside = k[None, :] < counts[:, None]  # (B, K)
-        gather = torch.where(inside, starts[:, None] + k[None, :], torch.zeros_like(k)[None, :])
+    log_t = torch.zeros(B, pix, device=device, dtype=dtype)  # log transmittance so far
+    done = torch.zeros(B, pix, device=device, dtype=torch.bool)
+    acc = torch.zeros(B, pix, table.shape[1] - 6, device=device, dtype=dtype)
+    live = torch.arange(B, device=device)  # rows of this batch still compositing
+    k0 = 0
+    while live.numel():
+        # Sizes seen by the compiled step stay ≥ 2 (a lone row is duplicated, K padded with the dummy
+        # Gaussian): dynamic-shape compilation specialises sizes 0 and 1, so this avoids recompiles.
+        rows_idx = live if live.numel() > 1 else live.repeat(2)
+        k_len = max(2, min(k_chunk, int(counts[live].max()) - k0))
+        k = torch.arange(k0, k0 + k_len, device=device)
+        inside = k[None, :] < counts[rows_idx, None]  # (L, K)
+        gather = torch.where(inside, starts[rows_idx, None] + k[None, :], torch.zeros_like(k)[None, :])
         gid = torch.where(inside, sorted_ids[gather], torch.full_like(gather, dummy))
-        dx = px[:, :, None] - mx[gid][:, None, :]  # (B, P, K)
-        dy = py[:, :, None] - my[gid][:, None, :]
-        sigma = 0.5 * (ca[gid][:, None, :] * dx * dx + cc[gid][:, None, :] * dy * dy) + cb[gid][:, None, :] * dx * dy
-        alpha = torch.clamp_max(op[gid][:, None, :] * torch.exp(-sigma), ALPHA_MAX)
-        alpha = torch.where((sigma >= 0) & (alpha >= ALPHA_MIN), alpha, torch.zeros_like(alpha))
-        log_one_minus = torch.log1p(-alpha)
-        log_incl = log_t[:, :, None] + torch.cumsum(log_one_minus, dim=2)  # log T after each Gaussian
-        keep = (log_incl >= log_t_min) & ~done[:, :, None]
-        log_excl = log_incl - log_one_minus
-        weights = torch.where(keep, alpha * torch.exp(log_excl), torch.zeros_like(alpha))
-        values = torch.cat([feat[gid], torch.ones(B, gid.shape[1], 1, device=device, dtype=dtype)], dim=2)
-        acc = acc + torch.bmm(weights, values)
-        kept_log = torch.where(keep, log_one_minus, torch.zeros_like(log_one_minus)).sum(dim=2)
-        # log_incl is non-increasing along k, so the pixel terminated iff its last value fell below.
-        done = done | (log_incl[:, :, -1] < log_t_min)
-        log_t = log_t + kept_log
-        if bool(done.all()):
-            break
+        rows = table.index_select(0, gid.reshape(-1)).reshape(rows_idx.numel(), k_len, table.shape[1])
+        contribution, new_log_t, new_done = step(px[rows_idx], py[rows_idx], rows, log_t[rows_idx],
+                                                 done[rows_idx])
+        n_live = live.numel()
+        acc = acc.index_add(0, live, contribution[:n_live])
+        log_t = log_t.index_copy(0, live, new_log_t[:n_live])
+        done = done.index_copy(0, live, new_done[:n_live])
+        k0 += k_chunk
+        keep = ~new_done[:n_live].all(dim=1) & (counts[live] > k0)
+        live = live[keep]
     return acc
+
+
+def composite_chunk(px: torch.Tensor, py: torch.Tensor, rows: torch.Tensor, log_t: torch.Tensor,
+                    done: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """One front-to-back step over K depth-sorted Gaussians for B tiles of P pixels.
+
+    Args:
+        px, py: ``(B, P)`` pixel-centre coordinates.
+        rows: ``(B, K, 6 + C)`` per Gaussian: centre x, y; conic a, b, c; opacity (0 for padding);
+            then the C values to composite (the last one 1, to accumulate alpha).
+        log_t: ``(B, P)`` log transmittance before this chunk.  done: ``(B, P)`` terminated pixels.
+
+    Returns:
+        ``(B, P, C)`` weighted value sums of this chunk, the new ``log_t`` and ``done``.
+    """
+    mx, my, ca, cb, cc, op = (rows[:, :, i] for i in range(6))
+    values = rows[:, :, 6:]
+    dx = px[:, :, None] - mx[:, None, :]  # (B, P, K)
+    dy = py[:, :, None] - my[:, None, :]
+    sigma = 0.5 * (ca[:, None, :] * dx * dx + cc[:, None, :] * dy * dy) + cb[:, None, :] * dx * dy
+    alpha = torch.clamp_max(op[:, None, :] * torch.exp(-sigma), ALPHA_MAX)
+    alpha = torch.where((sigma >= 0) & (alpha >= ALPHA_MIN), alpha, torch.zeros_like(alpha))
+    log_one_minus = torch.log1p(-alpha)
+    log_incl = log_t[:, :, None] + torch.cumsum(log_one_minus, dim=2)  # log T after each Gaussian
+    keep = (log_incl >= LOG_TRANSMITTANCE_MIN) & ~done[:, :, None]
+    weights = torch.where(keep, alpha * torch.exp(log_incl - log_one_minus), torch.zeros_like(alpha))
+    contribution = torch.bmm(weights, values)
+    kept_log = torch.where(keep, log_one_minus, torch.zeros_like(log_one_minus)).sum(dim=2)
+    # log_incl is non-increasing along K, so a pixel terminated iff its last value fell below the floor.
+    return contribution, log_t + kept_log, done | (log_incl[:, :, -1] < LOG_TRANSMITTANCE_MIN)
+
+
+_COMPILED_STEP: Callable[..., tuple[torch.Tensor, torch.Tensor, torch.Tensor]] | None = None
+
+
+def _chunk_step_function(work: int) -> Callable[..., tuple[torch.Tensor, torch.Tensor, torch.Tensor]]:
+    """:func:`composite_chunk`, fused by ``torch.compile`` for large renders.
+
+    Compilation (TorchInductor, C++/OpenMP on CPU, Triton on GPU) fuses the ~20 element-wise passes
+    over the ``(B, P, K)`` tensors into a few loops: 10–30× faster than eager on CPU, after a one-off
+    compile of 10–30 s (cached on disk by Inductor).  ``SETDIFF_COMPILE`` = ``auto`` (default:
+    compile when a render evaluates ≥ ``COMPILE_MIN_WORK`` pixel-Gaussian pairs), ``1`` (always) or
+    ``0`` (never).  If compilation is unavailable (no C++ compiler) the eager function — identical
+    maths — is used and a warning says so.
+    """
+    global _COMPILED_STEP
+    mode = os.environ.get("SETDIFF_COMPILE", "auto")
+    if mode == "0" or (mode == "auto" and work < COMPILE_MIN_WORK):
+        return composite_chunk
+    if _COMPILED_STEP is None:
+        try:
+            _COMPILED_STEP = torch.compile(composite_chunk, dynamic=True)
+        except Exception as exc:  # torch.compile unsupported on this platform
+            warnings.warn(f"torch.compile unavailable ({exc}); using the eager rasteriser", stacklevel=2)
+            _COMPILED_STEP = composite_chunk
+    return _COMPILED_STEP

@@ -1,0 +1,63 @@
+"""CUDA rendering through ``gsplat.rasterization`` with the same outputs as the torch backend.
+
+RGB and the C-map go through gsplat as 6 feature channels (``sh_degree=None``; colours are
+evaluated from SH by :meth:`GaussianModel.colors`, identical to the torch backend), and
+``render_mode="RGB+D"`` appends accumulated depth: one rasterisation pass.  gsplat's conventions
+differ from the torch backend in one documented place: it clamps α at 0.999 instead of 0.99.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+
+from setdiff_bench.cameras import Camera
+from setdiff_bench.errors import UsageError
+from setdiff_bench.gaussians.model import GaussianModel
+
+
+def render(gaussians: GaussianModel, cameras: list[Camera], *, with_geometry: bool, sh_degree: int | None,
+           background: Sequence[float] | None, cmap_bound: float | None, cmap_center: Sequence[float],
+           near: float, far: float, eps2d: float, tile_size: int):
+    """Render with gsplat; see :func:`setdiff_bench.gaussians.render.render` for the arguments."""
+    from setdiff_bench.gaussians.render import RenderOutput, clip_centres
+
+    try:
+        import gsplat
+    except ImportError as exc:
+        raise UsageError("the gsplat backend needs the 'gpu' extra: pip install 'setdiff-bench[gpu]'") from exc
+    if not torch.cuda.is_available():
+        raise UsageError("the gsplat backend needs a CUDA GPU; use backend='torch' on the CPU")
+    g = gaussians if gaussians.device.type == "cuda" else gaussians.to("cuda")
+    device, dtype = g.means.device, torch.float32
+    g = g.to(device, dtype)
+    height, width = cameras[0].height, cameras[0].width
+    viewmats = torch.tensor(np.stack([c.w2c for c in cameras]), device=device, dtype=dtype)
+    Ks = torch.tensor(np.stack([c.K for c in cameras]), device=device, dtype=dtype)
+    centers = torch.linalg.inv(viewmats)[:, :3, 3]
+    colors = torch.stack([g.colors(center, sh_degree) for center in centers])  # (C, N, 3)
+    if with_geometry:
+        points = clip_centres(g.means, cmap_bound, cmap_center)
+        features = torch.cat([colors, points.expand(len(cameras), -1, -1)], dim=-1)
+        mode = "RGB+D"
+    else:
+        features, mode = colors, "RGB"
+    renders, alphas, meta = gsplat.rasterization(
+        g.means, g.quats, g.scales, g.opacities, features, viewmats, Ks, width, height,
+        near_plane=near, far_plane=far, eps2d=eps2d, sh_degree=None, packed=False, tile_size=16,
+        backgrounds=None, render_mode=mode, rasterize_mode="classic")
+    renders = renders.permute(0, 3, 1, 2)  # (C, D, H, W)
+    alpha = alphas.permute(0, 3, 1, 2)
+    rgb = renders[:, :3]
+    if background is not None:
+        rgb = rgb + (1.0 - alpha) * torch.as_tensor(list(background), device=device, dtype=dtype).view(1, 3, 1, 1)
+    means2d = meta.get("means2d")
+    if means2d is not None and means2d.requires_grad:
+        means2d.retain_grad()
+    per_camera = [{"means2d": means2d[i] if means2d is not None else None,
+                   "radii": meta["radii"][i], "visible": (meta["radii"][i] > 0).reshape(len(g), -1).any(-1)}
+                  for i in range(len(cameras))]
+    return RenderOutput(rgb=rgb, cmap=renders[:, 3:6] if with_geometry else None,
+                        depth=renders[:, 6:7] if with_geometry else None, alpha=alpha, meta=per_camera)
