@@ -1,0 +1,1 @@
+"""Learned enhancers. ``setdiff`` holds the SetDiff set model and its DiFix-style baseline configuration."""

@@ -1,0 +1,199 @@
+"""Checkpoints: one folder with ``model.safetensors`` (every weight), ``config.json``, and for resuming
+training ``optimizer.pt`` (``torch.save`` of the optimizer state, read back with ``weights_only=True``)
+and ``trainer.json`` (step count).
+
+Every weight of the model is saved — UNet, VAE (with LoRA and skip convs), Ψ, text embedding — so a
+checkpoint is self-contained: loading needs neither the pretrained SD-Turbo folder nor the random
+seed.  Folders are written under a temporary name and renamed into place, so a killed process never
+leaves a half-written checkpoint.  A training run keeps ``OUT/checkpoints/step-XXXXXXXX/`` folders and
+names the newest one in ``OUT/latest``; any function here taking a checkpoint also accepts ``OUT``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from setdiff_bench.errors import CheckpointError, UsageError
+from setdiff_bench.io.atomic import write_text_atomic
+from setdiff_bench.models.setdiff.config import Config, config_from_dict
+
+WEIGHTS_FILE = "model.safetensors"
+CONFIG_FILE = "config.json"
+OPTIMIZER_FILE = "optimizer.pt"
+TRAINER_FILE = "trainer.json"
+LATEST_FILE = "latest"
+CHECKPOINTS_DIR = "checkpoints"
+
+
+def resolve_checkpoint(path: str | os.PathLike[str]) -> Path:
+    """A checkpoint folder, or a training output folder's newest checkpoint (via ``OUT/latest``)."""
+    path = Path(path)
+    if (path / WEIGHTS_FILE).is_file():
+        return path
+    latest = path / LATEST_FILE
+    if latest.is_file():
+        candidate = path / latest.read_text(encoding="utf-8").strip()
+        if (candidate / WEIGHTS_FILE).is_file():
+            return candidate
+        raise CheckpointError(f"'latest' names {candidate.name!r}, which has no {WEIGHTS_FILE}", latest)
+    if not path.exists():
+        raise CheckpointError("checkpoint not found", path)
+    raise CheckpointError(f"not a checkpoint: no {WEIGHTS_FILE} and no '{LATEST_FILE}' file", path)
+
+
+def read_config(checkpoint: str | os.PathLike[str]) -> Config:
+    """The configuration a checkpoint was saved with."""
+    folder = resolve_checkpoint(checkpoint)
+    path = folder / CONFIG_FILE
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError) as error:
+        raise CheckpointError(f"cannot read checkpoint config: {error}", path) from error
+    try:
+        return config_from_dict(data, source=str(path))
+    except UsageError as error:
+        raise CheckpointError(f"invalid checkpoint config: {error.problem}", path) from error
+
+
+def check_compatible(saved: Config, expected: Config, where: str | os.PathLike[str]) -> None:
+    """Raise :class:`CheckpointError` when the two model architectures differ (naming the first key)."""
+    a, b = saved.model.architecture(), expected.model.architecture()
+    if a != b:
+        key = next(k for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k))
+        detail = _first_difference(a.get(key), b.get(key))
+        raise CheckpointError(f"checkpoint belongs to another configuration: model {key}{detail}", where)
+
+
+def save_checkpoint(folder: str | os.PathLike[str], model: torch.nn.Module, config: Config, *,
+                    optimizer: torch.optim.Optimizer | None = None, step: int | None = None) -> Path:
+    """Write a checkpoint folder atomically (replacing an existing one of that name).
+
+    Args:
+        folder: destination folder.
+        model: the (unwrapped) model; every tensor of its ``state_dict`` is saved in float32 or its own dtype.
+        config: the full config (model + train), saved as JSON.
+        optimizer, step: saved too when given (for resuming training).
+    """
+    from safetensors.torch import save_file
+
+    folder = Path(folder)
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", suffix=".tmp", dir=folder.parent))
+    try:
+        state = {name: tensor.detach().cpu().contiguous() for name, tensor in model.state_dict().items()}
+        save_file(state, str(tmp / WEIGHTS_FILE), metadata={"format": "setdiff-bench", "config": config.to_json()})
+        (tmp / CONFIG_FILE).write_text(config.to_json() + "\n", encoding="utf-8")
+        if optimizer is not None:
+            torch.save(optimizer.state_dict(), tmp / OPTIMIZER_FILE)
+        if step is not None:
+            (tmp / TRAINER_FILE).write_text(json.dumps({"step": int(step)}) + "\n", encoding="utf-8")
+        if folder.exists():
+            old = folder.with_name(f".{folder.name}.old")
+            shutil.rmtree(old, ignore_errors=True)
+            os.replace(folder, old)
+            os.replace(tmp, folder)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, folder)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return folder
+
+
+def load_weights(model: torch.nn.Module, checkpoint: str | os.PathLike[str]) -> None:
+    """Load ``model.safetensors`` into ``model`` strictly (every key, every shape)."""
+    from safetensors import SafetensorError
+    from safetensors.torch import load_file
+
+    path = resolve_checkpoint(checkpoint) / WEIGHTS_FILE
+    try:
+        state = load_file(str(path))
+    except (OSError, SafetensorError) as error:
+        raise CheckpointError(f"cannot read weights: {error}", path) from error
+    expected = model.state_dict()
+    missing = sorted(set(expected) - set(state))
+    unexpected = sorted(set(state) - set(expected))
+    if missing or unexpected:
+        raise CheckpointError(f"weights do not match the model: {len(missing)} missing (e.g. {missing[:2]}), "
+                              f"{len(unexpected)} unexpected (e.g. {unexpected[:2]})", path)
+    for name, tensor in state.items():
+        if tuple(tensor.shape) != tuple(expected[name].shape):
+            raise CheckpointError(f"weight {name} has shape {tuple(tensor.shape)}, the model expects "
+                                  f"{tuple(expected[name].shape)}", path)
+    model.load_state_dict(state, strict=True)
+
+
+def load_model(checkpoint: str | os.PathLike[str], *, expected: Config | None = None,
+               method: str | None = None, device: str | torch.device = "cpu",
+               dtype: torch.dtype | None = None) -> tuple[Any, Config]:
+    """Build the model a checkpoint describes and load its weights.
+
+    Args:
+        checkpoint: checkpoint folder or training output folder.
+        expected: when given, the checkpoint's architecture must equal this config's.
+        method: when given (``setdiff``/``difix``), the checkpoint must have been trained as that method.
+        device, dtype: where and in which float type to put the model (default float32).
+
+    Returns:
+        ``(model in eval mode, saved config)``.
+    """
+    from setdiff_bench.models.setdiff.model import SetDiffModel
+
+    folder = resolve_checkpoint(checkpoint)
+    config = read_config(folder)
+    if expected is not None:
+        check_compatible(config, expected, folder)
+    if method is not None and config.model.method != method:
+        raise CheckpointError(f"checkpoint was trained as method {config.model.method!r}, not {method!r}", folder)
+    model = SetDiffModel(config.model, load_pretrained=False)
+    load_weights(model, folder)
+    model.to(device=device, dtype=dtype or torch.float32)
+    model.eval()
+    return model, config
+
+
+def load_training_state(checkpoint: Path, optimizer: torch.optim.Optimizer) -> int:
+    """Restore the optimizer state of a checkpoint; returns the step it was saved at."""
+    trainer_path = checkpoint / TRAINER_FILE
+    optimizer_path = checkpoint / OPTIMIZER_FILE
+    try:
+        step = int(json.loads(trainer_path.read_text(encoding="utf-8"))["step"])
+        state = torch.load(optimizer_path, map_location="cpu", weights_only=True)
+    except (OSError, KeyError, ValueError, json.JSONDecodeError, RuntimeError) as error:
+        raise CheckpointError(f"cannot resume from this checkpoint: {error}", checkpoint) from error
+    try:
+        optimizer.load_state_dict(state)
+    except (ValueError, KeyError) as error:
+        raise CheckpointError(f"optimizer state does not match the model: {error}", optimizer_path) from error
+    return step
+
+
+def step_folder(out_dir: Path, step: int) -> Path:
+    return out_dir / CHECKPOINTS_DIR / f"step-{step:08d}"
+
+
+def mark_latest(out_dir: Path, checkpoint: Path, keep: int) -> None:
+    """Point ``OUT/latest`` at ``checkpoint`` and delete all but the ``keep`` newest step folders."""
+    write_text_atomic(out_dir / LATEST_FILE, checkpoint.relative_to(out_dir).as_posix() + "\n")
+    folders = sorted((out_dir / CHECKPOINTS_DIR).glob("step-*"))
+    for old in folders[: max(0, len(folders) - max(keep, 1))]:
+        if old != checkpoint:
+            with contextlib.suppress(OSError):
+                shutil.rmtree(old)
+
+
+def _first_difference(a: Any, b: Any) -> str:
+    if isinstance(a, dict) and isinstance(b, dict):
+        for key in sorted(set(a) | set(b)):
+            if a.get(key) != b.get(key):
+                return f".{key} is {a.get(key)!r} in the checkpoint but {b.get(key)!r} in the config"
+    return f" is {a!r} in the checkpoint but {b!r} in the config"

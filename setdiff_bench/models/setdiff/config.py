@@ -1,0 +1,444 @@
+"""SetDiff / DiFix configuration: the SD-Turbo architecture as data, a tiny CPU variant, TOML loading.
+
+Architectures (``preset``):
+
+* ``sd-turbo`` — stabilityai/sd-turbo's UNet and VAE configs (shared/reference/model.md §4), i.e. the
+  SD 2.1-base UNet (865.9 M parameters).  Note the diffusers quirk: ``attention_head_dim=(5, 10, 20, 20)``
+  is really the *number of heads* per level (head dim 64).
+* ``tiny`` — the same classes (``UNet2DConditionModel``, ``AutoencoderKL``) with two UNet levels of
+  32/64 channels, one layer per block and a 16/32-channel VAE, so training and tests run on a CPU.
+
+A config file is TOML with a ``[model]`` table (``preset`` plus overrides, ``[model.unet]`` /
+``[model.vae]`` override single architecture keys) and a ``[train]`` table.  The packaged examples
+live in ``setdiff_bench/models/setdiff/configs/`` and can be named without a path
+(``tiny_setdiff``, ``sd_turbo_setdiff``, ...).  TOML has no null: a key left out means "default".
+
+Scheduler constants are the SD-Turbo ``scaled_linear`` schedule; ᾱ_t is computed analytically in
+float64 (:func:`alphas_cumprod`), never through ``DDPMScheduler`` (see model.md §1.3 for its pitfalls).
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field, fields, replace
+from importlib import resources
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import tomllib
+
+from setdiff_bench.errors import UsageError
+
+Method = Literal["setdiff", "difix"]
+Prediction = Literal["v_prediction", "epsilon"]
+DecoderTraining = Literal["lora", "full", "frozen"]
+
+CONFIG_FORMAT = 1
+DEFAULT_PROMPT = "remove degradation"
+
+#: stabilityai/sd-turbo ``unet/config.json`` (model.md §4.1).
+SD_TURBO_UNET: dict[str, Any] = {
+    "sample_size": 64,
+    "in_channels": 4,
+    "out_channels": 4,
+    "center_input_sample": False,
+    "flip_sin_to_cos": True,
+    "freq_shift": 0,
+    "down_block_types": ["CrossAttnDownBlock2D", "CrossAttnDownBlock2D", "CrossAttnDownBlock2D", "DownBlock2D"],
+    "mid_block_type": "UNetMidBlock2DCrossAttn",
+    "up_block_types": ["UpBlock2D", "CrossAttnUpBlock2D", "CrossAttnUpBlock2D", "CrossAttnUpBlock2D"],
+    "only_cross_attention": False,
+    "block_out_channels": [320, 640, 1280, 1280],
+    "layers_per_block": 2,
+    "downsample_padding": 1,
+    "mid_block_scale_factor": 1,
+    "dropout": 0.0,
+    "act_fn": "silu",
+    "norm_num_groups": 32,
+    "norm_eps": 1e-5,
+    "cross_attention_dim": 1024,
+    "transformer_layers_per_block": 1,
+    "attention_head_dim": [5, 10, 20, 20],  # diffusers quirk: these are head *counts* (head dim 64)
+    "num_attention_heads": None,
+    "dual_cross_attention": False,
+    "use_linear_projection": True,
+    "upcast_attention": None,
+    "class_embed_type": None,
+    "addition_embed_type": None,
+    "num_class_embeds": None,
+    "resnet_time_scale_shift": "default",
+    "time_embedding_type": "positional",
+    "time_cond_proj_dim": None,
+    "conv_in_kernel": 3,
+    "conv_out_kernel": 3,
+    "attention_type": "default",
+    "mid_block_only_cross_attention": None,
+    "cross_attention_norm": None,
+    "addition_embed_type_num_heads": 64,
+}
+
+#: stabilityai/sd-turbo ``vae/config.json`` (model.md §4.2).
+SD_TURBO_VAE: dict[str, Any] = {
+    "in_channels": 3,
+    "out_channels": 3,
+    "latent_channels": 4,
+    "block_out_channels": [128, 256, 512, 512],
+    "layers_per_block": 2,
+    "norm_num_groups": 32,
+    "act_fn": "silu",
+    "down_block_types": ["DownEncoderBlock2D"] * 4,
+    "up_block_types": ["UpDecoderBlock2D"] * 4,
+    "sample_size": 768,
+    "scaling_factor": 0.18215,
+    "force_upcast": True,
+}
+
+#: stabilityai/sd-turbo ``scheduler/scheduler_config.json``, the keys that define ᾱ_t (model.md §4.3).
+SD_TURBO_SCHEDULE: dict[str, Any] = {
+    "beta_start": 0.00085,
+    "beta_end": 0.012,
+    "beta_schedule": "scaled_linear",
+    "num_train_timesteps": 1000,
+}
+
+#: Same UNet class, CPU-sized: 2 levels (32, 64 ch), 1 layer per block, 2/4 heads of dim 16.
+TINY_UNET: dict[str, Any] = {
+    **SD_TURBO_UNET,
+    "sample_size": 8,
+    "down_block_types": ["CrossAttnDownBlock2D", "DownBlock2D"],
+    "up_block_types": ["UpBlock2D", "CrossAttnUpBlock2D"],
+    "block_out_channels": [32, 64],
+    "layers_per_block": 1,
+    "norm_num_groups": 8,
+    "cross_attention_dim": 32,
+    "attention_head_dim": [2, 4],
+}
+
+#: Same VAE class, CPU-sized: 4 levels (3 downsamplers → 8×), 16/32 channels, 1 layer per block.
+TINY_VAE: dict[str, Any] = {
+    **SD_TURBO_VAE,
+    "block_out_channels": [16, 32, 32, 32],
+    "layers_per_block": 1,
+    "norm_num_groups": 8,
+    "sample_size": 64,
+}
+
+PRESETS: dict[str, dict[str, Any]] = {
+    "sd-turbo": {"unet": SD_TURBO_UNET, "vae": SD_TURBO_VAE, "geometry_channels": [32, 64, 128, 256, 256]},
+    "tiny": {"unet": TINY_UNET, "vae": TINY_VAE, "geometry_channels": [8, 16, 16, 32, 32]},
+}
+
+
+def alphas_cumprod(beta_start: float, beta_end: float, beta_schedule: str, num_train_timesteps: int) -> np.ndarray:
+    """ᾱ_t for t = 0 … T−1 in float64.
+
+    ``scaled_linear``: ``betas = linspace(√beta_start, √beta_end, T)²`` (SD-Turbo); ``linear``:
+    ``linspace(beta_start, beta_end, T)``.  ᾱ_t = Π_{s ≤ t} (1 − β_s).
+    """
+    if beta_schedule == "scaled_linear":
+        betas = np.linspace(math.sqrt(beta_start), math.sqrt(beta_end), num_train_timesteps, dtype=np.float64) ** 2
+    elif beta_schedule == "linear":
+        betas = np.linspace(beta_start, beta_end, num_train_timesteps, dtype=np.float64)
+    else:
+        raise UsageError(f"unsupported beta_schedule {beta_schedule!r} (expected scaled_linear or linear)",
+                         "model.scheduler")
+    return np.cumprod(1.0 - betas)
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """Everything that defines the model's parameters and its forward pass.
+
+    Attributes:
+        method: ``setdiff`` (set of N refs + M targets, geometry, CFG) or ``difix`` (one reference +
+            one target, RGB only, no CFG — the DiFix3D baseline on the same code).
+        preset: the architecture the ``unet``/``vae`` dicts started from (``sd-turbo`` or ``tiny``).
+        unet, vae: diffusers ``UNet2DConditionModel`` / ``AutoencoderKL`` configs.
+        scheduler: ``beta_start``, ``beta_end``, ``beta_schedule``, ``num_train_timesteps``.
+        timestep: the fixed UNet timestep (199, i.e. τ = 200); the clean latent is fed, no noise.
+        prediction: the UNet output's meaning, ``v_prediction`` (SetDiff) or ``epsilon`` (DiFix, SD-Turbo).
+        use_geometry: add Ψ(C-map, Plücker) to the latents.
+        geometry_channels: the five conv blocks' widths of Ψ.
+        geometry_groups: GroupNorm groups in Ψ (clipped to divide each width).
+        cmap_clip: C-map coordinates are clamped to ±cmap_clip (packet units; the packet's cameras
+            span 1).  The paper "clips by scene scale"; the value is our choice (UNCONFIRMED).  0 = off.
+        geometry_dropout: probability, per training packet, of removing C-maps and poses together.
+        guidance_scale: geometry CFG scale at inference (1.0 = conditional only, no second pass).
+        cfg_batched: run conditional and unconditional passes in one UNet call (2× batch).
+        vae_decoder: how the decoder trains: ``lora`` (peft, rank ``vae_lora_rank``), ``full``, ``frozen``.
+        vae_lora_rank, vae_lora_alpha: LoRA rank and alpha (peft's default alpha is 8; DiFix keeps it).
+        skip_connections: DiFix-style 1×1 skip convs from the encoder's down-block inputs to the decoder.
+        skip_gamma: multiplier on the skip activations (DiFix: 1).
+        text_prompt: the fixed prompt, encoded once when a text encoder is available.
+        text_length: token count of the text embedding (77).
+        max_references: use at most this many references per set (the first ones); ``None`` = all.
+        targets_per_set: enhance targets in sets of this many (DiFix: 1); ``None`` = all at once.
+        pretrained: a local diffusers SD-Turbo folder (``unet/``, ``vae/``, ``scheduler/``, optional
+            ``text_encoder/`` + ``tokenizer/``) to initialise from; ``None`` = random init.
+    """
+
+    method: Method = "setdiff"
+    preset: str = "sd-turbo"
+    unet: Mapping[str, Any] = field(default_factory=lambda: copy.deepcopy(SD_TURBO_UNET))
+    vae: Mapping[str, Any] = field(default_factory=lambda: copy.deepcopy(SD_TURBO_VAE))
+    scheduler: Mapping[str, Any] = field(default_factory=lambda: dict(SD_TURBO_SCHEDULE))
+    timestep: int = 199
+    prediction: Prediction = "v_prediction"
+    use_geometry: bool = True
+    geometry_channels: tuple[int, ...] = (32, 64, 128, 256, 256)
+    geometry_groups: int = 8
+    cmap_clip: float = 10.0
+    geometry_dropout: float = 0.15
+    guidance_scale: float = 2.0
+    cfg_batched: bool = True
+    vae_decoder: DecoderTraining = "lora"
+    vae_lora_rank: int = 4
+    vae_lora_alpha: float = 8.0
+    skip_connections: bool = False
+    skip_gamma: float = 1.0
+    text_prompt: str = DEFAULT_PROMPT
+    text_length: int = 77
+    max_references: int | None = None
+    targets_per_set: int | None = None
+    pretrained: str | None = None
+
+    def __post_init__(self) -> None:
+        where = "[model]"
+        if self.method not in ("setdiff", "difix"):
+            raise UsageError(f"method must be 'setdiff' or 'difix', got {self.method!r}", where)
+        if self.prediction not in ("v_prediction", "epsilon"):
+            raise UsageError(f"prediction must be 'v_prediction' or 'epsilon', got {self.prediction!r}", where)
+        if self.vae_decoder not in ("lora", "full", "frozen"):
+            raise UsageError(f"vae_decoder must be lora, full or frozen, got {self.vae_decoder!r}", where)
+        steps = int(self.scheduler["num_train_timesteps"])
+        if not 0 <= self.timestep < steps:
+            raise UsageError(f"timestep must be in [0, {steps}), got {self.timestep}", where)
+        if len(self.geometry_channels) != 5:
+            raise UsageError(f"geometry_channels must list 5 block widths, got {list(self.geometry_channels)}", where)
+        if not 0.0 <= self.geometry_dropout < 1.0:
+            raise UsageError(f"geometry_dropout must be in [0, 1), got {self.geometry_dropout}", where)
+        if self.max_references is not None and self.max_references < 0:
+            raise UsageError(f"max_references must be >= 0, got {self.max_references}", where)
+        if self.targets_per_set is not None and self.targets_per_set < 1:
+            raise UsageError(f"targets_per_set must be >= 1, got {self.targets_per_set}", where)
+        if self.method == "difix":
+            bad = []
+            if self.use_geometry:
+                bad.append("use_geometry = false")
+            if self.max_references != 1:
+                bad.append("max_references = 1")
+            if self.targets_per_set != 1:
+                bad.append("targets_per_set = 1")
+            if bad:
+                raise UsageError(f"method 'difix' is RGB-only with one reference and one target; set {', '.join(bad)}",
+                                 where)
+        factor = self.latent_factor
+        if factor & (factor - 1) or factor > 16:
+            raise UsageError(f"VAE downsampling factor must be a power of two <= 16, got {factor}", where)
+        object.__setattr__(self, "geometry_channels", tuple(int(c) for c in self.geometry_channels))
+
+    @property
+    def latent_channels(self) -> int:
+        return int(self.vae["latent_channels"])
+
+    @property
+    def latent_factor(self) -> int:
+        """Image-to-latent downsampling (8 for SD VAEs: one per down block but the last)."""
+        return 2 ** (len(self.vae["block_out_channels"]) - 1)
+
+    @property
+    def cross_attention_dim(self) -> int:
+        return int(self.unet["cross_attention_dim"])
+
+    @property
+    def alpha_bar(self) -> float:
+        """ᾱ at :attr:`timestep` (0.7552384 for SD-Turbo at t = 199), float64 arithmetic."""
+        return float(alphas_cumprod(**self.scheduler)[self.timestep])
+
+    @property
+    def uses_cfg(self) -> bool:
+        return self.use_geometry and self.guidance_scale != 1.0
+
+    def architecture(self) -> dict[str, Any]:
+        """The fields that decide parameter names/shapes and the forward maths (checkpoint identity).
+
+        Inference knobs (guidance scale, CFG batching, set sizes) and the ``pretrained`` path are
+        left out: a checkpoint may be used with other values of those.
+        """
+        keep = ("method", "unet", "vae", "scheduler", "timestep", "prediction", "use_geometry",
+                "geometry_channels", "geometry_groups", "cmap_clip", "vae_decoder", "vae_lora_rank",
+                "vae_lora_alpha", "skip_connections", "skip_gamma", "text_length")
+        return _jsonable({name: getattr(self, name) for name in keep})
+
+    def to_dict(self) -> dict[str, Any]:
+        return _jsonable(asdict(self))
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Training hyper-parameters (paper supplement; DiFix3D defaults where the paper is silent).
+
+    Attributes:
+        steps: optimiser steps (the paper: ~40 k at total batch 4).
+        learning_rate, weight_decay, adam_betas, adam_eps: AdamW (DiFix: 2e-5, 1e-2, (0.9, 0.999), 1e-8).
+        grad_clip: max gradient norm (0 = off).
+        gradient_accumulation: micro-batches (one packet each) per optimiser step and process.
+        min_views, max_views: each training set holds a random number of views in this range
+            (fewer if the packet has fewer); references and targets keep the packet's proportion,
+            at least one of each when the packet has them.
+        decode_targets: how many target latents are decoded for the reconstruction loss (0 = all).
+        latent_weight: weight of the latent loss ‖x̂0 − E(y)‖² on target latents.
+        l2_weight, ssim_weight, lpips_weight: reconstruction terms (equal weights in the paper).
+        lpips_net: LPIPS backbone for the loss (``vgg`` as DiFix, or ``alex``).
+        mixed_precision: ``auto`` (bf16 on CUDA, fp32 on CPU), ``no``, ``bf16`` or ``fp16``.
+        checkpoint_every, keep_checkpoints: save period in steps and how many step checkpoints to keep.
+        validate_every, validation_packets: validation period and how many test packets it scores.
+        log_every: progress-bar update period.
+        seed: seeds every random choice (subsets, permutations, dropout, init).
+        num_workers: DataLoader worker processes.
+    """
+
+    steps: int = 40_000
+    learning_rate: float = 2e-5
+    weight_decay: float = 1e-2
+    adam_betas: tuple[float, float] = (0.9, 0.999)
+    adam_eps: float = 1e-8
+    grad_clip: float = 1.0
+    gradient_accumulation: int = 1
+    min_views: int = 8
+    max_views: int = 12
+    decode_targets: int = 2
+    latent_weight: float = 1.0
+    l2_weight: float = 1.0
+    ssim_weight: float = 1.0
+    lpips_weight: float = 1.0
+    lpips_net: str = "vgg"
+    mixed_precision: str = "auto"
+    checkpoint_every: int = 1000
+    keep_checkpoints: int = 3
+    validate_every: int = 1000
+    validation_packets: int = 4
+    log_every: int = 10
+    seed: int = 0
+    num_workers: int = 0
+
+    def __post_init__(self) -> None:
+        where = "[train]"
+        if self.steps < 0 or self.gradient_accumulation < 1:
+            raise UsageError("steps must be >= 0 and gradient_accumulation >= 1", where)
+        if not 2 <= self.min_views <= self.max_views:
+            raise UsageError(f"need 2 <= min_views <= max_views, got {self.min_views}, {self.max_views}", where)
+        if self.mixed_precision not in ("auto", "no", "bf16", "fp16"):
+            raise UsageError(f"mixed_precision must be auto, no, bf16 or fp16, got {self.mixed_precision!r}", where)
+        if self.lpips_net not in ("vgg", "alex"):
+            raise UsageError(f"lpips_net must be 'vgg' or 'alex', got {self.lpips_net!r}", where)
+        weights = (self.latent_weight, self.l2_weight, self.ssim_weight, self.lpips_weight)
+        if min(weights) < 0 or sum(weights) == 0:
+            raise UsageError("loss weights must be >= 0 and not all zero", where)
+        object.__setattr__(self, "adam_betas", tuple(float(b) for b in self.adam_betas))
+
+    @property
+    def reconstruction_weight(self) -> float:
+        return self.l2_weight + self.ssim_weight + self.lpips_weight
+
+    def to_dict(self) -> dict[str, Any]:
+        return _jsonable(asdict(self))
+
+
+@dataclass(frozen=True)
+class Config:
+    """A model config and a training config, as read from one TOML file."""
+
+    model: ModelConfig = field(default_factory=ModelConfig)
+    train: TrainConfig = field(default_factory=TrainConfig)
+    source: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"format": CONFIG_FORMAT, "model": self.model.to_dict(), "train": self.train.to_dict()}
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), indent=2, sort_keys=True)
+
+
+def packaged_configs() -> dict[str, Path]:
+    """The example configs shipped with the package, by name (file stem)."""
+    folder = resources.files("setdiff_bench.models.setdiff") / "configs"
+    return {Path(str(p)).stem: Path(str(p)) for p in folder.iterdir() if str(p).endswith(".toml")}
+
+
+def load_config(source: str | Path) -> Config:
+    """Read a config from a TOML file, or a packaged config by name (``tiny_setdiff``, ...)."""
+    path = Path(source)
+    if not path.exists():
+        packaged = packaged_configs()
+        if str(source) in packaged:
+            path = packaged[str(source)]
+        else:
+            raise UsageError(f"config file not found (packaged configs: {', '.join(sorted(packaged))})", source)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as error:
+        raise UsageError(f"cannot read config TOML: {error}", path) from error
+    try:
+        return config_from_dict(data, source=str(path))
+    except UsageError as error:
+        raise UsageError(error.one_line(), path) from error
+
+
+def config_from_dict(data: Mapping[str, Any], source: str = "") -> Config:
+    """Build a :class:`Config` from ``{"model": {...}, "train": {...}}`` (TOML layout or saved JSON)."""
+    unknown = set(data) - {"model", "train", "format"}
+    if unknown:
+        raise UsageError(f"unknown top-level tables {sorted(unknown)} (expected [model], [train])", source)
+    model = model_config_from_dict(data.get("model", {}))
+    train = _build(TrainConfig, data.get("train", {}), "[train]")
+    return Config(model=model, train=train, source=source)
+
+
+def model_config_from_dict(data: Mapping[str, Any]) -> ModelConfig:
+    """Resolve ``preset`` and key-wise ``unet``/``vae`` overrides into a :class:`ModelConfig`."""
+    data = dict(data)
+    preset_name = data.get("preset", "sd-turbo")
+    if preset_name not in PRESETS:
+        raise UsageError(f"unknown preset {preset_name!r}; known: {', '.join(PRESETS)}", "[model]")
+    preset = PRESETS[preset_name]
+    for part in ("unet", "vae"):
+        overrides = data.get(part, {})
+        if not isinstance(overrides, Mapping):
+            raise UsageError(f"[model.{part}] must be a table", "[model]")
+        base = copy.deepcopy(preset[part])
+        base.update(overrides)
+        data[part] = base
+    data.setdefault("geometry_channels", list(preset["geometry_channels"]))
+    data.setdefault("scheduler", dict(SD_TURBO_SCHEDULE))
+    return _build(ModelConfig, data, "[model]")
+
+
+def with_overrides(config: Config, **train_overrides: Any) -> Config:
+    """A copy of ``config`` with some training fields replaced (``None`` values are ignored)."""
+    updates = {k: v for k, v in train_overrides.items() if v is not None}
+    return replace(config, train=replace(config.train, **updates)) if updates else config
+
+
+def _build(cls: type, data: Mapping[str, Any], where: str) -> Any:
+    names = {f.name for f in fields(cls)}
+    unknown = sorted(set(data) - names)
+    if unknown:
+        raise UsageError(f"unknown keys {unknown} in {where}; known: {', '.join(sorted(names))}", where)
+    try:
+        return cls(**dict(data))
+    except TypeError as error:
+        raise UsageError(f"invalid {where}: {error}", where) from error
+
+
+def _jsonable(value: Any) -> Any:
+    """Tuples → lists, mappings → plain sorted dicts, recursively (a stable JSON form)."""
+    if isinstance(value, Mapping):
+        return {str(k): _jsonable(v) for k, v in sorted(value.items())}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    return value

@@ -1,0 +1,195 @@
+"""Packets → model tensors, and the view subsets the trainer draws.
+
+Layout used everywhere in the model: a *set* is N references followed by M targets; several sets of
+the same layout stack on a leading batch axis, ``(B, V, ...)`` with V = N + M, flattened "(b v)"
+(view-minor) before the networks.
+"""
+
+from __future__ import annotations
+
+import random
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+import torch
+
+from setdiff_bench.errors import PacketError
+from setdiff_bench.geometry import max_pairwise_distance, overlap_score_matrix
+from setdiff_bench.models.setdiff.geometry_encoder import geometry_input
+from setdiff_bench.types import Packet, TrainingSample, ViewSet
+
+
+@dataclass
+class SetBatch:
+    """B sets of N references + M targets.
+
+    Attributes:
+        images: ``(B, V, 3, H, W)`` float32 in [0, 1]; views ``[0, N)`` are references.
+        geometry: ``(B, V, 9, H, W)`` C-map + Plücker input of Ψ, or ``None`` (RGB-only model).
+        num_references: N.
+    """
+
+    images: torch.Tensor
+    geometry: torch.Tensor | None
+    num_references: int
+
+    @property
+    def num_sets(self) -> int:
+        return int(self.images.shape[0])
+
+    @property
+    def num_views(self) -> int:
+        return int(self.images.shape[1])
+
+    @property
+    def num_targets(self) -> int:
+        return self.num_views - self.num_references
+
+    def to(self, device: torch.device | str, dtype: torch.dtype | None = None) -> SetBatch:
+        geometry = None if self.geometry is None else self.geometry.to(device=device, dtype=dtype)
+        return SetBatch(self.images.to(device=device, dtype=dtype), geometry, self.num_references)
+
+
+def check_image_size(height: int, width: int, factor: int, where: str) -> None:
+    """Reject sizes the VAE cannot map to a latent grid exactly (no silent padding or resizing)."""
+    if height % factor or width % factor:
+        raise PacketError(f"image size {height}x{width} is not divisible by {factor}; resize or crop the packet "
+                          f"to a multiple of {factor} (e.g. 576x1024)", where)
+
+
+def check_packet(packet: Packet, factor: int) -> None:
+    """At least one target; all views the same size, divisible by the latent factor."""
+    where = f"packet {packet.packet_id}"
+    if len(packet.targets) < 1:
+        raise PacketError("packet has no target views", where)
+    shapes = {tuple(packet.targets.images.shape[-2:])}
+    if len(packet.references):
+        shapes.add(tuple(packet.references.images.shape[-2:]))
+    if len(shapes) != 1:
+        raise PacketError(f"references and targets differ in size: {sorted(shapes)}", where)
+    check_image_size(packet.height, packet.width, factor, where)
+
+
+def view_tensors(packet: Packet, *, use_geometry: bool, cmap_clip: float,
+                 max_references: int | None = None) -> tuple[torch.Tensor, torch.Tensor | None, int]:
+    """All views of a packet, references first.
+
+    Returns:
+        images ``(V, 3, H, W)``, geometry ``(V, 9, H, W)`` or ``None``, and N (references used: the
+        first ``max_references`` of the packet's, which the packet builder orders best first by Eq. 2).
+    """
+    references = packet.references
+    if max_references is not None and len(references) > max_references:
+        references = references.subset(range(max_references))
+    views = [v for v in (references, packet.targets) if len(v)]
+    images = torch.cat([v.images.float() for v in views])
+    geometry = None
+    if use_geometry:
+        geometry = torch.cat([geometry_input(v.cmaps, v.cameras, cmap_clip=cmap_clip) for v in views])
+    return images, geometry, len(references)
+
+
+def target_sets(images: torch.Tensor, geometry: torch.Tensor | None, num_references: int,
+                targets_per_set: int | None) -> list[tuple[SetBatch, list[int]]]:
+    """Split the targets into sets that each carry all references.
+
+    Args:
+        images, geometry, num_references: as from :func:`view_tensors`.
+        targets_per_set: targets per set (``None`` = all in one set).
+
+    Returns:
+        ``(batch, target_indices)`` pairs: equal-sized sets are stacked on the batch axis; the
+        indices say which packet targets the batch's targets are, in "(b m)" order.
+    """
+    total = int(images.shape[0]) - num_references
+    size = total if targets_per_set is None else min(targets_per_set, total)
+    chunks = [list(range(start, min(start + size, total))) for start in range(0, total, size)]
+    by_size: dict[int, list[list[int]]] = {}
+    for chunk in chunks:
+        by_size.setdefault(len(chunk), []).append(chunk)
+    result = []
+    refs = list(range(num_references))
+    for group in by_size.values():
+        index = torch.tensor([refs + [num_references + t for t in chunk] for chunk in group])
+        batch_geometry = None if geometry is None else geometry[index]
+        result.append((SetBatch(images[index], batch_geometry, num_references), [t for c in group for t in c]))
+    return result
+
+
+@dataclass
+class TrainingSet:
+    """One training set drawn from a :class:`TrainingSample`.
+
+    Attributes:
+        batch: one set (B = 1) of N references + M targets.
+        target_gt: ``(1, M, 3, H, W)`` ground truth of the targets, in [0, 1].
+        target_masks: ``(1, M, 1, H, W)`` bool, True where the loss counts.
+    """
+
+    batch: SetBatch
+    target_gt: torch.Tensor
+    target_masks: torch.Tensor
+
+
+def choose_views(num_references: int, num_targets: int, rng: random.Random, *, min_views: int, max_views: int,
+                 max_references: int | None = None) -> tuple[list[int], list[int]]:
+    """Random subset and order of a packet's views for one training step.
+
+    The set size is uniform in ``[min_views, max_views]`` (capped by what the packet has); references
+    and targets keep the packet's proportion, with at least one target and, when the packet has any,
+    at least one reference.  Both lists come back randomly permuted (paper: random permutation π).
+    """
+    available = num_references + num_targets
+    size = min(rng.randint(min_views, max_views), available)
+    if max_references is not None:
+        num_references = min(num_references, max_references)
+        size = min(size, num_references + num_targets)
+    refs = round(size * num_references / max(num_references + num_targets, 1))
+    refs = min(max(refs, 1 if num_references else 0), num_references, size - 1)
+    targets = min(size - refs, num_targets)
+    refs = min(size - targets, num_references)
+    reference_ids = rng.sample(range(num_references), refs)
+    target_ids = rng.sample(range(num_targets), targets)
+    return reference_ids, target_ids
+
+
+def best_reference_per_target(packet: Packet) -> list[int]:
+    """For each target, the reference with the highest Eq. 2 score against it (DiFix training pairs).
+
+    ``d_max`` is the largest camera-centre distance within the packet.
+    """
+    cameras = (*packet.references.cameras, *packet.targets.cameras)
+    d_max = max_pairwise_distance(np.stack([c.center for c in cameras]))
+    scores = overlap_score_matrix(packet.targets.cameras, packet.references.cameras, d_max)
+    return [int(np.argmax(row)) for row in scores]
+
+
+def training_set(sample: TrainingSample, rng: random.Random, *, min_views: int, max_views: int,
+                 use_geometry: bool, cmap_clip: float, pairs: bool = False) -> TrainingSet:
+    """Draw the views of one training step from ``sample`` and build the tensors.
+
+    Args:
+        pairs: DiFix mode: one random target and its best reference by Eq. 2 (the training data may
+            be permuted, so the packet's first reference need not be the best one).
+    """
+    packet = sample.packet
+    check_packet(packet, 1)
+    num_refs, num_targets = len(packet.references), len(packet.targets)
+    if pairs:
+        target = rng.randrange(num_targets)
+        reference_ids = [best_reference_per_target(packet)[target]] if num_refs else []
+        target_ids = [target]
+    else:
+        reference_ids, target_ids = choose_views(num_refs, num_targets, rng, min_views=min_views, max_views=max_views)
+    subset = replace(packet, references=_subset(packet.references, reference_ids),
+                     targets=_subset(packet.targets, target_ids))
+    images, geometry, n = view_tensors(subset, use_geometry=use_geometry, cmap_clip=cmap_clip)
+    batch = SetBatch(images[None], None if geometry is None else geometry[None], n)
+    gt = sample.target_gt[target_ids].float()[None]
+    masks = sample.target_masks[target_ids].bool()[None]
+    return TrainingSet(batch=batch, target_gt=gt, target_masks=masks)
+
+
+def _subset(views: ViewSet, indices: Sequence[int]) -> ViewSet:
+    return views.subset(list(indices))

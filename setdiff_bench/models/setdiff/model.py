@@ -1,0 +1,191 @@
+"""The SetDiff model (and DiFix on the same code): one-step set diffusion on SD-Turbo latents.
+
+Forward pass for B sets of N references + M targets (paper §3.1–3.3, model.md §1 and §9):
+
+1. every view is encoded by the frozen VAE encoder: ``z = mean(E(x)) · 0.18215``;
+2. Ψ(C-map, Plücker) is added: the UNet input is ``z + g`` (``g = 0`` when geometry is dropped);
+3. the UNet runs **once** at t = 199 (τ = 200) on the clean latents — no noise is added — with the
+   set mixer joining all V views' self-attention tokens and the fixed text embedding in ``attn2``;
+4. the prediction becomes x̂0 analytically with ᾱ = ᾱ₁₉₉ = 0.7552384 (float64 cumprod of SD-Turbo's
+   ``scaled_linear`` betas):  v-prediction ``x̂0 = √ᾱ·z − √(1−ᾱ)·v̂``, ε-prediction
+   ``x̂0 = (z − √(1−ᾱ)·ε̂)/√ᾱ``.  ``z`` here is the *image* latent: Ψ's output is a condition added
+   to the UNet input, not part of the diffusion state (our reading; with Ψ zero-initialised both
+   readings agree at the start);
+5. only the targets' x̂0 are decoded (decoder with LoRA, optional DiFix skip convs).
+
+Geometry classifier-free guidance: training removes C-maps and poses together for a whole set with
+probability ``geometry_dropout``; at inference ``x̂0 = x̂0_u + s·(x̂0_c − x̂0_u)`` with s = 2.0, the
+conditional and unconditional UNet passes batched into one call (``cfg_batched``).  As both branches
+share ``z``, guiding x̂0 equals guiding the UNet output.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+from torch import nn
+
+from setdiff_bench.models.setdiff.config import ModelConfig
+from setdiff_bench.models.setdiff.geometry_encoder import GeometryEncoder
+from setdiff_bench.models.setdiff.inputs import SetBatch, check_image_size
+from setdiff_bench.models.setdiff.networks import build_networks
+from setdiff_bench.models.setdiff.set_mixer import SetContext, install_set_mixer
+from setdiff_bench.models.setdiff.vae_codec import Encoded, LatentCodec
+
+
+@dataclass
+class SetPrediction:
+    """Training forward output.
+
+    Attributes:
+        target_x0: ``(B, M, C, h, w)`` predicted clean target latents (scaled latent space).
+        decoded: ``(B, K, 3, H, W)`` decoded images in [0, 1] of the targets in ``decode_index``,
+            or ``None`` when nothing was decoded.
+    """
+
+    target_x0: torch.Tensor
+    decoded: torch.Tensor | None
+
+
+class SetDiffModel(nn.Module):
+    """SD-Turbo UNet + VAE with set mixer, geometry encoder and one-step x̂0 (see module docstring).
+
+    Args:
+        config: the model configuration.
+        load_pretrained: load ``config.pretrained`` when set; ``False`` builds random networks of the
+            same architecture (used before loading a checkpoint, which holds every weight).
+    """
+
+    def __init__(self, config: ModelConfig, *, load_pretrained: bool = True) -> None:
+        super().__init__()
+        networks = build_networks(config, load_pretrained=load_pretrained)
+        self.unet = networks.unet
+        self.set_context = SetContext()
+        self.mixed_attention = install_set_mixer(self.unet, self.set_context)
+        self.codec = LatentCodec(networks.vae, skip_connections=config.skip_connections,
+                                 skip_gamma=config.skip_gamma, decoder_training=config.vae_decoder,
+                                 lora_rank=config.vae_lora_rank, lora_alpha=config.vae_lora_alpha)
+        self.geometry_encoder = (GeometryEncoder(config.geometry_channels, config.latent_channels,
+                                                 config.latent_factor, config.geometry_groups)
+                                 if config.use_geometry else None)
+        text_shape = (1, config.text_length, config.cross_attention_dim)
+        if networks.prompt_embedding is not None:
+            if tuple(networks.prompt_embedding.shape) != text_shape:
+                raise ValueError(f"prompt embedding {tuple(networks.prompt_embedding.shape)} != {text_shape}")
+            self.text_embedding = nn.Parameter(networks.prompt_embedding.clone(), requires_grad=False)
+        else:
+            self.text_embedding = nn.Parameter(torch.zeros(text_shape))
+        self.unet.requires_grad_(True)
+        self.config = config
+        alpha_bar = config.alpha_bar
+        self.sqrt_alpha_bar = math.sqrt(alpha_bar)
+        self.sqrt_one_minus_alpha_bar = math.sqrt(1.0 - alpha_bar)
+
+    # ------------------------------------------------------------------ stages
+    def encode(self, images: torch.Tensor, keep_skips: torch.Tensor | None = None) -> Encoded:
+        """``(B·V, 3, H, W)`` in [0, 1] → :class:`Encoded` (scaled posterior means, skips of ``keep_skips``)."""
+        check_image_size(int(images.shape[-2]), int(images.shape[-1]), self.config.latent_factor, "model input")
+        return self.codec.encode(images, keep_skips)
+
+    def geometry_latents(self, geometry: torch.Tensor) -> torch.Tensor:
+        """Ψ: ``(B·V, 9, H, W)`` → ``(B·V, C, H/8, W/8)``."""
+        if self.geometry_encoder is None:
+            raise RuntimeError("this model has no geometry encoder (use_geometry = false)")
+        return self.geometry_encoder(geometry)
+
+    def unet_output(self, unet_input: torch.Tensor, num_views: int) -> torch.Tensor:
+        """One UNet pass at the fixed timestep over ``(B·V, C, h, w)`` sets of ``num_views`` views."""
+        text = self.text_embedding.to(unet_input.dtype).expand(unet_input.shape[0], -1, -1)
+        timestep = torch.full((unet_input.shape[0],), self.config.timestep, device=unet_input.device,
+                              dtype=torch.long)
+        with self.set_context.views(num_views):
+            return self.unet(unet_input, timestep, encoder_hidden_states=text).sample
+
+    def to_x0(self, latents: torch.Tensor, prediction: torch.Tensor) -> torch.Tensor:
+        """Analytic one-step x̂0 from the image latent and the UNet output (v or ε)."""
+        if self.config.prediction == "v_prediction":
+            return self.sqrt_alpha_bar * latents - self.sqrt_one_minus_alpha_bar * prediction
+        return (latents - self.sqrt_one_minus_alpha_bar * prediction) / self.sqrt_alpha_bar
+
+    def decode(self, latents: torch.Tensor, skips: tuple[torch.Tensor, ...] | None = None) -> torch.Tensor:
+        """Scaled latents ``(K, C, h, w)`` → images ``(K, 3, H, W)`` in [0, 1]."""
+        return self.codec.decode(latents, skips)
+
+    def predict_x0(self, latents: torch.Tensor, geometry: torch.Tensor | None, num_views: int, *,
+                   guidance_scale: float = 1.0, geometry_keep: torch.Tensor | None = None) -> torch.Tensor:
+        """x̂0 for every view, ``(B·V, C, h, w)``.
+
+        Args:
+            latents: ``(B·V, C, h, w)`` image latents.
+            geometry: ``(B·V, 9, H, W)`` Ψ input or ``None`` (no geometry).
+            guidance_scale: geometry CFG scale; 1 = conditional only.
+            geometry_keep: ``(B,)`` 0/1 per set multiplying Ψ's output (training dropout); the
+                multiplication keeps Ψ in the graph so DDP sees all parameters used.
+        """
+        if geometry is None or self.geometry_encoder is None:
+            return self.to_x0(latents, self.unet_output(latents, num_views))
+        g = self.geometry_latents(geometry.to(latents.dtype))
+        if geometry_keep is not None:
+            keep = geometry_keep.to(g.dtype).repeat_interleave(num_views)
+            g = g * keep.view(-1, 1, 1, 1)
+        if guidance_scale == 1.0:
+            return self.to_x0(latents, self.unet_output(latents + g, num_views))
+        if self.config.cfg_batched:
+            both = self.unet_output(torch.cat([latents + g, latents]), num_views)
+            conditional, unconditional = both.chunk(2)
+        else:
+            conditional = self.unet_output(latents + g, num_views)
+            unconditional = self.unet_output(latents, num_views)
+        guided = unconditional + guidance_scale * (conditional - unconditional)
+        return self.to_x0(latents, guided)
+
+    # ------------------------------------------------------------------ whole passes
+    def forward(self, batch: SetBatch, *, geometry_keep: torch.Tensor | None = None,
+                decode_index: torch.Tensor | None = None) -> SetPrediction:
+        """Training pass (no CFG): x̂0 of all targets, and decoded images of ``decode_index`` targets.
+
+        Args:
+            batch: B sets of N references + M targets.
+            geometry_keep: ``(B,)`` 0/1 geometry dropout per set (``None`` = keep all).
+            decode_index: target indices (in ``[0, M)``, same for all sets) to decode; ``None`` = none.
+        """
+        sets, views, n = batch.num_sets, batch.num_views, batch.num_references
+        images = batch.images.reshape(sets * views, *batch.images.shape[2:])
+        geometry = None if batch.geometry is None else batch.geometry.reshape(sets * views, *batch.geometry.shape[2:])
+        flat_decode = None
+        if decode_index is not None:
+            offsets = torch.arange(sets, device=decode_index.device)[:, None] * views
+            flat_decode = (offsets + n + decode_index[None, :].to(offsets.device)).reshape(-1)
+        encoded = self.encode(images, flat_decode)
+        x0 = self.predict_x0(encoded.latents, geometry, views, geometry_keep=geometry_keep)
+        x0 = x0.reshape(sets, views, *x0.shape[1:])
+        target_x0 = x0[:, n:]
+        decoded = None
+        if flat_decode is not None:
+            chosen = x0.reshape(sets * views, *x0.shape[2:])[flat_decode.to(x0.device)]
+            decoded = self.decode(chosen, encoded.skips)
+            decoded = decoded.reshape(sets, -1, *decoded.shape[1:])
+        return SetPrediction(target_x0=target_x0, decoded=decoded)
+
+    @torch.no_grad()
+    def enhance(self, batch: SetBatch, guidance_scale: float | None = None) -> torch.Tensor:
+        """Inference: ``(B, M, 3, H, W)`` enhanced targets in [0, 1] (CFG per the config).
+
+        Args:
+            guidance_scale: overrides ``config.guidance_scale`` (ignored without geometry).
+        """
+        scale = self.config.guidance_scale if guidance_scale is None else float(guidance_scale)
+        sets, views, n = batch.num_sets, batch.num_views, batch.num_references
+        images = batch.images.reshape(sets * views, *batch.images.shape[2:])
+        geometry = None if batch.geometry is None else batch.geometry.reshape(sets * views, *batch.geometry.shape[2:])
+        targets = (torch.arange(sets)[:, None] * views + torch.arange(n, views)[None, :]).reshape(-1)
+        encoded = self.encode(images, targets.to(images.device))
+        x0 = self.predict_x0(encoded.latents, geometry, views, guidance_scale=scale)
+        decoded = self.decode(x0[targets.to(x0.device)], encoded.skips)
+        return decoded.reshape(sets, views - n, *decoded.shape[1:]).float()
+
+    def trainable_parameters(self) -> list[nn.Parameter]:
+        """UNet (fully), Ψ, the decoder per ``vae_decoder`` (LoRA/full), skip convs, a learned text embedding."""
+        return [p for p in self.parameters() if p.requires_grad]

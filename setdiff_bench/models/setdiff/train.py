@@ -1,0 +1,314 @@
+"""Training loop for SetDiff and DiFix (same code; the config's ``method`` picks the set layout).
+
+One micro-batch is one training set drawn from one :class:`~setdiff_bench.types.TrainingSample`:
+a random subset of 8–12 of its views (references and targets in the packet's proportion, randomly
+permuted; DiFix: one random target and its best reference by Eq. 2).  Per set, with probability
+``geometry_dropout`` the C-maps and poses are removed together (geometry CFG).  The loss is the latent
+loss on every target plus the reconstruction loss on ``decode_targets`` random decoded targets (see
+:mod:`.losses`).  AdamW on the trainable parameters (UNet fully, Ψ, decoder LoRA or decoder, skip
+convs, a learned text embedding), gradient clipping, gradient accumulation.
+
+Runs under ``accelerate``: one process per GPU with DDP (``accelerate launch -m setdiff_bench.cli.main
+train ...``), bf16 autocast on CUDA and float32 on the CPU by default; total batch =
+processes × ``gradient_accumulation``.  Every random choice derives from ``seed``, the process rank and
+the step, so a resumed run draws the same sets as an uninterrupted one (for map-style datasets).
+
+Outputs in ``OUT``: ``checkpoints/step-XXXXXXXX/`` (see :mod:`.checkpoint`), ``latest``,
+``train_log.jsonl`` (losses every ``log_every`` steps) and ``validation.jsonl`` (PSNR/SSIM[/LPIPS]
+of the enhanced targets of the validation samples every ``validate_every`` steps).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import random
+import time
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from setdiff_bench.errors import UsageError
+from setdiff_bench.models.setdiff.checkpoint import (
+    check_compatible,
+    load_training_state,
+    load_weights,
+    mark_latest,
+    read_config,
+    resolve_checkpoint,
+    save_checkpoint,
+    step_folder,
+)
+from setdiff_bench.models.setdiff.config import Config
+from setdiff_bench.models.setdiff.inference import enhance_packet
+from setdiff_bench.models.setdiff.inputs import training_set
+from setdiff_bench.models.setdiff.losses import ReconstructionLoss, latent_loss
+from setdiff_bench.models.setdiff.model import SetDiffModel
+from setdiff_bench.types import TrainingSample
+
+LOG_FILE = "train_log.jsonl"
+VALIDATION_FILE = "validation.jsonl"
+
+
+@dataclass
+class TrainResult:
+    """What :func:`train` did.
+
+    Attributes:
+        step: optimiser steps done in total (including those before a resume).
+        checkpoint: the final checkpoint folder.
+        losses: the last logged loss terms.
+        validation: every validation record written during this call.
+    """
+
+    step: int
+    checkpoint: Path
+    losses: dict[str, float] = field(default_factory=dict)
+    validation: list[dict[str, float]] = field(default_factory=list)
+
+
+class SampleStream:
+    """An endless, resumable stream of training samples for one process.
+
+    Map-style datasets (``__len__`` + ``__getitem__``) are shuffled per epoch with a seeded permutation
+    and sharded by rank (``perm[rank::world]``); position ``start`` skips what a previous run used.
+    Other iterables are cycled in their own order (and restart from the beginning on resume).
+    """
+
+    def __init__(self, dataset: Sequence[TrainingSample] | Iterable[TrainingSample], *, seed: int, rank: int = 0,
+                 world: int = 1, start: int = 0, num_workers: int = 0) -> None:
+        self.dataset, self.seed, self.rank, self.world = dataset, seed, rank, world
+        self.position, self.num_workers = start, num_workers
+        self.map_style = hasattr(dataset, "__len__") and hasattr(dataset, "__getitem__")
+        if self.map_style and len(dataset) == 0:  # type: ignore[arg-type]
+            raise UsageError("the training dataset is empty", "--packets")
+        self._iterator = self._map_style() if self.map_style else self._cycle()
+
+    def __iter__(self) -> Iterator[TrainingSample]:
+        return self
+
+    def __next__(self) -> TrainingSample:
+        return next(self._iterator)
+
+    def _epoch_indices(self, epoch: int) -> list[int]:
+        generator = torch.Generator().manual_seed(self.seed * 1_000_003 + epoch)
+        permutation = torch.randperm(len(self.dataset), generator=generator).tolist()  # type: ignore[arg-type]
+        shard = permutation[self.rank::self.world]
+        return shard or permutation[: 1]
+
+    def _map_style(self) -> Iterator[TrainingSample]:
+        per_epoch = len(self._epoch_indices(0))
+        epoch, offset = divmod(self.position, per_epoch)
+        while True:
+            indices = self._epoch_indices(epoch)[offset:]
+            if self.num_workers > 0:
+                loader = torch.utils.data.DataLoader(self.dataset, batch_size=None, sampler=indices,  # type: ignore[arg-type]
+                                                     num_workers=self.num_workers, collate_fn=_identity)
+                yield from loader
+            else:
+                for index in indices:
+                    yield self.dataset[index]  # type: ignore[index]
+            epoch, offset = epoch + 1, 0
+
+    def _cycle(self) -> Iterator[TrainingSample]:
+        while True:
+            empty = True
+            for number, sample in enumerate(self.dataset):
+                if number % self.world == self.rank:
+                    empty = False
+                    yield sample
+            if empty:
+                raise UsageError("the training dataset yielded no samples for this process", "--packets")
+
+
+def _identity(sample: Any) -> Any:
+    return sample
+
+
+def train(config: Config, dataset: Sequence[TrainingSample] | Iterable[TrainingSample], out_dir: str | Path, *,
+          validation: Sequence[TrainingSample] = (), resume: bool = True, cpu: bool | None = None,
+          progress: bool = True) -> TrainResult:
+    """Train (or resume training) a model and write checkpoints to ``out_dir``.
+
+    Args:
+        config: model + training configuration.
+        dataset: training samples (map-style datasets shuffle and resume exactly).
+        out_dir: output folder (created); an existing run there is resumed when ``resume``.
+        validation: samples scored every ``validate_every`` steps and at the end (main process).
+        resume: continue from ``out_dir``'s latest checkpoint if there is one.
+        cpu: force the CPU (default: CPU when CUDA is unavailable).
+        progress: show a tqdm progress bar.
+
+    Raises:
+        CheckpointError: the checkpoint in ``out_dir`` belongs to another model configuration.
+        WeightsError: LPIPS (loss weight > 0) or pretrained weights are missing.
+    """
+    from accelerate import Accelerator
+    from accelerate.utils import DistributedDataParallelKwargs, set_seed
+    from tqdm.auto import tqdm
+
+    tc = config.train
+    cpu = (not torch.cuda.is_available()) if cpu is None else cpu
+    precision = ("no" if cpu else "bf16") if tc.mixed_precision == "auto" else tc.mixed_precision
+    ddp = DistributedDataParallelKwargs(find_unused_parameters=tc.reconstruction_weight == 0)
+    accelerator = Accelerator(cpu=cpu, mixed_precision=precision, kwargs_handlers=[ddp])
+    device = accelerator.device
+    out = Path(out_dir)
+
+    previous = None
+    if resume and ((out / "latest").is_file()):
+        previous = resolve_checkpoint(out)
+        check_compatible(read_config(previous), config, previous)
+
+    set_seed(tc.seed)
+    model = SetDiffModel(config.model, load_pretrained=previous is None)
+    if previous is not None:
+        load_weights(model, previous)
+    model.to(device)
+    model.train()
+    optimizer = torch.optim.AdamW(model.trainable_parameters(), lr=tc.learning_rate, betas=tc.adam_betas,
+                                  eps=tc.adam_eps, weight_decay=tc.weight_decay)
+    start = load_training_state(previous, optimizer) if previous is not None else 0
+    reconstruction = (ReconstructionLoss(tc.l2_weight, tc.ssim_weight, tc.lpips_weight, tc.lpips_net, device=device)
+                      if tc.reconstruction_weight > 0 else None)
+    model, optimizer = accelerator.prepare(model, optimizer)
+    core: SetDiffModel = accelerator.unwrap_model(model)
+    rank, world = accelerator.process_index, accelerator.num_processes
+    stream = SampleStream(dataset, seed=tc.seed, rank=rank, world=world, start=start * tc.gradient_accumulation,
+                          num_workers=tc.num_workers)
+    main = accelerator.is_main_process
+    bar = tqdm(total=tc.steps, initial=start, disable=not (progress and main), desc=f"train {config.model.method}",
+               dynamic_ncols=True)
+    result = TrainResult(step=start, checkpoint=previous or out)
+    running: dict[str, float] = {}
+    running_steps = 0
+    began = time.perf_counter()
+
+    for step in range(start, tc.steps):
+        for micro in range(tc.gradient_accumulation):
+            rng = random.Random(f"{tc.seed}/{rank}/{step}/{micro}")
+            sync = micro == tc.gradient_accumulation - 1
+            with contextlib.nullcontext() if sync else accelerator.no_sync(model):
+                terms = _micro_step(model, core, next(stream), rng, config, reconstruction, accelerator)
+            for key, value in terms.items():
+                running[key] = running.get(key, 0.0) + value / tc.gradient_accumulation
+        if tc.grad_clip > 0:
+            accelerator.clip_grad_norm_(model.parameters(), tc.grad_clip)
+        optimizer.step()
+        optimizer.zero_grad(set_to_none=True)
+        running_steps += 1
+        done = step + 1
+        result.step = done
+        if done % tc.log_every == 0 or done == tc.steps:
+            logged = {k: _gather_mean(accelerator, v / running_steps) for k, v in running.items()}
+            running, running_steps = {}, 0
+            result.losses = logged
+            if main:
+                bar.set_postfix({k: f"{v:.4f}" for k, v in logged.items()})
+                _append_jsonl(out / LOG_FILE, {"step": done, **logged,
+                                               "seconds": round(time.perf_counter() - began, 3)})
+        bar.update(1)
+        if validation and (done % tc.validate_every == 0 or done == tc.steps):
+            if main:
+                record = {"step": done, **validate(core, validation[: tc.validation_packets], reconstruction)}
+                result.validation.append(record)
+                _append_jsonl(out / VALIDATION_FILE, record)
+                bar.write(f"step {done}: " + ", ".join(f"{k} {v:.4f}" for k, v in record.items() if k != "step"))
+            accelerator.wait_for_everyone()
+        if done % tc.checkpoint_every == 0 or done == tc.steps:
+            result.checkpoint = _save(accelerator, core, optimizer, config, out, done)
+    bar.close()
+    if result.step == start and previous is None:
+        result.checkpoint = _save(accelerator, core, optimizer, config, out, start)
+    accelerator.wait_for_everyone()
+    return result
+
+
+def _micro_step(model: Any, core: SetDiffModel, sample: TrainingSample, rng: random.Random, config: Config,
+                reconstruction: ReconstructionLoss | None, accelerator: Any) -> dict[str, float]:
+    """Forward + backward of one training set; returns the loss terms as floats."""
+    tc, mc = config.train, config.model
+    device = accelerator.device
+    drawn = training_set(sample, rng, min_views=tc.min_views, max_views=tc.max_views, use_geometry=mc.use_geometry,
+                         cmap_clip=mc.cmap_clip, pairs=mc.method == "difix")
+    batch = drawn.batch.to(device)
+    keep = None
+    if mc.use_geometry:
+        keep = torch.tensor([0.0 if rng.random() < mc.geometry_dropout else 1.0], device=device)
+    targets = batch.num_targets
+    decode_index = None
+    if reconstruction is not None:
+        count = targets if tc.decode_targets <= 0 else min(tc.decode_targets, targets)
+        decode_index = torch.tensor(sorted(rng.sample(range(targets), count)), device=device)
+    gt = drawn.target_gt.to(device).flatten(0, 1)
+    masks = drawn.target_masks.to(device).flatten(0, 1)
+    prediction = model(batch, geometry_keep=keep, decode_index=decode_index)
+    with accelerator.autocast():
+        gt_latents = core.encode(gt).latents
+    loss = torch.zeros((), device=device)
+    terms: dict[str, float] = {}
+    if tc.latent_weight > 0:
+        latent = latent_loss(prediction.target_x0.flatten(0, 1), gt_latents, masks)
+        loss = loss + tc.latent_weight * latent
+        terms["latent"] = float(latent.detach())
+    if reconstruction is not None and prediction.decoded is not None and decode_index is not None:
+        recon = reconstruction(prediction.decoded.flatten(0, 1), gt[decode_index], masks[decode_index])
+        loss = loss + recon["total"]
+        terms.update({k: float(v.detach()) for k, v in recon.items() if k != "total"})
+    terms["loss"] = float(loss.detach())
+    accelerator.backward(loss / tc.gradient_accumulation)
+    return terms
+
+
+@torch.no_grad()
+def validate(model: SetDiffModel, samples: Sequence[TrainingSample],
+             reconstruction: ReconstructionLoss | None = None) -> dict[str, float]:
+    """Mean masked PSNR and SSIM (and LPIPS when the loss has it loaded) of enhanced vs ground-truth targets."""
+    from setdiff_bench.metrics.psnr import psnr
+    from setdiff_bench.metrics.ssim import ssim
+
+    was_training = model.training
+    model.eval()
+    scores: dict[str, list[float]] = {"psnr": [], "ssim": []}
+    try:
+        for sample in samples:
+            enhanced = enhance_packet(model, sample.packet)
+            gt = sample.target_gt.float()
+            masks = sample.target_masks.bool()
+            scores["psnr"] += psnr(enhanced, gt, masks).tolist()
+            scores["ssim"] += ssim(enhanced, gt, mask=masks).tolist()
+            if reconstruction is not None and reconstruction.lpips is not None:
+                device = next(reconstruction.lpips.parameters()).device
+                composite = torch.where(masks, enhanced, gt).to(device)
+                scores.setdefault("lpips", []).extend(
+                    reconstruction.lpips(composite, gt.to(device)).flatten().tolist())
+    finally:
+        model.train(was_training)
+    return {k: float(sum(v) / len(v)) for k, v in scores.items() if v and all(math.isfinite(x) for x in v)}
+
+
+def _save(accelerator: Any, core: SetDiffModel, optimizer: Any, config: Config, out: Path, step: int) -> Path:
+    folder = step_folder(out, step)
+    accelerator.wait_for_everyone()
+    if accelerator.is_main_process:
+        save_checkpoint(folder, core, config, optimizer=optimizer, step=step)
+        mark_latest(out, folder, config.train.keep_checkpoints)
+    accelerator.wait_for_everyone()
+    return folder
+
+
+def _gather_mean(accelerator: Any, value: float) -> float:
+    if accelerator.num_processes == 1:
+        return float(value)
+    tensor = torch.tensor([value], device=accelerator.device)
+    return float(accelerator.gather(tensor).mean())
+
+
+def _append_jsonl(path: Path, record: dict[str, Any]) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a", encoding="utf-8") as handle:
+        handle.write(json.dumps(record, sort_keys=True) + "\n")

@@ -1,0 +1,72 @@
+"""Helpers for the SetDiff tests: small packets with real cameras, and tiny configs."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from setdiff_bench.cameras import Camera
+from setdiff_bench.models.setdiff.config import Config, TrainConfig, model_config_from_dict
+from setdiff_bench.types import Packet, TrainingSample, ViewSet
+
+
+def smooth_images(count: int, height: int, width: int, generator: torch.Generator) -> torch.Tensor:
+    """``(count, 3, H, W)`` low-frequency random images in [0, 1]."""
+    coarse = torch.rand(count, 3, max(2, height // 8), max(2, width // 8), generator=generator)
+    return F.interpolate(coarse, size=(height, width), mode="bilinear", align_corners=False).clamp(0, 1)
+
+
+def look_camera(yaw_deg: float, x: float, height: int, width: int) -> Camera:
+    """A pinhole camera at ``(x, 0, 0)`` (world) turned by ``yaw`` about the y axis."""
+    yaw = math.radians(yaw_deg)
+    rotation = np.array([[math.cos(yaw), 0.0, -math.sin(yaw)], [0.0, 1.0, 0.0], [math.sin(yaw), 0.0, math.cos(yaw)]])
+    center = np.array([x, 0.0, 0.0])
+    w2c = np.eye(4)
+    w2c[:3, :3] = rotation
+    w2c[:3, 3] = -rotation @ center
+    focal = 0.8 * width
+    K = np.array([[focal, 0.0, width / 2], [0.0, focal, height / 2], [0.0, 0.0, 1.0]])
+    return Camera(K=K, w2c=w2c, width=width, height=height)
+
+
+def view_set(prefix: str, count: int, height: int, width: int, generator: torch.Generator,
+             offset: float) -> ViewSet:
+    cameras = tuple(look_camera(7.0 * i + offset * 3, 0.1 * i + offset, height, width) for i in range(count))
+    return ViewSet(
+        names=tuple(f"{prefix}{i}" for i in range(count)),
+        images=smooth_images(count, height, width, generator),
+        cmaps=torch.randn(count, 3, height, width, generator=generator),
+        alphas=torch.ones(count, 1, height, width),
+        cameras=cameras,
+    )
+
+
+def make_packet(num_refs: int, num_targets: int, size: tuple[int, int] = (32, 32), seed: int = 0) -> Packet:
+    """A packet of random smooth images, random C-maps and distinct real cameras."""
+    generator = torch.Generator().manual_seed(seed)
+    height, width = size
+    return Packet(packet_id=f"p{seed}", dataset="test", protocol="unit", group="g", split="train", scene="s",
+                  references=view_set("ref", num_refs, height, width, generator, 0.05),
+                  targets=view_set("tgt", num_targets, height, width, generator, 0.0))
+
+
+def make_sample(num_refs: int, num_targets: int, size: tuple[int, int] = (32, 32), seed: int = 0) -> TrainingSample:
+    """A training sample whose target renders are the ground truth, blurred and noised."""
+    packet = make_packet(num_refs, num_targets, size, seed)
+    generator = torch.Generator().manual_seed(seed + 1000)
+    gt = smooth_images(num_targets, size[0], size[1], generator)
+    blurred = F.avg_pool2d(gt, 3, stride=1, padding=1, count_include_pad=False)
+    packet.targets.images = (blurred + 0.1 * torch.randn(gt.shape, generator=generator)).clamp(0, 1)
+    masks = torch.ones(num_targets, 1, size[0], size[1], dtype=torch.bool)
+    return TrainingSample(packet=packet, target_gt=gt, target_masks=masks)
+
+
+def tiny_config(**model_overrides: object) -> Config:
+    """The tiny architecture with test-friendly training settings (no LPIPS weights needed)."""
+    model = model_config_from_dict({"preset": "tiny", **model_overrides})
+    train = TrainConfig(steps=4, learning_rate=1e-3, min_views=2, max_views=4, decode_targets=1, lpips_weight=0.0,
+                        checkpoint_every=1000, validate_every=1000, log_every=1, seed=0)
+    return Config(model=model, train=train)
