@@ -1,0 +1,66 @@
+"""``setdiff-bench render``: files per view, values equal to an in-memory render, resume, bad input."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pycolmap
+import pytest
+
+from setdiff_bench.cameras import look_at, matrix_to_quaternion
+from setdiff_bench.cli.main import main
+from setdiff_bench.gaussians.ply import read_ply, write_ply
+from setdiff_bench.gaussians.render import render
+from setdiff_bench.io.images import read_exr, read_image_raw
+from setdiff_bench.loaders.colmap import read_colmap_model
+from tests.gaussians.test_render import random_scene
+
+
+def write_model(folder: Path) -> None:
+    rec = pycolmap.Reconstruction()
+    rec.add_camera_with_trivial_rig(pycolmap.Camera(camera_id=1, model="PINHOLE", width=40, height=30,
+                                                    params=[35.0, 35.0, 20.0, 15.0]))
+    for image_id, eye in enumerate([[0.0, 0.0, 0.0], [0.5, 0.2, 0.3]], start=1):
+        w2c = look_at(eye, [0.0, 0.0, 6.0], up=(0.0, -1.0, 0.0))
+        pose = pycolmap.Rigid3d(pycolmap.Rotation3d(matrix_to_quaternion(w2c[:3, :3], order="xyzw")), w2c[:3, 3])
+        rec.add_image_with_trivial_frame(pycolmap.Image(name=f"view_{image_id}.jpg", camera_id=1,
+                                                        image_id=image_id), pose)
+    folder.mkdir(parents=True)
+    rec.write_binary(str(folder))
+
+
+def test_render_verb_writes_views_and_resumes(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    write_model(tmp_path / "sparse")
+    write_ply(tmp_path / "scene.ply", random_scene(200, seed=1))
+    args = ["render", "--ply", str(tmp_path / "scene.ply"), "--colmap", str(tmp_path / "sparse"),
+            "--out", str(tmp_path / "out")]
+    assert main(args) == 0
+    for view in ("view_1", "view_2"):
+        for name in ("rgb.png", "cmap.exr", "depth.exr", "alpha.png"):
+            assert (tmp_path / "out" / view / name).is_file()
+    camera = read_colmap_model(tmp_path / "sparse").cameras["view_2.jpg"]
+    expected = render(read_ply(tmp_path / "scene.ply"), camera)
+    cmap = read_exr(tmp_path / "out" / "view_2" / "cmap.exr", channels=3)
+    assert np.allclose(cmap, expected.cmap[0].permute(1, 2, 0).numpy(), atol=1e-6)
+    rgb = read_image_raw(tmp_path / "out" / "view_2" / "rgb.png", "uint8")
+    assert np.array_equal(rgb, np.rint(expected.rgb[0].clamp(0, 1).permute(1, 2, 0).numpy() * 255).astype(np.uint8))
+    stamp = (tmp_path / "out" / "view_1" / "rgb.png").stat().st_mtime_ns
+    assert main(args) == 0
+    assert (tmp_path / "out" / "view_1" / "rgb.png").stat().st_mtime_ns == stamp
+    assert "0 view(s)" in capsys.readouterr().out.splitlines()[-1].replace("rendered ", "")
+
+
+def test_render_verb_bad_input_is_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    write_model(tmp_path / "sparse")
+    write_ply(tmp_path / "scene.ply", random_scene(10, seed=1))
+    code = main(["render", "--ply", str(tmp_path / "scene.ply"), "--colmap", str(tmp_path / "sparse"),
+                 "--out", str(tmp_path / "out"), "--images", "nope.jpg"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "nope.jpg" in err[0] and "sparse" in err[0]
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+    (tmp_path / "broken.ply").write_bytes(b"ply\nformat ascii 1.0\n")
+    code = main(["render", "--ply", str(tmp_path / "broken.ply"), "--colmap", str(tmp_path / "sparse"),
+                 "--out", str(tmp_path / "out2")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "broken.ply" in err[0]
