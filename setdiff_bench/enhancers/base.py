@@ -97,3 +97,14 @@ def create_enhancer(name: str, **options: Any) -> Enhancer:
     if not isinstance(enhancer, Enhancer):
         raise UsageError(f"method {name!r} did not build an Enhancer (got {type(enhancer).__name__})", spec.factory)
     return enhancer
+
+
+# Built-in learned methods (lazy specs: listing them imports nothing heavy).
+register_builtin(MethodSpec(
+    name="setdiff", factory="setdiff_bench.enhancers.setdiff:create",
+    description="SetDiff: geometry-grounded set diffusion over all references + targets (--checkpoint CKPT)",
+    needs_weights=True))
+register_builtin(MethodSpec(
+    name="difix", factory="setdiff_bench.enhancers.difix:create",
+    description="DiFix3D-style baseline: best reference + one target, RGB only (--checkpoint CKPT)",
+    needs_weights=True))

@@ -1,0 +1,83 @@
+"""``--method setdiff --checkpoint CKPT``: the SetDiff set model as an enhancer (thin adapter).
+
+All references and targets of a packet are enhanced jointly in one set (see
+:mod:`setdiff_bench.models.setdiff`), with geometry CFG at the checkpoint's guidance scale unless
+``guidance_scale`` overrides it.  Heavy imports (diffusers, peft) happen when the enhancer is built.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from setdiff_bench.errors import UsageError
+from setdiff_bench.types import Packet
+
+DTYPES = {"float32": torch.float32, "bfloat16": torch.bfloat16, "float16": torch.float16}
+
+
+class ModelEnhancer:
+    """A trained SetDiff/DiFix checkpoint behind the :class:`~setdiff_bench.enhancers.base.Enhancer` protocol.
+
+    Attributes:
+        name: the method name (``setdiff`` or ``difix``).
+        checkpoint: the checkpoint folder actually loaded.
+        config: its saved configuration (``Config``).
+        options: the inference options in effect (for run manifests).
+    """
+
+    def __init__(self, name: str, model: Any, config: Any, checkpoint: Path, *, guidance_scale: float | None,
+                 sets_per_call: int | None) -> None:
+        self.name = name
+        self.model = model
+        self.config = config
+        self.checkpoint = checkpoint
+        self.guidance_scale = guidance_scale
+        self.sets_per_call = sets_per_call
+        parameter = next(model.parameters())
+        self.options = {"checkpoint": str(checkpoint), "device": str(parameter.device),
+                        "dtype": str(parameter.dtype).removeprefix("torch."),
+                        "guidance_scale": config.model.guidance_scale if guidance_scale is None else guidance_scale,
+                        "sets_per_call": sets_per_call}
+
+    def enhance(self, packet: Packet) -> torch.Tensor:
+        """``(M, 3, H, W)`` float32 images in [0, 1], packet order (H, W divisible by 8)."""
+        from setdiff_bench.models.setdiff.inference import enhance_packet
+
+        return enhance_packet(self.model, packet, guidance_scale=self.guidance_scale,
+                              sets_per_call=self.sets_per_call)
+
+
+def load_enhancer(method: str, checkpoint: str | None, *, device: str | None = None, dtype: str | None = None,
+                  guidance_scale: float | None = None, sets_per_call: int | None = None) -> ModelEnhancer:
+    """Load ``checkpoint`` (a checkpoint folder or a training output folder) for ``method``.
+
+    Args:
+        device: ``cuda``/``cpu``/...; default CUDA when available.
+        dtype: ``float32``, ``bfloat16`` or ``float16``; default bfloat16 on CUDA, float32 elsewhere.
+
+    Raises:
+        UsageError: no checkpoint given, or an unknown dtype.
+        CheckpointError: the checkpoint is missing, broken, or was trained as another method.
+    """
+    from setdiff_bench.models.setdiff.checkpoint import load_model, resolve_checkpoint
+
+    if not checkpoint:
+        raise UsageError(f"method {method!r} needs a trained model: pass --checkpoint CKPT "
+                         "(train one with `setdiff-bench train`)", "--checkpoint")
+    device = device or ("cuda" if torch.cuda.is_available() else "cpu")
+    dtype = dtype or ("bfloat16" if str(device).startswith("cuda") else "float32")
+    if dtype not in DTYPES:
+        raise UsageError(f"dtype must be one of {', '.join(DTYPES)}, got {dtype!r}", "--dtype")
+    folder = resolve_checkpoint(checkpoint)
+    model, config = load_model(folder, method=method, device=device, dtype=DTYPES[dtype])
+    return ModelEnhancer(method, model, config, folder, guidance_scale=guidance_scale, sets_per_call=sets_per_call)
+
+
+def create(checkpoint: str | None = None, device: str | None = None, dtype: str | None = None,
+           guidance_scale: float | None = None, sets_per_call: int | None = None) -> ModelEnhancer:
+    """Factory of ``--method setdiff``."""
+    return load_enhancer("setdiff", checkpoint, device=device, dtype=dtype, guidance_scale=guidance_scale,
+                         sets_per_call=sets_per_call)

@@ -1,0 +1,66 @@
+"""``--method setdiff`` / ``--method difix`` through the enhancer registry."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+from setdiff_fixtures import make_packet, tiny_config
+
+from setdiff_bench.enhancers.base import Enhancer, available_methods, create_enhancer
+from setdiff_bench.errors import CheckpointError, UsageError
+from setdiff_bench.models.setdiff.checkpoint import save_checkpoint
+from setdiff_bench.models.setdiff.inference import enhance_packet
+from setdiff_bench.models.setdiff.model import SetDiffModel
+
+DIFIX = {"method": "difix", "prediction": "epsilon", "use_geometry": False, "max_references": 1,
+         "targets_per_set": 1, "skip_connections": True}
+
+
+def saved(tmp_path: Path, **overrides: object) -> tuple[Path, SetDiffModel]:
+    config = tiny_config(**overrides)
+    torch.manual_seed(0)
+    model = SetDiffModel(config.model).eval()
+    return save_checkpoint(tmp_path / "ckpt", model, config), model
+
+
+def test_registered_as_builtins() -> None:
+    methods = available_methods()
+    for name in ("setdiff", "difix"):
+        assert methods[name].needs_weights
+        assert methods[name].factory.startswith(f"setdiff_bench.enhancers.{name}:")
+
+
+def test_setdiff_enhancer(tmp_path: Path) -> None:
+    folder, model = saved(tmp_path)
+    enhancer = create_enhancer("setdiff", checkpoint=str(folder), device="cpu")
+    assert isinstance(enhancer, Enhancer) and enhancer.name == "setdiff"
+    packet = make_packet(2, 3)
+    output = enhancer.enhance(packet)
+    assert output.shape == (3, 3, 32, 32) and output.dtype == torch.float32
+    assert torch.equal(output, enhance_packet(model, packet))
+    assert enhancer.options["guidance_scale"] == 2.0
+    assert create_enhancer("setdiff", checkpoint=str(folder), guidance_scale=1.5).options["guidance_scale"] == 1.5
+
+
+def test_difix_enhancer(tmp_path: Path) -> None:
+    folder, model = saved(tmp_path, **DIFIX)
+    enhancer = create_enhancer("difix", checkpoint=str(folder), device="cpu")
+    packet = make_packet(3, 2)
+    output = enhancer.enhance(packet)
+    assert output.shape == (2, 3, 32, 32)
+    assert torch.equal(output, enhance_packet(model, packet))
+
+
+def test_method_and_checkpoint_must_match(tmp_path: Path) -> None:
+    folder, _ = saved(tmp_path)
+    with pytest.raises(CheckpointError, match="trained as method 'setdiff'"):
+        create_enhancer("difix", checkpoint=str(folder))
+
+
+def test_checkpoint_is_required() -> None:
+    with pytest.raises(UsageError, match="--checkpoint"):
+        create_enhancer("setdiff")
+    with pytest.raises(CheckpointError, match="not found"):
+        create_enhancer("setdiff", checkpoint="/nonexistent/ckpt")
