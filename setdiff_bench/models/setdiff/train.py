@@ -247,11 +247,11 @@ def _micro_step(model: Any, core: SetDiffModel, sample: TrainingSample, rng: ran
     gt = drawn.target_gt.to(device).flatten(0, 1)
     masks = drawn.target_masks.to(device).flatten(0, 1)
     prediction = model(batch, geometry_keep=keep, decode_index=decode_index)
-    with accelerator.autocast():
-        gt_latents = core.encode(gt).latents
     loss = torch.zeros((), device=device)
     terms: dict[str, float] = {}
     if tc.latent_weight > 0:
+        with accelerator.autocast():
+            gt_latents = core.encode(gt).latents
         latent = latent_loss(prediction.target_x0.flatten(0, 1), gt_latents, masks)
         loss = loss + tc.latent_weight * latent
         terms["latent"] = float(latent.detach())

@@ -1,0 +1,63 @@
+"""``setdiff-bench train --config FILE --packets DIR --out CKPT_DIR``: train SetDiff or DiFix.
+
+The config (a TOML file, or a packaged one by name: ``tiny_setdiff``, ``tiny_difix``,
+``sd_turbo_setdiff``, ``sd_turbo_difix``) says which method and architecture; training samples come
+from the packet store's ``train`` split, validation packets from its ``test`` split.  Re-running the
+same command resumes from ``CKPT_DIR/latest``; a checkpoint of another configuration is refused.
+Several GPUs: ``accelerate launch -m setdiff_bench.cli.main train ...`` (DDP, one process per GPU).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from pathlib import Path
+
+VERB = "train"
+HELP = "train a SetDiff or DiFix enhancer on a packet store"
+DESCRIPTION = __doc__.split("\n\n", 1)[1] if __doc__ else HELP
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--config", required=True, metavar="FILE",
+                        help="TOML config, or a packaged name: tiny_setdiff, tiny_difix, sd_turbo_setdiff, "
+                             "sd_turbo_difix")
+    parser.add_argument("--packets", required=True, metavar="DIR", type=Path, help="packet store (setdiff-bench prepare)")
+    parser.add_argument("--out", required=True, metavar="CKPT_DIR", type=Path, help="output folder for checkpoints")
+    parser.add_argument("--steps", type=int, help="override [train] steps")
+    parser.add_argument("--seed", type=int, help="override [train] seed")
+    parser.add_argument("--pretrained", metavar="DIR", help="local diffusers SD-Turbo folder (overrides [model])")
+    parser.add_argument("--validation-split", default="test", help="packet split scored during training")
+    parser.add_argument("--no-resume", action="store_true", help="refuse to continue an existing run in CKPT_DIR")
+    parser.add_argument("--cpu", action="store_true", help="train on the CPU even when CUDA is available")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def run(args: argparse.Namespace) -> int:
+    from setdiff_bench.errors import UsageError
+    from setdiff_bench.models.setdiff.config import load_config, with_overrides
+    from setdiff_bench.models.setdiff.train import train
+    from setdiff_bench.packets import PacketStore
+    from setdiff_bench.types import TrainingSample
+
+    config = with_overrides(load_config(args.config), steps=args.steps, seed=args.seed)
+    if args.pretrained:
+        config = dataclasses.replace(config, model=dataclasses.replace(config.model, pretrained=str(args.pretrained)))
+    if args.no_resume and (args.out / "latest").exists():
+        raise UsageError("output folder already holds a training run (drop --no-resume to continue it)", args.out)
+    store = PacketStore(args.packets)
+    tc = config.train
+    dataset = store.training_dataset(split="train", min_views=tc.min_views, max_views=tc.max_views, seed=tc.seed)
+    validation = []
+    if tc.validation_packets > 0:
+        for packet_id in list(store.packet_ids(args.validation_split))[: tc.validation_packets]:
+            gt, masks = store.load_ground_truth(packet_id)
+            validation.append(TrainingSample(packet=store.load_packet(packet_id), target_gt=gt, target_masks=masks))
+    result = train(config, dataset, args.out, validation=validation, resume=not args.no_resume,
+                   cpu=True if args.cpu else None, progress=not args.no_progress)
+    losses = ", ".join(f"{k} {v:.4f}" for k, v in result.losses.items())
+    print(f"trained {config.model.method} to step {result.step}: {result.checkpoint}" + (f" ({losses})" if losses else ""))
+    if result.validation:
+        last = result.validation[-1]
+        print("validation: " + ", ".join(f"{k} {v:.4f}" for k, v in last.items() if k != "step"))
+    return 0

@@ -1,0 +1,95 @@
+"""``setdiff-bench train`` end to end against an in-memory stand-in for the packet store."""
+
+from __future__ import annotations
+
+import sys
+import types
+from pathlib import Path
+from typing import ClassVar
+
+import pytest
+from setdiff_fixtures import make_sample
+
+from setdiff_bench.cli.main import main
+from setdiff_bench.models.setdiff.checkpoint import read_config, resolve_checkpoint
+
+CONFIG = """
+[model]
+preset = "tiny"
+method = "setdiff"
+vae_decoder = "full"
+skip_connections = true
+
+[train]
+steps = 2
+learning_rate = 1e-3
+min_views = 2
+max_views = 4
+lpips_weight = 0.0
+validation_packets = 1
+validate_every = 2
+checkpoint_every = 1
+log_every = 1
+"""
+
+
+class FakeStore:
+    """The PacketStore interface the train verb uses, over two in-memory samples."""
+
+    calls: ClassVar[list[tuple[str, object]]] = []
+
+    def __init__(self, root: Path) -> None:
+        self.root = Path(root)
+        self.samples = {"train-0": make_sample(2, 2, seed=0), "test-0": make_sample(1, 2, seed=1)}
+
+    def training_dataset(self, split: str = "train", min_views: int = 8, max_views: int = 12, seed: int = 0) -> list:
+        FakeStore.calls.append(("training_dataset", (split, min_views, max_views, seed)))
+        return [s for k, s in self.samples.items() if k.startswith(split)]
+
+    def packet_ids(self, split: str) -> list[str]:
+        return [k for k in self.samples if k.startswith(split)]
+
+    def load_packet(self, packet_id: str) -> object:
+        return self.samples[packet_id].packet
+
+    def load_ground_truth(self, packet_id: str) -> tuple[object, object]:
+        sample = self.samples[packet_id]
+        return sample.target_gt, sample.target_masks
+
+
+@pytest.fixture
+def fake_store(monkeypatch: pytest.MonkeyPatch) -> type[FakeStore]:
+    module = types.ModuleType("setdiff_bench.packets")
+    module.PacketStore = FakeStore  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, "setdiff_bench.packets", module)
+    FakeStore.calls = []
+    return FakeStore
+
+
+def test_train_verb(tmp_path: Path, fake_store: type[FakeStore], capsys: pytest.CaptureFixture[str]) -> None:
+    config = tmp_path / "tiny.toml"
+    config.write_text(CONFIG)
+    out = tmp_path / "run"
+    code = main(["train", "--config", str(config), "--packets", str(tmp_path / "packets"), "--out", str(out),
+                 "--no-progress", "--cpu"])
+    assert code == 0
+    assert fake_store.calls == [("training_dataset", ("train", 2, 4, 0))]
+    printed = capsys.readouterr().out
+    assert "trained setdiff to step 2" in printed and "validation: psnr" in printed
+    checkpoint = resolve_checkpoint(out)
+    assert checkpoint.name == "step-00000002"
+    assert read_config(checkpoint).train.steps == 2
+    # running again resumes (nothing left to do) and --steps extends the run
+    assert main(["train", "--config", str(config), "--packets", "p", "--out", str(out), "--no-progress",
+                 "--steps", "3"]) == 0
+    assert resolve_checkpoint(out).name == "step-00000003"
+
+
+def test_train_verb_errors(tmp_path: Path, fake_store: type[FakeStore], capsys: pytest.CaptureFixture[str]) -> None:
+    code = main(["train", "--config", str(tmp_path / "missing.toml"), "--packets", "p", "--out", str(tmp_path)])
+    assert code == 2
+    assert "config file not found" in capsys.readouterr().err
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[model]\npreset = 'tiny'\nunknown_key = 1\n")
+    assert main(["train", "--config", str(bad), "--packets", "p", "--out", str(tmp_path / "o")]) == 2
+    assert "unknown keys ['unknown_key']" in capsys.readouterr().err
