@@ -51,11 +51,11 @@ def test_monotone_in_noise_and_blur(model: LPIPS) -> None:
 
 
 def test_equals_independent_numpy_forward(model: LPIPS, net: str) -> None:
-    size = (64, 72) if net == "alex" else (40, 48)
+    size = (48, 56) if net == "alex" else (32, 36)
     target = photo_batch(("astronaut", "coffee"), size=size)
     pred = blur(add_noise(target, 0.05, seed=3), 0.8)
     weights = load_file(str(resolve_lpips_weights(net)))
-    for rescale in (True, False):
+    for rescale in (True, False) if net == "alex" else (True,):  # the unscaled mode matters for EUVS (alex)
         expected = [lpips_numpy(p.permute(1, 2, 0).numpy(), t.permute(1, 2, 0).numpy(), weights, net, rescale)
                     for p, t in zip(pred, target)]
         tested = LPIPS(net, rescale_input=rescale)

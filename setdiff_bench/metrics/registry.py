@@ -1,0 +1,113 @@
+"""Registry of metric specs (name, direction, lazy function) and named presets.
+
+Specs reference their function as ``"module:attr"`` so that listing metrics imports nothing heavy
+(LPIPS weights, OpenCV flow).  Image metrics are called as ``fn(pred, target, mask=mask, **kwargs)`` on
+``(V, 3, H, W)`` batches and return ``(V,)``; the sequence metric (warp error) is called as
+``fn(frames, reference, mask, **kwargs)`` per sequence and returns a 0-dim tensor.
+
+Presets (the metric sets papers report; shared/reference/metrics.md §5):
+
+- ``standard``: per-image PSNR, SSIM with ``valid`` border (tf / dm_pix / skimage), LPIPS-alex on [-1, 1].
+- ``gaussian_splatting``: the 3DGS repo's ``metrics.py``: PSNR, SSIM ``same`` zero-padded border, LPIPS-vgg
+  fed [0, 1] unscaled.
+- ``euvs_official``: EUVS ``metrics_with_dyn_masks.py``: masked PSNR, SSIM of mask-multiplied images over
+  the whole ``same`` map, LPIPS-alex of mask-multiplied images fed [0, 1] unscaled.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any, Literal
+
+import torch
+
+from setdiff_bench.errors import UsageError
+
+
+@dataclass(frozen=True)
+class MetricSpec:
+    """One metric.
+
+    Attributes:
+        name: registry key, also the column name in results.
+        higher_is_better: ranking direction (PSNR/SSIM True; LPIPS/warp error False).
+        function: ``"module:attr"`` of the implementation.
+        scope: ``"image"`` (per target image) or ``"sequence"`` (per ordered sequence of frames).
+        kwargs: fixed keyword arguments that select the variant (border, net, input scaling, scale...).
+        unit: unit of the values, for tables.
+        needs_mask: the variant is defined with a mask (EUVS); without one, an all-ones mask is used.
+        description: one line for listings.
+    """
+
+    name: str
+    higher_is_better: bool
+    function: str
+    scope: Literal["image", "sequence"] = "image"
+    kwargs: Mapping[str, Any] = field(default_factory=dict)
+    unit: str = ""
+    needs_mask: bool = False
+    description: str = ""
+
+    def load(self) -> Callable[..., torch.Tensor]:
+        """Import and return the implementation."""
+        module_name, _, attr = self.function.partition(":")
+        return getattr(importlib.import_module(module_name), attr)
+
+    def compute(self, pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
+        """Image metric on ``(V, 3, H, W)`` batches with an optional ``(V, 1, H, W)`` mask → ``(V,)``."""
+        if self.scope != "image":
+            raise UsageError(f"metric {self.name} is a sequence metric; call its function per sequence")
+        if mask is None and self.needs_mask:
+            mask = torch.ones(pred.shape[0], 1, *pred.shape[-2:], dtype=torch.bool, device=pred.device)
+        return self.load()(pred, target, mask=mask, **self.kwargs)
+
+
+def _spec(name: str, higher: bool, function: str, unit: str, description: str, **kwargs: Any) -> MetricSpec:
+    needs_mask = name.endswith("_euvs")
+    return MetricSpec(name, higher, function, "image", MappingProxyType(kwargs), unit, needs_mask, description)
+
+
+_PSNR = "setdiff_bench.metrics.psnr:psnr"
+_SSIM = "setdiff_bench.metrics.ssim:ssim"
+_LPIPS = "setdiff_bench.metrics.lpips:lpips"
+
+METRICS: Mapping[str, MetricSpec] = MappingProxyType({spec.name: spec for spec in (
+    _spec("psnr", True, _PSNR, "dB", "per-image PSNR, data range 1; masked: MSE over valid pixels"),
+    _spec("ssim", True, _SSIM, "", "SSIM, Gaussian 11/1.5, valid border (tf/dm_pix/skimage)", border="valid"),
+    _spec("ssim_same", True, _SSIM, "", "SSIM with zero-padded same border (3DGS)", border="same"),
+    _spec("lpips", False, _LPIPS, "", "LPIPS v0.1 AlexNet, input [0,1] mapped to [-1,1]", net="alex"),
+    _spec("lpips_vgg", False, _LPIPS, "", "LPIPS v0.1 VGG16, input [0,1] mapped to [-1,1]", net="vgg"),
+    _spec("lpips_vgg_unscaled", False, _LPIPS, "", "LPIPS v0.1 VGG16 fed [0,1] unscaled (3DGS metrics.py)",
+          net="vgg", rescale_input=False),
+    _spec("psnr_euvs", True, "setdiff_bench.metrics.psnr:psnr_euvs", "dB", "EUVS psnr_mask"),
+    _spec("ssim_euvs", True, "setdiff_bench.metrics.ssim:ssim_euvs", "", "EUVS ssim_mask (mask-multiplied, same border)"),
+    _spec("lpips_euvs", False, "setdiff_bench.metrics.lpips:lpips_euvs", "", "EUVS lpips_mask (alex, [0,1] unscaled)"),
+    MetricSpec("warp", False, "setdiff_bench.metrics.warp:warp_error", "sequence",
+               MappingProxyType({"scale": 255.0**2}), "MSE on 0-255 scale", False,
+               "warp error (Lai et al. 2018), flow+occlusion from ground truth, DeepFlow"),
+)})
+
+PRESETS: Mapping[str, tuple[str, ...]] = MappingProxyType({
+    "standard": ("psnr", "ssim", "lpips"),
+    "gaussian_splatting": ("psnr", "ssim_same", "lpips_vgg_unscaled"),
+    "euvs_official": ("psnr_euvs", "ssim_euvs", "lpips_euvs"),
+})
+
+
+def get_metric(name: str) -> MetricSpec:
+    """The spec called ``name``; :class:`~setdiff_bench.errors.UsageError` listing the known names otherwise."""
+    try:
+        return METRICS[name]
+    except KeyError:
+        raise UsageError(f"unknown metric {name!r}; known: {', '.join(METRICS)}") from None
+
+
+def preset(name: str) -> tuple[MetricSpec, ...]:
+    """The specs of a named preset (``standard``, ``gaussian_splatting``, ``euvs_official``)."""
+    try:
+        return tuple(METRICS[metric] for metric in PRESETS[name])
+    except KeyError:
+        raise UsageError(f"unknown metric preset {name!r}; known: {', '.join(PRESETS)}") from None
