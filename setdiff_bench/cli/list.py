@@ -4,6 +4,9 @@ Targets are entries of :data:`TARGETS` (one subcommand each); a new target adds 
 :class:`ListTarget` there.  Built in:
 
 * ``list datasets``: the dataset keys the loaders know.
+* ``list methods``: the enhancers ``setdiff-bench run --method`` accepts (built-ins and entry-point
+  plugins), with a one-line description and whether each needs weights or a GPU; nothing heavy is
+  imported to list them.
 * ``list scenes --dataset D --root R``: load every scene (validating poses, images and masks) and
   print one row per scene with frame, camera (distinct sensors) and traversal counts, the dataset's
   train/test designation and the image sizes; ``--names-only`` lists names without loading.
@@ -21,8 +24,9 @@ from typing import Any
 from setdiff_bench.errors import UsageError
 
 VERB = "list"
-HELP = "list datasets, or the scenes of a dataset on disk"
-DESCRIPTION = "List what the toolkit can see: `list datasets`, `list scenes --dataset D --root R`."
+HELP = "list datasets, methods, or the scenes of a dataset on disk"
+DESCRIPTION = ("List what the toolkit can see: `list datasets`, `list methods`, "
+               "`list scenes --dataset D --root R`.")
 
 
 @dataclass(frozen=True)
@@ -46,6 +50,30 @@ def _datasets_run(args: argparse.Namespace) -> int:
     width = max(len(key) for key in DATASETS)
     for key, spec in DATASETS.items():
         print(f"{key:<{width}}  {spec.description}")
+    return 0
+
+
+# ---------------------------------------------------------------------- list methods
+def _methods_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--json", action="store_true", help="one JSON object per method instead of a table")
+
+
+def _methods_run(args: argparse.Namespace) -> int:
+    from setdiff_bench.enhancers.base import available_methods
+
+    methods = available_methods()
+    if args.json:
+        for spec in methods.values():
+            print(json.dumps({"name": spec.name, "description": spec.description, "needs_weights": spec.needs_weights,
+                              "needs_gpu": spec.needs_gpu, "source": spec.source}, sort_keys=True))
+        return 0
+    headers = ["METHOD", "WEIGHTS", "GPU", "DESCRIPTION"]
+    table = [[spec.name, "yes" if spec.needs_weights else "no", "yes" if spec.needs_gpu else "no",
+              spec.description if spec.source == "builtin" else f"{spec.description} [plugin: {spec.source}]"]
+             for spec in methods.values()]
+    widths = [max(len(h), *(len(r[i]) for r in table)) for i, h in enumerate(headers)]
+    for line in [headers, *table]:
+        print("  ".join(cell.ljust(widths[i]) for i, cell in enumerate(line[:-1])) + "  " + line[-1])
     return 0
 
 
@@ -124,6 +152,7 @@ def _summary(scene: Any) -> dict[str, Any]:
 
 TARGETS: dict[str, ListTarget] = {
     "datasets": ListTarget("dataset keys known to the loaders", _datasets_arguments, _datasets_run),
+    "methods": ListTarget("enhancers for `run --method` (built-in and plugins)", _methods_arguments, _methods_run),
     "scenes": ListTarget("scenes of a dataset on disk, with frame and camera counts", _scenes_arguments, _scenes_run),
 }
 

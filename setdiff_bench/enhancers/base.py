@@ -4,17 +4,30 @@ An enhancer receives a :class:`~setdiff_bench.types.Packet` — N clean referenc
 targets with C-maps and normalised cameras — and returns the M enhanced targets.  Ground truth and
 masks never reach it.
 
-Registry entries are lazy ``"module:attr"`` specs, so listing methods imports nothing heavy.  The
-built-ins are below; third parties add theirs through the entry-point group
-``setdiff_bench.enhancers`` (each entry point names a :class:`MethodSpec` or a factory returning one).
+Registry entries are lazy ``"module:attr"`` specs (:class:`MethodSpec`), so listing methods imports
+nothing heavy: the built-ins are declared as data in :data:`BUILTIN_METHODS`, and their modules are
+imported only by :meth:`MethodSpec.load_factory` when a method is actually built.  Third parties add
+methods through the entry-point group ``setdiff_bench.enhancers``; each entry point names a
+:class:`MethodSpec`, or a zero-argument callable returning one.  For example, in a plugin's
+``pyproject.toml``::
+
+    [project.entry-points."setdiff_bench.enhancers"]
+    mymethod = "my_package.setdiff_spec:SPEC"
+
+where ``SPEC = MethodSpec(name="mymethod", factory="my_package.method:create", description="...")``.
+A plugin may not shadow a built-in name or another plugin's name: the first definition wins and the
+duplicate is reported with a :class:`RegistryWarning`.
 """
 
 from __future__ import annotations
 
 import importlib
-from collections.abc import Callable, Mapping
+import inspect
+import warnings
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import metadata
+from types import MappingProxyType
 from typing import Any, Protocol, runtime_checkable
 
 import torch
@@ -23,17 +36,50 @@ from setdiff_bench.errors import UsageError
 from setdiff_bench.types import Packet
 
 ENTRY_POINT_GROUP = "setdiff_bench.enhancers"
+#: Command-line spelling of factory options whose flag differs from ``--<option-name>``.
+OPTION_FLAGS = {"source": "--from"}
+
+
+class RegistryWarning(UserWarning):
+    """A plugin entry point was skipped (duplicate name)."""
 
 
 @runtime_checkable
 class Enhancer(Protocol):
-    """What every method implements."""
+    """What every method implements.
+
+    Optional extras the runner uses when present: ``options`` (a JSON-serialisable mapping recorded in
+    the run manifest) and ``check_targets(targets)`` (see :class:`ChecksTargets`).
+    """
 
     name: str
 
     def enhance(self, packet: Packet) -> torch.Tensor:
         """Return ``(M, 3, H, W)`` float32 images in [0, 1], one per target view, in packet order."""
         ...
+
+
+@dataclass(frozen=True)
+class TargetRef:
+    """Where one target view comes from: enough to find a file produced for it by external code."""
+
+    dataset: str
+    protocol: str
+    group: str
+    scene: str
+    frame: str
+
+
+@runtime_checkable
+class ChecksTargets(Protocol):
+    """An enhancer that can verify up front that it can serve every target of a run.
+
+    The runner calls ``check_targets`` once, before enhancing anything, with every target of the
+    selected packets; it raises a :class:`~setdiff_bench.errors.SetDiffBenchError` listing what is
+    missing (e.g. ``precomputed`` images that were never produced).
+    """
+
+    def check_targets(self, targets: Sequence[TargetRef]) -> None: ...
 
 
 @dataclass(frozen=True)
@@ -47,6 +93,7 @@ class MethodSpec:
         needs_weights: whether it needs a checkpoint or pretrained weights.
         needs_gpu: whether it is impractical without CUDA.
         options: default keyword options passed to the factory.
+        source: ``"builtin"``, or the entry point (``name = value``) a plugin came from.
     """
 
     name: str
@@ -55,56 +102,120 @@ class MethodSpec:
     needs_weights: bool = False
     needs_gpu: bool = False
     options: Mapping[str, Any] = field(default_factory=dict)
+    source: str = "builtin"
 
     def load_factory(self) -> Callable[..., Enhancer]:
-        module_name, _, attr = self.factory.partition(":")
-        module = importlib.import_module(module_name)
-        return getattr(module, attr)
+        """Import the factory (this is where a method's heavy imports happen)."""
+        module_name, sep, attr = self.factory.partition(":")
+        if not sep or not module_name or not attr:
+            raise UsageError(f"method {self.name!r}: factory {self.factory!r} is not 'module:attr'", self.source)
+        try:
+            module = importlib.import_module(module_name)
+        except ImportError as error:
+            raise UsageError(f"method {self.name!r}: cannot import {module_name} ({error})", self.source) from None
+        try:
+            return getattr(module, attr)
+        except AttributeError:
+            raise UsageError(f"method {self.name!r}: {module_name} has no {attr!r}", self.source) from None
 
 
-BUILTIN_METHODS: dict[str, MethodSpec] = {}
+def _builtin(name: str, module: str, description: str, **flags: bool) -> MethodSpec:
+    return MethodSpec(name=name, factory=f"setdiff_bench.enhancers.{module}:create", description=description, **flags)
+
+
+#: The built-in methods, declared as data (nothing is imported to list them).
+BUILTIN_METHODS: dict[str, MethodSpec] = {spec.name: spec for spec in (
+    _builtin("identity", "identity", "the raw 3DGS render unchanged (the paper's '3DGS' / 'OmniRe' row)"),
+    _builtin("reproject", "reproject",
+             "geometry-only baseline: reference colours reprojected through C-maps with a depth test, Eq. 2 blend"),
+    _builtin("precomputed", "precomputed",
+             "score images produced by external code (--from DIR, matched by frame name)"),
+    _builtin("setdiff", "setdiff",
+             "SetDiff: geometry-grounded set diffusion over all references + targets (--checkpoint CKPT)",
+             needs_weights=True),
+    _builtin("difix", "difix", "DiFix3D-style baseline: best reference + one target, RGB only (--checkpoint CKPT)",
+             needs_weights=True),
+)}
 
 
 def register_builtin(spec: MethodSpec) -> None:
-    """Add a built-in method (called at import of this module's bottom section)."""
+    """Add (or replace) a built-in method spec; later lookups see it."""
     BUILTIN_METHODS[spec.name] = spec
 
 
-def available_methods() -> dict[str, MethodSpec]:
-    """Built-in methods plus entry-point plugins (a plugin may not shadow a built-in name)."""
-    methods = dict(BUILTIN_METHODS)
-    for entry in metadata.entry_points(group=ENTRY_POINT_GROUP):
-        if entry.name in methods:
-            continue
+def _plugin_spec(entry: metadata.EntryPoint) -> MethodSpec:
+    where = f"entry point {entry.name} = {entry.value} (group {ENTRY_POINT_GROUP})"
+    try:
         spec = entry.load()
-        if callable(spec) and not isinstance(spec, MethodSpec):
-            spec = spec()
-        if not isinstance(spec, MethodSpec):
-            raise UsageError(f"entry point {entry.name!r} of group {ENTRY_POINT_GROUP} is not a MethodSpec",
-                             entry.value)
+    except Exception as error:  # a broken plugin must say which one, in one line
+        raise UsageError(f"cannot load plugin method: {type(error).__name__}: {error}", where) from None
+    if callable(spec) and not isinstance(spec, MethodSpec):
+        spec = spec()
+    if not isinstance(spec, MethodSpec):
+        raise UsageError(f"plugin method is a {type(spec).__name__}, expected a MethodSpec", where)
+    return MethodSpec(spec.name, spec.factory, spec.description, spec.needs_weights, spec.needs_gpu,
+                      MappingProxyType(dict(spec.options)), f"{entry.name} = {entry.value}")
+
+
+def available_methods() -> dict[str, MethodSpec]:
+    """Built-in methods plus entry-point plugins, built-ins first, plugins sorted by entry-point name.
+
+    Raises:
+        UsageError: a plugin entry point cannot be imported or does not give a MethodSpec.
+    """
+    methods = dict(BUILTIN_METHODS)
+    entries = sorted(metadata.entry_points(group=ENTRY_POINT_GROUP), key=lambda e: (e.name, e.value))
+    for entry in entries:
+        spec = _plugin_spec(entry)
+        if spec.name in methods:
+            warnings.warn(f"plugin {spec.source!r} defines method {spec.name!r}, already defined by "
+                          f"{methods[spec.name].source!r}; ignored", RegistryWarning, stacklevel=2)
+            continue
         methods[spec.name] = spec
     return methods
 
 
-def create_enhancer(name: str, **options: Any) -> Enhancer:
-    """Instantiate the method called ``name`` with the spec's default options updated by ``options``."""
+def factory_parameters(factory: Callable[..., Any]) -> tuple[set[str], bool]:
+    """Keyword names a factory accepts, and whether it takes ``**kwargs``."""
+    try:
+        signature = inspect.signature(factory)
+    except (TypeError, ValueError):
+        return set(), True
+    names = {p.name for p in signature.parameters.values()
+             if p.kind in (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)}
+    var_kw = any(p.kind == inspect.Parameter.VAR_KEYWORD for p in signature.parameters.values())
+    return names, var_kw
+
+
+def create_enhancer(name: str, *, optional: Mapping[str, Any] | None = None, **options: Any) -> Enhancer:
+    """Instantiate the method called ``name``.
+
+    Args:
+        name: registry key (``setdiff-bench list methods``).
+        optional: options passed only when the factory accepts them (e.g. the runner's ``device``);
+            ``None`` values are dropped.
+        **options: options the factory must accept (a ``UsageError`` names any it does not);
+            ``None`` values are dropped, the rest update the spec's default options.
+
+    Raises:
+        UsageError: unknown method, an option the method does not take, or a factory that does not
+            return an :class:`Enhancer`.
+    """
     methods = available_methods()
     if name not in methods:
         raise UsageError(f"unknown method {name!r}; available: {', '.join(sorted(methods))}", "--method")
     spec = methods[name]
-    merged = {**spec.options, **{k: v for k, v in options.items() if v is not None}}
-    enhancer = spec.load_factory()(**merged)
+    factory = spec.load_factory()
+    accepted, var_kw = factory_parameters(factory)
+    given = {k: v for k, v in options.items() if v is not None}
+    unknown = sorted(k for k in given if k not in accepted and not var_kw)
+    if unknown:
+        flags = ", ".join(OPTION_FLAGS.get(k, f"--{k.replace('_', '-')}") for k in unknown)
+        takes = ", ".join(OPTION_FLAGS.get(k, f"--{k.replace('_', '-')}") for k in sorted(accepted)) or "no options"
+        raise UsageError(f"method {name!r} does not take {flags} (it takes: {takes})", "--method")
+    extra = {k: v for k, v in (optional or {}).items() if v is not None and (k in accepted or var_kw)}
+    merged = {**spec.options, **extra, **given}
+    enhancer = factory(**merged)
     if not isinstance(enhancer, Enhancer):
         raise UsageError(f"method {name!r} did not build an Enhancer (got {type(enhancer).__name__})", spec.factory)
     return enhancer
-
-
-# Built-in learned methods (lazy specs: listing them imports nothing heavy).
-register_builtin(MethodSpec(
-    name="setdiff", factory="setdiff_bench.enhancers.setdiff:create",
-    description="SetDiff: geometry-grounded set diffusion over all references + targets (--checkpoint CKPT)",
-    needs_weights=True))
-register_builtin(MethodSpec(
-    name="difix", factory="setdiff_bench.enhancers.difix:create",
-    description="DiFix3D-style baseline: best reference + one target, RGB only (--checkpoint CKPT)",
-    needs_weights=True))

@@ -1,0 +1,95 @@
+"""Scoring enhanced targets against ground truth: image metrics per target, warp error per sequence.
+
+What is scored is what is written: an enhancer's output is quantised to 8 bits exactly as the PNG
+writer does (``rint(clip(x, 0, 1) · 255) / 255``) before any metric sees it, so scoring the PNGs
+later (``--method precomputed`` on a run's own ``images/``) gives identical numbers — the
+nerfbaselines convention of evaluating saved 8-bit predictions (shared/reference/metrics.md §6.4).
+
+Image metrics come from :mod:`setdiff_bench.metrics` specs and see the protocol's masks
+(True = evaluate).  Warp error (Lai et al. 2018) is a sequence metric: one value per time-ordered
+sequence of one camera's targets (flow and occlusion from the ground truth, see
+:mod:`setdiff_bench.metrics.warp`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+
+from setdiff_bench.errors import UsageError
+from setdiff_bench.metrics.registry import METRICS, PRESETS, MetricSpec
+
+
+def quantize(images: torch.Tensor) -> torch.Tensor:
+    """``(V, 3, H, W)`` float → float32 on the 8-bit grid, as written to PNG (round to nearest)."""
+    return torch.round(images.detach().float().clamp(0.0, 1.0) * 255.0) / 255.0
+
+
+def to_uint8_hwc(image: torch.Tensor) -> np.ndarray:
+    """``(3, H, W)`` float in [0, 1] → ``(H, W, 3)`` uint8 (round to nearest)."""
+    return torch.round(image.detach().float().clamp(0.0, 1.0) * 255.0).to(torch.uint8).permute(1, 2, 0).cpu().numpy()
+
+
+def resolve_metrics(names: str | Sequence[str]) -> tuple[MetricSpec, ...]:
+    """Image-metric specs from a preset name (``standard``), or a comma list / sequence of metric names.
+
+    Raises:
+        UsageError: an unknown name, or a sequence metric (warp error is chosen with ``warp=``).
+    """
+    if isinstance(names, str):
+        names = list(PRESETS[names]) if names in PRESETS else [n.strip() for n in names.split(",") if n.strip()]
+    specs = []
+    for name in names:
+        if name not in METRICS:
+            raise UsageError(f"unknown metric {name!r}; presets: {', '.join(PRESETS)}; metrics: {', '.join(METRICS)}",
+                             "--metrics")
+        spec = METRICS[name]
+        if spec.scope != "image":
+            raise UsageError(f"{name} is a sequence metric; it is enabled with --warp, not --metrics", "--metrics")
+        specs.append(spec)
+    if not specs:
+        raise UsageError("no metrics selected", "--metrics")
+    return tuple(specs)
+
+
+def score_images(specs: Sequence[MetricSpec], pred: torch.Tensor, target: torch.Tensor, masks: torch.Tensor,
+                 batch_size: int) -> dict[str, np.ndarray]:
+    """Every image metric for ``V`` pairs, ``batch_size`` images per call.
+
+    Args:
+        specs: image metric specs.
+        pred: ``(V, 3, H, W)`` enhanced images in [0, 1] (already quantised).
+        target: ``(V, 3, H, W)`` ground truth in [0, 1].
+        masks: ``(V, 1, H, W)`` bool, True = evaluate.
+        batch_size: at most this many images per metric call (bounds LPIPS memory).
+
+    Returns:
+        metric name → ``(V,)`` float64 values.
+    """
+    values: dict[str, list[np.ndarray]] = {spec.name: [] for spec in specs}
+    with torch.no_grad():
+        for start in range(0, pred.shape[0], max(1, batch_size)):
+            stop = min(start + max(1, batch_size), pred.shape[0])
+            for spec in specs:
+                result = spec.compute(pred[start:stop], target[start:stop], masks[start:stop])
+                values[spec.name].append(result.detach().double().cpu().numpy().reshape(-1))
+    return {name: np.concatenate(parts) if parts else np.zeros(0) for name, parts in values.items()}
+
+
+def sequence_warp_error(frames: torch.Tensor, ground_truth: torch.Tensor, masks: torch.Tensor | None, *,
+                        flow_method: str = "deepflow") -> float:
+    """Warp error of one time-ordered sequence (paper units: MSE on the 0–255 scale).
+
+    Args:
+        frames: ``(T, 3, H, W)`` the method's (quantised) outputs, ``T ≥ 2``, time order.
+        ground_truth: ``(T, 3, H, W)`` the matching ground truth (flow and occlusion come from it).
+        masks: ``(T, 1, H, W)`` evaluation masks or ``None``.
+        flow_method: OpenCV optical flow (``deepflow`` default, ``dis`` fast).
+    """
+    from setdiff_bench.metrics.warp import warp_error, warp_reference
+
+    reference = warp_reference(ground_truth.float().cpu(), method=flow_method)  # type: ignore[arg-type]
+    mask = None if masks is None else masks.cpu()
+    return float(warp_error(frames.float().cpu(), reference, mask))
