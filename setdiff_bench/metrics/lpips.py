@@ -33,6 +33,8 @@ SHIFT = (-0.030, -0.088, -0.188)
 SCALE = (0.458, 0.448, 0.450)
 #: Added to the feature norm before dividing (lpips ``normalize_tensor``).
 NORM_EPS = 1e-10
+#: How far outside [0, 1] the functional :func:`lpips` lets inputs stray before refusing them.
+RANGE_TOLERANCE = 1e-3
 
 
 class LPIPS(nn.Module):
@@ -147,8 +149,16 @@ def lpips(pred: torch.Tensor, target: torch.Tensor, *, net: Net = "alex", mask: 
 
     Returns:
         ``(V,)`` distances on ``pred``'s device.
+
+    Raises:
+        ImageError: inputs outside [0, 1] (e.g. 8-bit values or [-1, 1] tensors), shape mismatches.
     """
     check_pair(pred, target, "lpips")
+    low, high = torch.aminmax(torch.stack([pred.detach().amin(), pred.detach().amax(),
+                                           target.detach().amin(), target.detach().amax()]))
+    if low < -RANGE_TOLERANCE or high > 1 + RANGE_TOLERANCE:
+        raise ImageError(f"lpips: images must be in [0, 1] (got values in [{float(low):.3g}, {float(high):.3g}]); "
+                         "divide 8-bit images by 255")
     if mask is not None:
         weights = check_mask(mask, pred, "lpips")
         pred, target = pred * weights, target * weights

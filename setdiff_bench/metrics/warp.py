@@ -29,12 +29,15 @@ truth).  This reading is UNCONFIRMED; ``scale`` is an explicit parameter (``scal
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import json
+import os
+from dataclasses import asdict, dataclass, field
 
 import torch
 import torch.nn.functional as F
 
 from setdiff_bench.errors import ImageError
+from setdiff_bench.io.atomic import atomic_path
 from setdiff_bench.metrics.optical_flow import DEFAULT_FLOW_METHOD, FlowMethod, sequence_flows
 
 #: Our reading of the SetDiff paper's warp-error unit: MSE on a 0–255 scale.
@@ -76,6 +79,34 @@ class WarpReference:
 
     def to(self, device: str | torch.device) -> WarpReference:
         return WarpReference(self.flow.to(device), self.valid.to(device), self.method, self.thresholds)
+
+    def save(self, path: str | os.PathLike[str]) -> None:
+        """Write flow, mask, method and thresholds to one ``.safetensors`` file (atomically)."""
+        from safetensors.torch import save_file
+
+        meta = {"format": "setdiff-bench-warp-reference", "method": self.method,
+                "thresholds": json.dumps(asdict(self.thresholds), sort_keys=True)}
+        tensors = {"flow": self.flow.detach().float().cpu().contiguous(),
+                   "valid": self.valid.detach().to(torch.uint8).cpu().contiguous()}
+        with atomic_path(path) as tmp:
+            save_file(tensors, str(tmp), metadata=meta)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> WarpReference:
+        """Read a file written by :meth:`save`; :class:`~setdiff_bench.errors.ImageError` if malformed."""
+        from safetensors import SafetensorError, safe_open
+
+        try:
+            with safe_open(str(path), framework="pt") as handle:
+                meta = handle.metadata() or {}
+                flow, valid = handle.get_tensor("flow"), handle.get_tensor("valid").bool()
+            thresholds = OcclusionThresholds(**json.loads(meta["thresholds"]))
+        except (SafetensorError, OSError, KeyError, TypeError, ValueError) as error:
+            raise ImageError(f"not a warp reference file: {error}", path) from None
+        if meta.get("format") != "setdiff-bench-warp-reference" or flow.ndim != 4 or flow.shape[1] != 2 \
+                or tuple(valid.shape) != (flow.shape[0], 1, *flow.shape[-2:]):
+            raise ImageError("not a warp reference file (wrong format tag or tensor shapes)", path)
+        return cls(flow, valid, meta.get("method", "unknown"), thresholds)
 
 
 def pixel_grid(height: int, width: int, device: torch.device, dtype: torch.dtype) -> torch.Tensor:

@@ -90,6 +90,10 @@ def test_functional_mask_and_euvs_variant(model: LPIPS, net: str) -> None:
         assert not torch.allclose(lpips_euvs(pred, target, mask.float()), expected, atol=1e-3)
 
 
-def test_too_small_images_raise(model: LPIPS) -> None:
+def test_too_small_or_out_of_range_images_raise(model: LPIPS, net: str) -> None:
     with pytest.raises(ImageError, match="too small"):
         model(torch.zeros(1, 3, 12, 12), torch.zeros(1, 3, 12, 12))
+    with pytest.raises(ImageError, match=r"must be in \[0, 1\]"):
+        lpips(torch.full((1, 3, 40, 40), 255.0), torch.zeros(1, 3, 40, 40), net=net)
+    with pytest.raises(ImageError, match=r"must be in \[0, 1\]"):
+        lpips(torch.zeros(1, 3, 40, 40), torch.full((1, 3, 40, 40), -1.0), net=net)

@@ -121,6 +121,20 @@ def test_disocclusion_behind_a_moving_object_is_masked() -> None:
     assert warp_error(frames, unmasked, scale=1.0) > 5 * warp_error(frames, reference, scale=1.0)
 
 
+def test_reference_round_trips_through_a_file(reference: WarpReference, tmp_path) -> None:
+    path = tmp_path / "ref.safetensors"
+    reference.save(path)
+    loaded = WarpReference.load(path)
+    torch.testing.assert_close(loaded.flow, reference.flow.float())
+    assert torch.equal(loaded.valid, reference.valid)
+    assert (loaded.method, loaded.thresholds) == (reference.method, reference.thresholds)
+    (tmp_path / "bad.safetensors").write_bytes(b"nope")
+    from setdiff_bench.errors import ImageError
+
+    with pytest.raises(ImageError, match="not a warp reference"):
+        WarpReference.load(tmp_path / "bad.safetensors")
+
+
 def test_shape_mismatch_raises(reference: WarpReference) -> None:
     from setdiff_bench.errors import ImageError
 
