@@ -147,10 +147,10 @@ def _plugin_spec(entry: metadata.EntryPoint) -> MethodSpec:
     where = f"entry point {entry.name} = {entry.value} (group {ENTRY_POINT_GROUP})"
     try:
         spec = entry.load()
+        if callable(spec) and not isinstance(spec, MethodSpec):
+            spec = spec()
     except Exception as error:  # a broken plugin must say which one, in one line
         raise UsageError(f"cannot load plugin method: {type(error).__name__}: {error}", where) from None
-    if callable(spec) and not isinstance(spec, MethodSpec):
-        spec = spec()
     if not isinstance(spec, MethodSpec):
         raise UsageError(f"plugin method is a {type(spec).__name__}, expected a MethodSpec", where)
     return MethodSpec(spec.name, spec.factory, spec.description, spec.needs_weights, spec.needs_gpu,

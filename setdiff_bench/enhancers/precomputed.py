@@ -9,7 +9,8 @@ specific first, at::
     DIR/<scene>/S.<ext>
     DIR/S.<ext>
 
-with ``<ext>`` one of ``png``, ``jpg``, ``jpeg`` (case-insensitive on the suffix as written: ``.png``,
+(``<protocol>``, ``<group>``, ``<scene>`` as :func:`setdiff_bench.run_paths.safe_component` spells them:
+the names themselves unless they hold a path separator) with ``<ext>`` one of ``png``, ``jpg``, ``jpeg`` (case-insensitive on the suffix as written: ``.png``,
 ``.PNG``...).  The first level holding a file wins; two files for one frame at the same level (say
 ``S.png`` and ``S.jpg``) are an error.  Use the ``<group>`` levels when one frame is a target of several
 groups (DL3DV's 3/6/9-view settings render the same frame from different fits).  ``DIR`` may also be
@@ -31,21 +32,17 @@ import torch
 from setdiff_bench.enhancers.base import TargetRef
 from setdiff_bench.errors import ImageError, UsageError
 from setdiff_bench.io.images import read_rgb
+from setdiff_bench.run_paths import frame_relative, safe_component
 from setdiff_bench.types import Packet
 
 EXTENSIONS = (".png", ".jpg", ".jpeg")
 SHOW_MISSING = 10
 
 
-def frame_stem(frame: str) -> str:
-    """``frame`` with its extension removed (folders kept): ``CAM_FRONT/a.jpg`` → ``CAM_FRONT/a``."""
-    path = Path(frame)
-    return str(path.with_suffix("")) if path.suffix else frame
-
-
 def candidate_folders(root: Path, ref: TargetRef) -> list[Path]:
-    """The folders searched for ``ref``, most specific first."""
-    return [root / ref.protocol / ref.group / ref.scene, root / ref.group / ref.scene, root / ref.scene, root]
+    """The folders searched for ``ref``, most specific first (names as in :func:`safe_component`)."""
+    protocol, group, scene = (safe_component(x) for x in (ref.protocol, ref.group, ref.scene))
+    return [root / protocol / group / scene, root / group / scene, root / scene, root]
 
 
 class PrecomputedEnhancer:
@@ -86,7 +83,7 @@ class PrecomputedEnhancer:
         Raises:
             UsageError: two candidate files at the same level (ambiguous).
         """
-        stem = frame_stem(ref.frame)
+        stem = str(frame_relative(ref.frame))
         for folder in candidate_folders(self.root, ref):
             found = self._files_at(folder, stem)
             if len(found) > 1:

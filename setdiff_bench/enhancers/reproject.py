@@ -97,8 +97,8 @@ def project(cameras: tuple[Camera, ...], points: torch.Tensor) -> tuple[torch.Te
             uvs.append(torch.from_numpy(np.nan_to_num(uv_np, nan=-1e9)).to(points))
             depths.append(torch.from_numpy(z_np).to(points))
             continue
-        w2c = torch.as_tensor(camera.w2c, dtype=points.dtype, device=points.device)
-        K = torch.as_tensor(camera.K, dtype=points.dtype, device=points.device)
+        w2c = torch.tensor(camera.w2c, dtype=points.dtype, device=points.device)
+        K = torch.tensor(camera.K, dtype=points.dtype, device=points.device)
         cam = points @ w2c[:3, :3].T + w2c[:3, 3]
         z = cam[:, 2]
         safe = torch.where(z > 0, z, torch.ones_like(z))
@@ -144,17 +144,15 @@ class ReprojectEnhancer:
                                             packet.targets.alphas.to(self.device, torch.float32), cfg.alpha_threshold)
         weights = blend_weights(packet, cfg).to(self.device, torch.float32)
         output = render.clone()
-        height, width = packet.height, packet.width
         for m in range(len(packet.targets)):
             points = tgt_points[m].reshape(3, -1).T  # (HW, 3)
             valid = tgt_valid[m].reshape(-1)
-            flat = output[m].reshape(3, -1)
+            flat = output[m].reshape(3, -1)  # a view: writes go to output
             for start in range(0, points.shape[0], cfg.pixel_chunk):
                 stop = min(start + cfg.pixel_chunk, points.shape[0])
                 colour, found = self._gather(points[start:stop], refs.cameras, ref_geometry, ref_images, weights[m])
                 keep = found & valid[start:stop]
                 flat[:, start:stop] = torch.where(keep[None], colour, flat[:, start:stop])
-            output[m] = flat.reshape(3, height, width)
         return output.clamp(0.0, 1.0).cpu()
 
     def _gather(self, points: torch.Tensor, cameras: tuple[Camera, ...], ref_geometry: torch.Tensor,

@@ -1,0 +1,76 @@
+"""``setdiff-bench run``: one enhancer over a packet store → enhanced PNGs, metrics.parquet, manifest.json.
+
+See :mod:`setdiff_bench.run` for the output layout, resume and shard semantics.  Examples::
+
+    setdiff-bench run --method identity --packets packets/synthetic
+    setdiff-bench run --method reproject --packets P --out results/runs/synthetic/reproject -o tolerance=0.05
+    setdiff-bench run --method precomputed --from my_outputs/ --packets P --out results/runs/synthetic/mine
+    setdiff-bench run --method setdiff --checkpoint ckpt/ --packets P --device cuda --shard 0/2
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+VERB = "run"
+HELP = "enhance every packet of a store with one method and score it (PSNR, SSIM, LPIPS; warp error)"
+DESCRIPTION = ("Run one enhancer over a packet store: write the enhanced targets as PNG, per-target metrics "
+               "(metrics.parquet) and a manifest. Resumes where it stopped; --shard i/n splits the work.")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--method", required=True, help="method name (`setdiff-bench list methods`)")
+    parser.add_argument("--packets", required=True, type=Path, help="packet store (`setdiff-bench prepare --out`)")
+    parser.add_argument("--split", default="test", help="packets of this split: train, test or all (default test)")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="run folder (default results/runs/<store name>/<method>)")
+    parser.add_argument("--shard", default="0/1", help="i/n: enhance packets i, i+n, ... (0 <= i < n); default 0/1")
+    parser.add_argument("--device", default="auto", help="cpu, cuda, cuda:1 ... or auto (cuda when available)")
+    parser.add_argument("--batch-size", type=int, default=8, help="images per metric call (memory bound)")
+    parser.add_argument("--checkpoint", default=None, help="trained model for learned methods (setdiff, difix)")
+    parser.add_argument("--from", dest="source", default=None, help="folder of images for --method precomputed")
+    parser.add_argument("-o", "--option", action="append", default=[], metavar="KEY=VALUE",
+                        help="method option, value parsed as JSON when valid (e.g. -o tolerance=0.05)")
+    parser.add_argument("--metrics", default="standard",
+                        help="metric preset (standard, gaussian_splatting, euvs_official) or comma list")
+    parser.add_argument("--warp", choices=("auto", "on", "off"), default="auto",
+                        help="warp error per camera sequence (auto: on for nuScenes)")
+    parser.add_argument("--flow", choices=("deepflow", "dis"), default="deepflow", help="optical flow for warp error")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def run(args: argparse.Namespace) -> int:
+    import torch
+
+    from setdiff_bench.cli.list import parse_option
+    from setdiff_bench.errors import UsageError
+    from setdiff_bench.run import RunSettings, Shard, run_method
+    from setdiff_bench.scoring import resolve_metrics
+
+    shard = Shard.parse(args.shard)
+    device = args.device
+    if device == "auto":
+        device = "cuda" if torch.cuda.is_available() else "cpu"
+    elif device.startswith("cuda") and not torch.cuda.is_available():
+        raise UsageError(f"device {device!r} requested but CUDA is not available", "--device")
+    options = dict(parse_option(text) for text in args.option)
+    for key, value in (("checkpoint", args.checkpoint), ("source", args.source)):
+        if value is not None:
+            if key in options:
+                raise UsageError(f"{key} given twice (flag and -o)", "--option")
+            options[key] = value
+    metrics = tuple(spec.name for spec in resolve_metrics(args.metrics))
+    settings = RunSettings(method=args.method, options=options, split=None if args.split == "all" else args.split,
+                           metrics=metrics, warp=args.warp, flow_method=args.flow, device=device,
+                           batch_size=args.batch_size)
+    out = args.out or Path("results") / "runs" / Path(args.packets).resolve().name / args.method
+    result = run_method(args.packets, out, settings, shard=shard, progress=False if args.no_progress else None)
+    print(f"{args.method} [{shard}]: enhanced {result.enhanced} packets, {result.skipped} already done → {out}")
+    if result.merged:
+        print(f"complete: {out / 'metrics.parquet'}, {out / 'manifest.json'}")
+    else:
+        print(f"{result.remaining} packets of the selection remain for other shards; "
+              "the last shard to finish merges the results", file=sys.stderr)
+    return 0

@@ -1,0 +1,521 @@
+"""One enhancer over one packet store → enhanced images, per-target metrics, a manifest.
+
+Output folder (``--out``)::
+
+    run.json                      the run's settings; a resumed run must match them
+    enhancer.json                 the options the enhancer reported when it was built
+    images/<protocol>/<group>/<scene>/<frame stem>.png   enhanced targets, 8-bit (round to nearest)
+    fragments/<packet id>.parquet one packet's rows, written atomically after its images
+    metrics.parquet               every target's row (merged when every selected packet has a fragment)
+    sequences.parquet             warp error per time-ordered sequence (sequence protocols only)
+    manifest.json                 method and config, versions, git revision, device, timing, index hash
+
+``metrics.parquet`` has one row per target: ``dataset, protocol, group, split, scene, frame, sensor,
+timestamp_us, packet_id, view, method``, one float column per image metric (``psnr, ssim, lpips`` with
+the default ``standard`` preset, masks applied), ``ms_per_frame`` (the enhancer's wall time for the
+packet divided by its targets; excludes I/O and scoring), and the enhanced image's path and SHA-256.
+Rows are sorted by packet id and target position, so the file depends only on the results.
+
+Resume and shards.  A packet is done when its fragment exists (fragments are written last, atomically),
+so a killed run restarted with the same command enhances only the rest.  ``--shard i/n`` (0 ≤ i < n)
+takes every n-th packet of the sorted selection starting at i; shards may run at the same time into the
+same folder.  Whichever call finds every fragment present merges them (under a lock): the merged files
+depend only on the fragments, so one run and any sharding give the same ``metrics.parquet`` up to the
+timing column.  Everything written is deterministic except timing — ``ms_per_frame`` and the
+manifest's ``timing`` block — so an interrupted-and-resumed run matches an uninterrupted one byte for
+byte in ``images/`` and in every other column (compare with :func:`comparable_metrics`).
+
+Warp error (``warp``: ``auto`` = on for the protocols in :data:`SEQUENCE_PROTOCOLS`) is computed at
+merge time per (protocol, scene, sensor) sequence of targets sorted by timestamp, across groups (a
+camera's 10–15 s targets form one sequence), from the written 8-bit images and the ground truth.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import hashlib
+import json
+import os
+import time
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+import torch
+
+from setdiff_bench.enhancers.base import (
+    ChecksTargets,
+    Enhancer,
+    TargetRef,
+    available_methods,
+    create_enhancer,
+)
+from setdiff_bench.errors import PacketError, SetDiffBenchError, UsageError
+from setdiff_bench.io.atomic import atomic_path, sha256_file, write_text_atomic
+from setdiff_bench.io.images import read_rgb, to_tensor_chw, write_png
+from setdiff_bench.metrics.registry import PRESETS, MetricSpec
+from setdiff_bench.run_paths import IMAGES_DIR, image_relative, safe_component
+from setdiff_bench.scoring import quantize, resolve_metrics, score_images, sequence_warp_error, to_uint8_hwc
+
+RUN_FORMAT = "setdiff-run/1"
+RUN_FILE = "run.json"
+ENHANCER_FILE = "enhancer.json"
+FRAGMENTS_DIR = "fragments"
+METRICS_FILE = "metrics.parquet"
+SEQUENCES_FILE = "sequences.parquet"
+MANIFEST_FILE = "manifest.json"
+LOCK_FILE = ".run.lock"
+#: Protocols whose targets are time-ordered camera sequences: warp error with ``warp="auto"``.
+SEQUENCE_PROTOCOLS = frozenset({"nuscenes"})
+#: Columns that are measurements of time, not results: excluded from byte-identity comparisons.
+TIMING_COLUMNS = ("ms_per_frame",)
+KEY_COLUMNS = ("dataset", "protocol", "group", "split", "scene", "frame", "sensor", "timestamp_us", "packet_id",
+               "view", "method")
+
+WarpMode = Literal["auto", "on", "off"]
+
+
+class EnhancerOutputError(SetDiffBenchError):
+    """An enhancer returned something other than ``(M, 3, H, W)`` finite images."""
+
+
+@dataclass(frozen=True)
+class Shard:
+    """``--shard i/n``: packets ``i, i+n, i+2n, ...`` of the sorted selection (0 ≤ i < n)."""
+
+    index: int = 0
+    count: int = 1
+
+    @classmethod
+    def parse(cls, text: str) -> Shard:
+        """``"1/4"`` → ``Shard(1, 4)``; a one-line :class:`UsageError` otherwise."""
+        head, sep, tail = text.partition("/")
+        try:
+            index, count = int(head), int(tail)
+        except ValueError:
+            index, count = -1, 0
+        if not sep or count < 1 or not 0 <= index < count:
+            raise UsageError(f"shard must be i/n with 0 <= i < n, got {text!r}", "--shard")
+        return cls(index, count)
+
+    def select(self, packet_ids: Sequence[str]) -> list[str]:
+        return list(packet_ids[self.index::self.count])
+
+    def __str__(self) -> str:
+        return f"{self.index}/{self.count}"
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """Everything that decides a run's results (recorded in ``run.json``; a resume must match).
+
+    Attributes:
+        method: registry name (``setdiff-bench list methods``).
+        options: factory options given by the user (``checkpoint``, ``source`` for ``--from``, plugin options).
+        split: ``"train"``/``"test"`` or ``None`` for every packet.
+        metrics: image metric names (default: the ``standard`` preset: PSNR, SSIM, LPIPS-alex).
+        warp: warp error per sequence: ``auto`` (on for :data:`SEQUENCE_PROTOCOLS`), ``on`` or ``off``.
+        flow_method: optical flow for warp error (``deepflow`` or ``dis``).
+        device: where the enhancer (if it takes ``device``) and the metrics run.
+        batch_size: images per metric call (bounds LPIPS memory); does not change results.
+    """
+
+    method: str
+    options: Mapping[str, Any] = field(default_factory=dict)
+    split: str | None = "test"
+    metrics: tuple[str, ...] = PRESETS["standard"]
+    warp: WarpMode = "auto"
+    flow_method: str = "deepflow"
+    device: str = "cpu"
+    batch_size: int = 8
+
+    def identity(self, index_sha256: str) -> dict[str, Any]:
+        """The ``run.json`` content: what must not change between a run and its resumption."""
+        return {"format": RUN_FORMAT, "method": self.method, "options": _jsonable(dict(self.options)),
+                "split": self.split, "metrics": list(self.metrics), "warp": self.warp, "flow_method": self.flow_method,
+                "device": self.device, "index_sha256": index_sha256}
+
+
+@dataclass
+class RunResult:
+    """What one call of :func:`run_method` did.
+
+    Attributes:
+        out: the run folder.
+        enhanced: packets enhanced by this call.
+        skipped: packets of this shard already done.
+        remaining: packets of the whole selection still without a fragment (other shards).
+        merged: whether ``metrics.parquet`` is complete (written now or already up to date).
+    """
+
+    out: Path
+    enhanced: int
+    skipped: int
+    remaining: int
+    merged: bool
+
+    @property
+    def metrics(self) -> pd.DataFrame:
+        """The merged per-target table (raises if the run is not merged yet)."""
+        if not self.merged:
+            raise UsageError(f"run not complete: {self.remaining} packets remain", self.out)
+        return pd.read_parquet(self.out / METRICS_FILE)
+
+
+# ---------------------------------------------------------------------- paths
+def fragment_path(out: Path, packet_id: str) -> Path:
+    return out / FRAGMENTS_DIR / f"{safe_component(packet_id)}.parquet"
+
+
+# ---------------------------------------------------------------------- the run
+def run_method(packets: str | os.PathLike[str] | Any, out: str | os.PathLike[str], settings: RunSettings, *,
+               shard: Shard = Shard(), progress: bool | None = None, enhancer: Enhancer | None = None) -> RunResult:
+    """Enhance and score every packet of ``settings.split`` in this shard; merge when all are done.
+
+    Args:
+        packets: a packet store folder or an open :class:`~setdiff_bench.packets.PacketStore`.
+        out: the run folder (created; a folder holding a run with other settings is refused).
+        settings: method, options and scoring choices.
+        shard: which packets this call enhances.
+        progress: tqdm bar (``None``: only on a terminal).
+        enhancer: an already built enhancer to use instead of building ``settings.method`` (tests,
+            notebooks); its ``name`` must equal ``settings.method``.
+
+    Raises:
+        SetDiffBenchError: bad store, unknown method or option, an output of the wrong shape, ...
+    """
+    from tqdm import tqdm
+
+    store = _open_store(packets)
+    out = Path(out)
+    if settings.batch_size < 1:
+        raise UsageError(f"batch size must be >= 1, got {settings.batch_size}", "--batch-size")
+    specs = resolve_metrics(settings.metrics)
+    selection = store.packet_ids(settings.split)
+    if not selection:
+        raise UsageError(f"no packets of split {settings.split or 'any'!r} in the store", store.root)
+    if settings.method not in available_methods() and enhancer is None:
+        raise UsageError(f"unknown method {settings.method!r}; available: {', '.join(sorted(available_methods()))}",
+                         "--method")
+    index_sha256 = sha256_file(Path(store.root) / "index.parquet")
+    _claim_folder(out, settings.identity(index_sha256))
+    mine = shard.select(selection)
+    todo = [pid for pid in mine if not fragment_path(out, pid).is_file()]
+    targets = _target_rows(store, selection)
+    if todo:
+        if enhancer is None:
+            enhancer = create_enhancer(settings.method, optional={"device": settings.device}, **settings.options)
+        elif enhancer.name != settings.method:
+            raise UsageError(f"enhancer {enhancer.name!r} given for method {settings.method!r}")
+        _record_enhancer(out, enhancer)
+        if isinstance(enhancer, ChecksTargets):
+            todo_set = set(todo)
+            enhancer.check_targets([_target_ref(row) for row in targets if row["packet_id"] in todo_set])
+        bar = tqdm(todo, desc=f"{settings.method} [{shard}]", unit="packet", disable=None if progress is None
+                   else not progress)
+        for packet_id in bar:
+            _run_packet(store, out, packet_id, enhancer, specs, settings)
+    remaining = sum(not fragment_path(out, pid).is_file() for pid in selection)
+    merged = False
+    if remaining == 0:
+        merge_run(store, out, settings, specs, selection)
+        merged = True
+    return RunResult(out, len(todo), len(mine) - len(todo), remaining, merged)
+
+
+def _open_store(packets: Any) -> Any:
+    if isinstance(packets, str | os.PathLike):
+        from setdiff_bench.packets import PacketStore
+
+        return PacketStore(packets)
+    return packets
+
+
+def _claim_folder(out: Path, identity: dict[str, Any]) -> None:
+    """Create ``out`` with ``run.json``, or check that the run already there has the same settings."""
+    run_file = out / RUN_FILE
+    if run_file.is_file():
+        try:
+            existing = json.loads(run_file.read_text())
+        except (OSError, json.JSONDecodeError) as error:
+            raise UsageError(f"unreadable run settings ({error})", run_file) from None
+        if existing != identity:
+            changed = sorted(k for k in set(existing) | set(identity) if existing.get(k) != identity.get(k))
+            raise UsageError(f"this folder holds a run with other settings ({', '.join(changed)} differ); "
+                             "resume with the same command or choose another --out", out)
+        return
+    if out.exists() and any(out.iterdir()):
+        raise UsageError("output folder is not empty and holds no run.json; choose another --out", out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(run_file, json.dumps(identity, indent=2, sort_keys=True) + "\n")
+
+
+def _record_enhancer(out: Path, enhancer: Enhancer) -> None:
+    info = {"name": enhancer.name, "class": f"{type(enhancer).__module__}.{type(enhancer).__qualname__}",
+            "options": _jsonable(dict(getattr(enhancer, "options", {}) or {}))}
+    path = out / ENHANCER_FILE
+    text = json.dumps(info, indent=2, sort_keys=True) + "\n"
+    if not path.is_file() or path.read_text() != text:
+        write_text_atomic(path, text)
+
+
+def _target_rows(store: Any, selection: Sequence[str]) -> list[dict[str, Any]]:
+    index = store.index
+    rows = index[(index["role"] == "target") & index["packet_id"].isin(list(selection))]
+    return rows.sort_values(["packet_id", "view"]).to_dict("records")
+
+
+def _target_ref(row: Mapping[str, Any]) -> TargetRef:
+    return TargetRef(str(row["dataset"]), str(row["protocol"]), str(row["group"]), str(row["scene"]), str(row["frame"]))
+
+
+def _run_packet(store: Any, out: Path, packet_id: str, enhancer: Enhancer, specs: Sequence[MetricSpec],
+                settings: RunSettings) -> None:
+    packet = store.load_packet(packet_id)
+    gt, masks = store.load_ground_truth(packet_id)
+    rows = store.rows(packet_id)
+    targets = rows[rows["role"] == "target"].sort_values("view").to_dict("records")
+    device = torch.device(settings.device)
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+    start = time.perf_counter()
+    output = enhancer.enhance(packet)
+    if isinstance(output, torch.Tensor) and output.is_cuda:
+        torch.cuda.synchronize(output.device)
+    elapsed_ms = (time.perf_counter() - start) * 1000.0
+    output = _checked(output, packet, enhancer.name)
+    enhanced = quantize(output)
+    records = []
+    for position, row in enumerate(targets):
+        ref = _target_ref(row)
+        relative = image_relative(ref)
+        write_png(out / relative, to_uint8_hwc(enhanced[position]))
+        records.append({**{key: row[key] for key in KEY_COLUMNS if key in row}, "method": settings.method,
+                        "timestamp_us": _timestamp(row.get("timestamp_us")), "sensor": str(row.get("sensor") or ""),
+                        "image": relative, "image_sha256": sha256_file(out / relative)})
+    scores = score_images(specs, enhanced.to(device), gt.to(device), masks.to(device), settings.batch_size)
+    per_frame = elapsed_ms / max(1, len(targets))
+    for position, record in enumerate(records):
+        for spec in specs:
+            record[spec.name] = float(scores[spec.name][position])
+        record["ms_per_frame"] = per_frame
+    _write_rows(fragment_path(out, packet_id), records, [spec.name for spec in specs])
+
+
+def _checked(output: Any, packet: Any, name: str) -> torch.Tensor:
+    where = f"method {name}, packet {packet.packet_id}"
+    expected = (len(packet.targets), 3, packet.height, packet.width)
+    if not isinstance(output, torch.Tensor):
+        raise EnhancerOutputError(f"enhance() returned {type(output).__name__}, expected a tensor {expected}", where)
+    if tuple(output.shape) != expected:
+        raise EnhancerOutputError(f"enhance() returned shape {tuple(output.shape)}, expected {expected}", where)
+    if not output.is_floating_point():
+        raise EnhancerOutputError(f"enhance() returned dtype {output.dtype}, expected float in [0, 1]", where)
+    if not torch.isfinite(output).all():
+        raise EnhancerOutputError("enhance() returned NaN or infinite values", where)
+    return output.detach().float().cpu()
+
+
+# ---------------------------------------------------------------------- tables
+def row_schema(metric_names: Sequence[str]) -> pa.Schema:
+    """Arrow schema of ``metrics.parquet`` and of fragments."""
+    return pa.schema([
+        ("dataset", pa.string()), ("protocol", pa.string()), ("group", pa.string()), ("split", pa.string()),
+        ("scene", pa.string()), ("frame", pa.string()), ("sensor", pa.string()), ("timestamp_us", pa.int64()),
+        ("packet_id", pa.string()), ("view", pa.int32()), ("method", pa.string()),
+        *[(name, pa.float64()) for name in metric_names],
+        ("ms_per_frame", pa.float64()), ("image", pa.string()), ("image_sha256", pa.string()),
+    ])
+
+
+def _write_rows(path: Path, records: Sequence[Mapping[str, Any]], metric_names: Sequence[str]) -> None:
+    schema = row_schema(metric_names)
+    clean = [{name: _plain(record.get(name)) for name in schema.names} for record in records]
+    table = pa.Table.from_pylist(clean, schema=schema)
+    with atomic_path(path) as tmp:
+        pq.write_table(table, tmp, compression="zstd")
+
+
+def _plain(value: Any) -> Any:
+    """numpy scalars → Python scalars (Arrow takes those); NaN floats stay NaN."""
+    return value.item() if isinstance(value, np.generic) else value
+
+
+def _timestamp(value: Any) -> int | None:
+    return None if value is None or pd.isna(value) else int(value)
+
+
+def comparable_metrics(path: str | os.PathLike[str]) -> pd.DataFrame:
+    """``metrics.parquet`` without its timing columns: equal for a resumed and an uninterrupted run."""
+    return pd.read_parquet(path).drop(columns=list(TIMING_COLUMNS), errors="ignore")
+
+
+# ---------------------------------------------------------------------- merging
+@contextlib.contextmanager
+def _locked(out: Path) -> Iterator[None]:
+    fd = os.open(out / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        os.close(fd)
+
+
+def warp_enabled(settings: RunSettings, protocols: Sequence[str]) -> bool:
+    """Whether warp error is computed for a run over ``protocols``."""
+    if settings.warp == "auto":
+        return any(protocol in SEQUENCE_PROTOCOLS for protocol in protocols)
+    return settings.warp == "on"
+
+
+def merge_run(store: Any, out: Path, settings: RunSettings, specs: Sequence[MetricSpec],
+              selection: Sequence[str]) -> None:
+    """Merge every fragment into ``metrics.parquet`` (+ ``sequences.parquet``) and write ``manifest.json``.
+
+    Idempotent: nothing is rewritten when the manifest already records the same fragments.
+    """
+    with _locked(out):
+        _remove_stale_temporaries(out)
+        paths = [fragment_path(out, pid) for pid in selection]
+        digest = hashlib.sha256()
+        for path in paths:
+            digest.update(f"{path.name}:{sha256_file(path)}\n".encode())
+        fragments_sha256 = digest.hexdigest()
+        manifest_path = out / MANIFEST_FILE
+        if manifest_path.is_file() and (out / METRICS_FILE).is_file():
+            with contextlib.suppress(OSError, json.JSONDecodeError):
+                if json.loads(manifest_path.read_text()).get("fragments_sha256") == fragments_sha256:
+                    return
+        names = [spec.name for spec in specs]
+        tables = []
+        for path in paths:
+            try:
+                tables.append(pq.read_table(path).cast(row_schema(names)))
+            except (OSError, pa.ArrowException) as error:
+                raise PacketError(f"unreadable run fragment ({type(error).__name__}); delete it to redo the packet",
+                                  path) from None
+        merged = pa.concat_tables(tables).sort_by([("packet_id", "ascending"), ("view", "ascending")])
+        with atomic_path(out / METRICS_FILE) as tmp:
+            pq.write_table(merged, tmp, compression="zstd")
+        frame = merged.to_pandas()
+        sequences = None
+        if warp_enabled(settings, sorted(frame["protocol"].unique())):
+            sequences = _sequence_table(store, out, frame, settings)
+            with atomic_path(out / SEQUENCES_FILE) as tmp:
+                pq.write_table(sequences, tmp, compression="zstd")
+        manifest = _manifest(store, out, settings, specs, frame, sequences, fragments_sha256)
+        write_text_atomic(manifest_path, json.dumps(manifest, indent=2, sort_keys=True) + "\n")
+
+
+def _remove_stale_temporaries(out: Path) -> None:
+    """Temporary files of writes killed mid-way (``.<name>.<random>.tmp<ext>``)."""
+    for folder in (out / IMAGES_DIR, out / FRAGMENTS_DIR, out):
+        if folder.is_dir():
+            pattern = "**/.*.tmp*" if folder.name == IMAGES_DIR else ".*.tmp*"
+            for stale in folder.glob(pattern):
+                if stale.is_file():
+                    with contextlib.suppress(FileNotFoundError):
+                        stale.unlink()
+
+
+SEQUENCE_SCHEMA = pa.schema([
+    ("dataset", pa.string()), ("protocol", pa.string()), ("scene", pa.string()), ("sensor", pa.string()),
+    ("method", pa.string()), ("frames", pa.int32()), ("first_frame", pa.string()), ("last_frame", pa.string()),
+    ("warp", pa.float64()),
+])
+
+
+def _sequence_table(store: Any, out: Path, frame: pd.DataFrame, settings: RunSettings) -> pa.Table:
+    """Warp error of every (protocol, scene, sensor) sequence with ≥ 2 time-stamped targets."""
+    records = []
+    for (protocol, scene, sensor), rows in frame.groupby(["protocol", "scene", "sensor"], sort=True, dropna=False):
+        if rows["timestamp_us"].isna().any():
+            if settings.warp == "on":
+                raise PacketError(f"warp error needs timestamps; scene {scene!r} sensor {sensor!r} has targets "
+                                  "without one", store.root)
+            continue
+        rows = rows.sort_values(["timestamp_us", "frame", "packet_id"])
+        if len(rows) < 2:
+            continue
+        frames, gts, masks = [], [], []
+        for row in rows.itertuples():
+            size = None
+            gt, mask = store.load_ground_truth(row.packet_id, targets=[int(row.view)])
+            size = tuple(gt.shape[-2:])
+            frames.append(to_tensor_chw(read_rgb(out / row.image, size)))
+            gts.append(gt[0])
+            masks.append(mask[0])
+        value = sequence_warp_error(torch.stack(frames), torch.stack(gts), torch.stack(masks),
+                                    flow_method=settings.flow_method)
+        records.append({"dataset": rows["dataset"].iloc[0], "protocol": protocol, "scene": scene, "sensor": sensor,
+                        "method": settings.method, "frames": len(rows), "first_frame": rows["frame"].iloc[0],
+                        "last_frame": rows["frame"].iloc[-1], "warp": value})
+    return pa.Table.from_pylist(records, schema=SEQUENCE_SCHEMA)
+
+
+def _manifest(store: Any, out: Path, settings: RunSettings, specs: Sequence[MetricSpec], frame: pd.DataFrame,
+              sequences: pa.Table | None, fragments_sha256: str) -> dict[str, Any]:
+    from setdiff_bench.provenance import device_description, git_revision, package_versions
+
+    methods = available_methods()
+    spec = methods.get(settings.method)
+    enhancer_info: dict[str, Any] = {}
+    with contextlib.suppress(OSError, json.JSONDecodeError):
+        enhancer_info = json.loads((out / ENHANCER_FILE).read_text())
+    timing = frame.drop_duplicates("packet_id")[["packet_id", "ms_per_frame"]]
+    per_frame = frame["ms_per_frame"].to_numpy(dtype=np.float64)
+    per_packet_ms = (frame.groupby("packet_id")["ms_per_frame"].sum()).to_numpy(dtype=np.float64)
+    return {
+        "format": RUN_FORMAT,
+        "method": {"name": settings.method, "factory": spec.factory if spec else None,
+                   "source": spec.source if spec else None, "options": _jsonable(dict(settings.options)),
+                   "enhancer": enhancer_info},
+        "packets": {"root": str(Path(store.root).resolve()), "index_sha256": sha256_file(Path(store.root) / "index.parquet"),
+                    "split": settings.split, "packets": int(frame["packet_id"].nunique()), "targets": len(frame),
+                    "datasets": sorted(frame["dataset"].unique().tolist()),
+                    "protocols": sorted(frame["protocol"].unique().tolist()),
+                    "groups": sorted(frame["group"].unique().tolist())},
+        "metrics": {"image": {s.name: {"function": s.function, "kwargs": _jsonable(dict(s.kwargs)),
+                                       "higher_is_better": s.higher_is_better} for s in specs},
+                    "quantization": "8-bit, rint(clip(x, 0, 1) * 255) / 255, as the written PNG",
+                    "masks": "protocol masks from the packet store (True = evaluate)",
+                    "warp": None if sequences is None else {
+                        "sequences": sequences.num_rows, "flow_method": settings.flow_method,
+                        "scale": "MSE on the 0-255 scale (setdiff_bench.metrics.warp.PAPER_SCALE)",
+                        "grouping": "(protocol, scene, sensor), targets sorted by timestamp across groups"}},
+        "device": {**device_description(settings.device), "requested": settings.device},
+        "batch_size": settings.batch_size,
+        "versions": package_versions(),
+        "git": git_revision(),
+        "timing": {"frames": len(frame), "packets": len(timing),
+                   "enhance_ms_total": float(per_packet_ms.sum()),
+                   "ms_per_frame_mean": float(per_frame.mean()) if len(per_frame) else None,
+                   "ms_per_frame_median": float(np.median(per_frame)) if len(per_frame) else None,
+                   "ms_per_frame_max": float(per_frame.max()) if len(per_frame) else None,
+                   "note": "enhancer wall time only (no I/O, no scoring); timing differs between runs"},
+        "fragments_sha256": fragments_sha256,
+        "outputs": {"metrics": METRICS_FILE, "sequences": SEQUENCES_FILE if sequences is not None else None,
+                    "images": f"{IMAGES_DIR}/<protocol>/<group>/<scene>/<frame stem>.png"},
+    }
+
+
+def _jsonable(value: Any) -> Any:
+    """Options as JSON values (paths and other objects become strings)."""
+    if isinstance(value, Mapping):
+        return {str(k): _jsonable(v) for k, v in sorted(value.items(), key=lambda kv: str(kv[0]))}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, bool | int | str) or value is None:
+        return value
+    if isinstance(value, float):
+        return value if np.isfinite(value) else str(value)
+    if hasattr(value, "__dataclass_fields__"):
+        return _jsonable(asdict(value))
+    return str(value)

@@ -1,0 +1,45 @@
+"""Where a run puts each enhanced target: ``images/<protocol>/<group>/<scene>/<frame stem>.png``.
+
+Shared by :mod:`setdiff_bench.run` (which writes there) and the ``precomputed`` enhancer (which reads a
+run's ``images/`` folder, or any folder in the same layout).
+"""
+
+from __future__ import annotations
+
+from pathlib import PurePosixPath
+
+from setdiff_bench.enhancers.base import TargetRef
+from setdiff_bench.errors import PacketError
+
+IMAGES_DIR = "images"
+
+
+def safe_component(text: str) -> str:
+    """A scene / group / protocol name as one path component.
+
+    Names are used as they are unless they are empty, ``.``/``..`` or contain a path separator or NUL;
+    those go through the packet-id slug (runs of characters other than ``A-Za-z0-9.+-`` become ``-``).
+    """
+    from setdiff_bench.packet_index import slug
+
+    if not text or text in {".", ".."} or "/" in text or "\\" in text or "\0" in text:
+        return slug(text)
+    return text
+
+
+def frame_relative(frame: str) -> PurePosixPath:
+    """A frame name as a relative path without its extension (``CAM_FRONT/a.jpg`` → ``CAM_FRONT/a``).
+
+    Raises:
+        PacketError: an absolute name, or one with ``..`` or empty parts (it could escape its folder).
+    """
+    path = PurePosixPath(frame.replace("\\", "/"))
+    if not frame or path.is_absolute() or any(part in {"..", "."} for part in path.parts) or "//" in frame:
+        raise PacketError(f"frame name {frame!r} is not a safe relative file name")
+    return path.with_suffix("") if path.suffix else path
+
+
+def image_relative(ref: TargetRef) -> str:
+    """``images/<protocol>/<group>/<scene>/<frame stem>.png``, POSIX, relative to the run folder."""
+    parts = [IMAGES_DIR, safe_component(ref.protocol), safe_component(ref.group), safe_component(ref.scene)]
+    return str(PurePosixPath(*parts, f"{frame_relative(ref.frame)}.png"))
