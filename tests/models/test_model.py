@@ -185,3 +185,23 @@ def test_rejects_size_not_divisible_by_8(model: SetDiffModel) -> None:
 def test_rejects_packet_without_targets(model: SetDiffModel) -> None:
     with pytest.raises(PacketError, match="no target"):
         enhance_packet(model, make_packet(2, 0))
+
+
+def test_gradient_checkpointing_keeps_gradients() -> None:
+    """Recomputed blocks see the set size too (it travels in cross_attention_kwargs)."""
+    packet = make_packet(2, 2)
+    images, geometry, n = view_tensors(packet, use_geometry=True, cmap_clip=10.0)
+    batch = SetBatch(images[None], geometry[None], n)
+    gradients = []
+    for checkpointing in (False, True):
+        model = tiny_model(skip_connections=True)
+        activate_geometry(model)
+        model.train()
+        if checkpointing:
+            model.unet.enable_gradient_checkpointing()
+        out = model(batch, geometry_keep=torch.ones(1), decode_index=torch.tensor([1]))
+        (out.target_x0.square().mean() + out.decoded.mean()).backward()
+        gradients.append({k: p.grad.clone() for k, p in model.named_parameters() if p.grad is not None})
+    assert gradients[0].keys() == gradients[1].keys()
+    for key, value in gradients[0].items():
+        torch.testing.assert_close(gradients[1][key], value, atol=1e-6, rtol=1e-5, msg=key)

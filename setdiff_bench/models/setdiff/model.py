@@ -31,7 +31,7 @@ from setdiff_bench.models.setdiff.config import ModelConfig
 from setdiff_bench.models.setdiff.geometry_encoder import GeometryEncoder
 from setdiff_bench.models.setdiff.inputs import SetBatch, check_image_size
 from setdiff_bench.models.setdiff.networks import build_networks
-from setdiff_bench.models.setdiff.set_mixer import SetContext, install_set_mixer
+from setdiff_bench.models.setdiff.set_mixer import install_set_mixer, set_kwargs
 from setdiff_bench.models.setdiff.vae_codec import Encoded, LatentCodec
 
 
@@ -62,8 +62,7 @@ class SetDiffModel(nn.Module):
         super().__init__()
         networks = build_networks(config, load_pretrained=load_pretrained)
         self.unet = networks.unet
-        self.set_context = SetContext()
-        self.mixed_attention = install_set_mixer(self.unet, self.set_context)
+        self.mixed_attention = install_set_mixer(self.unet)
         self.codec = LatentCodec(networks.vae, skip_connections=config.skip_connections,
                                  skip_gamma=config.skip_gamma, decoder_training=config.vae_decoder,
                                  lora_rank=config.vae_lora_rank, lora_alpha=config.vae_lora_alpha)
@@ -100,8 +99,8 @@ class SetDiffModel(nn.Module):
         text = self.text_embedding.to(unet_input.dtype).expand(unet_input.shape[0], -1, -1)
         timestep = torch.full((unet_input.shape[0],), self.config.timestep, device=unet_input.device,
                               dtype=torch.long)
-        with self.set_context.views(num_views):
-            return self.unet(unet_input, timestep, encoder_hidden_states=text).sample
+        return self.unet(unet_input, timestep, encoder_hidden_states=text,
+                         cross_attention_kwargs=set_kwargs(num_views)).sample
 
     def to_x0(self, latents: torch.Tensor, prediction: torch.Tensor) -> torch.Tensor:
         """Analytic one-step x̂0 from the image latent and the UNet output (v or ε)."""

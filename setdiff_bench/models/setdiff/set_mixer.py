@@ -5,55 +5,47 @@ then all of set 1, ...).  In each transformer block the set mixer regroups the s
 ``(B·V, L, C) → (B, V·L, C)``, runs multi-head attention over the union, and splits the result back,
 so every token of any reference or target can attend to every other token of the same set (paper
 §3.2, "Set mixer").  There is no view position encoding, so the UNet is permutation-equivariant over
-views; V may change from call to call.  Text cross-attention (``attn2``) keeps diffusers' standard
-processor.  The pretrained ``to_q/to_k/to_v/to_out`` weights are reused; no new parameters.
+views.  Text cross-attention (``attn2``) stays per view.  The pretrained ``to_q/to_k/to_v/to_out``
+weights are reused; no new parameters.
 
-V travels through a :class:`SetContext` shared by the model's processors (not a process-global
-patch, unlike DiFix3D's ``mv_unet.py``), set around each UNet call with :meth:`SetContext.views`.
-This is written here because diffusers ships no processor for joint attention across batch items.
+V may change from call to call.  It travels with each UNet call as
+``cross_attention_kwargs={"num_views": V}`` (:func:`set_kwargs`), which diffusers hands to every
+attention processor of that call — per model, not a process-global patch like DiFix3D's
+``mv_unet.py``.  A context object set around the call would not survive gradient checkpointing:
+checkpointed blocks are recomputed during the backward pass, after such a context has been left,
+whereas the kwargs are arguments of the checkpointed call and are replayed with it.  ``attn2`` gets a
+thin ``PerViewAttnProcessor`` that accepts the key (diffusers would otherwise warn on every call).
+
+Written here because diffusers ships no processor for joint attention across batch items.
 """
 
 from __future__ import annotations
 
-import contextlib
-from collections.abc import Iterator
+import functools
 from typing import Any
 
 import torch
 import torch.nn.functional as F
 
+NUM_VIEWS_KEY = "num_views"
 
-class SetContext:
-    """How many views each set in the current UNet batch has (``None`` outside a call)."""
 
-    def __init__(self) -> None:
-        self.num_views: int | None = None
-
-    @contextlib.contextmanager
-    def views(self, num_views: int) -> Iterator[None]:
-        """Within the block, the UNet batch is ``(B·num_views)`` in "(b v)" order."""
-        if num_views < 1:
-            raise ValueError(f"a set needs at least one view, got {num_views}")
-        previous, self.num_views = self.num_views, int(num_views)
-        try:
-            yield
-        finally:
-            self.num_views = previous
+def set_kwargs(num_views: int) -> dict[str, int]:
+    """The ``cross_attention_kwargs`` of a UNet call whose batch is ``(B·num_views)`` in "(b v)" order."""
+    if num_views < 1:
+        raise ValueError(f"a set needs at least one view, got {num_views}")
+    return {NUM_VIEWS_KEY: int(num_views)}
 
 
 class SetSelfAttnProcessor:
     """Joint self-attention over the union of all V views' tokens (replaces ``attn1`` processors)."""
 
-    def __init__(self, context: SetContext) -> None:
-        self.context = context
-
     def __call__(self, attn: Any, hidden_states: torch.Tensor, encoder_hidden_states: torch.Tensor | None = None,
                  attention_mask: torch.Tensor | None = None, temb: torch.Tensor | None = None,
-                 **kwargs: Any) -> torch.Tensor:
+                 num_views: int | None = None, **kwargs: Any) -> torch.Tensor:
         """``hidden_states`` ``(B·V, L, C)`` → ``(B·V, L, C_out)``, attending across the V views of each set."""
-        num_views = self.context.num_views
         if num_views is None:
-            raise RuntimeError("set mixer called outside SetContext.views(...): the number of views is unknown")
+            raise RuntimeError("set mixer called without cross_attention_kwargs={'num_views': V}")
         if encoder_hidden_states is not None or attention_mask is not None:
             raise RuntimeError("set mixer replaces self-attention only: got encoder_hidden_states or a mask")
         if hidden_states.ndim != 3:
@@ -78,6 +70,22 @@ class SetSelfAttnProcessor:
         return mixed / attn.rescale_output_factor
 
 
+@functools.cache
+def per_view_processor_class() -> type:
+    """:class:`PerViewAttnProcessor` (built on first use so that importing this module stays light)."""
+    from diffusers.models.attention_processor import AttnProcessor2_0
+
+    class PerViewAttnProcessor(AttnProcessor2_0):
+        """diffusers' standard SDPA processor, accepting (and ignoring) the set size."""
+
+        def __call__(self, attn: Any, hidden_states: torch.Tensor, encoder_hidden_states: torch.Tensor | None = None,
+                     attention_mask: torch.Tensor | None = None, temb: torch.Tensor | None = None,
+                     num_views: int | None = None, **kwargs: Any) -> torch.Tensor:
+            return super().__call__(attn, hidden_states, encoder_hidden_states, attention_mask, temb, **kwargs)
+
+    return PerViewAttnProcessor
+
+
 def check_self_attention(attn: Any, name: str) -> None:
     """Refuse attention layers with features the set mixer does not implement."""
     unsupported = [flag for flag in ("spatial_norm", "group_norm", "norm_q", "norm_k")
@@ -90,14 +98,12 @@ def check_self_attention(attn: Any, name: str) -> None:
         raise RuntimeError(f"{name}: set mixer does not support {', '.join(unsupported)}")
 
 
-def install_set_mixer(unet: torch.nn.Module, context: SetContext) -> list[str]:
-    """Give every ``attn1`` of ``unet`` a :class:`SetSelfAttnProcessor`; ``attn2`` gets ``AttnProcessor2_0``.
+def install_set_mixer(unet: torch.nn.Module) -> list[str]:
+    """Give every ``attn1`` of ``unet`` a :class:`SetSelfAttnProcessor`, every other attention the per-view one.
 
     Returns:
         the processor names that now mix across views (16 for the SD-Turbo UNet).
     """
-    from diffusers.models.attention_processor import AttnProcessor2_0
-
     modules = dict(unet.named_modules())
     processors: dict[str, Any] = {}
     mixed: list[str] = []
@@ -105,9 +111,9 @@ def install_set_mixer(unet: torch.nn.Module, context: SetContext) -> list[str]:
         module_name = name.removesuffix(".processor")
         if module_name.endswith("attn1"):
             check_self_attention(modules[module_name], module_name)
-            processors[name] = SetSelfAttnProcessor(context)
+            processors[name] = SetSelfAttnProcessor()
             mixed.append(name)
         else:
-            processors[name] = AttnProcessor2_0()
+            processors[name] = per_view_processor_class()()
     unet.set_attn_processor(processors)
     return mixed

@@ -168,6 +168,8 @@ def train(config: Config, dataset: Sequence[TrainingSample] | Iterable[TrainingS
     model = SetDiffModel(config.model, load_pretrained=previous is None)
     if previous is not None:
         load_weights(model, previous)
+    if tc.gradient_checkpointing:
+        model.unet.enable_gradient_checkpointing()
     model.to(device)
     model.train()
     optimizer = torch.optim.AdamW(model.trainable_parameters(), lr=tc.learning_rate, betas=tc.adam_betas,
