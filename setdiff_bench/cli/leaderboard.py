@@ -1,0 +1,81 @@
+"""``setdiff-bench leaderboard``: tables (Parquet, LaTeX, Markdown), plots and image grids from finished runs.
+
+Examples::
+
+    setdiff-bench leaderboard --dataset synthetic --runs results/runs --plots
+    setdiff-bench leaderboard --dataset euvs --with-reported --format latex,md
+    setdiff-bench leaderboard --dataset synthetic --grids 6 --packets packets/synthetic
+
+See :mod:`setdiff_bench.leaderboard` for the aggregation rules (means of per-image values; a method
+missing rows in a block is refused) and how reported paper rows are marked.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from pathlib import Path
+
+VERB = "leaderboard"
+HELP = "tabulate finished runs per method and group: Parquet, LaTeX (booktabs), Markdown; plots and grids"
+DESCRIPTION = ("Aggregate finished runs (metrics.parquet under --runs) into per-group means per method, in the "
+               "paper's table shape; optionally mix in the paper's reported rows (marked), draw plots and grids.")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--dataset", required=True, help="dataset key (euvs, paralane, nuscenes, dl3dv, synthetic, ...)")
+    parser.add_argument("--runs", type=Path, default=Path("results/runs"), help="folder searched for runs")
+    parser.add_argument("--format", default="parquet,latex,md", help="comma list of parquet, latex, md")
+    parser.add_argument("--out", type=Path, default=Path("results/leaderboards"), help="output folder")
+    parser.add_argument("--with-reported", action="store_true",
+                        help="add the paper's reported rows (marked '(paper)' / dagger, source=reported)")
+    parser.add_argument("--split", default="test", help="split of the targets to tabulate (train, test, all)")
+    parser.add_argument("--methods", default=None, help="comma list of methods, in row order (default all)")
+    parser.add_argument("--metrics", default=None,
+                        help="comma list of metric columns (default psnr,ssim,lpips; e.g. psnr_euvs,ssim_euvs,lpips_euvs)")
+    parser.add_argument("--plots", action="store_true", help="also write the dataset's metric plots (PNG)")
+    parser.add_argument("--grids", type=int, default=0, metavar="K",
+                        help="also write a qualitative grid of K targets (needs --packets)")
+    parser.add_argument("--packets", type=Path, default=None, help="packet store the runs were made on (for --grids)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from setdiff_bench.errors import UsageError
+    from setdiff_bench.leaderboard import build_leaderboard, load_runs, reported_for, write_leaderboard
+
+    formats = [f.strip() for f in args.format.split(",") if f.strip()]
+    split = None if args.split == "all" else args.split
+    methods = [m.strip() for m in args.methods.split(",")] if args.methods else None
+    metrics = [m.strip() for m in args.metrics.split(",")] if args.metrics else None
+    images, sequences = load_runs(args.runs)
+    reported = None
+    if args.with_reported:
+        reported = reported_for(args.dataset)
+        if reported.empty:
+            print(f"note: the paper reports no numbers for dataset {args.dataset!r}", file=sys.stderr)
+    board = build_leaderboard(args.dataset, images, sequences, split=split, reported=reported, metrics=metrics,
+                              methods=methods)
+    command = "setdiff-bench " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:] else None
+    for fmt, path in write_leaderboard(board, args.out, formats, command).items():
+        print(f"{fmt}: {path}")
+    if args.plots and len(images):
+        from setdiff_bench.plots import write_plots
+
+        for path in write_plots(args.dataset, images, args.out, split=split):
+            print(f"plot: {path}")
+    if args.grids:
+        if args.packets is None:
+            raise UsageError("--grids needs --packets (the store the runs were made on)", "--grids")
+        from setdiff_bench.grids import pick_frames, qualitative_grid
+        from setdiff_bench.packets import PacketStore
+
+        store = PacketStore(args.packets)
+        chosen = images[(images["dataset"] == args.dataset) & ((images["split"] == split) if split else True)]
+        folders = {m: Path(r) for m, r in chosen.drop_duplicates("method")[["method", "run"]].itertuples(index=False)}
+        order = methods or sorted(folders)
+        frames = pick_frames(store.index[store.index["dataset"] == args.dataset], args.grids, split=split)
+        path = qualitative_grid(store, {m: folders[m] for m in order if m in folders}, frames,
+                                args.out / f"{args.dataset}_grid.png")
+        print(f"grid: {path}")
+    return 0

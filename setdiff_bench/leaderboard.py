@@ -1,0 +1,522 @@
+"""Leaderboards: per-group means of per-image metrics per method → Parquet, LaTeX (booktabs), Markdown.
+
+Inputs are finished runs (``metrics.parquet`` of :mod:`setdiff_bench.run`, found recursively under
+``--runs``) and, only when asked (``with_reported``), the SetDiff paper's reported numbers from
+``protocols/reported/*.csv`` — always marked: a ``source`` column (``measured`` / ``reported``), a
+"(paper)" suffix in Markdown and a dagger in LaTeX.
+
+Aggregation (the nerfbaselines convention, shared/reference/metrics.md §6.4): a cell is the **mean of
+per-image values** over the block's targets (not a metric of pooled errors, not a mean of scene means);
+the pooled "All" block averages every image of every group.  Warp error is a per-sequence value; its
+cell is the mean over sequences.  A method whose rows in a block miss targets that another method has
+is refused with an error naming the method, the block and the missing frames — a mean over a subset
+is never shown.  A method with no rows at all in a block shows "–".
+
+Best per column: bold, decided on the values as displayed (PSNR 2 decimals, SSIM/LPIPS 3, warp 1;
+reported numbers at their printed precision), so ties share the bold.  Direction comes from the
+metric registry (``higher_is_better``).
+
+Table shapes follow the paper: EUVS Settings 1–3 (Table 1), Para-Lane single/double lane shift
+(Table 2), nuScenes one pooled block with warp error (Table 3 + supplement), DL3DV 3/6/9 views
+(Table 4); other datasets get one block per group found.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from setdiff_bench.errors import SetDiffBenchError, UsageError
+from setdiff_bench.io.atomic import atomic_path, write_text_atomic
+from setdiff_bench.metrics.registry import METRICS
+
+FORMATS = ("parquet", "latex", "md")
+ALL = ""  # block key of the pooled block (every group)
+
+
+class LeaderboardError(SetDiffBenchError):
+    """Runs that cannot be put in one table (missing rows, duplicates, no data)."""
+
+
+@dataclass(frozen=True)
+class Block:
+    """A column block: one group (or every group pooled, ``key == ""``) with a display label."""
+
+    key: str
+    label: str
+
+
+@dataclass(frozen=True)
+class Layout:
+    """The table shape of one dataset.
+
+    Attributes:
+        blocks: column blocks in order; ``None`` = one block per group found (natural order).
+        metrics: image metrics per block.
+        sequence_metrics: per-sequence metrics shown in the pooled block when runs have them.
+        reported_tables: ``table`` ids of ``protocols/reported`` mixed in by ``with_reported``.
+        title: caption text.
+    """
+
+    blocks: tuple[Block, ...] | None
+    metrics: tuple[str, ...] = ("psnr", "ssim", "lpips")
+    sequence_metrics: tuple[str, ...] = ()
+    reported_tables: tuple[str, ...] = ()
+    title: str = ""
+
+
+LAYOUTS: dict[str, Layout] = {
+    "euvs": Layout((Block("level1", "Setting 1"), Block("level2", "Setting 2"), Block("level3", "Setting 3")),
+                   reported_tables=("table1_euvs",), title="EUVS novel-view settings (paper Table 1)"),
+    "paralane": Layout((Block("single", "Single-lane shift"), Block("double", "Double-lane shift")),
+                       reported_tables=("table2_paralane",), title="Para-Lane lane shifts (paper Table 2)"),
+    "nuscenes": Layout((Block(ALL, "All"),), sequence_metrics=("warp",),
+                       reported_tables=("table3_nuscenes", "supp_consistency"),
+                       title="nuScenes temporal extrapolation, 10-15 s (paper Table 3 and consistency table)"),
+    "dl3dv": Layout((Block("n3", "3 views"), Block("n6", "6 views"), Block("n9", "9 views")),
+                    reported_tables=("table4_dl3dv",), title="DL3DV sparse views (paper Table 4)"),
+    "synthetic": Layout((Block("lane+1", "Lane +1"), Block("lane+2", "Lane +2"), Block("side", "Side cameras"),
+                         Block("turn", "Turn"), Block("interp", "Held-out")),
+                        title="Synthetic streets (fit on lane 0, front camera)"),
+}
+
+HEADERS = {"psnr": "PSNR", "ssim": "SSIM", "lpips": "LPIPS", "warp": "Warp"}
+DECIMALS = {"psnr": 2, "ssim": 3, "lpips": 3, "warp": 1}
+SECTIONS = ("reconstruction", "enhancer", "ablation", "measured")
+
+
+def metric_header(name: str) -> str:
+    """``psnr_euvs`` → ``PSNR``; unknown names upper-cased."""
+    return HEADERS.get(name.split("_")[0], name.upper())
+
+
+def metric_decimals(name: str) -> int:
+    return DECIMALS.get(name.split("_")[0], 3)
+
+
+def higher_is_better(name: str) -> bool:
+    if name in METRICS:
+        return METRICS[name].higher_is_better
+    return name.split("_")[0] in {"psnr", "ssim"}
+
+
+def natural_key(text: str) -> list[Any]:
+    """Sort key that orders ``n3 < n6 < n12`` and ``10-11s < 11-12s``."""
+    return [int(part) if part.isdigit() else part for part in re.split(r"(\d+)", text)]
+
+
+# ---------------------------------------------------------------------- inputs
+def find_runs(runs: str | Path) -> list[Path]:
+    """Every run folder (holding ``metrics.parquet``) under ``runs``, sorted."""
+    root = Path(runs)
+    if not root.is_dir():
+        raise UsageError("runs folder not found", root)
+    return sorted(p.parent for p in root.rglob("metrics.parquet") if not p.name.startswith("."))
+
+
+def load_runs(runs: str | Path | Sequence[Path]) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Per-target rows and per-sequence rows of every run (a ``run`` column names the folder)."""
+    folders = find_runs(runs) if isinstance(runs, str | Path) else [Path(p) for p in runs]
+    images, sequences = [], []
+    for folder in folders:
+        try:
+            images.append(pd.read_parquet(folder / "metrics.parquet").assign(run=str(folder)))
+            if (folder / "sequences.parquet").is_file():
+                sequences.append(pd.read_parquet(folder / "sequences.parquet").assign(run=str(folder)))
+        except (OSError, pa.ArrowException) as error:
+            raise LeaderboardError(f"unreadable run results ({type(error).__name__})", folder) from None
+    image_frame = pd.concat(images, ignore_index=True) if images else pd.DataFrame()
+    sequence_frame = pd.concat(sequences, ignore_index=True) if sequences else pd.DataFrame()
+    return image_frame, sequence_frame
+
+
+def load_reported(dataset: str | None = None, tables: Iterable[str] | None = None) -> pd.DataFrame:
+    """The paper's numbers from ``protocols/reported/*.csv`` (long format).
+
+    Columns: ``table, dataset, section, setting, group, method, method_id, metric, value`` (float),
+    ``printed`` (the text as typeset), ``decimals``, ``bold`` (bold in the paper), ``source``
+    (``"reported"``).  ``group`` is the protocol group the setting corresponds to (``""`` = all).
+    """
+    folder = resources.files("setdiff_bench.protocols") / "reported"
+    frames = []
+    for entry in sorted(folder.iterdir(), key=lambda e: e.name):
+        if entry.name.endswith(".csv"):
+            with entry.open() as handle:
+                frames.append(pd.read_csv(handle, dtype=str, keep_default_na=False))
+    frame = pd.concat(frames, ignore_index=True)
+    if dataset is not None:
+        frame = frame[frame["dataset"] == dataset]
+    if tables is not None:
+        frame = frame[frame["table"].isin(list(tables))]
+    frame = frame.rename(columns={"value": "printed"}).reset_index(drop=True)
+    frame["value"] = frame["printed"].astype(float)
+    frame["decimals"] = frame["printed"].map(lambda text: len(text.split(".")[1]) if "." in text else 0)
+    frame["bold"] = frame["bold"] == "1"
+    frame["source"] = "reported"
+    return frame
+
+
+# ---------------------------------------------------------------------- the table
+@dataclass
+class Row:
+    """One table row: a method (measured) or a paper row (reported)."""
+
+    label: str
+    method: str
+    source: str  # "measured" | "reported"
+    section: str
+    values: dict[tuple[str, str], float] = field(default_factory=dict)  # (block key, metric) → value
+    decimals: dict[tuple[str, str], int] = field(default_factory=dict)
+    counts: dict[tuple[str, str], int] = field(default_factory=dict)  # images or sequences averaged
+
+
+@dataclass
+class Leaderboard:
+    """A finished table.
+
+    Attributes:
+        dataset: dataset key.
+        columns: ``(block, metrics)`` in display order.
+        rows: rows in display order (reported sections first, then measured methods).
+        best: ``(block key, metric)`` → row indices holding the best displayed value.
+        title: caption text.
+        notes: footnotes (aggregation, marks).
+    """
+
+    dataset: str
+    columns: list[tuple[Block, tuple[str, ...]]]
+    rows: list[Row]
+    best: dict[tuple[str, str], set[int]]
+    title: str
+    notes: list[str]
+
+    def cells(self) -> list[tuple[str, str]]:
+        return [(block.key, metric) for block, metrics in self.columns for metric in metrics]
+
+    def display(self, row: Row, cell: tuple[str, str]) -> str | None:
+        """The value as printed (``None`` when the row has no value there)."""
+        value = row.values.get(cell)
+        if value is None or math.isnan(value):
+            return None
+        return f"{value:.{row.decimals.get(cell, metric_decimals(cell[1]))}f}"
+
+
+def build_leaderboard(dataset: str, images: pd.DataFrame, sequences: pd.DataFrame | None = None, *,
+                      split: str | None = "test", reported: pd.DataFrame | None = None,
+                      metrics: Sequence[str] | None = None, methods: Sequence[str] | None = None,
+                      layout: Layout | None = None) -> Leaderboard:
+    """Aggregate runs (and optional reported rows) of ``dataset`` into a :class:`Leaderboard`.
+
+    Args:
+        dataset: dataset key; selects the layout and filters the rows.
+        images: per-target rows (:func:`load_runs`), any datasets.
+        sequences: per-sequence rows (warp error), or ``None``.
+        split: keep rows of this split (``None``: all).
+        reported: rows of :func:`load_reported` to mix in (already chosen by the caller), or ``None``.
+        metrics: image metric columns (default: the layout's).
+        methods: measured methods to show, in this order (default: all, sorted).
+        layout: override the dataset's layout.
+
+    Raises:
+        LeaderboardError: no rows, a metric column missing, duplicate rows, or a method missing rows.
+    """
+    layout = layout or LAYOUTS.get(dataset, Layout(None))
+    metric_names = tuple(metrics or layout.metrics)
+    frame = images if len(images) else pd.DataFrame(columns=["dataset"])
+    frame = frame[frame["dataset"] == dataset]
+    if split is not None and len(frame):
+        frame = frame[frame["split"] == split]
+    if methods is not None and len(frame):
+        unknown = sorted(set(methods) - set(frame["method"]))
+        if unknown:
+            raise LeaderboardError(f"no {dataset} runs of method(s) {', '.join(unknown)}")
+        frame = frame[frame["method"].isin(list(methods))]
+    if not len(frame) and (reported is None or not len(reported)):
+        raise LeaderboardError(f"no {dataset} results{f' of split {split}' if split else ''} to tabulate")
+    missing_columns = [m for m in metric_names if len(frame) and m not in frame.columns]
+    if missing_columns:
+        raise LeaderboardError(f"runs have no column(s) {', '.join(missing_columns)} "
+                               f"(they were scored with other metrics; pass --metrics)")
+    _check_duplicates(frame)
+    groups = sorted(frame["group"].unique(), key=natural_key) if len(frame) else []
+    blocks = list(layout.blocks) if layout.blocks is not None else [Block(g, g) for g in groups]
+    if layout.blocks is not None and groups:
+        unknown = [g for g in groups if g not in {b.key for b in blocks}]
+        if unknown and not any(b.key == ALL for b in blocks):
+            blocks += [Block(g, g) for g in unknown]
+    seq = sequences if sequences is not None and len(sequences) else None
+    if seq is not None:
+        seq = seq[(seq["dataset"] == dataset) & seq["method"].isin(frame["method"].unique())]
+    seq_names = tuple(m for m in layout.sequence_metrics
+                      if (seq is not None and m in seq.columns and len(seq))
+                      or (reported is not None and len(reported) and m in set(reported["metric"])))
+    columns = [(b, metric_names + (seq_names if b.key == ALL else ())) for b in blocks]
+    rows = _reported_rows(reported, blocks, layout.reported_tables) if reported is not None and len(reported) else []
+    order = list(methods) if methods is not None else sorted(frame["method"].unique()) if len(frame) else []
+    for method in order:
+        rows.append(_measured_row(method, frame, seq, blocks, metric_names, seq_names))
+    _check_complete(frame, blocks)
+    filled = {key for row in rows for key, _ in row.values}
+    columns = [(block, metrics) for block, metrics in columns if block.key in filled]
+    if not columns:
+        raise LeaderboardError(f"no {dataset} results fall in the table's blocks "
+                               f"({', '.join(b.label for b in blocks)})")
+    board = Leaderboard(dataset, columns, rows, {}, layout.title or dataset, [])
+    board.best = _best(board)
+    board.notes = _notes(board, frame, seq)
+    return board
+
+
+def _check_duplicates(frame: pd.DataFrame) -> None:
+    if not len(frame):
+        return
+    keys = ["method", "protocol", "group", "scene", "frame"]
+    duplicated = frame[frame.duplicated(keys, keep=False)]
+    if len(duplicated):
+        first = duplicated.iloc[0]
+        runs = sorted(duplicated[(duplicated[keys] == first[keys]).all(axis=1)]["run"].unique())
+        raise LeaderboardError(f"method {first['method']!r} has {len(duplicated)} duplicate rows, e.g. "
+                               f"{first['scene']}/{first['frame']} ({first['group']}) in runs {', '.join(runs)}; "
+                               "keep one run per method")
+
+
+def _block_rows(frame: pd.DataFrame, block: Block) -> pd.DataFrame:
+    return frame if block.key == ALL else frame[frame["group"] == block.key]
+
+
+def _check_complete(frame: pd.DataFrame, blocks: Sequence[Block]) -> None:
+    """Refuse a mean over a subset: every method present in a block must have every target of it."""
+    keys = ["protocol", "group", "scene", "frame"]
+    if not len(frame):
+        return
+    for block in blocks:
+        rows = _block_rows(frame, block)
+        if not len(rows):
+            continue
+        universe = set(map(tuple, rows[keys].drop_duplicates().to_numpy().tolist()))
+        for method, own in rows.groupby("method", sort=True):
+            have = set(map(tuple, own[keys].to_numpy().tolist()))
+            missing = sorted(universe - have)
+            if missing:
+                shown = ", ".join(f"{scene}/{name} ({group})" for _, group, scene, name in missing[:5])
+                raise LeaderboardError(
+                    f"method {method!r} lacks {len(missing)} of {len(universe)} targets of block "
+                    f"{block.label!r} that other runs have ({shown}{', ...' if len(missing) > 5 else ''}); "
+                    "refusing to average it over a subset — finish or rerun it")
+
+
+def _measured_row(method: str, frame: pd.DataFrame, seq: pd.DataFrame | None, blocks: Sequence[Block],
+                  metric_names: Sequence[str], seq_names: Sequence[str]) -> Row:
+    row = Row(label=method, method=method, source="measured", section="measured")
+    own = frame[frame["method"] == method]
+    for block in blocks:
+        rows = _block_rows(own, block)
+        if not len(rows):
+            continue
+        for metric in metric_names:
+            values = rows[metric].to_numpy(dtype=np.float64)
+            row.values[(block.key, metric)] = float(values.mean())
+            row.decimals[(block.key, metric)] = metric_decimals(metric)
+            row.counts[(block.key, metric)] = len(values)
+        if block.key == ALL and seq is not None:
+            mine = seq[seq["method"] == method]
+            for metric in seq_names:
+                if metric in mine.columns and len(mine):
+                    row.values[(ALL, metric)] = float(mine[metric].to_numpy(dtype=np.float64).mean())
+                    row.decimals[(ALL, metric)] = metric_decimals(metric)
+                    row.counts[(ALL, metric)] = len(mine)
+    return row
+
+
+def _reported_rows(reported: pd.DataFrame, blocks: Sequence[Block], tables: Sequence[str]) -> list[Row]:
+    """Paper rows keyed by (section, method id), tables in layout order then CSV order.
+
+    Settings map to blocks by their ``group``; the same method in two tables (nuScenes Table 3 and the
+    consistency table) becomes one row labelled as in the first table.
+    """
+    rows: dict[tuple[str, str], Row] = {}
+    keys = {b.key for b in blocks}
+    rank = {table: i for i, table in enumerate(tables)}
+    ordered_records = reported.assign(_rank=reported["table"].map(lambda t: rank.get(t, len(rank))))
+    for record in ordered_records.sort_values("_rank", kind="stable").itertuples():
+        if record.group not in keys:
+            continue
+        key = (record.section, record.method_id)
+        if key not in rows:
+            rows[key] = Row(label=record.method, method=record.method_id, source="reported", section=record.section)
+        cell = (record.group, record.metric)
+        rows[key].values[cell] = float(record.value)
+        rows[key].decimals[cell] = int(record.decimals)
+    ordered = sorted(rows.values(), key=lambda r: SECTIONS.index(r.section) if r.section in SECTIONS else 99)
+    return ordered
+
+
+def _best(board: Leaderboard) -> dict[tuple[str, str], set[int]]:
+    best: dict[tuple[str, str], set[int]] = {}
+    for cell in board.cells():
+        shown = {i: board.display(row, cell) for i, row in enumerate(board.rows)}
+        numbers = {i: float(text) for i, text in shown.items() if text is not None}
+        if not numbers:
+            continue
+        target = max(numbers.values()) if higher_is_better(cell[1]) else min(numbers.values())
+        best[cell] = {i for i, value in numbers.items() if value == target}
+    return best
+
+
+def _notes(board: Leaderboard, frame: pd.DataFrame, seq: pd.DataFrame | None) -> list[str]:
+    notes = ["Cells are means of per-image values over each block's targets; best per column in bold "
+             "(ties share it, compared as displayed)."]
+    if len(frame):
+        targets = frame.drop_duplicates(["protocol", "group", "scene", "frame"])
+        counts = targets.groupby("group")["frame"].count()
+        notes.append("Targets per block: " + ", ".join(f"{g}: {int(counts[g])}" for g in
+                                                       sorted(counts.index, key=natural_key)) + ".")
+    if seq is not None and len(seq):
+        notes.append("Warp error: mean over per-camera sequences (MSE on the 0-255 scale).")
+    if any(row.source == "reported" for row in board.rows):
+        notes.append("Rows marked (paper) / † are the numbers reported in the SetDiff paper, not measured here.")
+    return notes
+
+
+# ---------------------------------------------------------------------- writers
+def to_frame(board: Leaderboard) -> pd.DataFrame:
+    """Long table: one row per (row, block, metric) with value, count, best flag and source."""
+    records = []
+    for index, row in enumerate(board.rows):
+        for block, metrics in board.columns:
+            for metric in metrics:
+                cell = (block.key, metric)
+                if cell not in row.values:
+                    continue
+                records.append({"dataset": board.dataset, "rank_row": index, "source": row.source,
+                                "section": row.section, "method": row.method, "label": row.label,
+                                "block": block.key, "block_label": block.label, "metric": metric,
+                                "value": row.values[cell], "decimals": row.decimals.get(cell, metric_decimals(metric)),
+                                "count": row.counts.get(cell), "best": index in board.best.get(cell, set())})
+    return pd.DataFrame.from_records(records, columns=["dataset", "rank_row", "source", "section", "method", "label",
+                                                       "block", "block_label", "metric", "value", "decimals",
+                                                       "count", "best"])
+
+
+LATEX_SPECIALS = {"\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_",
+                  "{": r"\{", "}": r"\}", "~": r"\textasciitilde{}", "^": r"\textasciicircum{}"}
+
+
+def latex_escape(text: str) -> str:
+    """Escape LaTeX's special characters in plain text."""
+    return "".join(LATEX_SPECIALS.get(char, char) for char in text)
+
+
+def _arrow(metric: str, latex: bool) -> str:
+    up = higher_is_better(metric)
+    if latex:
+        return r"$\uparrow$" if up else r"$\downarrow$"
+    return "↑" if up else "↓"
+
+
+def render_latex(board: Leaderboard, command: str | None = None) -> str:
+    """A booktabs ``tabular`` in the paper's shape (needs ``\\usepackage{booktabs}``)."""
+    spec = "l" + "|".join("c" * len(metrics) for _, metrics in board.columns)
+    lines = [f"% {latex_escape(board.title)}"]
+    if command:
+        lines.append(f"% generated by: {command}")
+    lines += [f"% {note}" for note in board.notes]
+    lines += [r"% requires \usepackage{booktabs}", rf"\begin{{tabular}}{{{spec}}}", r"\toprule"]
+    if len(board.columns) > 1 or board.columns[0][0].key != ALL:
+        heads, rules, start = [""], [], 2
+        for block, metrics in board.columns:
+            heads.append(rf"\multicolumn{{{len(metrics)}}}{{c}}{{\textbf{{{latex_escape(block.label)}}}}}")
+            rules.append(rf"\cmidrule(lr){{{start}-{start + len(metrics) - 1}}}")
+            start += len(metrics)
+        lines.append(" & ".join(heads) + r" \\")
+        lines.append(" ".join(rules))
+    header = [r"\textbf{Method}"] + [rf"\textbf{{{latex_escape(metric_header(m))}}}{_arrow(m, True)}"
+                                     for _, metrics in board.columns for m in metrics]
+    lines += [" & ".join(header) + r" \\", r"\midrule"]
+    previous = None
+    for index, row in enumerate(board.rows):
+        group = (row.source, row.section)
+        if previous is not None and group != previous:
+            lines.append(r"\midrule")
+        previous = group
+        label = latex_escape(row.label) + (r"$^\dagger$" if row.source == "reported" else "")
+        cells = [label]
+        for cell in board.cells():
+            text = board.display(row, cell)
+            if text is None:
+                cells.append("--")
+            elif index in board.best.get(cell, set()):
+                cells.append(rf"\textbf{{{text}}}")
+            else:
+                cells.append(text)
+        lines.append(" & ".join(cells) + r" \\")
+    lines += [r"\bottomrule", r"\end{tabular}"]
+    return "\n".join(lines) + "\n"
+
+
+def _md_escape(text: str) -> str:
+    return text.replace("|", r"\|")
+
+
+def render_markdown(board: Leaderboard, command: str | None = None) -> str:
+    """A GitHub Markdown table: one column per (block, metric), best in bold, paper rows suffixed."""
+    multi = len(board.columns) > 1 or board.columns[0][0].key != ALL
+    header = ["Method"] + [(f"{block.label} " if multi else "") + metric_header(m) + _arrow(m, False)
+                           for block, metrics in board.columns for m in metrics]
+    lines = [f"**{_md_escape(board.title)}**", "", "| " + " | ".join(_md_escape(h) for h in header) + " |",
+             "|" + "---|" + "---:|" * (len(header) - 1)]
+    for index, row in enumerate(board.rows):
+        label = row.label + (" (paper)" if row.source == "reported" else "")
+        cells = [_md_escape(label)]
+        for cell in board.cells():
+            text = board.display(row, cell)
+            cells.append("–" if text is None else f"**{text}**" if index in board.best.get(cell, set()) else text)
+        lines.append("| " + " | ".join(cells) + " |")
+    lines.append("")
+    lines += [_md_escape(note) for note in board.notes]
+    if command:
+        lines.append(f"Generated by `{command}`.")
+    return "\n".join(lines) + "\n"
+
+
+def write_leaderboard(board: Leaderboard, out: str | Path, formats: Sequence[str] = FORMATS,
+                      command: str | None = None) -> dict[str, Path]:
+    """Write ``<out>/<dataset>.{parquet,tex,md}`` atomically; returns format → path."""
+    unknown = [f for f in formats if f not in FORMATS]
+    if unknown:
+        raise UsageError(f"unknown format(s) {', '.join(unknown)}; choose from {', '.join(FORMATS)}", "--format")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    written: dict[str, Path] = {}
+    if "parquet" in formats:
+        path = out / f"{board.dataset}.parquet"
+        table = pa.Table.from_pandas(to_frame(board), preserve_index=False)
+        with atomic_path(path) as tmp:
+            pq.write_table(table, tmp, compression="zstd")
+        written["parquet"] = path
+    if "latex" in formats:
+        written["latex"] = out / f"{board.dataset}.tex"
+        write_text_atomic(written["latex"], render_latex(board, command))
+    if "md" in formats:
+        written["md"] = out / f"{board.dataset}.md"
+        write_text_atomic(written["md"], render_markdown(board, command))
+    return written
+
+
+def reported_for(dataset: str, layout: Layout | None = None) -> pd.DataFrame:
+    """The reported rows the dataset's layout mixes in (empty when the paper has none)."""
+    layout = layout or LAYOUTS.get(dataset, Layout(None))
+    if not layout.reported_tables:
+        return load_reported(dataset).iloc[0:0]
+    return load_reported(dataset, layout.reported_tables)
+

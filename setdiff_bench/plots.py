@@ -1,0 +1,149 @@
+"""Metric-vs-distance plots (matplotlib, Agg): nuScenes time buckets (the paper's per-offset figure) and
+lane shift (Para-Lane single/double, synthetic lane +1/+2).
+
+Each point is a method's mean of per-image values over the targets of one group, with an error bar
+of ±1 standard error of that mean (``std / sqrt(n)``, ddof 1).  The x position of a group comes from
+its name: ``10-11s`` → the bucket's start offset 10 s (label "10–11 s"); ``single``/``double`` → 1/2
+lanes, ``lane+K`` → K, ``interp`` → 0.  Groups without a position are left out of that plot.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from setdiff_bench.errors import UsageError
+from setdiff_bench.io.atomic import atomic_path
+from setdiff_bench.leaderboard import higher_is_better, metric_header
+
+_BUCKET = re.compile(r"^(\d+(?:\.\d+)?)-(\d+(?:\.\d+)?)s$")
+_LANE = re.compile(r"^lane\+(\d+)$")
+LANE_NAMES = {"interp": 0, "single": 1, "double": 2}
+
+
+def time_bucket(group: str) -> tuple[float, str] | None:
+    """``"10-11s"`` → ``(10.0, "10–11 s")``; ``None`` for other names."""
+    match = _BUCKET.match(group)
+    if not match:
+        return None
+    return float(match.group(1)), f"{match.group(1)}–{match.group(2)} s"
+
+
+def lane_shift(group: str) -> tuple[float, str] | None:
+    """``single``/``double``/``lane+K``/``interp`` → ``(lanes, label)``; ``None`` for other names."""
+    if group in LANE_NAMES:
+        lanes = LANE_NAMES[group]
+    elif (match := _LANE.match(group)) is not None:
+        lanes = int(match.group(1))
+    else:
+        return None
+    return float(lanes), f"{lanes:+d}" if lanes else "0"
+
+
+def group_summary(images: pd.DataFrame, metric: str, position: Callable[[str], tuple[float, str] | None]
+                  ) -> pd.DataFrame:
+    """Per (method, group with a position): x, label, mean, standard error, count of ``metric``."""
+    records = []
+    for (method, group), rows in images.groupby(["method", "group"], sort=True):
+        where = position(str(group))
+        if where is None:
+            continue
+        values = rows[metric].to_numpy(dtype=np.float64)
+        values = values[np.isfinite(values)]
+        sem = float(values.std(ddof=1) / np.sqrt(len(values))) if len(values) > 1 else 0.0
+        records.append({"method": method, "group": group, "x": where[0], "label": where[1],
+                        "mean": float(values.mean()) if len(values) else np.nan, "sem": sem, "count": len(values)})
+    return pd.DataFrame.from_records(records, columns=["method", "group", "x", "label", "mean", "sem", "count"])
+
+
+def plot_metric_by_group(images: pd.DataFrame, out: str | Path, *, position: Callable[[str], tuple[float, str] | None],
+                         xlabel: str, metrics: Sequence[str] = ("psnr", "ssim", "lpips"), title: str = "",
+                         methods: Sequence[str] | None = None) -> Path:
+    """One panel per metric, one line per method, x = group position; saved as PNG at ``out``.
+
+    Args:
+        images: per-target rows of runs (``metrics.parquet`` columns).
+        out: the PNG to write (atomically).
+        position: group name → ``(x, tick label)`` or ``None``.
+        xlabel: axis label.
+        metrics: metric columns, one panel each.
+        methods: methods to draw, in legend order (default: all, sorted).
+
+    Raises:
+        UsageError: no group of ``images`` has a position, or a metric column is missing.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    missing = [m for m in metrics if m not in images.columns]
+    if missing:
+        raise UsageError(f"no metric column(s) {', '.join(missing)} in the runs")
+    methods = list(methods) if methods is not None else sorted(images["method"].unique())
+    frame = images[images["method"].isin(methods)]
+    summaries = {metric: group_summary(frame, metric, position) for metric in metrics}
+    if all(s.empty for s in summaries.values()):
+        raise UsageError(f"no group of these runs has a position on the {xlabel!r} axis "
+                         f"(groups: {', '.join(sorted(images['group'].unique()))})")
+    figure, axes = plt.subplots(1, len(metrics), figsize=(4.2 * len(metrics), 3.4), squeeze=False)
+    for axis, metric in zip(axes[0], metrics):
+        summary = summaries[metric]
+        for method in methods:
+            own = summary[summary["method"] == method].sort_values("x")
+            if own.empty:
+                continue
+            axis.errorbar(own["x"], own["mean"], yerr=own["sem"], marker="o", capsize=3, label=method)
+        ticks = summary.drop_duplicates("x").sort_values("x")
+        axis.set_xticks(ticks["x"].to_numpy(), ticks["label"].tolist())
+        arrow = "↑" if higher_is_better(metric) else "↓"
+        axis.set_title(f"{metric_header(metric)} {arrow}")
+        axis.set_xlabel(xlabel)
+        axis.grid(alpha=0.3)
+    axes[0][0].legend(fontsize="small")
+    if title:
+        figure.suptitle(title)
+    figure.tight_layout()
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(out) as tmp:
+        figure.savefig(tmp, dpi=120, format="png", metadata={"Software": "setdiff-bench"})
+    plt.close(figure)
+    return out
+
+
+def plot_time_buckets(images: pd.DataFrame, out: str | Path, **kwargs: object) -> Path:
+    """Metric vs nuScenes time bucket (seconds after the start of the scene): the paper's per-offset figure."""
+    return plot_metric_by_group(images, out, position=time_bucket, xlabel="time after scene start",
+                                **kwargs)  # type: ignore[arg-type]
+
+
+def plot_lane_shift(images: pd.DataFrame, out: str | Path, **kwargs: object) -> Path:
+    """Metric vs lateral lane shift of the target from the fitted lane."""
+    return plot_metric_by_group(images, out, position=lane_shift, xlabel="lane shift", **kwargs)  # type: ignore[arg-type]
+
+
+#: Plots :func:`write_plots` makes per dataset: (file suffix, plotting function).
+PLOTS: dict[str, tuple[str, Callable[..., Path]]] = {
+    "nuscenes": ("time_buckets", plot_time_buckets),
+    "paralane": ("lane_shift", plot_lane_shift),
+    "synthetic": ("lane_shift", plot_lane_shift),
+}
+
+
+def write_plots(dataset: str, images: pd.DataFrame, out: str | Path, *, split: str | None = "test",
+                metrics: Sequence[str] = ("psnr", "ssim", "lpips")) -> list[Path]:
+    """The dataset's standard plots (:data:`PLOTS`) into ``out``; ``[]`` when it has none."""
+    if dataset not in PLOTS:
+        return []
+    frame = images[images["dataset"] == dataset]
+    if split is not None:
+        frame = frame[frame["split"] == split]
+    if frame.empty:
+        return []
+    suffix, plot = PLOTS[dataset]
+    return [plot(frame, Path(out) / f"{dataset}_{suffix}.png", metrics=metrics, title=dataset)]
