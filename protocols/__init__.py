@@ -1,1 +1,306 @@
-"""Evaluation protocols (installed as ``setdiff_bench.protocols``): TOML definitions, split lists, reported numbers."""
+"""Evaluation protocols (installed as ``setdiff_bench.protocols``): TOML definitions, split lists, reported numbers.
+
+A protocol file (``protocols/<name>.toml``, format ``setdiff-protocol/1``) declares, for one dataset:
+
+* ``[loader]`` — keyword options for :func:`setdiff_bench.loaders.load_scenes`;
+* ``[split]`` — the scene-level train/test split for enhancer training (:mod:`.scene_split`);
+* ``[images]`` — working resolution ``[height, width]`` (or ``"native"``: the scene's own), how
+  captures are brought to it (``resize = "crop"``: centre-crop to the aspect ratio, then resize;
+  ``"stretch"``: resize only) and where evaluation masks come from (``masks``: ``"dataset"`` =
+  ``Frame.mask_path``, 255 = keep; ``"foreground"`` = ``metadata["foreground_mask_path"]`` inverted;
+  ``"none"`` = every pixel evaluated);
+* ``[references]`` — Eq. 2's ``alpha`` and ``beta``, how a candidate's scores over the packet's
+  targets aggregate (``mean``), and the reference count N per packet for ``train`` and ``test`` scenes;
+* ``[packets]`` — views stored per packet (N + M) for training and test scenes, and the set-size
+  range the training loader draws from;
+* ``[render]`` — ``cmap_clip``: Gaussian centres are clipped to a box of half-width
+  ``cmap_clip × d_max`` around the mean camera centre of the scene before the C-map is composited
+  (the paper's "clipped by scene scale"; ``d_max`` = largest pairwise camera distance in the scene;
+  0 = no clipping);
+* ``[[groups]]`` — evaluation groups: a name, a rule (:mod:`.rules`) with its parameters, the
+  ``fit_key`` naming the 3DGS fit (``<fits>/<scene>/<fit_key>.ply``) and an optional ``scenes``
+  filter on ``Scene.metadata`` (EUVS ``level``).
+
+Usage::
+
+    from setdiff_bench.protocols import load_protocol
+    protocol = load_protocol("euvs")                 # packaged file, or a path to a TOML
+    split = protocol.split.assign(scene_names)       # {scene: "train" | "test"}
+    frames = protocol.groups[0].select(scene)        # GroupFrames(fit, targets)
+
+Every problem in a file is a :class:`~setdiff_bench.errors.ProtocolError` naming the file and key.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from fractions import Fraction
+from importlib import resources
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Literal
+
+import tomllib
+
+from setdiff_bench.errors import ProtocolError
+
+from .rules import RULES, GroupFrames
+from .scene_split import SceneSplit, read_split_list
+from .schema import Table
+
+if TYPE_CHECKING:
+    from setdiff_bench.types import Scene
+
+FORMAT = "setdiff-protocol/1"
+PROTOCOL_NAMES = ("euvs", "paralane", "nuscenes", "dl3dv", "synthetic")
+SPLITS = ("train", "test")
+MaskSource = Literal["dataset", "foreground", "none"]
+
+
+@dataclass(frozen=True)
+class ImageSpec:
+    """Working resolution and mask source.
+
+    Attributes:
+        resolution: ``(height, width)`` in pixels, or ``None`` for the scene's own size.
+        resize: ``"crop"`` (centre-crop to the working aspect ratio, then resize) or ``"stretch"``.
+        masks: ``"dataset"``, ``"foreground"`` or ``"none"`` (module docstring).
+    """
+
+    resolution: tuple[int, int] | None
+    resize: Literal["crop", "stretch"]
+    masks: MaskSource
+
+
+@dataclass(frozen=True)
+class ReferenceSpec:
+    """Eq. 2 and how many references a packet takes.
+
+    Attributes:
+        alpha, beta: Eq. 2 weights (0.8, 0.2 in the paper).
+        aggregate: ``"mean"`` (or ``"max"``) of a candidate's scores over the packet's targets.
+        count: N per packet, by scene split (``{"train": 6, "test": 8}``).
+    """
+
+    alpha: float
+    beta: float
+    aggregate: Literal["mean", "max"]
+    count: Mapping[str, int]
+
+
+@dataclass(frozen=True)
+class PacketSpec:
+    """Packet sizes.
+
+    Attributes:
+        views: N + M stored per packet, by scene split.  When a group has fewer reference candidates
+            than N, the packet takes all of them and more targets, keeping N + M = views.
+        train_views: ``(min, max)`` set size the training loader draws (paper: 8, varied up to 12).
+    """
+
+    views: Mapping[str, int]
+    train_views: tuple[int, int]
+
+
+@dataclass(frozen=True)
+class GroupSpec:
+    """One evaluation group.
+
+    Attributes:
+        name: group name (``level1``, ``single``, ``10-11s``, ``n3``, ``lane+1``).
+        rule: a key of :data:`setdiff_bench.protocols.rules.RULES`.
+        params: the rule's validated parameters.
+        fit_key: names the 3DGS fitted for this group (fits are shared by groups with the same key).
+        scenes: ``Scene.metadata`` filter (key → accepted values); empty = every scene.
+    """
+
+    name: str
+    rule: str
+    params: Mapping[str, Any]
+    fit_key: str
+    scenes: Mapping[str, tuple[Any, ...]] = field(default_factory=dict)
+
+    def applies_to(self, scene: Scene) -> bool:
+        """Whether this group is evaluated on ``scene`` (its ``scenes`` filter)."""
+        return all(scene.metadata.get(key) in values for key, values in self.scenes.items())
+
+    def select(self, scene: Scene) -> GroupFrames:
+        """Fit frames and targets of this group in ``scene`` (unfiltered: see :meth:`applies_to`)."""
+        return RULES[self.rule].select(scene, self.params)
+
+
+@dataclass(frozen=True)
+class Protocol:
+    """A validated protocol file (module docstring)."""
+
+    name: str
+    dataset: str
+    description: str
+    path: Path
+    loader_options: Mapping[str, Any]
+    split: SceneSplit
+    images: ImageSpec
+    references: ReferenceSpec
+    packets: PacketSpec
+    cmap_clip: float
+    groups: tuple[GroupSpec, ...]
+
+    def group(self, name: str) -> GroupSpec:
+        for group in self.groups:
+            if group.name == name:
+                return group
+        raise ProtocolError(f"protocol {self.name!r} has no group {name!r}; groups: "
+                            f"{', '.join(g.name for g in self.groups)}", self.path)
+
+    def references_for(self, split: str) -> int:
+        return int(self.references.count[split])
+
+    def views_for(self, split: str) -> int:
+        return int(self.packets.views[split])
+
+
+def protocol_dir() -> Path:
+    """The folder holding the packaged protocol files."""
+    return Path(str(resources.files(__name__)))
+
+
+def list_protocols() -> list[str]:
+    """Names of the packaged protocols."""
+    return sorted(p.stem for p in protocol_dir().glob("*.toml"))
+
+
+def protocol_path(name_or_path: str | os.PathLike[str]) -> Path:
+    """A packaged protocol name (``euvs``) or a path to a TOML file → the file."""
+    text = os.fspath(name_or_path)
+    candidate = Path(text)
+    if candidate.suffix == ".toml" or os.sep in text or "/" in text:
+        if not candidate.is_file():
+            raise ProtocolError("protocol file not found", candidate)
+        return candidate
+    packaged = protocol_dir() / f"{text}.toml"
+    if not packaged.is_file():
+        raise ProtocolError(f"unknown protocol {text!r}; packaged: {', '.join(list_protocols())} "
+                            "(or pass a path to a .toml file)", protocol_dir())
+    return packaged
+
+
+def load_protocol(name_or_path: str | os.PathLike[str]) -> Protocol:
+    """Load and validate a protocol (packaged name or path).
+
+    Raises:
+        ProtocolError: the file is missing, not TOML, or a key is missing, unknown or invalid.
+    """
+    path = protocol_path(name_or_path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise ProtocolError(f"invalid TOML: {exc}", path) from exc
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ProtocolError(f"cannot read protocol file ({exc.__class__.__name__})", path) from exc
+    return parse_protocol(data, path)
+
+
+def parse_protocol(data: Mapping[str, Any], path: Path) -> Protocol:
+    """Validate parsed TOML ``data`` (read from ``path``, named in errors) into a :class:`Protocol`."""
+    root = Table(data, path)
+    root.check_keys(("format", "name", "dataset", "description", "loader", "split", "images", "references",
+                     "packets", "render", "groups"))
+    if root.raw("format") != FORMAT:
+        raise root.error("format", f"expected {FORMAT!r}, got {root.raw('format')!r}")
+    loader = root.table("loader", {})
+    references = _references(root.table("references"))
+    packets = _packets(root.table("packets"))
+    for split in SPLITS:
+        if references.count[split] >= packets.views[split]:
+            raise root.error(f"references.{split}", f"N = {references.count[split]} leaves no target in a packet of "
+                             f"{packets.views[split]} views (packets.{split}_views)")
+    render = root.table("render", {})
+    render.check_keys(("cmap_clip",))
+    groups = tuple(_group(t) for t in root.tables("groups"))
+    names = [g.name for g in groups]
+    duplicate = next((n for n in names if names.count(n) > 1), None)
+    if duplicate:
+        raise root.error("groups", f"group name {duplicate!r} appears twice")
+    return Protocol(
+        name=root.string("name"), dataset=root.string("dataset"), description=root.string("description", "-"),
+        path=path, loader_options=dict(loader.data), split=_split(root.table("split")),
+        images=_images(root.table("images")), references=references, packets=packets,
+        cmap_clip=render.number("cmap_clip", 0.0, minimum=0.0), groups=groups)
+
+
+# ---------------------------------------------------------------------- sections
+def _split(table: Table) -> SceneSplit:
+    rule = table.string("rule", choices=("interleaved", "every_nth", "list"))
+    if rule == "interleaved":
+        table.check_keys(("rule", "test_fraction"))
+        value = table.integers("test_fraction", minimum=0)
+        if len(value) != 2 or not 0 < value[0] < value[1]:
+            raise table.error("test_fraction", f"expected [numerator, denominator] with 0 < numerator < "
+                              f"denominator, got {value!r}")
+        numerator, denominator = value
+        return SceneSplit("interleaved", test_fraction=Fraction(numerator, denominator))
+    if rule == "every_nth":
+        table.check_keys(("rule", "every"))
+        return SceneSplit("every_nth", every=table.integer("every", minimum=2))
+    table.check_keys(("rule", "file"))
+    relative = table.string("file")
+    file = (table.path.parent / relative).resolve()
+    if not file.is_file():
+        raise table.error("file", f"split list {file} not found")
+    names = read_split_list(file)
+    if not names:
+        raise table.error("file", f"split list {file} is empty")
+    return SceneSplit("list", test_names=names, list_file=file)
+
+
+def _images(table: Table) -> ImageSpec:
+    table.check_keys(("resolution", "resize", "masks"))
+    value = table.raw("resolution")
+    if value == "native":
+        resolution = None
+    else:
+        size = table.integers("resolution", minimum=1)
+        if len(size) != 2:
+            raise table.error("resolution", f"expected [height, width] or \"native\", got {value!r}")
+        resolution = (size[0], size[1])
+    return ImageSpec(resolution=resolution, resize=table.string("resize", "crop", choices=("crop", "stretch")),
+                     masks=table.string("masks", choices=("dataset", "foreground", "none")))  # type: ignore[arg-type]
+
+
+def _references(table: Table) -> ReferenceSpec:
+    table.check_keys(("alpha", "beta", "aggregate", "train", "test"))
+    return ReferenceSpec(alpha=table.number("alpha", minimum=0.0), beta=table.number("beta", minimum=0.0),
+                         aggregate=table.string("aggregate", "mean", choices=("mean", "max")),  # type: ignore[arg-type]
+                         count={s: table.integer(s, minimum=1) for s in SPLITS})
+
+
+def _packets(table: Table) -> PacketSpec:
+    table.check_keys(("train_views", "test_views", "train_min_views", "train_max_views"))
+    views = {s: table.integer(f"{s}_views", minimum=2) for s in SPLITS}
+    low, high = table.integer("train_min_views", minimum=2), table.integer("train_max_views", minimum=2)
+    if not low <= high <= views["train"]:
+        raise table.error("train_max_views", f"expected train_min_views <= train_max_views <= train_views, got "
+                          f"{low}, {high}, {views['train']}")
+    return PacketSpec(views=views, train_views=(low, high))
+
+
+def _group(table: Table) -> GroupSpec:
+    rule_name = table.string("rule", choices=tuple(RULES))
+    reserved = {"name", "rule", "fit_key", "scenes"}
+    params = Table({k: v for k, v in table.data.items() if k not in reserved}, table.path, table.prefix)
+    scenes: dict[str, tuple[Any, ...]] = {}
+    if table.has("scenes"):
+        for key, value in table.table("scenes").data.items():
+            scenes[key] = tuple(value) if isinstance(value, list) else (value,)
+    name = table.string("name")
+    fit_key = table.string("fit_key")
+    for label, value in (("name", name), ("fit_key", fit_key)):
+        if any(c in value for c in "/\\") or value.startswith(".") or value.startswith("_") or "__" in value:
+            raise table.error(label, f"must not contain '/', '\\' or '__' nor start with '.' or '_', got {value!r}")
+    return GroupSpec(name=name, rule=rule_name, params=RULES[rule_name].validate(params), fit_key=fit_key,
+                     scenes=scenes)
+
+
+__all__ = ["FORMAT", "PROTOCOL_NAMES", "GroupFrames", "GroupSpec", "ImageSpec", "PacketSpec", "Protocol",
+           "ReferenceSpec", "SceneSplit", "list_protocols", "load_protocol", "parse_protocol", "protocol_path"]

@@ -8,6 +8,7 @@ instead, which biases PSNR by up to 1/255 — see README "Metric conventions".
 
 from __future__ import annotations
 
+import contextlib
 import os
 from pathlib import Path
 
@@ -104,8 +105,9 @@ def quantize_uint8(image: np.ndarray) -> np.ndarray:
     return np.rint(np.clip(np.asarray(image, dtype=np.float32), 0.0, 1.0) * 255.0).astype(np.uint8)
 
 
-def write_png(path: PathLike, image: np.ndarray) -> None:
-    """Write an 8-bit PNG atomically.
+def write_png(path: PathLike, image: np.ndarray, *, atomic: bool = True) -> None:
+    """Write an 8-bit PNG atomically (``atomic=False``: directly, for files inside a folder that is
+    itself renamed into place).
 
     Args:
         path: destination ``.png``.
@@ -118,16 +120,21 @@ def write_png(path: PathLike, image: np.ndarray) -> None:
         array = quantize_uint8(array)
     if array.ndim == 2:
         array = array[:, :, None]
-    _write(path, np.ascontiguousarray(array), oiio.UINT8, None, {"png:compressionLevel": 6})
+    _write(path, np.ascontiguousarray(array), oiio.UINT8, None, {"png:compressionLevel": 6}, atomic)
 
 
 def write_exr(path: PathLike, image: np.ndarray, channel_names: tuple[str, ...] | None = None,
-              half: bool = False) -> None:
-    """Write a float EXR atomically (ZIP compression, float32 unless ``half``)."""
+              half: bool = False, attributes: dict[str, object] | None = None, *, atomic: bool = True) -> None:
+    """Write a float EXR atomically (ZIP compression, float32 unless ``half``; ``atomic`` as :func:`write_png`).
+
+    ``attributes`` are extra header attributes; OpenEXR stamps the write time as ``DateTime`` unless one
+    is given, so pass e.g. ``{"DateTime": "1970:01:01 00:00:00"}`` for byte-identical files.
+    """
     array = np.ascontiguousarray(np.asarray(image, dtype=np.float32))
     if array.ndim == 2:
         array = array[:, :, None]
-    _write(path, array, oiio.HALF if half else oiio.FLOAT, channel_names, {"compression": "zip"})
+    _write(path, array, oiio.HALF if half else oiio.FLOAT, channel_names,
+           {"compression": "zip", **(attributes or {})}, atomic)
 
 
 def to_tensor_chw(image: np.ndarray) -> torch.Tensor:
@@ -141,7 +148,7 @@ def to_numpy_hwc(tensor: torch.Tensor) -> np.ndarray:
 
 
 def _write(path: PathLike, array: np.ndarray, fmt: object, channel_names: tuple[str, ...] | None,
-           attributes: dict[str, object]) -> None:
+           attributes: dict[str, object], atomic: bool = True) -> None:
     height, width, channels = array.shape
     spec = oiio.ImageSpec(width, height, channels, fmt)
     if channel_names is not None:
@@ -150,7 +157,7 @@ def _write(path: PathLike, array: np.ndarray, fmt: object, channel_names: tuple[
         spec.channelnames = tuple(channel_names)
     for key, value in attributes.items():
         spec.attribute(key, value)
-    with atomic_path(path) as tmp:
+    with (atomic_path(path) if atomic else contextlib.nullcontext(Path(path))) as tmp:
         out = oiio.ImageOutput.create(str(tmp))
         if out is None or not out.open(str(tmp), spec):
             raise ImageError(f"cannot write image ({_first_line(oiio.geterror())})", path)

@@ -1,0 +1,159 @@
+"""The packet store's on-disk index: one Parquet row per view, written per packet and merged.
+
+Store layout::
+
+    <store>/index.parquet                    every view of every complete packet (written last)
+    <store>/packets/<packet_id>/index.parquet    the packet's own rows ("fragment"), written last in it
+    <store>/packets/<packet_id>/ref_00_rgb.png   clean capture at the working resolution
+                               ref_00_cmap.exr   C-map X, Y, Z + alpha A (float32, normalised frame)
+                               tgt_00_rgb.png    3DGS render
+                               tgt_00_cmap.exr
+                               tgt_00_gt.png     captured ground truth
+                               tgt_00_mask.png   255 = evaluate, 0 = ignore
+
+A packet folder appears only complete: it is written under ``packets/.tmp-<packet_id>-*`` and
+renamed into place.  The top-level index is the concatenation of all fragments, sorted by packet id
+then role (references first) then position — so it depends only on which packets exist, not on the
+order, shard or worker that wrote them.  Merges run under an exclusive ``flock`` on
+``<store>/.index.lock``, so concurrent shards never publish a stale index last.
+
+Columns (:data:`SCHEMA`): ``packet_id, role ("ref" | "target"), view`` (position within the role),
+``dataset, protocol, group, split, scene, fit_key, frame, sensor, traversal, timestamp_us`` (null when
+unknown), ``width, height``, ``K`` (9 floats, row-major, pixels at the working resolution), ``w2c``
+(16 floats, row-major, normalised: first target = identity, max pairwise centre distance 1),
+``w2c_world`` (16 floats, the dataset's world frame), ``scale`` (world units → packet units),
+``overlap_score`` (Eq. 2 score of a reference, aggregated over the packet's targets; null for
+targets), file paths relative to the store with their SHA-256 (``image, cmap`` for every view;
+``gt, mask`` for targets, null for references), and ``recipe`` (SHA-256 of everything the packet
+was made from; a changed recipe makes ``prepare`` rewrite the packet).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import os
+import re
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from setdiff_bench.errors import PacketError
+from setdiff_bench.io.atomic import atomic_path
+
+INDEX_FILE = "index.parquet"
+PACKETS_DIR = "packets"
+LOCK_FILE = ".index.lock"
+TEMP_PREFIX = ".tmp-"
+ROLES = ("ref", "target")
+FILE_COLUMNS = ("image", "cmap", "gt", "mask")
+
+SCHEMA = pa.schema([
+    ("packet_id", pa.string()), ("role", pa.string()), ("view", pa.int32()),
+    ("dataset", pa.string()), ("protocol", pa.string()), ("group", pa.string()), ("split", pa.string()),
+    ("scene", pa.string()), ("fit_key", pa.string()), ("frame", pa.string()), ("sensor", pa.string()),
+    ("traversal", pa.string()), ("timestamp_us", pa.int64()), ("width", pa.int32()), ("height", pa.int32()),
+    ("K", pa.list_(pa.float64(), 9)), ("w2c", pa.list_(pa.float64(), 16)),
+    ("w2c_world", pa.list_(pa.float64(), 16)), ("scale", pa.float64()), ("overlap_score", pa.float64()),
+    ("image", pa.string()), ("image_sha256", pa.string()), ("cmap", pa.string()), ("cmap_sha256", pa.string()),
+    ("gt", pa.string()), ("gt_sha256", pa.string()), ("mask", pa.string()), ("mask_sha256", pa.string()),
+    ("recipe", pa.string()),
+])
+
+_UNSAFE = re.compile(r"[^A-Za-z0-9.+-]+")
+
+
+def slug(text: str) -> str:
+    """A file-name-safe form of a scene or group name: runs of other characters become ``-``."""
+    out = _UNSAFE.sub("-", text).strip("-.")
+    return out or "x"
+
+
+def packet_id(protocol: str, scene: str, group: str, index: int) -> str:
+    """``<protocol>__<scene slug>__<group slug>__<index:04d>`` (slugs never contain ``__``)."""
+    return f"{slug(protocol)}__{slug(scene)}__{slug(group)}__{index:04d}"
+
+
+def group_prefix(protocol: str, scene: str, group: str) -> str:
+    """The id prefix shared by every packet of one (protocol, scene, group)."""
+    return f"{slug(protocol)}__{slug(scene)}__{slug(group)}__"
+
+
+def write_rows(path: Path, rows: Sequence[dict[str, Any]], *, atomic: bool = True) -> None:
+    """Write ``rows`` (dicts with the :data:`SCHEMA` columns) as Parquet, reproducibly.
+
+    ``atomic``: through a temporary file and rename (off inside a folder that is renamed as a whole).
+    """
+    table = pa.Table.from_pylist(list(rows), schema=SCHEMA)
+    with (atomic_path(path) if atomic else contextlib.nullcontext(path)) as tmp:
+        pq.write_table(table, tmp, compression="zstd")
+
+
+def read_rows(path: Path) -> pa.Table:
+    """Read an index or fragment file; ``PacketError`` if it is unreadable or has other columns."""
+    try:
+        table = pq.read_table(path)
+    except (OSError, pa.ArrowException) as exc:
+        raise PacketError(f"cannot read packet index ({exc.__class__.__name__}: {str(exc).splitlines()[0]})",
+                          path) from exc
+    if table.schema.names != SCHEMA.names:
+        missing = sorted(set(SCHEMA.names) - set(table.schema.names))
+        raise PacketError(f"not a packet index of this version (missing columns {missing[:5]})", path)
+    return table.cast(SCHEMA)
+
+
+def sort_rows(table: pa.Table) -> pa.Table:
+    """Rows ordered by packet id, role (``ref`` before ``target``), position."""
+    return table.sort_by([("packet_id", "ascending"), ("role", "ascending"), ("view", "ascending")])
+
+
+def fragment_paths(root: Path) -> list[Path]:
+    """Fragments of every complete packet folder under ``root/packets`` (temporary folders skipped)."""
+    folder = root / PACKETS_DIR
+    if not folder.is_dir():
+        return []
+    return sorted(p / INDEX_FILE for p in folder.iterdir()
+                  if p.is_dir() and not p.name.startswith(".") and (p / INDEX_FILE).is_file())
+
+
+@contextlib.contextmanager
+def index_lock(root: Path) -> Iterator[None]:
+    """Exclusive advisory lock on ``root/.index.lock`` for the duration of the block."""
+    root.mkdir(parents=True, exist_ok=True)
+    fd = os.open(root / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        os.close(fd)
+
+
+def merge_index(root: Path) -> bool:
+    """Rebuild ``root/index.parquet`` from the packet fragments.
+
+    Nothing is written when the merged bytes would equal the existing file (a resumed run with
+    nothing to do leaves the store untouched).  Stale temporary index files of killed runs are
+    removed under the lock.
+
+    Returns:
+        whether the index file was (re)written.
+    """
+    with index_lock(root):
+        for stale in root.glob(f".{Path(INDEX_FILE).stem}.*.tmp*"):
+            with contextlib.suppress(FileNotFoundError):
+                stale.unlink()
+        tables = [read_rows(p) for p in fragment_paths(root)]
+        merged = sort_rows(pa.concat_tables(tables)) if tables else SCHEMA.empty_table()
+        target = root / INDEX_FILE
+        if target.is_file():
+            try:
+                if read_rows(target).equals(merged):
+                    return False
+            except PacketError:
+                pass
+        write_rows(target, merged.to_pylist())
+        return True

@@ -1,0 +1,420 @@
+"""``prepare``: a dataset, a protocol and 3DGS fits → a packet store (``setdiff-bench prepare``).
+
+Per scene and group (:mod:`setdiff_bench.prepare_plan` for the rules): load or fit the group's
+3DGS, render the targets (RGB, C-map, alpha) and the C-maps of the N references chosen by Eq. 2
+among the clean fit frames, normalise the packet into its first target's frame at unit extent,
+and write it (:mod:`setdiff_bench.packets`).
+
+Fits
+----
+``fits_dir`` (``--fits DIR``): one standard 3DGS PLY per scene and fit key, looked up as
+``DIR/<scene>/<fit_key>.ply``, then ``DIR/<scene>/fits/<fit_key>.ply`` (the synthetic generator's
+in-scene fits: ``--fits`` may be the dataset root).  ``<scene>`` is the loader's scene name (it may
+contain ``/``, e.g. ``Level 1/nuplan_vegas_location_1``); fit keys are the protocol's: EUVS
+``level1``/``level2``/``level3``, Para-Lane ``clip_0`` (the training lane), nuScenes ``first_10s``,
+DL3DV ``n3``/``n6``/``n9``, synthetic ``lane0``.  The PLY must be in the loader's world frame.
+``fit=True`` (``--fit``): fit each one with :func:`setdiff_bench.gaussians.fit.fit_gaussians` on the
+group's fit frames (loader resolution, dataset masks), writing ``<out>/fits/<scene>/<fit_key>.ply``
+(reused on a rerun; the fit itself checkpoints under ``<fit_key>.ckpt/`` and resumes).
+
+Resume, shards, workers
+-----------------------
+A packet is skipped when its folder holds a fragment with the same recipe and every file matches its
+SHA-256.  Work is split into units (scene, fit key), sorted; shard ``i/n`` takes units ``i, i+n, …``,
+so shards write disjoint packets and never fit the same model twice.  Each shard merges the fragments
+of the whole store into ``index.parquet`` under a file lock when it ends; the last shard to finish
+publishes the complete index.  ``workers`` > 1 renders packets in that many spawned processes.
+Packets are byte-identical for identical inputs and render backend, whichever run, shard or worker
+wrote them.
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing
+import os
+import shutil
+import time
+from collections.abc import Iterable, Mapping, Sequence
+from concurrent.futures import FIRST_EXCEPTION, ProcessPoolExecutor, wait
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import torch
+
+from setdiff_bench.errors import DatasetError, ProtocolError, UsageError
+from setdiff_bench.io.atomic import sha256_file
+from setdiff_bench.io.images import read_mask, read_rgb, to_numpy_hwc
+from setdiff_bench.packet_index import PACKETS_DIR, group_prefix, merge_index
+from setdiff_bench.packets import (
+    PacketHeader,
+    ViewContent,
+    packet_is_complete,
+    remove_temporaries,
+    write_packet,
+)
+from setdiff_bench.prepare_plan import Crop, GroupPlan, PacketJob, ViewJob, applicable_groups, plan_scene
+from setdiff_bench.protocols import Protocol, load_protocol
+from setdiff_bench.types import Frame, Scene
+
+SPLIT_CHOICES = ("train", "test", "all")
+
+
+@dataclass
+class PrepareSummary:
+    """What a run did.  Times are seconds summed over packets (across workers)."""
+
+    planned: int = 0
+    written: int = 0
+    skipped: int = 0
+    removed: int = 0
+    views_written: int = 0
+    fits_trained: int = 0
+    index_written: bool = False
+    wall_s: float = 0.0
+    render_s: float = 0.0
+    read_s: float = 0.0
+    write_s: float = 0.0
+    scenes: int = 0
+    split_counts: dict[str, int] = field(default_factory=dict)
+
+    def line(self) -> str:
+        return (f"{self.planned} packet(s) planned in {self.scenes} scene(s): {self.written} written "
+                f"({self.views_written} views), {self.skipped} already complete, {self.removed} outdated removed; "
+                f"index {'updated' if self.index_written else 'unchanged'}; {self.wall_s:.1f} s")
+
+
+@dataclass
+class JobStats:
+    packet_id: str
+    views: int
+    render_s: float
+    read_s: float
+    write_s: float
+
+
+# ---------------------------------------------------------------------- fits
+class FitSource:
+    """Finds (or trains) the PLY of each (scene, fit key) and hashes it once."""
+
+    def __init__(self, *, fits_dir: Path | None, fit: bool, out: Path, fit_iterations: int = 30_000,
+                 fit_device: str = "auto", progress: bool = True) -> None:
+        if (fits_dir is None) == (not fit):
+            raise UsageError("give exactly one of --fits DIR (your 3DGS PLYs) or --fit (fit them here)", "--fits")
+        self.fits_dir, self.fit, self.out = fits_dir, fit, out
+        self.fit_iterations, self.fit_device, self.progress = fit_iterations, fit_device, progress
+        self.trained = 0
+        self._hashes: dict[Path, str] = {}
+
+    def candidates(self, scene: str, fit_key: str) -> list[Path]:
+        if self.fit:
+            return [self.out / "fits" / scene / f"{fit_key}.ply"]
+        assert self.fits_dir is not None
+        return [self.fits_dir / scene / f"{fit_key}.ply", self.fits_dir / scene / "fits" / f"{fit_key}.ply"]
+
+    def existing(self, scene: str, fit_key: str) -> Path | None:
+        return next((p for p in self.candidates(scene, fit_key) if p.is_file()), None)
+
+    def ensure(self, scene: Scene, fit_key: str, fit_frames: Sequence[Frame]) -> None:
+        """Train the fit if ``--fit`` and it does not exist yet."""
+        if not self.fit or self.existing(scene.name, fit_key) is not None:
+            return
+        from setdiff_bench.gaussians.fit import FitConfig, fit_gaussians
+        from setdiff_bench.gaussians.fit_data import load_fit_views
+        from setdiff_bench.gaussians.ply import write_ply
+
+        target = self.candidates(scene.name, fit_key)[0]
+        if self.fit_iterations == FitConfig().iterations:
+            config = FitConfig()
+        else:
+            config = FitConfig.schedule(self.fit_iterations, densify_every=min(100, max(1, self.fit_iterations // 50)))
+        device = self.fit_device
+        if device == "auto":
+            device = "cuda" if torch.cuda.is_available() else "cpu"
+        views = load_fit_views(scene, [f.name for f in fit_frames])
+        result = fit_gaussians(views, config, points=scene.points3d, colors=scene.points_rgb, device=device,
+                               checkpoint_dir=target.with_suffix(".ckpt"), checkpoint_every=1000,
+                               progress=self.progress)
+        write_ply(target, result.model)
+        shutil.rmtree(target.with_suffix(".ckpt"), ignore_errors=True)
+        self.trained += 1
+
+    def __call__(self, scene: str, fit_key: str) -> tuple[Path, str]:
+        path = self.existing(scene, fit_key)
+        if path is None:
+            expected = self.candidates(scene, fit_key)[0]
+            raise DatasetError(f"missing 3DGS fit for scene {scene!r}, fit {fit_key!r} (expected this PLY, or "
+                               f"{self.candidates(scene, fit_key)[-1].name} under <scene>/fits/; or pass --fit)",
+                               expected)
+        if path not in self._hashes:
+            self._hashes[path] = sha256_file(path)
+        return path, self._hashes[path]
+
+
+# ---------------------------------------------------------------------- one packet (worker side)
+_MODELS: dict[Path, Any] = {}
+
+
+def _model(path: Path, device: str) -> Any:
+    from setdiff_bench.gaussians.ply import read_ply
+
+    if path not in _MODELS:
+        _MODELS.clear()  # jobs arrive grouped by fit: keep one model per process
+        _MODELS[path] = read_ply(path).to(device)
+    return _MODELS[path]
+
+
+def resample(image: np.ndarray, crop: Crop, resolution: tuple[int, int], *, nearest: bool = False) -> np.ndarray:
+    """Crop ``image`` ``(H, W[, C])`` to ``crop`` and resize to ``resolution`` (H, W) (rules in prepare_plan)."""
+    window = image[crop.top:crop.top + crop.height, crop.left:crop.left + crop.width]
+    out_h, out_w = resolution
+    if window.shape[:2] == (out_h, out_w):
+        return np.ascontiguousarray(window)
+    if nearest:
+        interpolation = cv2.INTER_NEAREST
+    elif out_h <= window.shape[0] and out_w <= window.shape[1]:
+        interpolation = cv2.INTER_AREA
+    else:
+        interpolation = cv2.INTER_LINEAR
+    return cv2.resize(np.ascontiguousarray(window), (out_w, out_h), interpolation=interpolation)
+
+
+def _capture(view: ViewJob, resolution: tuple[int, int]) -> np.ndarray:
+    """The capture of ``view`` at the working resolution, ``(H, W, 3)`` float32 in [0, 1]."""
+    image = read_rgb(view.image_path)
+    return np.clip(resample(image, view.crop, resolution), 0.0, 1.0).astype(np.float32)
+
+
+def _mask(view: ViewJob, resolution: tuple[int, int]) -> np.ndarray:
+    if view.mask_path is None:
+        return np.ones(resolution, dtype=bool)
+    keep = read_mask(view.mask_path)
+    if view.invert_mask:
+        keep = ~keep
+    return resample(keep.astype(np.uint8), view.crop, resolution, nearest=True).astype(bool)
+
+
+def build_packet(job: PacketJob, root: Path, backend: str, device: str) -> JobStats:
+    """Render, normalise and write one packet (runs in a worker process or in-process)."""
+    from setdiff_bench.gaussians.render import render
+    from setdiff_bench.geometry import normalize_packet
+
+    views = (*job.references, *job.targets)
+    cameras = [v.camera for v in views]
+    start = time.perf_counter()
+    model = _model(job.fit_path, device if backend == "torch" else "cuda")
+    with torch.no_grad():
+        out = render(model, cameras, backend=backend, cmap_bound=job.cmap_bound, cmap_center=job.cmap_center)
+    rgb, cmap, alpha = out.rgb.float().cpu(), out.cmap.float().cpu(), out.alpha.float().cpu()
+    normalised = normalize_packet(cameras, cmap, len(job.references), alphas=alpha)
+    rendered = time.perf_counter()
+    contents = []
+    for i, view in enumerate(views):
+        is_target = i >= len(job.references)
+        contents.append(ViewContent(
+            frame=view.frame, sensor=view.sensor, traversal=view.traversal, timestamp_us=view.timestamp_us,
+            camera=normalised.cameras[i], camera_world=view.camera,
+            image=to_numpy_hwc(rgb[i]) if is_target else _capture(view, job.resolution),
+            cmap=to_numpy_hwc(normalised.cmaps[i]), alpha=alpha[i, 0].numpy(),
+            gt=_capture(view, job.resolution) if is_target else None,
+            mask=_mask(view, job.resolution) if is_target else None, overlap_score=view.overlap_score))
+    read = time.perf_counter()
+    header = PacketHeader(packet_id=job.packet_id, dataset=job.dataset, protocol=job.protocol, group=job.group,
+                          split=job.split, scene=job.scene, fit_key=job.fit_key, scale=normalised.scale,
+                          recipe=job.recipe)
+    n = len(job.references)
+    write_packet(root, header, contents[:n], contents[n:])
+    done = time.perf_counter()
+    return JobStats(job.packet_id, len(views), rendered - start, read - rendered, done - read)
+
+
+def _init_worker(threads: int) -> None:
+    torch.set_num_threads(threads)
+
+
+# ---------------------------------------------------------------------- orchestration
+def parse_shard(text: str) -> tuple[int, int]:
+    """``"i/n"`` → ``(i, n)`` with ``0 <= i < n``."""
+    try:
+        index, count = (int(part) for part in text.split("/"))
+    except ValueError as exc:
+        raise UsageError(f"shard must look like i/n (e.g. 0/4), got {text!r}", "--shard") from exc
+    if not 0 <= index < count:
+        raise UsageError(f"shard i/n needs 0 <= i < n, got {text!r}", "--shard")
+    return index, count
+
+
+def resolve_backend(backend: str, device: str) -> tuple[str, str]:
+    """``auto`` → gsplat on CUDA when importable, else the torch backend (on CUDA if present)."""
+    if device == "auto":
+        device = "cuda" if torch.cuda.is_available() else "cpu"
+    if backend == "auto":
+        backend = "torch"
+        if device.startswith("cuda"):
+            try:
+                import gsplat  # noqa: F401
+
+                backend = "gsplat"
+            except ImportError:
+                pass
+    if backend not in ("torch", "gsplat"):
+        raise UsageError(f"unknown backend {backend!r}; use auto, torch or gsplat", "--backend")
+    return backend, device
+
+
+def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[str], *,
+            protocol: str | os.PathLike[str] | None = None, fits: str | os.PathLike[str] | None = None,
+            fit: bool = False, split: str = "all", scenes: Sequence[str] | None = None,
+            workers: int = 1, shard: tuple[int, int] = (0, 1), backend: str = "auto", device: str = "auto",
+            loader_options: Mapping[str, Any] | None = None, fit_iterations: int = 30_000, threads: int = 1,
+            progress: bool = True) -> PrepareSummary:
+    """Prepare the packets of ``dataset`` under ``protocol`` into the store ``out`` (module docstring).
+
+    Args:
+        dataset: a loader key (``euvs``, ``paralane``, ``nuscenes``, ``dl3dv``, ``synthetic``).
+        root: the dataset root.
+        out: the packet store folder (created).
+        protocol: packaged protocol name or TOML path; default: the dataset's own.
+        fits, fit: user PLYs folder, or fit here (exactly one).
+        split: ``train``, ``test`` or ``all`` scenes (the protocol's scene split).
+        scenes: restrict to these scene names (the split is still computed over all scenes).
+        workers: render processes.  shard: ``(i, n)``.
+        threads: torch intra-op threads per render process (default 1: the tile rasteriser's ops are
+            small, and on a busy machine extra threads slowed a 48×32 render 50× (measured); use
+            ``workers`` for parallelism, or more threads for large CPU renders).
+        backend, device: renderer (``auto``/``torch``/``gsplat``) and torch device (``auto``/``cpu``/``cuda``).
+        loader_options: override the protocol's ``[loader]`` options.
+        fit_iterations: 3DGS iterations with ``fit``.
+        progress: show tqdm bars.
+
+    Raises:
+        UsageError / ProtocolError / DatasetError: bad arguments, a protocol that does not fit the
+            dataset, missing fits or data.
+    """
+    from setdiff_bench.loaders import list_scenes, load_scenes
+    from setdiff_bench.loaders.common import select_scenes
+
+    started = time.perf_counter()
+    spec = load_protocol(protocol or dataset)
+    if spec.dataset != dataset:
+        raise ProtocolError(f"protocol {spec.name!r} is for dataset {spec.dataset!r}, not {dataset!r}", spec.path)
+    if split not in SPLIT_CHOICES:
+        raise UsageError(f"split must be one of {', '.join(SPLIT_CHOICES)}, got {split!r}", "--split")
+    if workers < 1:
+        raise UsageError(f"workers must be >= 1, got {workers}", "--workers")
+    if threads < 1:
+        raise UsageError(f"threads must be >= 1, got {threads}", "--threads")
+    shard_index, shard_count = shard
+    backend, device = resolve_backend(backend, device)
+    out = Path(out)
+    options = {**spec.loader_options, **(loader_options or {})}
+    source = FitSource(fits_dir=None if fits is None else Path(fits), fit=fit, out=out,
+                       fit_iterations=fit_iterations, progress=progress)
+
+    assignment = spec.split.assign(list_scenes(dataset, root, **options))
+    chosen = sorted(assignment) if scenes is None else select_scenes(sorted(assignment), scenes, Path(root), dataset)
+    chosen = [name for name in chosen if split == "all" or assignment[name] == split]
+    summary = PrepareSummary()
+    summary.split_counts = {s: sum(1 for n in chosen if assignment[n] == s) for s in ("train", "test")}
+    loaded = load_scenes(dataset, root, chosen, **options) if chosen else []
+    summary.scenes = len(loaded)
+
+    units = _units(spec, loaded)
+    mine = units[shard_index::shard_count]
+    jobs: list[PacketJob] = []
+    by_name = {s.name: s for s in loaded}
+    for scene_name, fit_key in mine:
+        scene = by_name[scene_name]
+        groups = [g for g in applicable_groups(spec, scene) if g.fit_key == fit_key]
+        fit_frames = [tuple(f.name for f in g.select(scene).fit) for g in groups]
+        if len(set(fit_frames)) > 1:
+            raise ProtocolError(f"groups {', '.join(g.name for g in groups)} share fit_key {fit_key!r} but select "
+                                f"different fit frames in scene {scene_name!r}", spec.path)
+        if source.fit:
+            source.ensure(scene, fit_key, groups[0].select(scene).fit)
+        plans = plan_scene(replace(spec, groups=tuple(groups)), scene, assignment[scene_name], source,
+                           backend=backend)
+        summary.removed += _remove_outdated(out, spec, plans)
+        jobs += [job for plan in plans for job in plan.jobs]
+    summary.fits_trained = source.trained
+    summary.planned = len(jobs)
+
+    todo = []
+    for job in jobs:
+        remove_temporaries(out, job.packet_id)
+        if packet_is_complete(out, job.packet_id, job.recipe):
+            summary.skipped += 1
+        else:
+            todo.append(job)
+    for stats in _execute(todo, out, backend, device, workers, threads, progress):
+        summary.written += 1
+        summary.views_written += stats.views
+        summary.render_s += stats.render_s
+        summary.read_s += stats.read_s
+        summary.write_s += stats.write_s
+    summary.index_written = merge_index(out)
+    summary.wall_s = time.perf_counter() - started
+    return summary
+
+
+def _units(protocol: Protocol, scenes: Iterable[Scene]) -> list[tuple[str, str]]:
+    """Sorted (scene, fit key) work units (a scene no group applies to is a ``ProtocolError``)."""
+    return sorted({(scene.name, g.fit_key) for scene in scenes for g in applicable_groups(protocol, scene)})
+
+
+def _remove_outdated(root: Path, protocol: Protocol, plans: Sequence[GroupPlan]) -> int:
+    """Delete packet folders of these (scene, group)s that the current plan no longer has."""
+    folder = root / PACKETS_DIR
+    if not folder.is_dir():
+        return 0
+    removed = 0
+    for plan in plans:
+        prefix = group_prefix(protocol.name, plan.scene, plan.group)
+        keep = {job.packet_id for job in plan.jobs}
+        for path in folder.glob(f"{prefix}*"):
+            if path.is_dir() and path.name not in keep and path.name[len(prefix):].isdigit():
+                shutil.rmtree(path)
+                removed += 1
+    return removed
+
+
+def _execute(jobs: Sequence[PacketJob], root: Path, backend: str, device: str, workers: int, threads: int,
+             progress: bool) -> Iterable[JobStats]:
+    from tqdm.auto import tqdm
+
+    bar = tqdm(total=len(jobs), desc="prepare", unit="packet", disable=not progress or not jobs,
+               dynamic_ncols=True)
+    try:
+        if workers == 1 or len(jobs) <= 1:
+            previous = torch.get_num_threads()
+            torch.set_num_threads(threads)
+            try:
+                for job in jobs:
+                    stats = build_packet(job, root, backend, device)
+                    bar.update(1)
+                    yield stats
+            finally:
+                torch.set_num_threads(previous)
+            return
+        context = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=context,
+                                 initializer=_init_worker, initargs=(threads,)) as pool:
+            chunk = math.ceil(len(jobs) / (4 * workers))
+            futures = [pool.submit(_build_many, jobs[i:i + chunk], root, backend, device)
+                       for i in range(0, len(jobs), chunk)]
+            pending = set(futures)
+            while pending:
+                done, pending = wait(pending, return_when=FIRST_EXCEPTION)
+                for future in done:
+                    for stats in future.result():  # re-raises a worker's error here
+                        bar.update(1)
+                        yield stats
+    finally:
+        bar.close()
+
+
+def _build_many(jobs: Sequence[PacketJob], root: Path, backend: str, device: str) -> list[JobStats]:
+    return [build_packet(job, root, backend, device) for job in jobs]

@@ -1,0 +1,288 @@
+"""Planning packets: protocol × scene → packet jobs (which frames, which cameras, which fit).
+
+Nothing is rendered here; a :class:`PacketJob` is a small picklable description that a worker
+process turns into files (:mod:`setdiff_bench.prepare`).
+
+Rules (choices where the paper is silent, all deterministic):
+
+* **Working resolution.**  A frame's camera and image are centre-cropped to the working aspect ratio
+  (``resize = "crop"``; a no-op for 16:9 captures at 576×1024) and then resized; ``K`` follows
+  through :meth:`Camera.cropped` and :meth:`Camera.resized`.  Images shrink with ``INTER_AREA``
+  and grow with ``INTER_LINEAR``; masks use nearest neighbour (as the EUVS metric script).
+* **Cutting targets into packets.**  A group's targets (scene order: consecutive in time per
+  traversal and camera) are cut into ``⌈T / M⌉`` consecutive chunks whose sizes differ by at most
+  one (``numpy.array_split``), where ``M = views − N`` and ``N = min(protocol N, fit frames)``: each
+  target is in exactly one packet, and a group with few fit frames (DL3DV n = 3) takes more targets.
+* **References.**  ``N`` fit frames chosen by Eq. 2 for the whole chunk
+  (:func:`setdiff_bench.geometry.select_references`: mean score over the chunk's targets, ties by
+  lower index, best first), with ``d_max`` = the largest pairwise camera-centre distance of the
+  scene (every frame the loader returned).
+* **C-map clipping.**  Gaussian centres clipped to ``mean camera centre ± cmap_clip · d_max``.
+* **Recipe.**  SHA-256 over the packet's inputs: protocol settings that shape it, the fit PLY's
+  SHA-256, frame names, cameras, source image/mask paths and byte sizes, render backend.  Editing a
+  capture in place without changing its size is not detected; delete the packet folder to redo it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from setdiff_bench.cameras import Camera
+from setdiff_bench.errors import ProtocolError
+from setdiff_bench.geometry import max_pairwise_distance, overlap_score_matrix, select_references
+from setdiff_bench.packet_index import packet_id
+from setdiff_bench.protocols import GroupSpec, Protocol
+from setdiff_bench.types import Frame, Scene
+
+PACKET_FORMAT = "setdiff-packets/1"
+
+
+@dataclass(frozen=True)
+class Crop:
+    """Pixel window ``[left, left + width) × [top, top + height)`` of the source image."""
+
+    left: int
+    top: int
+    width: int
+    height: int
+
+
+@dataclass(frozen=True)
+class ViewJob:
+    """One view of a packet, as the worker needs it.
+
+    Attributes:
+        frame, sensor, traversal, timestamp_us: from the loader's :class:`Frame`.
+        image_path: the capture.  mask_path: the mask file, or ``None`` (all pixels evaluated).
+        invert_mask: the mask file marks what to ignore (Para-Lane foreground masks).
+        crop: window of the source image kept before resizing.
+        camera: world-frame camera at the working resolution.
+        overlap_score: Eq. 2 score for a reference, ``None`` for a target.
+    """
+
+    frame: str
+    sensor: str
+    traversal: str
+    timestamp_us: int | None
+    image_path: Path
+    mask_path: Path | None
+    invert_mask: bool
+    crop: Crop
+    camera: Camera
+    overlap_score: float | None = None
+
+
+@dataclass(frozen=True)
+class PacketJob:
+    """Everything needed to write one packet."""
+
+    packet_id: str
+    dataset: str
+    protocol: str
+    group: str
+    split: str
+    scene: str
+    fit_key: str
+    fit_path: Path
+    references: tuple[ViewJob, ...]
+    targets: tuple[ViewJob, ...]
+    resolution: tuple[int, int]
+    cmap_bound: float | None
+    cmap_center: tuple[float, float, float]
+    recipe: str = ""
+
+
+@dataclass(frozen=True)
+class GroupPlan:
+    """The packets of one (scene, group) and the fit they need."""
+
+    scene: str
+    group: str
+    fit_key: str
+    fit_frames: tuple[Frame, ...]
+    jobs: tuple[PacketJob, ...]
+
+
+def crop_window(width: int, height: int, resolution: tuple[int, int], mode: str) -> Crop:
+    """The centred window of a ``width × height`` image with the aspect ratio of ``resolution`` (H, W)."""
+    if mode == "stretch":
+        return Crop(0, 0, width, height)
+    out_h, out_w = resolution
+    if width * out_h > height * out_w:  # too wide: keep the full height
+        crop_w = min(width, max(1, round(height * out_w / out_h)))
+        return Crop((width - crop_w) // 2, 0, crop_w, height)
+    crop_h = min(height, max(1, round(width * out_h / out_w)))
+    return Crop(0, (height - crop_h) // 2, width, crop_h)
+
+
+def working_camera(camera: Camera, crop: Crop, resolution: tuple[int, int]) -> Camera:
+    """``camera`` after cropping to ``crop`` and resizing to ``resolution`` (H, W)."""
+    if (crop.left, crop.top, crop.width, crop.height) != (0, 0, camera.width, camera.height):
+        camera = camera.cropped(crop.left, crop.top, crop.width, crop.height)
+    if (camera.height, camera.width) != tuple(resolution):
+        camera = camera.resized(resolution[1], resolution[0])
+    return camera
+
+
+def scene_resolution(protocol: Protocol, scene: Scene) -> tuple[int, int]:
+    """The working ``(height, width)``: the protocol's, or the scene's own for ``"native"``."""
+    if protocol.images.resolution is not None:
+        return protocol.images.resolution
+    sizes = sorted({(f.camera.height, f.camera.width) for f in scene.frames})
+    if len(sizes) != 1:
+        raise ProtocolError(f"resolution = \"native\" needs one image size per scene; scene {scene.name!r} has "
+                            f"{', '.join(f'{w}x{h}' for h, w in sizes)}", protocol.path)
+    return sizes[0]
+
+
+def mask_source(protocol: Protocol, frame: Frame) -> tuple[Path | None, bool]:
+    """``(mask file or None, invert)`` of a target under the protocol's mask rule."""
+    if protocol.images.masks == "dataset":
+        return frame.mask_path, False
+    if protocol.images.masks == "foreground":
+        path = frame.metadata.get("foreground_mask_path")
+        return (Path(path), True) if path else (None, False)
+    return None, False
+
+
+def view_job(protocol: Protocol, frame: Frame, resolution: tuple[int, int], *, target: bool,
+             score: float | None = None) -> ViewJob:
+    crop = crop_window(frame.camera.width, frame.camera.height, resolution, protocol.images.resize)
+    mask, invert = mask_source(protocol, frame) if target else (None, False)
+    return ViewJob(frame=frame.name, sensor=frame.sensor, traversal=frame.traversal,
+                   timestamp_us=frame.timestamp_us, image_path=frame.image_path, mask_path=mask,
+                   invert_mask=invert, crop=crop, camera=working_camera(frame.camera, crop, resolution),
+                   overlap_score=score)
+
+
+def chunk_sizes(total: int, per_packet: int) -> list[int]:
+    """Sizes of ``⌈total / per_packet⌉`` consecutive chunks differing by at most one."""
+    if total <= 0:
+        return []
+    count = math.ceil(total / per_packet)
+    return [len(c) for c in np.array_split(np.arange(total), count)]
+
+
+def applicable_groups(protocol: Protocol, scene: Scene) -> list[GroupSpec]:
+    """The protocol's groups whose ``scenes`` filter accepts ``scene``; ``ProtocolError`` if none does."""
+    groups = [g for g in protocol.groups if g.applies_to(scene)]
+    if not groups:
+        wanted = "; ".join(f"{g.name}: {dict(g.scenes)}" for g in protocol.groups)
+        found = {k: scene.metadata.get(k) for g in protocol.groups for k in g.scenes}
+        raise ProtocolError(f"scene {scene.name!r} matches no group of protocol {protocol.name!r} (scene has "
+                            f"{found}; groups need {wanted})", protocol.path)
+    return groups
+
+
+def plan_scene(protocol: Protocol, scene: Scene, split: str, fit_path_for: Any, *,
+               backend: str = "torch") -> list[GroupPlan]:
+    """Plan every packet of ``scene`` under ``protocol``.
+
+    Args:
+        protocol: the protocol.
+        scene: the loaded scene.
+        split: the scene's split (``"train"``/``"test"``), picking packet sizes.
+        fit_path_for: ``callable(scene_name, fit_key) -> (Path, sha256)`` of the fit PLY.
+        backend: render backend name (part of the recipe).
+
+    Raises:
+        ProtocolError: no group applies to the scene, or a group selects no fit frames / targets, or
+            targets that are also fit frames.
+    """
+    groups = applicable_groups(protocol, scene)
+    for frame in scene.frames:
+        if frame.camera.distortion is not None and not frame.camera.distortion.is_zero():
+            raise ProtocolError(f"scene {scene.name!r} frame {frame.name!r} has lens distortion; the renderer is "
+                                "pinhole — undistort the images or set the loader option distortion = \"ignore\"",
+                                protocol.path)
+    resolution = scene_resolution(protocol, scene)
+    centers = np.stack([f.camera.center for f in scene.frames])
+    d_max = max_pairwise_distance(centers)
+    center = tuple(float(v) for v in centers.mean(axis=0))
+    bound = protocol.cmap_clip * d_max if protocol.cmap_clip > 0 and d_max > 0 else None
+    plans = []
+    for group in groups:
+        plans.append(_plan_group(protocol, scene, split, group, resolution, d_max, bound, center, fit_path_for,
+                                 backend))
+    return plans
+
+
+def _plan_group(protocol: Protocol, scene: Scene, split: str, group: GroupSpec, resolution: tuple[int, int],
+                d_max: float, bound: float | None, center: tuple[float, float, float], fit_path_for: Any,
+                backend: str) -> GroupPlan:
+    frames = group.select(scene)
+    where = f"protocol {protocol.name!r} group {group.name!r} ({group.rule}) in scene {scene.name!r}"
+    if not frames.fit:
+        raise ProtocolError(f"{where} selects no fit frames", protocol.path)
+    if not frames.targets:
+        raise ProtocolError(f"{where} selects no target frames", protocol.path)
+    overlap = {f.name for f in frames.fit} & {f.name for f in frames.targets}
+    if overlap:
+        raise ProtocolError(f"{where}: frame {sorted(overlap)[0]!r} is both a fit frame and a target", protocol.path)
+    fit_path, fit_sha = fit_path_for(scene.name, group.fit_key)
+    n_ref = min(protocol.references_for(split), len(frames.fit))
+    per_packet = protocol.views_for(split) - n_ref
+    fit_cameras = [f.camera for f in frames.fit]
+    refs_spec = protocol.references
+    jobs, start = [], 0
+    for index, size in enumerate(chunk_sizes(len(frames.targets), per_packet)):
+        targets = frames.targets[start:start + size]
+        start += size
+        target_cameras = [f.camera for f in targets]
+        chosen = select_references(target_cameras, fit_cameras, n_ref, d_max=d_max, alpha=refs_spec.alpha,
+                                   beta=refs_spec.beta, aggregate=refs_spec.aggregate)
+        scores = overlap_score_matrix(target_cameras, fit_cameras, d_max, alpha=refs_spec.alpha, beta=refs_spec.beta)
+        aggregated = scores.mean(axis=0) if refs_spec.aggregate == "mean" else scores.max(axis=0)
+        job = PacketJob(
+            packet_id=packet_id(protocol.name, scene.name, group.name, index), dataset=scene.dataset,
+            protocol=protocol.name, group=group.name, split=split, scene=scene.name, fit_key=group.fit_key,
+            fit_path=fit_path,
+            references=tuple(view_job(protocol, frames.fit[i], resolution, target=False,
+                                      score=float(aggregated[i])) for i in chosen),
+            targets=tuple(view_job(protocol, f, resolution, target=True) for f in targets),
+            resolution=resolution, cmap_bound=bound, cmap_center=center)
+        jobs.append(_with_recipe(job, protocol, fit_sha, backend))
+    return GroupPlan(scene=scene.name, group=group.name, fit_key=group.fit_key, fit_frames=frames.fit,
+                     jobs=tuple(jobs))
+
+
+def _with_recipe(job: PacketJob, protocol: Protocol, fit_sha: str, backend: str) -> PacketJob:
+    def view(v: ViewJob) -> dict[str, Any]:
+        return {"frame": v.frame, "sensor": v.sensor, "traversal": v.traversal, "timestamp_us": v.timestamp_us,
+                "image": v.image_path.name, "image_bytes": _size(v.image_path),
+                "mask": None if v.mask_path is None else v.mask_path.name,
+                "mask_bytes": None if v.mask_path is None else _size(v.mask_path), "invert_mask": v.invert_mask,
+                "crop": [v.crop.left, v.crop.top, v.crop.width, v.crop.height],
+                "K": _floats(v.camera.K), "w2c": _floats(v.camera.w2c), "score": v.overlap_score}
+
+    content = {"format": PACKET_FORMAT, "packet_id": job.packet_id, "dataset": job.dataset,
+               "protocol": job.protocol, "group": job.group, "split": job.split, "scene": job.scene,
+               "fit_key": job.fit_key, "fit_sha256": fit_sha, "resolution": list(job.resolution),
+               "resize": protocol.images.resize, "masks": protocol.images.masks,
+               "cmap_bound": job.cmap_bound, "cmap_center": list(job.cmap_center), "backend": backend,
+               "references": [view(v) for v in job.references], "targets": [view(v) for v in job.targets]}
+    digest = hashlib.sha256(json.dumps(content, sort_keys=True, separators=(",", ":")).encode("utf-8")).hexdigest()
+    return replace(job, recipe=digest)
+
+
+def _floats(array: np.ndarray) -> list[str]:
+    return [float(v).hex() for v in np.asarray(array, dtype=np.float64).reshape(-1)]
+
+
+def _size(path: Path) -> int | None:
+    try:
+        return path.stat().st_size
+    except OSError:
+        return None
+
+
+def flatten(plans: Sequence[GroupPlan]) -> list[PacketJob]:
+    return [job for plan in plans for job in plan.jobs]
