@@ -2,14 +2,23 @@
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 
 from setdiff_bench.cameras import Camera
-from setdiff_bench.models.setdiff.config import Config, TrainConfig, model_config_from_dict
+from setdiff_bench.models.setdiff.config import (
+    TINY_UNET,
+    TINY_VAE,
+    Config,
+    TrainConfig,
+    model_config_from_dict,
+)
 from setdiff_bench.types import Packet, TrainingSample, ViewSet
 
 
@@ -70,3 +79,44 @@ def tiny_config(**model_overrides: object) -> Config:
     train = TrainConfig(steps=4, learning_rate=1e-3, min_views=2, max_views=4, decode_targets=1, lpips_weight=0.0,
                         checkpoint_every=1000, validate_every=1000, log_every=1, seed=0)
     return Config(model=model, train=train)
+
+
+# The scheduler_config.json of stabilityai/sd-turbo (shared/reference/model.md §4.3).
+SD_TURBO_SCHEDULER_JSON = {
+    "_class_name": "EulerDiscreteScheduler", "beta_start": 0.00085, "beta_end": 0.012,
+    "beta_schedule": "scaled_linear", "clip_sample": False, "interpolation_type": "linear",
+    "num_train_timesteps": 1000, "prediction_type": "epsilon", "sample_max_value": 1.0,
+    "set_alpha_to_one": False, "sigma_max": None, "sigma_min": None, "skip_prk_steps": True,
+    "steps_offset": 1, "timestep_spacing": "trailing", "timestep_type": "discrete",
+    "trained_betas": None, "use_karras_sigmas": False,
+}
+
+
+def write_diffusers_folder(root: Path, *, text: bool) -> tuple[Any, Any]:
+    """A local folder laid out like the SD-Turbo repo, with tiny random networks; returns (unet, vae)."""
+    from diffusers import AutoencoderKL, UNet2DConditionModel
+
+    torch.manual_seed(3)
+    unet = UNet2DConditionModel.from_config(dict(TINY_UNET))
+    vae = AutoencoderKL.from_config(dict(TINY_VAE))
+    unet.save_pretrained(root / "unet")
+    vae.save_pretrained(root / "vae")
+    (root / "scheduler").mkdir(parents=True)
+    (root / "scheduler" / "scheduler_config.json").write_text(json.dumps(SD_TURBO_SCHEDULER_JSON))
+    if text:
+        from transformers import CLIPTextConfig, CLIPTextModel, CLIPTokenizer
+
+        vocab = {"<|startoftext|>": 0, "<|endoftext|>": 1}
+        for letter in "abcdefghijklmnopqrstuvwxyz":
+            vocab[letter] = len(vocab)
+            vocab[letter + "</w>"] = len(vocab)
+        (root / "raw").mkdir()
+        (root / "raw" / "vocab.json").write_text(json.dumps(vocab))
+        (root / "raw" / "merges.txt").write_text("#version: 0.2\n")
+        CLIPTokenizer(str(root / "raw" / "vocab.json"), str(root / "raw" / "merges.txt")).save_pretrained(
+            root / "tokenizer")
+        encoder = CLIPTextModel(CLIPTextConfig(vocab_size=len(vocab), hidden_size=32, intermediate_size=64,
+                                               num_hidden_layers=1, num_attention_heads=2, max_position_embeddings=77,
+                                               bos_token_id=0, eos_token_id=1, pad_token_id=1))
+        encoder.save_pretrained(root / "text_encoder")
+    return unet, vae

@@ -34,7 +34,7 @@ def test_round_trip_is_bit_identical(tmp_path: Path) -> None:
     before = enhance_packet(model, packet)
     save_checkpoint(tmp_path / "ckpt", model, config)
     loaded, saved = load_model(tmp_path / "ckpt")
-    assert saved.model == config.model
+    assert saved.model == model.config and saved.model.learn_text_embedding is True
     assert torch.equal(enhance_packet(loaded, packet), before)
     reference_state, loaded_state = model.state_dict(), loaded.state_dict()
     assert reference_state.keys() == loaded_state.keys()

@@ -12,6 +12,7 @@ names the newest one in ``OUT/latest``; any function here taking a checkpoint al
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import os
 import shutil
@@ -23,7 +24,7 @@ import torch
 
 from setdiff_bench.errors import CheckpointError, UsageError
 from setdiff_bench.io.atomic import write_text_atomic
-from setdiff_bench.models.setdiff.config import Config, config_from_dict
+from setdiff_bench.models.setdiff.config import Config, ModelConfig, config_from_dict
 
 WEIGHTS_FILE = "model.safetensors"
 CONFIG_FILE = "config.json"
@@ -85,6 +86,9 @@ def save_checkpoint(folder: str | os.PathLike[str], model: torch.nn.Module, conf
     from safetensors.torch import save_file
 
     folder = Path(folder)
+    model_config = getattr(model, "config", None)
+    if isinstance(model_config, ModelConfig):  # the model's resolved choices (e.g. learn_text_embedding)
+        config = dataclasses.replace(config, model=model_config)
     folder.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", suffix=".tmp", dir=folder.parent))
     try:

@@ -175,6 +175,9 @@ class ModelConfig:
         skip_gamma: multiplier on the skip activations (DiFix: 1).
         text_prompt: the fixed prompt, encoded once when a text encoder is available.
         text_length: token count of the text embedding (77).
+        learn_text_embedding: train the text embedding; ``None`` = automatic: frozen when it is the
+            encoded prompt of a pretrained text encoder, learned (from zeros) otherwise.  Resolved to
+            ``True``/``False`` when the model is built, and saved so in checkpoints.
         max_references: use at most this many references per set (the first ones); ``None`` = all.
         targets_per_set: enhance targets in sets of this many (DiFix: 1); ``None`` = all at once.
         pretrained: a local diffusers SD-Turbo folder (``unet/``, ``vae/``, ``scheduler/``, optional
@@ -202,6 +205,7 @@ class ModelConfig:
     skip_gamma: float = 1.0
     text_prompt: str = DEFAULT_PROMPT
     text_length: int = 77
+    learn_text_embedding: bool | None = None
     max_references: int | None = None
     targets_per_set: int | None = None
     pretrained: str | None = None

@@ -22,7 +22,7 @@ share ``z``, guiding x̂0 equals guiding the UNet output.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import torch
 from torch import nn
@@ -70,14 +70,14 @@ class SetDiffModel(nn.Module):
                                                  config.latent_factor, config.geometry_groups)
                                  if config.use_geometry else None)
         text_shape = (1, config.text_length, config.cross_attention_dim)
-        if networks.prompt_embedding is not None:
-            if tuple(networks.prompt_embedding.shape) != text_shape:
-                raise ValueError(f"prompt embedding {tuple(networks.prompt_embedding.shape)} != {text_shape}")
-            self.text_embedding = nn.Parameter(networks.prompt_embedding.clone(), requires_grad=False)
-        else:
-            self.text_embedding = nn.Parameter(torch.zeros(text_shape))
+        prompt = networks.prompt_embedding
+        if prompt is not None and tuple(prompt.shape) != text_shape:
+            raise ValueError(f"prompt embedding {tuple(prompt.shape)} != {text_shape}")
+        learn_text = prompt is None if config.learn_text_embedding is None else config.learn_text_embedding
+        initial = torch.zeros(text_shape) if prompt is None else prompt.clone()
+        self.text_embedding = nn.Parameter(initial, requires_grad=learn_text)
         self.unet.requires_grad_(True)
-        self.config = config
+        self.config = replace(config, learn_text_embedding=learn_text)
         alpha_bar = config.alpha_bar
         self.sqrt_alpha_bar = math.sqrt(alpha_bar)
         self.sqrt_one_minus_alpha_bar = math.sqrt(1.0 - alpha_bar)

@@ -21,6 +21,7 @@ of the enhanced targets of the validation samples every ``validate_every`` steps
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import math
 import random
@@ -160,12 +161,16 @@ def train(config: Config, dataset: Sequence[TrainingSample] | Iterable[TrainingS
     out = Path(out_dir)
 
     previous = None
+    model_config = config.model
     if resume and ((out / "latest").is_file()):
         previous = resolve_checkpoint(out)
-        check_compatible(read_config(previous), config, previous)
+        saved = read_config(previous)
+        check_compatible(saved, config, previous)
+        model_config = dataclasses.replace(model_config, learn_text_embedding=saved.model.learn_text_embedding)
 
     set_seed(tc.seed)
-    model = SetDiffModel(config.model, load_pretrained=previous is None)
+    model = SetDiffModel(model_config, load_pretrained=previous is None)
+    config = dataclasses.replace(config, model=model.config)  # saved with the resolved text-embedding choice
     if previous is not None:
         load_weights(model, previous)
     if tc.gradient_checkpointing:
@@ -216,7 +221,9 @@ def train(config: Config, dataset: Sequence[TrainingSample] | Iterable[TrainingS
         bar.update(1)
         if validation and (done % tc.validate_every == 0 or done == tc.steps):
             if main:
-                record = {"step": done, **validate(core, validation[: tc.validation_packets], reconstruction)}
+                with accelerator.autocast():
+                    scores = validate(core, validation[: tc.validation_packets], reconstruction)
+                record = {"step": done, **scores}
                 result.validation.append(record)
                 _append_jsonl(out / VALIDATION_FILE, record)
                 bar.write(f"step {done}: " + ", ".join(f"{k} {v:.4f}" for k, v in record.items() if k != "step"))
