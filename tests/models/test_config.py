@@ -1,0 +1,57 @@
+"""Configs: packaged TOML files, validation, and the analytic noise schedule against diffusers."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from setdiff_bench.errors import UsageError
+from setdiff_bench.models.setdiff.config import (
+    SD_TURBO_SCHEDULE,
+    alphas_cumprod,
+    config_from_dict,
+    load_config,
+    packaged_configs,
+)
+
+
+def test_packaged_configs_load() -> None:
+    names = set(packaged_configs())
+    assert {"tiny_setdiff", "tiny_difix", "sd_turbo_setdiff", "sd_turbo_difix"} <= names
+    for name in names:
+        config = load_config(name)
+        assert config.model.method in name
+        assert config.model.timestep == 199
+    setdiff = load_config("sd_turbo_setdiff")
+    assert setdiff.model.prediction == "v_prediction" and setdiff.model.geometry_dropout == 0.15
+    assert setdiff.model.guidance_scale == 2.0 and setdiff.model.vae_lora_rank == 4
+    assert list(setdiff.model.unet["attention_head_dim"]) == [5, 10, 20, 20]
+    assert (setdiff.train.min_views, setdiff.train.max_views) == (8, 12)
+    difix = load_config("sd_turbo_difix")
+    assert difix.model.prediction == "epsilon" and not difix.model.use_geometry and not difix.model.uses_cfg
+
+
+def test_alphas_cumprod_matches_diffusers() -> None:
+    from diffusers import DDPMScheduler
+
+    scheduler = DDPMScheduler.from_config({**SD_TURBO_SCHEDULE, "clip_sample": False})
+    ours = alphas_cumprod(**SD_TURBO_SCHEDULE)
+    np.testing.assert_allclose(ours, scheduler.alphas_cumprod.numpy(), rtol=2e-6)
+
+
+def test_overrides_and_errors(tmp_path: Path) -> None:
+    config = config_from_dict({"model": {"preset": "tiny", "unet": {"layers_per_block": 2}}, "train": {"steps": 7}})
+    assert config.model.unet["layers_per_block"] == 2 and config.model.unet["block_out_channels"] == [32, 64]
+    assert config.train.steps == 7
+    with pytest.raises(UsageError, match="unknown preset"):
+        config_from_dict({"model": {"preset": "sdxl"}})
+    with pytest.raises(UsageError, match="RGB-only"):
+        config_from_dict({"model": {"preset": "tiny", "method": "difix"}})
+    with pytest.raises(UsageError, match="min_views"):
+        config_from_dict({"train": {"min_views": 9, "max_views": 8}})
+    broken = tmp_path / "broken.toml"
+    broken.write_text("[model\n")
+    with pytest.raises(UsageError, match="cannot read config TOML"):
+        load_config(broken)
