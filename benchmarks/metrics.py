@@ -7,7 +7,7 @@ torchmetrics and ≥ 5× skimage with values equal to 1e-5.  Also re-runs the op
 warp error (DeepFlow vs DIS end-point error on synthetic scenes with known flow) and times a warp
 reference at full size.  Runs on the CPU, and on CUDA too when available.
 
-    python benchmarks/metrics.py [--pairs 4] [--repeats 5]
+    python benchmarks/metrics.py [--pairs 4] [--repeats 5] [--lpips-pairs 2]
 """
 
 from __future__ import annotations
@@ -68,7 +68,7 @@ def skimage_ssim(pred: torch.Tensor, target: torch.Tensor) -> float:
                                  channel_axis=-1)
 
 
-def bench_device(preds: torch.Tensor, targets: torch.Tensor, device: str, repeats: int) -> dict:
+def bench_device(preds: torch.Tensor, targets: torch.Tensor, device: str, repeats: int, lpips_pairs: int) -> dict:
     cuda = device == "cuda"
     preds, targets = preds.to(device), targets.to(device)
     out: dict = {}
@@ -101,10 +101,13 @@ def bench_device(preds: torch.Tensor, targets: torch.Tensor, device: str, repeat
             ssim_block["speedup_vs_skimage"] = ssim_block["skimage"]["median_ms"] / ssim_block["ours_valid"]["median_ms"]
         out["ssim"] = ssim_block
 
+        few_preds, few_targets = preds[:lpips_pairs], targets[:lpips_pairs]
         for net in ("alex", "vgg"):
             model = load_lpips(net, device=device)
-            out[f"lpips_{net}"] = {"ours": per_pair(lambda p, t, m=model: m(p, t), preds, targets, max(2, repeats // 2), cuda),
-                                   "values": [round(v, 6) for v in model(preds, targets).tolist()]}
+            out[f"lpips_{net}"] = {"ours": per_pair(lambda p, t, m=model: m(p, t), few_preds, few_targets,
+                                                    max(2, repeats // 2), cuda),
+                                   "pairs": lpips_pairs,
+                                   "values": [round(v, 6) for v in model(few_preds, few_targets).tolist()]}
     return out
 
 
@@ -139,11 +142,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--pairs", type=int, default=4)
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--lpips-pairs", type=int, default=2, help="pairs timed for LPIPS (VGG is slow on CPU)")
     args = parser.parse_args()
     load_start = os.getloadavg()[0]
     preds, targets = image_pairs(args.pairs)
-    results = {"cpu": bench_device(preds, targets, "cpu", args.repeats)}
-    results["cuda"] = (bench_device(preds, targets, "cuda", args.repeats) if torch.cuda.is_available()
+    results = {"cpu": bench_device(preds, targets, "cpu", args.repeats, args.lpips_pairs)}
+    results["cuda"] = (bench_device(preds, targets, "cuda", args.repeats, args.lpips_pairs) if torch.cuda.is_available()
                        else {"skipped": "no CUDA device on this machine"})
     results["optical_flow"] = flow_comparison()
     cpu = results["cpu"]["ssim"]

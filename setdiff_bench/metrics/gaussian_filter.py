@@ -81,17 +81,21 @@ def blur_torch(maps: torch.Tensor, window_size: int, sigma: float, border: Borde
     return F.conv2d(out, cols, padding=(pad, 0), groups=channels)
 
 
-def blur_opencv(plane: np.ndarray, window_size: int, sigma: float, border: Border) -> np.ndarray:
+def blur_opencv(plane: np.ndarray, window_size: int, sigma: float, border: Border,
+                dst: np.ndarray | None = None) -> np.ndarray:
     """OpenCV separable Gaussian filter of one ``(H, W)`` float32/float64 plane.
 
     Zero padding (``BORDER_CONSTANT``) for ``"same"``, ``BORDER_REFLECT_101`` for ``"reflect"``; for
     ``"valid"`` the ``k//2`` border rows and columns are cropped (a view), so the padding never reaches the
-    result.  Returns ``(H', W')``.
+    result.  ``dst`` (``(H, W)``, same dtype, not aliasing ``plane``) receives the full-size output.
+
+    Returns:
+        ``(H', W')`` filtered plane (a view of ``dst`` when given).
     """
     taps = gaussian_window_1d(window_size, sigma).astype(plane.dtype)
     depth = cv2.CV_32F if plane.dtype == np.float32 else cv2.CV_64F
     border_type = cv2.BORDER_REFLECT_101 if border == "reflect" else cv2.BORDER_CONSTANT
-    out = cv2.sepFilter2D(plane, depth, taps, taps, borderType=border_type)
+    out = cv2.sepFilter2D(plane, depth, taps, taps, dst=dst, borderType=border_type)
     if border == "valid":
         half = window_size // 2
         out = out[half: out.shape[0] - half, half: out.shape[1] - half]
