@@ -40,6 +40,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--packets", type=Path, default=None, help="packet store the runs were made on (for --grids)")
 
 
+def _command(args: argparse.Namespace) -> str:
+    """The command line that reproduces this table (recorded in the outputs)."""
+    parts = ["setdiff-bench", "leaderboard", "--dataset", args.dataset, "--runs", str(args.runs), "--format",
+             args.format, "--out", str(args.out), "--split", args.split]
+    for flag, value in (("--methods", args.methods), ("--metrics", args.metrics)):
+        if value:
+            parts += [flag, value]
+    if args.with_reported:
+        parts.append("--with-reported")
+    return " ".join(shlex.quote(part) for part in parts)
+
+
 def run(args: argparse.Namespace) -> int:
     from setdiff_bench.errors import UsageError
     from setdiff_bench.leaderboard import build_leaderboard, load_runs, reported_for, write_leaderboard
@@ -56,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"note: the paper reports no numbers for dataset {args.dataset!r}", file=sys.stderr)
     board = build_leaderboard(args.dataset, images, sequences, split=split, reported=reported, metrics=metrics,
                               methods=methods)
-    command = "setdiff-bench " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[1:] else None
+    command = _command(args)
     for fmt, path in write_leaderboard(board, args.out, formats, command).items():
         print(f"{fmt}: {path}")
     if args.plots and len(images):
