@@ -1,0 +1,48 @@
+"""Session fixtures of the packet tests: a three-scene street dataset and one prepared store."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+import torch
+from packet_fixtures import StreetScene, write_dataset
+
+from setdiff_bench.packets import PacketStore
+from setdiff_bench.prepare import PrepareSummary, prepare
+
+
+@pytest.fixture(autouse=True)
+def _one_thread() -> Iterator[None]:
+    """The tile rasteriser's ops are tiny: one thread is fastest, and much faster on a busy machine."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+@pytest.fixture(scope="session")
+def street(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, StreetScene]]:
+    """``(root, scenes)``: street_00, street_01 (train) and street_02 (test under the 60/40 rule)."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        root = tmp_path_factory.mktemp("street")
+        return root, write_dataset(root)
+    finally:
+        torch.set_num_threads(threads)
+
+
+@pytest.fixture(scope="session")
+def prepared(street, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, PrepareSummary, PacketStore]:
+    """The whole dataset prepared in-process with the fits found under ``<scene>/fits/``."""
+    root, _ = street
+    out = tmp_path_factory.mktemp("store")
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        summary = prepare("synthetic", root, out, fits=root, progress=False)
+    finally:
+        torch.set_num_threads(threads)
+    return out, summary, PacketStore(out)
