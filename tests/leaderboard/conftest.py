@@ -2,24 +2,33 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
 from setdiff_bench.run import RunSettings, run_method
-from tests.run.store_fixtures import StoreSpec, build_store
+from tests.run.store_fixtures import StoreSpec, build_store, one_thread
+
+
+@pytest.fixture(autouse=True)
+def _one_thread() -> Iterator[None]:
+    with one_thread():
+        yield
 
 
 @pytest.fixture(scope="package")
 def lb_store(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """One scene, groups lane+1 / lane+2, two packets of two targets each per group."""
-    return build_store(tmp_path_factory.mktemp("lb_store"), StoreSpec(packets_per_group=2, targets=2))
+    with one_thread():
+        return build_store(tmp_path_factory.mktemp("lb_store"), StoreSpec(packets_per_group=2, targets=2))
 
 
 @pytest.fixture(scope="package")
 def lb_runs(lb_store: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """``runs/identity`` and ``runs/reproject`` on :func:`lb_store`."""
     runs = tmp_path_factory.mktemp("lb_runs")
-    for method in ("identity", "reproject"):
-        run_method(lb_store, runs / method, RunSettings(method), progress=False)
+    with one_thread():
+        for method in ("identity", "reproject"):
+            run_method(lb_store, runs / method, RunSettings(method), progress=False)
     return runs

@@ -138,6 +138,21 @@ def test_filters_and_missing_inputs() -> None:
     assert [row.label for row in board.rows] == ["beta", "alpha"]
 
 
+def test_nuscenes_pools_buckets_and_adds_warp_error_per_sequence() -> None:
+    frame = pd.concat([images("identity", "10-11s", [(16.0, 0.6, 0.5)], dataset="nuscenes", frames=["a"]),
+                       images("identity", "14-15s", [(14.0, 0.5, 0.6)], dataset="nuscenes", frames=["b"])],
+                      ignore_index=True)
+    sequences = pd.DataFrame({"dataset": "nuscenes", "method": "identity", "sensor": ["CAM_FRONT", "CAM_BACK"],
+                              "warp": [100.0, 110.0]})
+    board = build_leaderboard("nuscenes", frame, sequences)
+    md = render_markdown(board)
+    assert "| Method | PSNR↑ | SSIM↑ | LPIPS↓ | Warp↓ |" in md
+    assert "| identity | **15.00** | **0.550** | **0.550** | **105.0** |" in md
+    mixed = render_markdown(build_leaderboard("nuscenes", frame, sequences, reported=reported_for("nuscenes")))
+    assert "| OmniRe + SetDiff (paper) | **21.58** | **0.716** | **0.303** | 108.9 |" in mixed
+    assert "| identity | 15.00 | 0.550 | 0.550 | **105.0** |" in mixed
+
+
 # ---------------------------------------------------------------------- LaTeX and Markdown
 def test_latex_is_booktabs_in_the_papers_shape_with_bold_and_escaping() -> None:
     named = table().replace({"method": {"alpha": "my_method & 50% #1"}})
