@@ -1,0 +1,346 @@
+"""3D Gaussian Splatting optimisation (Kerbl et al. 2023), the graphdeco-inria training loop on our renderer.
+
+Per iteration: pick the next view of a seeded per-epoch permutation, render it (torch backend on the
+CPU, gsplat on CUDA), loss ``(1 − λ)·L1 + λ·(1 − SSIM)`` with λ = 0.2 and the 3DGS SSIM (zero-padded
+"same" border, :func:`setdiff_bench.metrics.ssim.ssim`), Adam step with the standard per-parameter
+learning rates (position rate × scene extent, decayed exponentially), then adaptive density control
+(:mod:`.densify`) and opacity resets on the schedule.  The active SH degree grows by one every
+``sh_increase_every`` iterations.  Pixels outside a view's mask (EUVS dynamic masks: 0 = moving
+object) take the ground-truth value in the prediction, so they add neither loss nor gradient.
+
+Initialisation: the scene's sparse points (COLMAP ``points3D``) when present, else
+``random_init_points`` uniform points in the box of the camera centres grown by the scene radius on
+every side (colour grey), each as an isotropic Gaussian (nearest-neighbour scale, opacity 0.1).
+
+Checkpoints (``checkpoint_dir``): parameters, Adam moments, density statistics and the random state in
+``fit_state.safetensors``; iteration, schedule position, config and view names in ``fit_state.json``
+(written last, with the tensor file's SHA-256, so a torn pair is detected).  Resuming restores all
+of it, so an interrupted fit ends with exactly the model an uninterrupted one would.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from setdiff_bench.errors import CheckpointError, UsageError
+from setdiff_bench.gaussians.densify import DensityStats, densify_and_prune, reset_opacity
+from setdiff_bench.gaussians.fit_data import FitView
+from setdiff_bench.gaussians.model import GaussianModel
+from setdiff_bench.gaussians.optim import GaussianParameters, exponential_lr
+from setdiff_bench.gaussians.render import render
+from setdiff_bench.io.atomic import atomic_path, sha256_file, write_text_atomic
+
+CHECKPOINT_FORMAT = "setdiff-fit-checkpoint/1"
+STATE_TENSORS = "fit_state.safetensors"
+STATE_JSON = "fit_state.json"
+
+
+@dataclass(frozen=True)
+class FitConfig:
+    """Hyper-parameters; defaults are the Inria 3DGS values for a 30 000-iteration run.
+
+    Learning rates (Adam): ``lr_means`` (× scene extent, decayed to ``lr_means_final`` × extent over
+    ``iterations``), ``lr_sh_dc``, ``lr_sh_rest`` (= dc / 20), ``lr_opacity`` (0.05, the original 3DGS
+    release and gsplat's default; later Inria versions use 0.025), ``lr_scales``, ``lr_quats``.
+    Density control: see :mod:`setdiff_bench.gaussians.densify`; iterations are 1-based as in Inria.
+    """
+
+    iterations: int = 30_000
+    sh_degree: int = 3
+    sh_increase_every: int = 1000
+    lr_means: float = 1.6e-4
+    lr_means_final: float = 1.6e-6
+    lr_means_delay_mult: float = 0.01
+    lr_sh_dc: float = 2.5e-3
+    lr_sh_rest: float = 2.5e-3 / 20
+    lr_opacity: float = 0.05
+    lr_scales: float = 5e-3
+    lr_quats: float = 1e-3
+    lambda_dssim: float = 0.2
+    densify_from: int = 500
+    densify_until: int = 15_000
+    densify_every: int = 100
+    grad_threshold: float = 2e-4
+    percent_dense: float = 0.01
+    opacity_reset_every: int = 3000
+    min_opacity: float = 0.005
+    max_screen_size: float = 20.0
+    max_world_fraction: float = 0.1
+    initial_opacity: float = 0.1
+    random_init_points: int = 100_000
+    max_gaussians: int | None = None
+    background: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    tile_size: int = 8
+    seed: int = 0
+
+    @classmethod
+    def schedule(cls, iterations: int, *, densify_every: int, **overrides: object) -> FitConfig:
+        """The standard schedule compressed to ``iterations``: densify from 10 % to 60 % of the run every
+        ``densify_every`` iterations, reset opacities every 30 %, raise the SH degree every 10 %."""
+        values: dict[str, object] = {
+            "iterations": iterations, "densify_every": densify_every,
+            "densify_from": max(1, round(0.1 * iterations)), "densify_until": round(0.6 * iterations),
+            "opacity_reset_every": max(densify_every, round(0.3 * iterations)),
+            "sh_increase_every": max(1, round(0.1 * iterations)),
+        }
+        values.update(overrides)
+        return cls(**values)  # type: ignore[arg-type]
+
+    def learning_rates(self, extent: float) -> dict[str, float]:
+        return {"means": self.lr_means * extent, "sh_dc": self.lr_sh_dc, "sh_rest": self.lr_sh_rest,
+                "opacity_logits": self.lr_opacity, "log_scales": self.lr_scales, "quats": self.lr_quats}
+
+    def to_json(self) -> dict[str, object]:
+        data = dataclasses.asdict(self)
+        data["background"] = list(self.background)
+        return data
+
+
+@dataclass
+class FitResult:
+    """What a fit returns: the model, the per-iteration loss and L1, and density-control events."""
+
+    model: GaussianModel
+    losses: list[float] = field(default_factory=list)
+    l1: list[float] = field(default_factory=list)
+    events: list[dict[str, int]] = field(default_factory=list)
+    extent: float = 1.0
+    start_iteration: int = 1
+
+
+def scene_extent(views: Sequence[FitView]) -> tuple[np.ndarray, float]:
+    """Inria ``getNerfppNorm``: centre of the camera centres and 1.1 × the largest distance to it (≥ 1e-3... 1)."""
+    centers = np.stack([v.camera.center for v in views])
+    center = centers.mean(axis=0)
+    radius = float(np.linalg.norm(centers - center, axis=1).max()) * 1.1
+    return center, radius if radius > 1e-6 else 1.0
+
+
+def initial_model(views: Sequence[FitView], points: np.ndarray | None, colors: np.ndarray | None,
+                  config: FitConfig) -> GaussianModel:
+    """Gaussians at the sparse points, or random ones in the camera box grown by the scene radius."""
+    if points is not None and len(points) > 0:
+        return GaussianModel.from_points(points, colors, sh_degree=config.sh_degree,
+                                         initial_opacity=config.initial_opacity)
+    centers = np.stack([v.camera.center for v in views])
+    _, radius = scene_extent(views)
+    low, high = centers.min(axis=0) - radius, centers.max(axis=0) + radius
+    generator = torch.Generator().manual_seed(config.seed)
+    unit = torch.rand(config.random_init_points, 3, generator=generator, dtype=torch.float64).numpy()
+    return GaussianModel.from_points(low + unit * (high - low), None, sh_degree=config.sh_degree,
+                                     initial_opacity=config.initial_opacity)
+
+
+def photometric_loss(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None,
+                     lambda_dssim: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(loss, l1)`` for ``(1, 3, H, W)`` images; masked-out pixels take the target value."""
+    from setdiff_bench.metrics.ssim import ssim
+
+    if mask is not None:
+        pred = torch.where(mask, pred, target)
+    l1 = (pred - target).abs().mean()
+    d_ssim = 1.0 - ssim(pred, target, border="same").mean()
+    return (1.0 - lambda_dssim) * l1 + lambda_dssim * d_ssim, l1
+
+
+class _Trainer:
+    """The mutable state of one fit (kept together so that it can be checkpointed as a whole)."""
+
+    def __init__(self, views: Sequence[FitView], init: GaussianModel, config: FitConfig, device: torch.device) -> None:
+        self.views = list(views)
+        self.config = config
+        self.device = device
+        self.backend = "gsplat" if device.type == "cuda" else "torch"
+        _, self.extent = scene_extent(views)
+        self.params = GaussianParameters(init.to(device, torch.float32), config.learning_rates(self.extent))
+        self.stats = DensityStats.zeros(len(self.params), device)
+        self.generator = torch.Generator().manual_seed(config.seed)
+        self.order = torch.randperm(len(self.views), generator=self.generator)
+        self.position = 0
+        self.iteration = 0  # iterations completed
+        self.active_sh = 0
+        self.images = [v.image.to(device)[None] for v in self.views]
+        self.masks = [None if v.mask is None else v.mask.to(device)[None] for v in self.views]
+
+    def next_view(self) -> int:
+        if self.position >= len(self.order):
+            self.order = torch.randperm(len(self.views), generator=self.generator)
+            self.position = 0
+        index = int(self.order[self.position])
+        self.position += 1
+        return index
+
+    def step(self) -> tuple[float, float, dict[str, int] | None]:
+        c = self.config
+        it = self.iteration + 1
+        self.params.set_lr("means", exponential_lr(it, c.lr_means * self.extent, c.lr_means_final * self.extent,
+                                                   c.iterations, delay_mult=c.lr_means_delay_mult))
+        if it % c.sh_increase_every == 0:
+            self.active_sh = min(self.active_sh + 1, c.sh_degree)
+        index = self.next_view()
+        view = self.views[index]
+        model = self.params.model()
+        kwargs = {"tile_size": c.tile_size} if self.backend == "torch" else {}
+        out = render(model, [view.camera], self.backend, with_geometry=False, sh_degree=self.active_sh,
+                     background=c.background, **kwargs)
+        loss, l1 = photometric_loss(out.rgb, self.images[index], self.masks[index], c.lambda_dssim)
+        if loss.requires_grad:  # False only when no Gaussian is visible in the view
+            loss.backward()
+        event = None
+        with torch.no_grad():
+            if it < c.densify_until:
+                self.stats.accumulate(out.meta[0], view.camera.width, view.camera.height)
+            self.params.optimizer.step()
+            self.params.optimizer.zero_grad(set_to_none=True)
+            if it < c.densify_until:
+                if it > c.densify_from and it % c.densify_every == 0:
+                    size_limit = c.max_screen_size if it > c.opacity_reset_every else None
+                    result = densify_and_prune(
+                        self.params, self.stats, grad_threshold=c.grad_threshold, percent_dense=c.percent_dense,
+                        extent=self.extent, min_opacity=c.min_opacity, max_screen_size=size_limit,
+                        max_world_fraction=c.max_world_fraction, generator=self.generator,
+                        max_gaussians=c.max_gaussians)
+                    self.stats = DensityStats.zeros(len(self.params), self.device)
+                    event = {"iteration": it, **dataclasses.asdict(result)}
+                if it % c.opacity_reset_every == 0:
+                    reset_opacity(self.params)
+        self.iteration = it
+        return float(loss.detach()), float(l1.detach()), event
+
+    # ------------------------------------------------------------------ checkpoints
+    def save(self, folder: Path, view_names: Sequence[str]) -> None:
+        from safetensors.torch import save_file
+
+        folder.mkdir(parents=True, exist_ok=True)
+        tensors = {k: v.detach().cpu().contiguous() for k, v in self.params.state_tensors().items()}
+        tensors.update({f"stats/{k}": v.detach().cpu().contiguous() for k, v in self.stats.tensors().items()})
+        tensors["rng/generator"] = self.generator.get_state().clone()
+        tensors["rng/order"] = self.order.clone()
+        with atomic_path(folder / STATE_TENSORS) as tmp:
+            save_file(tensors, str(tmp))
+        state = {"format": CHECKPOINT_FORMAT, "iteration": self.iteration, "position": self.position,
+                 "active_sh": self.active_sh, "extent": self.extent, "config": self.config.to_json(),
+                 "views": list(view_names), "tensors_sha256": sha256_file(folder / STATE_TENSORS)}
+        write_text_atomic(folder / STATE_JSON, json.dumps(state, indent=1, sort_keys=True) + "\n")
+
+    def load(self, folder: Path, view_names: Sequence[str]) -> None:
+        from safetensors import SafetensorError
+        from safetensors.torch import load_file
+
+        json_path, tensor_path = folder / STATE_JSON, folder / STATE_TENSORS
+        try:
+            state = json.loads(json_path.read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError) as exc:
+            raise CheckpointError(f"cannot read checkpoint state ({exc.__class__.__name__})", json_path) from exc
+        if state.get("format") != CHECKPOINT_FORMAT:
+            raise CheckpointError(f"format is {state.get('format')!r}, expected {CHECKPOINT_FORMAT!r}", json_path)
+        if state.get("config") != self.config.to_json():
+            raise CheckpointError("checkpoint was written with a different fit configuration", json_path)
+        if state.get("views") != list(view_names):
+            raise CheckpointError("checkpoint was written for different training frames", json_path)
+        if not tensor_path.is_file() or sha256_file(tensor_path) != state.get("tensors_sha256"):
+            raise CheckpointError("tensor file is missing or does not match fit_state.json", tensor_path)
+        try:
+            tensors = load_file(str(tensor_path))
+        except (SafetensorError, OSError) as exc:
+            raise CheckpointError(f"cannot read tensors ({exc})", tensor_path) from exc
+        self.params.load_state_tensors({k: v.to(self.device) for k, v in tensors.items()
+                                        if k.startswith(("param/", "adam/"))})
+        self.stats = DensityStats(*(tensors[f"stats/{k}"].to(self.device) for k in ("grad_sum", "count", "max_radius")))
+        self.generator.set_state(tensors["rng/generator"])
+        self.order = tensors["rng/order"]
+        self.iteration = int(state["iteration"])
+        self.position = int(state["position"])
+        self.active_sh = int(state["active_sh"])
+
+
+def fit_gaussians(views: Sequence[FitView], config: FitConfig, *, points: np.ndarray | None = None,
+                  colors: np.ndarray | None = None, device: str | torch.device = "cpu",
+                  checkpoint_dir: str | os.PathLike[str] | None = None, checkpoint_every: int = 0,
+                  resume: bool = True, stop_after: int | None = None, progress: bool = True,
+                  on_iteration: Callable[[int, float], None] | None = None) -> FitResult:
+    """Fit 3D Gaussians to posed images.
+
+    Args:
+        views: training views (images ``(3, H, W)`` in [0, 1], cameras, optional masks).
+        config: hyper-parameters and schedule.
+        points, colors: ``(P, 3)`` sparse points (world units) and their uint8 colours for initialisation.
+        device: ``"cpu"`` (torch rasteriser) or ``"cuda"`` (gsplat).
+        checkpoint_dir: where to save/resume the state; ``None`` disables checkpoints.
+        checkpoint_every: save every this many iterations (0: only when stopping or finishing).
+        resume: continue from a checkpoint in ``checkpoint_dir`` if one exists.
+        stop_after: stop (and checkpoint) after this iteration, for interruption tests and time slicing.
+        progress: show a tqdm bar.
+
+    Returns:
+        :class:`FitResult`; ``losses``/``l1`` cover the iterations run in this call.
+    """
+    if not views:
+        raise UsageError("a fit needs at least one training view")
+    if config.iterations < 1:
+        raise UsageError(f"iterations must be ≥ 1, got {config.iterations}", "--iterations")
+    device = torch.device(device)
+    if device.type == "cuda" and not torch.cuda.is_available():
+        raise UsageError("CUDA was requested but is not available", "--device")
+    init = initial_model(views, points, colors, config)
+    trainer = _Trainer(views, init, config, device)
+    names = [v.name for v in views]
+    folder = Path(checkpoint_dir) if checkpoint_dir is not None else None
+    if folder is not None and resume and (folder / STATE_JSON).is_file():
+        trainer.load(folder, names)
+    result = FitResult(model=init, extent=trainer.extent, start_iteration=trainer.iteration + 1)
+    last = config.iterations if stop_after is None else min(config.iterations, stop_after)
+    from tqdm.auto import tqdm
+
+    bar = tqdm(total=config.iterations, initial=trainer.iteration, disable=not progress, desc="fit", unit="it",
+               dynamic_ncols=True, leave=False)
+    try:
+        while trainer.iteration < last:
+            loss, l1, event = trainer.step()
+            result.losses.append(loss)
+            result.l1.append(l1)
+            if event is not None:
+                result.events.append(event)
+            if on_iteration is not None:
+                on_iteration(trainer.iteration, loss)
+            bar.update(1)
+            if trainer.iteration % 10 == 0 or trainer.iteration == last:
+                bar.set_postfix(loss=f"{loss:.4f}", n=len(trainer.params), refresh=False)
+            if folder is not None and checkpoint_every > 0 and trainer.iteration % checkpoint_every == 0:
+                trainer.save(folder, names)
+    finally:
+        bar.close()
+    if folder is not None:
+        trainer.save(folder, names)
+    result.model = trainer.params.model().detach().clone()
+    return result
+
+
+def fit_scene(scene_dir: str | os.PathLike[str], out_ply: str | os.PathLike[str], config: FitConfig, *,
+              frames: Sequence[str] | None = None, device: str | torch.device = "cpu",
+              checkpoint_dir: str | os.PathLike[str] | None = None, checkpoint_every: int = 0, resume: bool = True,
+              progress: bool = True) -> FitResult:
+    """Fit a scene folder's training frames (or ``frames``) and write the standard 3DGS PLY to ``out_ply``.
+
+    The scene is read through the loaders (:func:`setdiff_bench.gaussians.fit_data.load_fit_scene`);
+    its sparse points, when present, initialise the Gaussians.
+    """
+    from setdiff_bench.gaussians.fit_data import load_fit_scene, load_fit_views, select_fit_frames
+    from setdiff_bench.gaussians.ply import write_ply
+
+    scene = load_fit_scene(scene_dir)
+    names = select_fit_frames(scene, frames)
+    views = load_fit_views(scene, names)
+    result = fit_gaussians(views, config, points=scene.points3d, colors=scene.points_rgb, device=device,
+                           checkpoint_dir=checkpoint_dir, checkpoint_every=checkpoint_every, resume=resume,
+                           progress=progress)
+    write_ply(out_ply, result.model)
+    return result
