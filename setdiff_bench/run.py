@@ -61,7 +61,14 @@ from setdiff_bench.io.atomic import atomic_path, sha256_file, write_text_atomic
 from setdiff_bench.io.images import read_rgb, to_tensor_chw, write_png
 from setdiff_bench.metrics.registry import PRESETS, MetricSpec
 from setdiff_bench.run_paths import IMAGES_DIR, image_relative, safe_component
-from setdiff_bench.scoring import quantize, resolve_metrics, score_images, sequence_warp_error, to_uint8_hwc
+from setdiff_bench.scoring import (
+    default_warp_cache,
+    quantize,
+    resolve_metrics,
+    score_images,
+    sequence_warp_error,
+    to_uint8_hwc,
+)
 
 RUN_FORMAT = "setdiff-run/1"
 RUN_FILE = "run.json"
@@ -124,6 +131,9 @@ class RunSettings:
         flow_method: optical flow for warp error (``deepflow`` or ``dis``).
         device: where the enhancer (if it takes ``device``) and the metrics run.
         batch_size: images per metric call (bounds LPIPS memory); does not change results.
+        warp_cache: folder caching the ground truth's flow per sequence (shared by every method; keyed
+            by the ground-truth files' SHA-256 and the flow method); ``"auto"`` = the user cache
+            (:func:`setdiff_bench.scoring.default_warp_cache`), ``None`` = no cache.  Does not change results.
     """
 
     method: str
@@ -134,6 +144,7 @@ class RunSettings:
     flow_method: str = "deepflow"
     device: str = "cpu"
     batch_size: int = 8
+    warp_cache: str | None = "auto"
 
     def identity(self, index_sha256: str) -> dict[str, Any]:
         """The ``run.json`` content: what must not change between a run and its resumption."""
@@ -435,6 +446,13 @@ SEQUENCE_SCHEMA = pa.schema([
 def _sequence_table(store: Any, out: Path, frame: pd.DataFrame, settings: RunSettings) -> pa.Table:
     """Warp error of every (protocol, scene, sensor) sequence with ≥ 2 time-stamped targets."""
     records = []
+    cache = None
+    if settings.warp_cache is not None:
+        cache = default_warp_cache() if settings.warp_cache == "auto" else Path(settings.warp_cache)
+    index = store.index
+    targets = index[index["role"] == "target"]
+    gt_hashes = dict(zip(zip(targets["packet_id"], targets["view"].astype(int)), targets["gt_sha256"])) \
+        if "gt_sha256" in targets.columns else {}
     for (protocol, scene, sensor), rows in frame.groupby(["protocol", "scene", "sensor"], sort=True, dropna=False):
         if rows["timestamp_us"].isna().any():
             if settings.warp == "on":
@@ -444,16 +462,18 @@ def _sequence_table(store: Any, out: Path, frame: pd.DataFrame, settings: RunSet
         rows = rows.sort_values(["timestamp_us", "frame", "packet_id"])
         if len(rows) < 2:
             continue
-        frames, gts, masks = [], [], []
+        frames, gts, masks, hashes = [], [], [], []
         for row in rows.itertuples():
-            size = None
             gt, mask = store.load_ground_truth(row.packet_id, targets=[int(row.view)])
+            digest = gt_hashes.get((row.packet_id, int(row.view)))
+            hashes.append(digest if isinstance(digest, str) else "")
             size = tuple(gt.shape[-2:])
             frames.append(to_tensor_chw(read_rgb(out / row.image, size)))
             gts.append(gt[0])
             masks.append(mask[0])
         value = sequence_warp_error(torch.stack(frames), torch.stack(gts), torch.stack(masks),
-                                    flow_method=settings.flow_method)
+                                    flow_method=settings.flow_method, cache=cache,
+                                    gt_key=",".join(hashes) if all(hashes) else None)
         records.append({"dataset": rows["dataset"].iloc[0], "protocol": protocol, "scene": scene, "sensor": sensor,
                         "method": settings.method, "frames": len(rows), "first_frame": rows["frame"].iloc[0],
                         "last_frame": rows["frame"].iloc[-1], "warp": value})

@@ -13,12 +13,15 @@ sequence of one camera's targets (flow and occlusion from the ground truth, see
 
 from __future__ import annotations
 
+import contextlib
+import hashlib
 from collections.abc import Sequence
+from pathlib import Path
 
 import numpy as np
 import torch
 
-from setdiff_bench.errors import UsageError
+from setdiff_bench.errors import ImageError, UsageError
 from setdiff_bench.metrics.registry import METRICS, PRESETS, MetricSpec
 
 
@@ -79,7 +82,7 @@ def score_images(specs: Sequence[MetricSpec], pred: torch.Tensor, target: torch.
 
 
 def sequence_warp_error(frames: torch.Tensor, ground_truth: torch.Tensor, masks: torch.Tensor | None, *,
-                        flow_method: str = "deepflow") -> float:
+                        flow_method: str = "deepflow", cache: Path | None = None, gt_key: str | None = None) -> float:
     """Warp error of one time-ordered sequence (paper units: MSE on the 0–255 scale).
 
     Args:
@@ -87,9 +90,34 @@ def sequence_warp_error(frames: torch.Tensor, ground_truth: torch.Tensor, masks:
         ground_truth: ``(T, 3, H, W)`` the matching ground truth (flow and occlusion come from it).
         masks: ``(T, 1, H, W)`` evaluation masks or ``None``.
         flow_method: OpenCV optical flow (``deepflow`` default, ``dis`` fast).
+        cache: folder for the ground truth's flow and occlusion (:class:`WarpReference` files), shared by
+            every method scored on the same sequence; ``None`` computes it every time.
+        gt_key: content key of the ground-truth sequence (e.g. the joined SHA-256 of its files);
+            required with ``cache``.
     """
-    from setdiff_bench.metrics.warp import warp_error, warp_reference
+    from setdiff_bench.metrics.warp import WarpReference, warp_error, warp_reference
 
-    reference = warp_reference(ground_truth.float().cpu(), method=flow_method)  # type: ignore[arg-type]
+    reference = None
+    path = None
+    if cache is not None and gt_key:
+        digest = hashlib.sha256(f"{gt_key}|{flow_method}".encode()).hexdigest()
+        path = Path(cache) / f"{digest}.safetensors"
+        if path.is_file():
+            with contextlib.suppress(ImageError):
+                reference = WarpReference.load(path)
+            if reference is not None and tuple(reference.flow.shape) != (frames.shape[0] - 1, 2, *frames.shape[-2:]):
+                reference = None
+    if reference is None:
+        reference = warp_reference(ground_truth.float().cpu(), method=flow_method)  # type: ignore[arg-type]
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            reference.save(path)
     mask = None if masks is None else masks.cpu()
     return float(warp_error(frames.float().cpu(), reference, mask))
+
+
+def default_warp_cache() -> Path:
+    """``$XDG_CACHE_HOME/setdiff_bench/warp`` (next to the converted LPIPS weights)."""
+    from setdiff_bench.metrics.weights import cache_dir
+
+    return cache_dir() / "warp"

@@ -38,6 +38,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--warp", choices=("auto", "on", "off"), default="auto",
                         help="warp error per camera sequence (auto: on for nuScenes)")
     parser.add_argument("--flow", choices=("deepflow", "dis"), default="deepflow", help="optical flow for warp error")
+    parser.add_argument("--warp-cache", default="auto", metavar="DIR",
+                        help="cache of ground-truth flows for warp error, shared by methods (auto: the user cache; "
+                             "none: off)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -65,7 +68,8 @@ def run(args: argparse.Namespace) -> int:
     metrics = tuple(spec.name for spec in resolve_metrics(args.metrics))
     settings = RunSettings(method=args.method, options=options, split=None if args.split == "all" else args.split,
                            metrics=metrics, warp=args.warp, flow_method=args.flow, device=device,
-                           batch_size=args.batch_size)
+                           batch_size=args.batch_size,
+                           warp_cache=None if args.warp_cache == "none" else args.warp_cache)
     out = args.out or Path("results") / "runs" / Path(args.packets).resolve().name / args.method
     result = run_method(args.packets, out, settings, shard=shard, progress=False if args.no_progress else None)
     print(f"{args.method} [{shard}]: enhanced {result.enhanced} packets, {result.skipped} already done → {out}")

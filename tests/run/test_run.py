@@ -286,9 +286,17 @@ def test_warp_error_per_camera_sequence_across_groups(tmp_path: Path) -> None:
     spec = StoreSpec(dataset="nuscenes", protocol="nuscenes", groups=("10-11s", "11-12s"), scenes=("scene-0001",),
                      sensors=("CAM_FRONT", "CAM_BACK"), targets=4, timestamps=True)
     store = build_store(tmp_path / "store", spec)
-    out = tmp_path / "run"
-    run_method(store, out, RunSettings("identity", flow_method="dis"), progress=False)
+    out, cache = tmp_path / "run", tmp_path / "flows"
+    run_method(store, out, RunSettings("identity", flow_method="dis", warp_cache=str(cache)), progress=False)
     sequences = pd.read_parquet(out / "sequences.parquet")
+    cached = {p: p.stat().st_mtime_ns for p in cache.glob("*.safetensors")}
+    assert len(cached) == 2  # one ground-truth flow per camera sequence
+    # another method on the same store reuses the flows; a copy of identity's images scores the same
+    run_method(store, tmp_path / "pre", RunSettings("precomputed", {"source": str(out)}, flow_method="dis",
+                                                    warp_cache=str(cache)), progress=False)
+    assert {p: p.stat().st_mtime_ns for p in cache.glob("*.safetensors")} == cached
+    again = pd.read_parquet(tmp_path / "pre" / "sequences.parquet")
+    assert again["warp"].tolist() == sequences["warp"].tolist()
     assert list(sequences["sensor"]) == ["CAM_BACK", "CAM_FRONT"] and list(sequences["frames"]) == [4, 4]
     assert list(sequences["first_frame"]) == ["CAM_BACK/000001.jpg", "CAM_FRONT/000000.jpg"]
     assert list(sequences["last_frame"]) == ["CAM_BACK/000007.jpg", "CAM_FRONT/000006.jpg"]
