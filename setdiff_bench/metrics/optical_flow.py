@@ -7,11 +7,13 @@ under camera zoom/rotation/translation plus a 64×96 photographed object moving 
 cases, end-point error over pixels visible in both frames), on the 2-core development machine while
 other jobs ran (``benchmarks/metrics.py`` re-measures it into ``benchmarks/results/metrics.json``):
 
-- DIS, preset MEDIUM: mean EPE 0.22 px (camera motion alone 0.16 px), 0.01–0.03 s per flow;
-- DeepFlow: mean EPE **0.10 px** (camera motion alone 0.06 px), 0.4–0.8 s per flow.
+- DIS, preset MEDIUM: mean EPE 0.235 px (camera motion alone 0.16 px), 0.01–0.04 s per flow;
+- DeepFlow: mean EPE **0.104 px** (camera motion alone 0.06 px), 0.4–1.1 s per flow.
 
-DeepFlow is about twice as accurate and is the default (about 4 s per flow at 576×1024 on one core, so
-a warp reference costs ~8 s per frame pair, computed once per ground-truth sequence).  DIS stays
+DeepFlow is about twice as accurate and is the default.  A warp reference (forward + backward flow and
+the occlusion test) costs 8–13 s per frame pair at 576×1024 with DeepFlow and ~1 s with DIS on the
+contended 2-core machine; it is computed once per ground-truth sequence (and can be saved with
+:meth:`~setdiff_bench.metrics.warp.WarpReference.save`).  DIS stays
 available as ``method="dis"`` for long sequences where time matters more.  Known limitation: on small,
 low-contrast objects moving several pixels DeepFlow can miss the motion (it returned ~0 for a 32×32
 blurred-noise patch moving 6 px, where DIS was right); forward and backward flows then agree, the
