@@ -249,22 +249,33 @@ def _open_store(packets: Any) -> Any:
 
 
 def _claim_folder(out: Path, identity: dict[str, Any]) -> None:
-    """Create ``out`` with ``run.json``, or check that the run already there has the same settings."""
+    """Create ``out`` with ``run.json``, or check that the run already there has the same settings.
+
+    Runs under the folder's lock, so shards started together into a new folder agree on one ``run.json``.
+    """
+    if out.exists() and not (out / RUN_FILE).is_file() and _has_visible_files(out):
+        raise UsageError("output folder is not empty and holds no run.json; choose another --out", out)
+    out.mkdir(parents=True, exist_ok=True)
     run_file = out / RUN_FILE
-    if run_file.is_file():
+    with _locked(out):
+        if not run_file.is_file():
+            if _has_visible_files(out):
+                raise UsageError("output folder is not empty and holds no run.json; choose another --out", out)
+            write_text_atomic(run_file, json.dumps(identity, indent=2, sort_keys=True) + "\n")
+            return
         try:
             existing = json.loads(run_file.read_text())
         except (OSError, json.JSONDecodeError) as error:
             raise UsageError(f"unreadable run settings ({error})", run_file) from None
-        if existing != identity:
-            changed = sorted(k for k in set(existing) | set(identity) if existing.get(k) != identity.get(k))
-            raise UsageError(f"this folder holds a run with other settings ({', '.join(changed)} differ); "
-                             "resume with the same command or choose another --out", out)
-        return
-    if out.exists() and any(out.iterdir()):
-        raise UsageError("output folder is not empty and holds no run.json; choose another --out", out)
-    out.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(run_file, json.dumps(identity, indent=2, sort_keys=True) + "\n")
+    if existing != identity:
+        changed = sorted(k for k in set(existing) | set(identity) if existing.get(k) != identity.get(k))
+        raise UsageError(f"this folder holds a run with other settings ({', '.join(changed)} differ); "
+                         "resume with the same command or choose another --out", out)
+
+
+def _has_visible_files(folder: Path) -> bool:
+    """Anything but hidden entries (the lock file, temporary files of killed writes)."""
+    return any(not entry.name.startswith(".") for entry in folder.iterdir())
 
 
 def _record_enhancer(out: Path, enhancer: Enhancer) -> None:

@@ -220,6 +220,17 @@ def test_two_shards_merge_to_the_single_run(store: Path, identity_run: Path, tmp
     same_results(identity_run, out)
 
 
+def test_concurrent_shard_processes_into_one_new_folder(store: Path, identity_run: Path, tmp_path: Path) -> None:
+    out = tmp_path / "parallel"
+    processes = [subprocess.Popen([sys.executable, "-m", "setdiff_bench", "run", "--method", "identity", "--packets",
+                                   str(store), "--out", str(out), "--shard", f"{i}/2", "--device", "cpu",
+                                   "--no-progress"], cwd=Path(__file__).parents[2], stdout=subprocess.PIPE,
+                                  stderr=subprocess.PIPE, text=True) for i in range(2)]
+    results = [process.communicate(timeout=120) for process in processes]
+    assert [process.returncode for process in processes] == [0, 0], results
+    same_results(identity_run, out)
+
+
 def test_second_run_does_nothing(store: Path, identity_run: Path) -> None:
     before = {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in (identity_run / "metrics.parquet",
                                                                    identity_run / "manifest.json")}
