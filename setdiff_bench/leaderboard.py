@@ -398,12 +398,12 @@ def to_frame(board: Leaderboard) -> pd.DataFrame:
                 cell = (block.key, metric)
                 if cell not in row.values:
                     continue
-                records.append({"dataset": board.dataset, "rank_row": index, "source": row.source,
+                records.append({"dataset": board.dataset, "row_order": index, "source": row.source,
                                 "section": row.section, "method": row.method, "label": row.label,
                                 "block": block.key, "block_label": block.label, "metric": metric,
                                 "value": row.values[cell], "decimals": row.decimals.get(cell, metric_decimals(metric)),
                                 "count": row.counts.get(cell), "best": index in board.best.get(cell, set())})
-    return pd.DataFrame.from_records(records, columns=["dataset", "rank_row", "source", "section", "method", "label",
+    return pd.DataFrame.from_records(records, columns=["dataset", "row_order", "source", "section", "method", "label",
                                                        "block", "block_label", "metric", "value", "decimals",
                                                        "count", "best"])
 

@@ -27,7 +27,9 @@ byte in ``images/`` and in every other column (compare with :func:`comparable_me
 
 Warp error (``warp``: ``auto`` = on for the protocols in :data:`SEQUENCE_PROTOCOLS`) is computed at
 merge time per (protocol, scene, sensor) sequence of targets sorted by timestamp, across groups (a
-camera's 10–15 s targets form one sequence), from the written 8-bit images and the ground truth.
+camera's 10–15 s targets form one sequence), from the written 8-bit images and the ground truth.  The
+ground truth's flow and occlusion mask are cached (``warp_cache``, keyed by the ground-truth files'
+SHA-256), so scoring a second method on the same store does not recompute optical flow.
 """
 
 from __future__ import annotations

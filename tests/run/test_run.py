@@ -31,6 +31,7 @@ from tests.enhancers.plugin_fixtures import install_plugin
 from tests.metrics.lpips_numpy import lpips_numpy
 from tests.run.store_fixtures import StoreSpec, build_store, files_of
 
+ONE_THREAD = {**os.environ, "OMP_NUM_THREADS": "1"}  # subprocesses: tiny images, busy machine
 COLUMNS = ["dataset", "protocol", "group", "split", "scene", "frame", "sensor", "timestamp_us", "packet_id", "view",
            "method", "psnr", "ssim", "lpips", "ms_per_frame", "image", "image_sha256"]
 
@@ -196,7 +197,8 @@ def test_sigkilled_run_resumes_to_identical_outputs(store: Path, identity_run: P
         "        time.sleep(0.4)\n"
         "        return super().enhance(packet)\n"
         "run_method(sys.argv[1], sys.argv[2], RunSettings('identity'), enhancer=Slow(), progress=False)\n")
-    process = subprocess.Popen([sys.executable, "-c", script, str(store), str(out)], cwd=Path(__file__).parents[2])
+    process = subprocess.Popen([sys.executable, "-c", script, str(store), str(out)], cwd=Path(__file__).parents[2],
+                               env=ONE_THREAD)
     deadline = time.monotonic() + 60
     while not fragments(out) and time.monotonic() < deadline and process.poll() is None:
         time.sleep(0.02)
@@ -224,7 +226,7 @@ def test_concurrent_shard_processes_into_one_new_folder(store: Path, identity_ru
     out = tmp_path / "parallel"
     processes = [subprocess.Popen([sys.executable, "-m", "setdiff_bench", "run", "--method", "identity", "--packets",
                                    str(store), "--out", str(out), "--shard", f"{i}/2", "--device", "cpu",
-                                   "--no-progress"], cwd=Path(__file__).parents[2], stdout=subprocess.PIPE,
+                                   "--no-progress"], cwd=Path(__file__).parents[2], env=ONE_THREAD, stdout=subprocess.PIPE,
                                   stderr=subprocess.PIPE, text=True) for i in range(2)]
     results = [process.communicate(timeout=120) for process in processes]
     assert [process.returncode for process in processes] == [0, 0], results
