@@ -532,7 +532,8 @@ def _manifest(store: Any, out: Path, settings: RunSettings, specs: Sequence[Metr
                    "ms_per_frame_mean": float(per_frame.mean()) if len(per_frame) else None,
                    "ms_per_frame_median": float(np.median(per_frame)) if len(per_frame) else None,
                    "ms_per_frame_max": float(per_frame.max()) if len(per_frame) else None,
-                   "note": "enhancer wall time only (no I/O, no scoring); timing differs between runs"},
+                   "note": "enhancer wall time only (no I/O, no scoring); the first packet of each call includes "
+                           "one-off warm-up (the median is robust to it); timing differs between runs"},
         "fragments_sha256": fragments_sha256,
         "outputs": {"metrics": METRICS_FILE, "sequences": SEQUENCES_FILE if sequences is not None else None,
                     "images": f"{IMAGES_DIR}/<protocol>/<group>/<scene>/<frame stem>.png"},
