@@ -81,16 +81,25 @@ def stage_times(model: SetDiffModel, batch: SetBatch, guidance: float, *, cuda: 
     targets = targets.to(images.device)
     frames = sets * (views - refs)
     with torch.no_grad():
+        torch.compiler.cudagraph_mark_step_begin()
         encoded = model.encode(images, targets)
-        x0 = model.predict_x0(encoded.latents, geometry, views, guidance_scale=guidance)
+        # clones: outputs of CUDA-graph replays are overwritten by the next replay of the same graph
+        latents = encoded.latents.clone()
+        skips = None if encoded.skips is None else tuple(s.clone() for s in encoded.skips)
+        x0 = model.predict_x0(latents, geometry, views, guidance_scale=guidance)[targets].clone()
         stages: dict[str, Callable[[], Any]] = {
             "encode": lambda: model.encode(images, targets),
-            "unet": lambda: model.predict_x0(encoded.latents, geometry, views, guidance_scale=guidance),
-            "decode": lambda: model.decode(x0[targets], encoded.skips),
+            "unet": lambda: model.predict_x0(latents, geometry, views, guidance_scale=guidance),
+            "decode": lambda: model.decode(x0, skips),
             "total": lambda: model.enhance(batch, guidance_scale=guidance),
         }
         result: dict[str, Any] = {}
-        for name, fn in stages.items():
+        for name, stage in stages.items():
+
+            def fn(stage: Callable[[], Any] = stage) -> Any:
+                torch.compiler.cudagraph_mark_step_begin()  # a new step for CUDA graph trees; no-op otherwise
+                return stage()
+
             timing = time_call(fn, repeats=repeats, warmup=warmup, cuda=cuda)
             result[f"{name}_ms"] = timing["median_ms"]
             result[f"{name}_ms_per_frame"] = timing["median_ms"] / frames
