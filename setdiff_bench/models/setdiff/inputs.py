@@ -15,7 +15,7 @@ import numpy as np
 import torch
 
 from setdiff_bench.errors import PacketError
-from setdiff_bench.geometry import max_pairwise_distance, overlap_score_matrix
+from setdiff_bench.geometry import max_pairwise_distance, normalize_packet, overlap_score_matrix
 from setdiff_bench.models.setdiff.geometry_encoder import geometry_input
 from setdiff_bench.types import Packet, TrainingSample, ViewSet
 
@@ -169,6 +169,10 @@ def training_set(sample: TrainingSample, rng: random.Random, *, min_views: int, 
                  use_geometry: bool, cmap_clip: float, pairs: bool = False) -> TrainingSet:
     """Draw the views of one training step from ``sample`` and build the tensors.
 
+    A sample with more than ``max_views`` views is subset (:func:`choose_views`); a smaller one (e.g.
+    already drawn by the packet store) keeps all its views.  Either way references and targets are
+    randomly permuted, and with geometry the set is re-normalised into its first target's frame.
+
     Args:
         pairs: DiFix mode: one random target and its best reference by Eq. 2 (the training data may
             be permuted, so the packet's first reference need not be the best one).
@@ -180,15 +184,31 @@ def training_set(sample: TrainingSample, rng: random.Random, *, min_views: int, 
         target = rng.randrange(num_targets)
         reference_ids = [best_reference_per_target(packet)[target]] if num_refs else []
         target_ids = [target]
-    else:
+    elif num_refs + num_targets > max_views:
         reference_ids, target_ids = choose_views(num_refs, num_targets, rng, min_views=min_views, max_views=max_views)
+    else:  # already a set of the wanted size (e.g. drawn by the packet store): only permute
+        reference_ids, target_ids = rng.sample(range(num_refs), num_refs), rng.sample(range(num_targets), num_targets)
     subset = replace(packet, references=_subset(packet.references, reference_ids),
                      targets=_subset(packet.targets, target_ids))
+    if use_geometry:
+        subset = renormalize(subset)
     images, geometry, n = view_tensors(subset, use_geometry=use_geometry, cmap_clip=cmap_clip)
     batch = SetBatch(images[None], None if geometry is None else geometry[None], n)
     gt = sample.target_gt[target_ids].float()[None]
     masks = sample.target_masks[target_ids].bool()[None]
     return TrainingSet(batch=batch, target_gt=gt, target_masks=masks)
+
+
+def renormalize(packet: Packet) -> Packet:
+    """Move a (sub)set into its first target's frame with unit camera extent — the packet invariant
+    (paper supplement "3D Priors") that inference inputs satisfy; C-maps follow the same map."""
+    refs, targets = packet.references, packet.targets
+    moved = normalize_packet((*refs.cameras, *targets.cameras), torch.cat([refs.cmaps, targets.cmaps]), len(refs),
+                             alphas=torch.cat([refs.alphas, targets.alphas]))
+    n = len(refs)
+    return replace(packet, scale=packet.scale * moved.scale,
+                   references=replace(refs, cmaps=moved.cmaps[:n], cameras=moved.cameras[:n]),
+                   targets=replace(targets, cmaps=moved.cmaps[n:], cameras=moved.cameras[n:]))
 
 
 def _subset(views: ViewSet, indices: Sequence[int]) -> ViewSet:

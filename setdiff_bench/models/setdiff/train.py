@@ -105,6 +105,8 @@ class SampleStream:
         per_epoch = len(self._epoch_indices(0))
         epoch, offset = divmod(self.position, per_epoch)
         while True:
+            if hasattr(self.dataset, "set_epoch"):  # e.g. the packet store's dataset: new draws per epoch
+                self.dataset.set_epoch(epoch)
             indices = self._epoch_indices(epoch)[offset:]
             if self.num_workers > 0:
                 loader = torch.utils.data.DataLoader(self.dataset, batch_size=None, sampler=indices,  # type: ignore[arg-type]
