@@ -82,7 +82,8 @@ class PrepareSummary:
     split_counts: dict[str, int] = field(default_factory=dict)
 
     def line(self) -> str:
-        return (f"{self.planned} packet(s) planned in {self.scenes} scene(s): {self.written} written "
+        fits = f"{self.fits_trained} fit(s) trained, " if self.fits_trained else ""
+        return (f"{fits}{self.planned} packet(s) planned in {self.scenes} scene(s): {self.written} written "
                 f"({self.views_written} views), {self.skipped} already complete, {self.removed} outdated removed; "
                 f"index {'updated' if self.index_written else 'unchanged'}; {self.wall_s:.1f} s")
 
@@ -294,6 +295,23 @@ def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[s
         UsageError / ProtocolError / DatasetError: bad arguments, a protocol that does not fit the
             dataset, missing fits or data.
     """
+    if threads < 1:
+        raise UsageError(f"threads must be >= 1, got {threads}", "--threads")
+    previous_threads = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        return _prepare(dataset, root, out, protocol=protocol, fits=fits, fit=fit, split=split, scenes=scenes,
+                        workers=workers, shard=shard, backend=backend, device=device, loader_options=loader_options,
+                        fit_iterations=fit_iterations, threads=threads, progress=progress)
+    finally:
+        torch.set_num_threads(previous_threads)
+
+
+def _prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[str], *,
+             protocol: str | os.PathLike[str] | None, fits: str | os.PathLike[str] | None, fit: bool, split: str,
+             scenes: Sequence[str] | None, workers: int, shard: tuple[int, int], backend: str, device: str,
+             loader_options: Mapping[str, Any] | None, fit_iterations: int, threads: int,
+             progress: bool) -> PrepareSummary:
     from setdiff_bench.loaders import list_scenes, load_scenes
     from setdiff_bench.loaders.common import select_scenes
 
@@ -305,8 +323,6 @@ def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[s
         raise UsageError(f"split must be one of {', '.join(SPLIT_CHOICES)}, got {split!r}", "--split")
     if workers < 1:
         raise UsageError(f"workers must be >= 1, got {workers}", "--workers")
-    if threads < 1:
-        raise UsageError(f"threads must be >= 1, got {threads}", "--threads")
     shard_index, shard_count = shard
     backend, device = resolve_backend(backend, device)
     out = Path(out)
@@ -389,15 +405,10 @@ def _execute(jobs: Sequence[PacketJob], root: Path, backend: str, device: str, w
                dynamic_ncols=True)
     try:
         if workers == 1 or len(jobs) <= 1:
-            previous = torch.get_num_threads()
-            torch.set_num_threads(threads)
-            try:
-                for job in jobs:
-                    stats = build_packet(job, root, backend, device)
-                    bar.update(1)
-                    yield stats
-            finally:
-                torch.set_num_threads(previous)
+            for job in jobs:
+                stats = build_packet(job, root, backend, device)
+                bar.update(1)
+                yield stats
             return
         context = multiprocessing.get_context("spawn")
         with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=context,

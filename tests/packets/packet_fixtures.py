@@ -147,7 +147,8 @@ def write_scene(folder: Path, seed: int, *, fit_in_scene: bool = True) -> Street
             mask[8:20, 10:30] = 0
         (folder / "dynamic_masks").mkdir(parents=True, exist_ok=True)
         assert cv2.imwrite(str(folder / "dynamic_masks" / name), mask)
-    write_colmap(folder / "sparse" / "0", cameras)
+    picked = rng.choice(len(truth), size=400, replace=False)
+    write_colmap(folder / "sparse" / "0", cameras, truth.means[picked].double().numpy())
     train = sorted(e["name"] for e in entries if e["split"] == "train")
     test = sorted(e["name"] for e in entries if e["split"] == "test")
     (folder / "train_set.txt").write_text("\n".join(train) + "\n")
@@ -167,8 +168,8 @@ def write_scene(folder: Path, seed: int, *, fit_in_scene: bool = True) -> Street
     return StreetScene(folder, truth, fit, cameras, train, test)
 
 
-def write_colmap(folder: Path, cameras: dict[str, Camera]) -> None:
-    """A binary COLMAP model (one shared PINHOLE camera) through pycolmap."""
+def write_colmap(folder: Path, cameras: dict[str, Camera], points: np.ndarray) -> None:
+    """A binary COLMAP model (one shared PINHOLE camera, ``points`` as grey 3D points) through pycolmap."""
     rec = pycolmap.Reconstruction()
     K = next(iter(cameras.values())).K
     rec.add_camera_with_trivial_rig(pycolmap.Camera(model="PINHOLE", width=WIDTH, height=HEIGHT,
@@ -177,6 +178,8 @@ def write_colmap(folder: Path, cameras: dict[str, Camera]) -> None:
         quat = Rotation.from_matrix(camera.R).as_quat()  # x, y, z, w
         rec.add_image_with_trivial_frame(pycolmap.Image(name=name, camera_id=1, image_id=image_id),
                                          pycolmap.Rigid3d(pycolmap.Rotation3d(quat), camera.t))
+    for xyz in points:
+        rec.add_point3D(np.asarray(xyz, np.float64), pycolmap.Track(), np.array([128, 128, 128], np.uint8))
     folder.mkdir(parents=True, exist_ok=True)
     rec.write_binary(str(folder))
 
