@@ -401,8 +401,8 @@ def _execute(jobs: Sequence[PacketJob], root: Path, backend: str, device: str, w
              progress: bool) -> Iterable[JobStats]:
     from tqdm.auto import tqdm
 
-    bar = tqdm(total=len(jobs), desc="prepare", unit="packet", disable=not progress or not jobs,
-               dynamic_ncols=True)
+    bar = tqdm(total=len(jobs), desc="prepare", unit="packet", disable=True if not progress or not jobs else None,
+               dynamic_ncols=True)  # None: tqdm hides itself when stderr is not a terminal
     try:
         if workers == 1 or len(jobs) <= 1:
             for job in jobs:
@@ -417,12 +417,16 @@ def _execute(jobs: Sequence[PacketJob], root: Path, backend: str, device: str, w
             futures = [pool.submit(_build_many, jobs[i:i + chunk], root, backend, device)
                        for i in range(0, len(jobs), chunk)]
             pending = set(futures)
-            while pending:
-                done, pending = wait(pending, return_when=FIRST_EXCEPTION)
-                for future in done:
-                    for stats in future.result():  # re-raises a worker's error here
-                        bar.update(1)
-                        yield stats
+            try:
+                while pending:
+                    done, pending = wait(pending, return_when=FIRST_EXCEPTION)
+                    for future in done:
+                        for stats in future.result():  # re-raises a worker's error here
+                            bar.update(1)
+                            yield stats
+            except BaseException:
+                pool.shutdown(wait=True, cancel_futures=True)  # finish running batches, drop queued ones
+                raise
     finally:
         bar.close()
 

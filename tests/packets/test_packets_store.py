@@ -130,6 +130,14 @@ def test_cli_errors_are_one_line(street, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert code == 2 and "missing" in err and len(err.splitlines()) == 1
 
+    bad = tmp_path / "bad_fits" / "street_00" / "lane0.ply"
+    bad.parent.mkdir(parents=True)
+    bad.write_bytes(b"ply\nformat ascii 1.0\nelement vertex 1\nend_header\n")
+    code = main(["prepare", "synthetic", "--root", str(root), "--fits", str(tmp_path / "bad_fits"),
+                 "--scene", "street_00", "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and str(bad) in err and len(err.splitlines()) == 1
+
     with pytest.raises(SystemExit) as exit_info:
         main(["prepare", "synthetic", "--root", str(root), "--fits", str(root), "--fit", "--out", str(tmp_path)])
     assert exit_info.value.code == 2
