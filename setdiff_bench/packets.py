@@ -4,12 +4,15 @@ Layout and index columns: :mod:`setdiff_bench.packet_index`.  Files per view:
 
 * ``*_rgb.png`` — 8-bit RGB: the clean capture (references) or the 3DGS render (targets), at the
   protocol's working resolution;
-* ``*_cmap.exr`` — 4 channels ``X, Y, Z, A`` through OpenImageIO, **float32**: X, Y, Z is the
-  Eq. 1 C-map (alpha-weighted, not divided) in the packet's normalised frame, A the render's
-  accumulated alpha (needed to divide or to re-transform an Eq. 1 map).  float32, not half: the
-  maps carry geometry, and half's 11-bit significand loses 1/2048 of a coordinate's magnitude —
-  0.02 packet units for background points 50 units away, already a visible fraction of the unit
-  camera spread — so reprojection tests and geometric conditioning would see quantisation error;
+* ``*_cmap.exr`` — 4 channels ``X, Y, Z, A`` through OpenImageIO, **float32** by default: X, Y, Z
+  is the Eq. 1 C-map (alpha-weighted, not divided) in the packet's normalised frame, A the render's
+  accumulated alpha (needed to divide or to re-transform an Eq. 1 map).  Why float32: the maps carry
+  geometry, and half's 11-bit significand is off by up to 2⁻¹¹ of a coordinate's magnitude — a
+  ~5e-4 rad direction error, about 0.4 px once a point is reprojected into another 576×1024 view —
+  so reprojection (warp metrics, reprojection baselines, the frame tests) would see quantisation
+  error.  The price is size: ZIP-compressed float32 maps are ~3.5× larger than half (measured,
+  benchmarks/results/prepare.json); ``prepare(cmap_precision="half")`` stores half where disk is
+  the constraint (the model's conditioning does not need more);
 * ``tgt_*_gt.png`` — 8-bit ground truth (the capture), ``tgt_*_mask.png`` — 8-bit, 255 = evaluate
   (all 255 when the protocol uses no masks).
 
@@ -98,6 +101,7 @@ class PacketHeader:
     fit_key: str
     scale: float
     recipe: str
+    cmap_half: bool = False
 
 
 def packet_dir(root: Path, packet_id: str) -> Path:
@@ -145,7 +149,8 @@ def _write_view(root: Path, folder: Path, header: PacketHeader, role: str, posit
     write_png(folder / f"{stem}_rgb.png", view.image, atomic=False)
     files["image"] = f"{stem}_rgb.png"
     cmap = np.concatenate([view.cmap, view.alpha[:, :, None]], axis=2).astype(np.float32)
-    write_exr(folder / f"{stem}_cmap.exr", cmap, CMAP_CHANNELS, attributes=EXR_ATTRIBUTES, atomic=False)
+    write_exr(folder / f"{stem}_cmap.exr", cmap, CMAP_CHANNELS, half=header.cmap_half, attributes=EXR_ATTRIBUTES,
+              atomic=False)
     files["cmap"] = f"{stem}_cmap.exr"
     if role == "target":
         if view.gt is None or view.mask is None:

@@ -225,7 +225,7 @@ def build_packet(job: PacketJob, root: Path, backend: str, device: str) -> JobSt
     read = time.perf_counter()
     header = PacketHeader(packet_id=job.packet_id, dataset=job.dataset, protocol=job.protocol, group=job.group,
                           split=job.split, scene=job.scene, fit_key=job.fit_key, scale=normalised.scale,
-                          recipe=job.recipe)
+                          recipe=job.recipe, cmap_half=job.cmap_half)
     n = len(job.references)
     write_packet(root, header, contents[:n], contents[n:])
     done = time.perf_counter()
@@ -271,7 +271,7 @@ def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[s
             fit: bool = False, split: str = "all", scenes: Sequence[str] | None = None,
             workers: int = 1, shard: tuple[int, int] = (0, 1), backend: str = "auto", device: str = "auto",
             loader_options: Mapping[str, Any] | None = None, fit_iterations: int = 30_000, threads: int = 1,
-            progress: bool = True) -> PrepareSummary:
+            cmap_precision: str = "float32", progress: bool = True) -> PrepareSummary:
     """Prepare the packets of ``dataset`` under ``protocol`` into the store ``out`` (module docstring).
 
     Args:
@@ -289,6 +289,7 @@ def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[s
         backend, device: renderer (``auto``/``torch``/``gsplat``) and torch device (``auto``/``cpu``/``cuda``).
         loader_options: override the protocol's ``[loader]`` options.
         fit_iterations: 3DGS iterations with ``fit``.
+        cmap_precision: ``"float32"`` (default) or ``"half"`` C-map EXRs (see :mod:`setdiff_bench.packets`).
         progress: show tqdm bars.
 
     Raises:
@@ -297,12 +298,15 @@ def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[s
     """
     if threads < 1:
         raise UsageError(f"threads must be >= 1, got {threads}", "--threads")
+    if cmap_precision not in ("float32", "half"):
+        raise UsageError(f"cmap precision must be float32 or half, got {cmap_precision!r}", "--cmap-precision")
     previous_threads = torch.get_num_threads()
     torch.set_num_threads(threads)
     try:
         return _prepare(dataset, root, out, protocol=protocol, fits=fits, fit=fit, split=split, scenes=scenes,
                         workers=workers, shard=shard, backend=backend, device=device, loader_options=loader_options,
-                        fit_iterations=fit_iterations, threads=threads, progress=progress)
+                        fit_iterations=fit_iterations, threads=threads, cmap_half=cmap_precision == "half",
+                        progress=progress)
     finally:
         torch.set_num_threads(previous_threads)
 
@@ -310,7 +314,7 @@ def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[s
 def _prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[str], *,
              protocol: str | os.PathLike[str] | None, fits: str | os.PathLike[str] | None, fit: bool, split: str,
              scenes: Sequence[str] | None, workers: int, shard: tuple[int, int], backend: str, device: str,
-             loader_options: Mapping[str, Any] | None, fit_iterations: int, threads: int,
+             loader_options: Mapping[str, Any] | None, fit_iterations: int, threads: int, cmap_half: bool,
              progress: bool) -> PrepareSummary:
     from setdiff_bench.loaders import list_scenes, load_scenes
     from setdiff_bench.loaders.common import select_scenes
@@ -352,7 +356,7 @@ def _prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[
         if source.fit:
             source.ensure(scene, fit_key, groups[0].select(scene).fit)
         plans = plan_scene(replace(spec, groups=tuple(groups)), scene, assignment[scene_name], source,
-                           backend=backend)
+                           backend=backend, cmap_half=cmap_half)
         summary.removed += _remove_outdated(out, spec, plans)
         jobs += [job for plan in plans for job in plan.jobs]
     summary.fits_trained = source.trained

@@ -97,6 +97,7 @@ class PacketJob:
     resolution: tuple[int, int]
     cmap_bound: float | None
     cmap_center: tuple[float, float, float]
+    cmap_half: bool = False
     recipe: str = ""
 
 
@@ -183,7 +184,7 @@ def applicable_groups(protocol: Protocol, scene: Scene) -> list[GroupSpec]:
 
 
 def plan_scene(protocol: Protocol, scene: Scene, split: str, fit_path_for: Any, *,
-               backend: str = "torch") -> list[GroupPlan]:
+               backend: str = "torch", cmap_half: bool = False) -> list[GroupPlan]:
     """Plan every packet of ``scene`` under ``protocol``.
 
     Args:
@@ -192,6 +193,7 @@ def plan_scene(protocol: Protocol, scene: Scene, split: str, fit_path_for: Any, 
         split: the scene's split (``"train"``/``"test"``), picking packet sizes.
         fit_path_for: ``callable(scene_name, fit_key) -> (Path, sha256)`` of the fit PLY.
         backend: render backend name (part of the recipe).
+        cmap_half: store C-maps as half floats (part of the recipe).
 
     Raises:
         ProtocolError: no group applies to the scene, or a group selects no fit frames / targets, or
@@ -211,13 +213,13 @@ def plan_scene(protocol: Protocol, scene: Scene, split: str, fit_path_for: Any, 
     plans = []
     for group in groups:
         plans.append(_plan_group(protocol, scene, split, group, resolution, d_max, bound, center, fit_path_for,
-                                 backend))
+                                 backend, cmap_half))
     return plans
 
 
 def _plan_group(protocol: Protocol, scene: Scene, split: str, group: GroupSpec, resolution: tuple[int, int],
                 d_max: float, bound: float | None, center: tuple[float, float, float], fit_path_for: Any,
-                backend: str) -> GroupPlan:
+                backend: str, cmap_half: bool) -> GroupPlan:
     frames = group.select(scene)
     where = f"protocol {protocol.name!r} group {group.name!r} ({group.rule}) in scene {scene.name!r}"
     if not frames.fit:
@@ -248,7 +250,7 @@ def _plan_group(protocol: Protocol, scene: Scene, split: str, group: GroupSpec, 
             references=tuple(view_job(protocol, frames.fit[i], resolution, target=False,
                                       score=float(aggregated[i])) for i in chosen),
             targets=tuple(view_job(protocol, f, resolution, target=True) for f in targets),
-            resolution=resolution, cmap_bound=bound, cmap_center=center)
+            resolution=resolution, cmap_bound=bound, cmap_center=center, cmap_half=cmap_half)
         jobs.append(_with_recipe(job, protocol, fit_sha, backend))
     return GroupPlan(scene=scene.name, group=group.name, fit_key=group.fit_key, fit_frames=frames.fit,
                      jobs=tuple(jobs))
@@ -268,6 +270,7 @@ def _with_recipe(job: PacketJob, protocol: Protocol, fit_sha: str, backend: str)
                "fit_key": job.fit_key, "fit_sha256": fit_sha, "resolution": list(job.resolution),
                "resize": protocol.images.resize, "masks": protocol.images.masks,
                "cmap_bound": job.cmap_bound, "cmap_center": list(job.cmap_center), "backend": backend,
+               "cmap_precision": "half" if job.cmap_half else "float32",
                "references": [view(v) for v in job.references], "targets": [view(v) for v in job.targets]}
     digest = hashlib.sha256(json.dumps(content, sort_keys=True, separators=(",", ":")).encode("utf-8")).hexdigest()
     return replace(job, recipe=digest)

@@ -44,6 +44,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--loader-option", action="append", default=[], metavar="KEY=VALUE",
                         help="override a loader option of the protocol (value parsed as JSON when it parses, "
                              "e.g. level=1, version=\"v1.0-mini\")")
+    parser.add_argument("--cmap-precision", choices=("float32", "half"), default="float32",
+                        help="C-map EXR precision (float32: exact geometry; half: ~3.5x smaller files)")
     parser.add_argument("--fit-iterations", type=int, default=30_000, help="3DGS iterations with --fit")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
@@ -69,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
 
     summary = prepare(args.dataset, args.root, args.out, protocol=args.protocol, fits=args.fits, fit=args.fit,
                       split=args.split, scenes=args.scenes, workers=args.workers, shard=parse_shard(args.shard),
-                      backend=args.backend, device=args.device, threads=args.threads,
+                      backend=args.backend, device=args.device, threads=args.threads, cmap_precision=args.cmap_precision,
                       loader_options=parse_loader_options(args.loader_option), fit_iterations=args.fit_iterations,
                       progress=not args.quiet)
     print(summary.line())

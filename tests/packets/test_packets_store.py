@@ -141,3 +141,21 @@ def test_cli_errors_are_one_line(street, tmp_path, capsys):
     with pytest.raises(SystemExit) as exit_info:
         main(["prepare", "synthetic", "--root", str(root), "--fits", str(root), "--fit", "--out", str(tmp_path)])
     assert exit_info.value.code == 2
+
+
+def test_half_precision_cmaps_are_smaller_and_close(prepared, street, tmp_path):
+    from setdiff_bench.prepare import prepare
+
+    root, _ = street
+    _, _, full = prepared
+    out = tmp_path / "half"
+    prepare("synthetic", root, out, fits=root, scenes=["street_02"], cmap_precision="half", progress=False)
+    half = PacketStore(out)
+    pid = half.packet_ids()[0]
+    handle = oiio.ImageInput.open(str(out / half.rows(pid)["cmap"].iloc[0]))
+    assert handle.spec().format == oiio.HALF
+    handle.close()
+    a, b = half.load_packet(pid), full.load_packet(pid)
+    np.testing.assert_allclose(a.targets.cmaps, b.targets.cmaps, rtol=2 ** -10, atol=1e-6)
+    assert half.rows(pid)["recipe"].iloc[0] != full.rows(pid)["recipe"].iloc[0]  # switching precision rewrites
+    assert (out / half.rows(pid)["cmap"].iloc[0]).stat().st_size < (full.root / full.rows(pid)["cmap"].iloc[0]).stat().st_size
