@@ -51,6 +51,11 @@ class FitConfig:
     ``iterations``), ``lr_sh_dc``, ``lr_sh_rest`` (= dc / 20), ``lr_opacity`` (0.05, the original 3DGS
     release and gsplat's default; later Inria versions use 0.025), ``lr_scales``, ``lr_quats``.
     Density control: see :mod:`setdiff_bench.gaussians.densify`; iterations are 1-based as in Inria.
+
+    ``background_points`` (0 = off, the Inria behaviour) adds that many points on a sphere of
+    ``background_radius`` × extent around the cameras, coloured from the training images: SfM leaves
+    the sky empty, and a short fit cannot grow Gaussians that far out (street-scene 3DGS methods add a
+    similar sky/background initialisation).
     """
 
     iterations: int = 30_000
@@ -76,6 +81,8 @@ class FitConfig:
     max_world_fraction: float = 0.1
     initial_opacity: float = 0.1
     random_init_points: int = 100_000
+    background_points: int = 0
+    background_radius: float = 30.0
     max_gaussians: int | None = None
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)
     tile_size: int = 8
@@ -126,17 +133,57 @@ def scene_extent(views: Sequence[FitView]) -> tuple[np.ndarray, float]:
 
 def initial_model(views: Sequence[FitView], points: np.ndarray | None, colors: np.ndarray | None,
                   config: FitConfig) -> GaussianModel:
-    """Gaussians at the sparse points, or random ones in the camera box grown by the scene radius."""
+    """Gaussians at the sparse points, or random ones in the camera box grown by the scene radius; plus
+    ``config.background_points`` image-coloured points on a far sphere."""
     if points is not None and len(points) > 0:
-        return GaussianModel.from_points(points, colors, sh_degree=config.sh_degree,
-                                         initial_opacity=config.initial_opacity)
-    centers = np.stack([v.camera.center for v in views])
-    _, radius = scene_extent(views)
-    low, high = centers.min(axis=0) - radius, centers.max(axis=0) + radius
-    generator = torch.Generator().manual_seed(config.seed)
-    unit = torch.rand(config.random_init_points, 3, generator=generator, dtype=torch.float64).numpy()
-    return GaussianModel.from_points(low + unit * (high - low), None, sh_degree=config.sh_degree,
-                                     initial_opacity=config.initial_opacity)
+        xyz = np.asarray(points, np.float64)
+        rgb = None if colors is None else np.asarray(colors)
+        if rgb is not None and rgb.dtype != np.uint8:
+            rgb = np.rint(np.clip(rgb, 0, 1) * 255).astype(np.uint8)
+    else:
+        centers = np.stack([v.camera.center for v in views])
+        _, radius = scene_extent(views)
+        low, high = centers.min(axis=0) - radius, centers.max(axis=0) + radius
+        generator = torch.Generator().manual_seed(config.seed)
+        unit = torch.rand(config.random_init_points, 3, generator=generator, dtype=torch.float64).numpy()
+        xyz, rgb = low + unit * (high - low), np.full((config.random_init_points, 3), 128, np.uint8)
+    if config.background_points > 0:
+        far_xyz, far_rgb = background_sphere(views, config.background_points, config.background_radius, config.seed)
+        xyz, rgb = np.concatenate([xyz, far_xyz]), np.concatenate([rgb if rgb is not None else
+                                                                   np.full((len(xyz), 3), 128, np.uint8), far_rgb])
+    return GaussianModel.from_points(xyz, rgb, sh_degree=config.sh_degree, initial_opacity=config.initial_opacity)
+
+
+def background_sphere(views: Sequence[FitView], count: int, radius_factor: float, seed: int
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """``count`` points on a Fibonacci sphere of ``radius_factor`` × extent around the camera centres, each
+    coloured with the pixel it projects to in the first training view that sees it.  Points below 5° under
+    the cameras' horizon (mean camera up = −y axis) and points no view sees are dropped.
+
+    Returns:
+        ``xyz (P, 3)`` world units and ``rgb (P, 3)`` uint8.
+    """
+    center, extent = scene_extent(views)
+    k = np.arange(count) + 0.5
+    polar = np.arccos(1 - 2 * k / count)
+    azimuth = np.pi * (1 + 5 ** 0.5) * k + 2 * np.pi * (seed % 997) / 997
+    unit = np.stack([np.sin(polar) * np.cos(azimuth), np.sin(polar) * np.sin(azimuth), np.cos(polar)], axis=1)
+    up = -np.mean([v.camera.R[1] for v in views], axis=0)
+    up /= max(float(np.linalg.norm(up)), 1e-12)
+    unit = unit[unit @ up > -np.sin(np.radians(5.0))]
+    xyz = center + radius_factor * extent * unit
+    count = len(xyz)
+    rgb = np.zeros((count, 3), np.uint8)
+    seen = np.zeros(count, bool)
+    for view in views:
+        uv, z = view.camera.project(xyz)
+        h, w = view.image.shape[1:]
+        with np.errstate(invalid="ignore"):
+            inside = ~seen & (z > 0) & (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+        cols, rows = np.floor(uv[inside]).astype(int).T
+        rgb[inside] = np.rint(view.image[:, rows, cols].T.numpy() * 255).astype(np.uint8)
+        seen |= inside
+    return xyz[seen], rgb[seen]
 
 
 def photometric_loss(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None,

@@ -1,8 +1,8 @@
 """The synthetic benchmark's presets: scene count, resolution, drive length, world detail, fit schedule.
 
 ``tiny``     1 scene, 48×80, 6 timesteps: seconds, for tests.
-``default``  5 scenes, 144×256, 16 timesteps (192 frames per scene), 300-iteration fits: generates and fits
-             everything in about 10 minutes on 2 CPU cores (see results/synthetic/fit_quality.md).
+``default``  6 scenes, 144×256, 16 timesteps (192 frames per scene), 250-iteration fits: generates and fits
+             everything in under 10 minutes on 2 CPU cores with ``--jobs 2`` (results/synthetic/fit_quality.md).
 ``large``    8 scenes, 288×512, 40 timesteps, 7000-iteration fits: for a GPU (``--device cuda``).
 """
 
@@ -58,17 +58,19 @@ PRESETS: dict[str, Preset] = {
         name="tiny", num_scenes=1, width=80, height=48, timesteps=4, step_m=1.5, holdout_every=4, view_ahead_m=30.0,
         pixels_per_gaussian=5.0, min_spacing=0.7, max_spacing=4.0, foliage_count=12, points3d=1500,
         moving_vehicles=True, tile_size=8,
-        fit=FitConfig.schedule(iterations=60, densify_every=10, tile_size=8)),
+        fit=FitConfig.schedule(iterations=60, densify_every=10, opacity_reset_every=10_000, background_points=500,
+                              tile_size=8)),
     "default": Preset(
-        name="default", num_scenes=5, width=256, height=144, timesteps=16, step_m=1.0, holdout_every=4,
+        name="default", num_scenes=6, width=256, height=144, timesteps=16, step_m=1.0, holdout_every=4,
         view_ahead_m=55.0, pixels_per_gaussian=4.0, min_spacing=0.3, max_spacing=3.0, foliage_count=60,
         points3d=6000, moving_vehicles=True, tile_size=8,
-        fit=FitConfig.schedule(iterations=300, densify_every=25, tile_size=8)),
+        fit=FitConfig.schedule(iterations=250, densify_every=20, opacity_reset_every=10_000, max_gaussians=16_000,
+                              background_points=3000, tile_size=8)),
     "large": Preset(
         name="large", num_scenes=8, width=512, height=288, timesteps=40, step_m=1.0, holdout_every=4,
         view_ahead_m=70.0, pixels_per_gaussian=3.0, min_spacing=0.12, max_spacing=3.0, foliage_count=200,
         points3d=30000, moving_vehicles=True, tile_size=16,
-        fit=FitConfig.schedule(iterations=7000, densify_every=100, tile_size=16)),
+        fit=FitConfig.schedule(iterations=7000, densify_every=100, background_points=10_000, tile_size=16)),
 }
 
 

@@ -136,15 +136,33 @@ def facade_texture(rng: np.random.Generator, style: FacadeStyle, width: float, h
     return sample
 
 
-def asphalt_texture(rng: np.random.Generator, base: Sequence[float]) -> Texture:
-    """Road surface: grey with patches, cracks-like dark streaks and tyre tracks along ``u``."""
+def asphalt_texture(rng: np.random.Generator, base: Sequence[float], *, lane_width: float | None = None,
+                    extent_m: tuple[float, float] = (400.0, 40.0)) -> Texture:
+    """Road surface: grey with large stains, fine grain, sharp-edged repair patches, manhole covers and,
+    with ``lane_width``, darker tyre tracks 0.9 m either side of each lane centre (``v`` = 0 on a lane edge)."""
     patches = value_noise(rng, 2.5)
-    grain = value_noise(rng, 0.45)
+    grain = value_noise(rng, 0.35)
     base_arr = np.asarray(base, np.float64)
+    n_repairs = int(extent_m[0] * extent_m[1] / 60)
+    repairs = np.stack([rng.uniform(0, extent_m[0], n_repairs), rng.uniform(0, extent_m[1], n_repairs),
+                        rng.uniform(0.6, 3.5, n_repairs), rng.uniform(0.5, 2.0, n_repairs),
+                        rng.uniform(-0.25, 0.2, n_repairs)], axis=1)
+    n_covers = int(extent_m[0] / 25)
+    covers = np.stack([rng.uniform(0, extent_m[0], n_covers), rng.uniform(0, extent_m[1], n_covers)], axis=1)
 
     def sample(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        shade = 1.0 + 0.12 * patches(u, v) + 0.08 * grain(u, v)
-        return np.clip(base_arr * shade, 0, 1)
+        u, v = np.asarray(u, np.float64), np.asarray(v, np.float64)
+        shade = 1.0 + 0.14 * patches(u, v)[:, 0] + 0.12 * grain(u, v)[:, 0]
+        if lane_width is not None:
+            across = np.mod(v, lane_width) - lane_width / 2
+            shade -= 0.12 * np.exp(-0.5 * ((np.abs(across) - 0.9) / 0.25) ** 2)
+        near = (repairs[:, 0] + repairs[:, 2] > u.min()) & (repairs[:, 0] - repairs[:, 2] < u.max()) if u.size else []
+        for x0, y0, length, width, tone in repairs[near]:
+            inside = (np.abs(u - x0) < length / 2) & (np.abs(v - y0) < width / 2)
+            shade = np.where(inside, shade + tone, shade)
+        for x0, y0 in covers[(np.abs(covers[:, 0] - u.mean()) < np.ptp(u) + 1.0)] if u.size else []:
+            shade = np.where((u - x0) ** 2 + (v - y0) ** 2 < 0.36, 0.55, shade)
+        return np.clip(base_arr * shade[:, None], 0, 1)
 
     return sample
 

@@ -34,6 +34,8 @@ CATEGORIES = ("ground", "facade", "object", "foliage", "far", "sky")
 SFM_CATEGORIES = (0, 1, 2, 3)
 """Categories whose surfaces may appear in the sparse SfM-like point cloud."""
 SKY_RADIUS_M = 400.0
+FACADE_DETAIL = 0.8
+"""Façades get a finer grid than other surfaces (windows, doors and frames are their detail)."""
 
 
 @dataclass(frozen=True)
@@ -122,7 +124,7 @@ def _chunks(start: float, stop: float, detail: Detail, y: float, z: float, facto
 
 def _road_texture(layout: StreetLayout, rng: np.random.Generator, y0: float) -> Texture:
     """Asphalt with painted markings baked in; ``u`` = x − x_min, ``v`` = y − y0."""
-    asphalt = tx.asphalt_texture(rng, layout.asphalt_color)
+    asphalt = tx.asphalt_texture(rng, layout.asphalt_color, lane_width=layout.lane_width)
     white = np.array([0.92, 0.92, 0.9])
     yellow = np.array([0.9, 0.75, 0.2])
     lw = layout.lane_width
@@ -242,7 +244,7 @@ def _building(soup: GaussianSoup, b: Building, side: int, y: float, detail: Deta
         for z0, z1 in ((0.0, min(b.height, 6.0)), (min(b.height, 6.0), b.height)):
             if z1 - z0 < 1e-6:
                 continue
-            s = detail.spacing(np.array([x + length / 2, y, 0.5 * (z0 + z1)]))
+            s = detail.spacing(np.array([x + length / 2, y, 0.5 * (z0 + z1)]), FACADE_DETAIL)
 
             def piece(u: np.ndarray, v: np.ndarray, du: float = x - b.x0, dv: float = z0) -> np.ndarray:
                 return tex(u + du, v + dv)

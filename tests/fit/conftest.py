@@ -1,0 +1,46 @@
+"""Fit fixtures: the tiny synthetic scene (generated once per session) and its training views."""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator
+
+import pytest
+import torch
+
+from setdiff_bench.gaussians.fit_data import load_fit_scene, load_fit_views, select_fit_frames
+from setdiff_bench.synthetic.generate import generate_scene
+from setdiff_bench.synthetic.presets import get_preset
+
+
+@contextlib.contextmanager
+def single_thread() -> Iterator[None]:
+    """One torch thread: the rasteriser runs many small ops, which OpenMP slows down badly on a busy machine."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
+
+
+@pytest.fixture(autouse=True)
+def _one_thread() -> Iterator[None]:
+    with single_thread():
+        yield
+
+
+@pytest.fixture(scope="session")
+def tiny_scene_dir(tmp_path_factory):
+    with single_thread():
+        return generate_scene(tmp_path_factory.mktemp("fit"), get_preset("tiny"), 0, 0)
+
+
+@pytest.fixture(scope="session")
+def tiny_scene(tiny_scene_dir):
+    return load_fit_scene(tiny_scene_dir)
+
+
+@pytest.fixture(scope="session")
+def tiny_views(tiny_scene):
+    return load_fit_views(tiny_scene, select_fit_frames(tiny_scene, None))
