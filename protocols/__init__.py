@@ -34,14 +34,13 @@ Every problem in a file is a :class:`~setdiff_bench.errors.ProtocolError` naming
 from __future__ import annotations
 
 import os
+import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from fractions import Fraction
 from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
-
-import tomllib
 
 from setdiff_bench.errors import ProtocolError
 

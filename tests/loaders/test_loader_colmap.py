@@ -12,10 +12,10 @@ from loader_fixtures import (
     write_colmap_text_by_hand,
     write_image,
 )
-from setdiff_bench.loaders import load_scenes
-from setdiff_bench.loaders.colmap import read_colmap_model
 
 from setdiff_bench.errors import CameraError, DatasetError, ImageError
+from setdiff_bench.loaders import load_scenes
+from setdiff_bench.loaders.colmap import read_colmap_model
 
 DIST = np.array([0.05, -0.02, 0.001, -0.0015])
 

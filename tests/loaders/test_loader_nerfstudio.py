@@ -14,10 +14,10 @@ from loader_fixtures import (
     write_image,
     write_transforms,
 )
-from setdiff_bench.loaders import load_scenes
-from setdiff_bench.loaders.nerfstudio import read_transforms
 
 from setdiff_bench.errors import DatasetError, ImageError
+from setdiff_bench.loaders import load_scenes
+from setdiff_bench.loaders.nerfstudio import read_transforms
 
 FULL = (128, 96)
 QUARTER = np.diag([0.25, 0.25, 1.0])

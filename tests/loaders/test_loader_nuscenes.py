@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from loader_fixtures import NU_CAMERAS, assert_projects, build_nuscenes, write_json
-from setdiff_bench.loaders import list_scenes, load_scenes
 
 from setdiff_bench.errors import CameraError, DatasetError, ImageError
+from setdiff_bench.loaders import list_scenes, load_scenes
 
 
 @pytest.fixture

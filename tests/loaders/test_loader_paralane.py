@@ -13,9 +13,9 @@ from loader_fixtures import (
     write_mask,
 )
 from scipy.spatial.transform import Rotation
-from setdiff_bench.loaders import list_scenes, load_scenes
 
 from setdiff_bench.errors import CameraError
+from setdiff_bench.loaders import list_scenes, load_scenes
 
 T0 = 1718346704099615
 LANE_WIDTH = 3.5

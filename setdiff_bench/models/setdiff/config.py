@@ -22,6 +22,7 @@ from __future__ import annotations
 import copy
 import json
 import math
+import tomllib
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields, replace
 from importlib import resources
@@ -29,7 +30,6 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-import tomllib
 
 from setdiff_bench.errors import UsageError
 
