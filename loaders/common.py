@@ -15,6 +15,7 @@ import OpenImageIO as oiio
 
 from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import DatasetError, ImageError
+from setdiff_bench.io.native_stderr import native_stderr_filtered
 
 PathLike = str | os.PathLike[str]
 
@@ -167,7 +168,8 @@ def image_size(path: Path) -> tuple[int, int]:
     if not path.is_file():
         raise ImageError("image file not found", path)
     oiio.geterror()
-    handle = oiio.ImageInput.open(str(path))
+    with native_stderr_filtered():  # libpng would print a corrupt header's error a second time
+        handle = oiio.ImageInput.open(str(path))
     if handle is None:
         message = (oiio.geterror() or "unknown format").strip().splitlines()
         raise ImageError(f"cannot read image header ({message[0] if message else 'unknown format'})", path)

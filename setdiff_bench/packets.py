@@ -20,7 +20,9 @@ Writes are atomic: a packet is assembled in a temporary folder, its fragment ind
 then renamed into place; an interrupted write (SIGKILL) leaves only a ``.tmp-*`` folder that the next
 run removes.  Files are not fsynced one by one (it tripled the write time): after a power loss a
 torn file would fail its SHA-256 check, which ``prepare`` runs before skipping a packet, so it is
-rewritten.  :meth:`PacketStore.verify` re-hashes every file.
+rewritten.  :meth:`PacketStore.verify` re-hashes every file, and every file a packet is loaded from is
+checked against its SHA-256 before it is decoded (a file changed after ``prepare`` is an error, never
+a silently different input or ground truth; hashing costs a few ms next to decoding).
 """
 
 from __future__ import annotations
@@ -267,8 +269,8 @@ class PacketStore:
         gts, masks = [], []
         for _, row in rows.iterrows():
             size = (int(row["height"]), int(row["width"]))
-            gts.append(to_tensor_chw(read_rgb(self._path(row["gt"]), size)))
-            masks.append(torch.from_numpy(read_mask(self._path(row["mask"]), size))[None])
+            gts.append(to_tensor_chw(read_rgb(self._file(row, "gt"), size)))
+            masks.append(torch.from_numpy(read_mask(self._file(row, "mask"), size))[None])
         return torch.stack(gts), torch.stack(masks)
 
     def iter_packets(self, split: str | None = None) -> Iterator[Packet]:
@@ -295,18 +297,24 @@ class PacketStore:
         return merge_index(self.root)
 
     # ------------------------------------------------------------------ helpers
-    def _path(self, relative: str) -> Path:
-        path = self.root / relative
+    def _file(self, row: pd.Series, column: str) -> Path:
+        """The file of ``row[column]``, checked against the index's SHA-256 before anything decodes it
+        (a changed file must never be scored silently)."""
+        path = self.root / row[column]
         if not path.is_file():
             raise PacketError("packet file missing (run `setdiff-bench prepare` again to rewrite it)", path)
+        expected = row[f"{column}_sha256"]
+        if sha256_file(path) != expected:
+            raise PacketError(f"SHA-256 mismatch: the file changed since the index recorded {str(expected)[:12]}… "
+                              "(run `setdiff-bench prepare` again to rewrite it)", path)
         return path
 
     def _view_set(self, rows: pd.DataFrame) -> ViewSet:
         images, cmaps, alphas, cameras = [], [], [], []
         for _, row in rows.iterrows():
             size = (int(row["height"]), int(row["width"]))
-            images.append(to_tensor_chw(read_rgb(self._path(row["image"]), size)))
-            exr_path = self._path(row["cmap"])
+            images.append(to_tensor_chw(read_rgb(self._file(row, "image"), size)))
+            exr_path = self._file(row, "cmap")
             cmap = read_exr(exr_path, channels=4)
             if cmap.shape[:2] != size:
                 raise PacketError(f"C-map is {cmap.shape[1]}x{cmap.shape[0]}, expected {size[1]}x{size[0]}", exr_path)

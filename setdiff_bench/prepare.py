@@ -156,16 +156,20 @@ class FitSource:
 
 
 # ---------------------------------------------------------------------- one packet (worker side)
-_MODELS: dict[Path, Any] = {}
+_MODELS: dict[tuple[Path, int, int, str], Any] = {}
 
 
 def _model(path: Path, device: str) -> Any:
+    """The fit at ``path``, cached per process; the key includes the file's size and mtime, so a PLY
+    replaced between two in-process ``prepare`` calls is read again instead of rendering the old one."""
     from setdiff_bench.gaussians.ply import read_ply
 
-    if path not in _MODELS:
+    stat = path.stat() if path.is_file() else None
+    key = (path, stat.st_size if stat else -1, stat.st_mtime_ns if stat else -1, device)
+    if key not in _MODELS:
         _MODELS.clear()  # jobs arrive grouped by fit: keep one model per process
-        _MODELS[path] = read_ply(path).to(device)
-    return _MODELS[path]
+        _MODELS[key] = read_ply(path).to(device)
+    return _MODELS[key]
 
 
 def resample(image: np.ndarray, crop: Crop, resolution: tuple[int, int], *, nearest: bool = False) -> np.ndarray:

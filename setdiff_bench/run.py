@@ -17,7 +17,9 @@ packet divided by its targets; excludes I/O and scoring), and the enhanced image
 Rows are sorted by packet id and target position, so the file depends only on the results.
 
 Resume and shards.  A packet is done when its fragment exists (fragments are written last, atomically),
-so a killed run restarted with the same command enhances only the rest.  ``--shard i/n`` (0 ≤ i < n)
+so a killed run restarted with the same command enhances only the rest.  Nothing is written before the
+first packet has been enhanced and scored (``run.json`` included), so a run that fails on bad input
+before that leaves no folder behind.  ``--shard i/n`` (0 ≤ i < n)
 takes every n-th packet of the sorted selection starting at i; shards may run at the same time into the
 same folder.  Whichever call finds every fragment present merges them (under a lock): the merged files
 depend only on the fragments, so one run and any sharding give the same ``metrics.parquet`` up to the
@@ -40,7 +42,7 @@ import hashlib
 import json
 import os
 import time
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -217,7 +219,8 @@ def run_method(packets: str | os.PathLike[str] | Any, out: str | os.PathLike[str
         raise UsageError(f"unknown method {settings.method!r}; available: {', '.join(sorted(available_methods()))}",
                          "--method")
     index_sha256 = sha256_file(Path(store.root) / "index.parquet")
-    _claim_folder(out, settings.identity(index_sha256))
+    identity = settings.identity(index_sha256)
+    _check_folder(out, identity)
     mine = shard.select(selection)
     todo = [pid for pid in mine if not fragment_path(out, pid).is_file()]
     targets = _target_rows(store, selection)
@@ -226,14 +229,25 @@ def run_method(packets: str | os.PathLike[str] | Any, out: str | os.PathLike[str
             enhancer = create_enhancer(settings.method, optional={"device": settings.device}, **settings.options)
         elif enhancer.name != settings.method:
             raise UsageError(f"enhancer {enhancer.name!r} given for method {settings.method!r}")
-        _record_enhancer(out, enhancer)
         if isinstance(enhancer, ChecksTargets):
             todo_set = set(todo)
             enhancer.check_targets([_target_ref(row) for row in targets if row["packet_id"] in todo_set])
+        built = enhancer
+        claimed = False
+
+        def claim() -> None:
+            """Write run.json / enhancer.json just before the first results (a run that fails earlier leaves
+            nothing behind, so a corrected command is not refused as 'other settings')."""
+            nonlocal claimed
+            if not claimed:
+                _claim_folder(out, identity)
+                _record_enhancer(out, built)
+                claimed = True
+
         bar = tqdm(todo, desc=f"{settings.method} [{shard}]", unit="packet", disable=None if progress is None
                    else not progress)
         for packet_id in bar:
-            _run_packet(store, out, packet_id, enhancer, specs, settings)
+            _run_packet(store, out, packet_id, enhancer, specs, settings, claim)
     remaining = sum(not fragment_path(out, pid).is_file() for pid in selection)
     merged = False
     if remaining == 0:
@@ -248,6 +262,18 @@ def _open_store(packets: Any) -> Any:
 
         return PacketStore(packets)
     return packets
+
+
+def _check_folder(out: Path, identity: dict[str, Any]) -> None:
+    """Refuse, without writing anything, a folder that holds another run or other files."""
+    if not out.exists():
+        return
+    if not out.is_dir():
+        raise UsageError("output path exists and is not a folder; choose another --out", out)
+    if (out / RUN_FILE).is_file():
+        _compare_settings(out, identity)
+    elif _has_visible_files(out):
+        raise UsageError("output folder is not empty and holds no run.json; choose another --out", out)
 
 
 def _claim_folder(out: Path, identity: dict[str, Any]) -> None:
@@ -265,10 +291,15 @@ def _claim_folder(out: Path, identity: dict[str, Any]) -> None:
                 raise UsageError("output folder is not empty and holds no run.json; choose another --out", out)
             write_text_atomic(run_file, json.dumps(identity, indent=2, sort_keys=True) + "\n")
             return
-        try:
-            existing = json.loads(run_file.read_text())
-        except (OSError, json.JSONDecodeError) as error:
-            raise UsageError(f"unreadable run settings ({error})", run_file) from None
+    _compare_settings(out, identity)
+
+
+def _compare_settings(out: Path, identity: dict[str, Any]) -> None:
+    run_file = out / RUN_FILE
+    try:
+        existing = json.loads(run_file.read_text())
+    except (OSError, json.JSONDecodeError) as error:
+        raise UsageError(f"unreadable run settings ({error})", run_file) from None
     if existing != identity:
         changed = sorted(k for k in set(existing) | set(identity) if existing.get(k) != identity.get(k))
         raise UsageError(f"this folder holds a run with other settings ({', '.join(changed)} differ); "
@@ -300,7 +331,12 @@ def _target_ref(row: Mapping[str, Any]) -> TargetRef:
 
 
 def _run_packet(store: Any, out: Path, packet_id: str, enhancer: Enhancer, specs: Sequence[MetricSpec],
-                settings: RunSettings) -> None:
+                settings: RunSettings, claim: Callable[[], None]) -> None:
+    """Enhance and score one packet, then write its images and (last) its fragment.
+
+    Everything that can fail on bad input (reading, enhancing, checking, scoring) happens before the
+    first write; ``claim()`` is called right before it.
+    """
     packet = store.load_packet(packet_id)
     gt, masks = store.load_ground_truth(packet_id)
     rows = store.rows(packet_id)
@@ -315,6 +351,8 @@ def _run_packet(store: Any, out: Path, packet_id: str, enhancer: Enhancer, specs
     elapsed_ms = (time.perf_counter() - start) * 1000.0
     output = _checked(output, packet, enhancer.name)
     enhanced = quantize(output)
+    scores = score_images(specs, enhanced.to(device), gt.to(device), masks.to(device), settings.batch_size)
+    claim()
     records = []
     for position, row in enumerate(targets):
         ref = _target_ref(row)
@@ -323,7 +361,6 @@ def _run_packet(store: Any, out: Path, packet_id: str, enhancer: Enhancer, specs
         records.append({**{key: row[key] for key in KEY_COLUMNS if key in row}, "method": settings.method,
                         "timestamp_us": _timestamp(row.get("timestamp_us")), "sensor": str(row.get("sensor") or ""),
                         "image": relative, "image_sha256": sha256_file(out / relative)})
-    scores = score_images(specs, enhanced.to(device), gt.to(device), masks.to(device), settings.batch_size)
     per_frame = elapsed_ms / max(1, len(targets))
     for position, record in enumerate(records):
         for spec in specs:

@@ -1,8 +1,10 @@
 """Entry point of the ``setdiff-bench`` console script.
 
 Every :class:`~setdiff_bench.errors.SetDiffBenchError` becomes one line on stderr
-(``setdiff-bench <verb>: error: <file>: <problem>``) and exit code 2, with no traceback; argparse
-usage errors also exit 2.  Set ``SETDIFF_DEBUG=1`` to see tracebacks.
+(``setdiff-bench <verb>: error: <file>: <problem>``) and exit code 2, with no traceback.  So do
+operating-system errors on the user's paths (``--out`` under a file, a full disk, no permission:
+``OSError`` with its file name) and argparse usage errors (one line naming the argument, instead of
+argparse's usage block).  Set ``SETDIFF_DEBUG=1`` to see tracebacks.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import pkgutil
 import sys
 from collections.abc import Sequence
 from types import ModuleType
+from typing import NoReturn
 
 import setdiff_bench.cli as cli_package
 from setdiff_bench import __version__
@@ -32,8 +35,18 @@ def verb_modules() -> list[ModuleType]:
     return sorted(modules, key=lambda m: m.VERB)
 
 
+class OneLineArgumentParser(argparse.ArgumentParser):
+    """argparse with one-line usage errors: ``<prog>: error: <message> (see <prog> --help)``, exit code 2.
+
+    Sub-parsers (verbs, ``list`` targets) inherit the class through ``add_subparsers``.
+    """
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineArgumentParser(
         prog="setdiff-bench",
         description="Benchmark and enhance 3D Gaussian Splatting renders far from the recorded trajectory.",
     )
@@ -57,6 +70,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         if os.environ.get("SETDIFF_DEBUG"):
             raise
         print(f"setdiff-bench {args.verb}: error: {error.one_line()}", file=sys.stderr)
+        return 2
+    except OSError as error:  # the user's paths: --out under a file, disk full, permission denied
+        if os.environ.get("SETDIFF_DEBUG"):
+            raise
+        where = f"{error.filename}: " if error.filename else ""
+        print(f"setdiff-bench {args.verb}: error: {where}{error.strerror or error}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"setdiff-bench {args.verb}: interrupted", file=sys.stderr)

@@ -18,6 +18,7 @@ import torch
 
 from setdiff_bench.errors import ImageError
 from setdiff_bench.io.atomic import atomic_path
+from setdiff_bench.io.native_stderr import native_stderr_filtered
 
 PathLike = str | os.PathLike[str]
 
@@ -39,17 +40,18 @@ def read_image_raw(path: PathLike, dtype: str = "float") -> np.ndarray:
     if not path.is_file():
         raise ImageError("file not found", path)
     oiio.geterror()  # clear stale global errors
-    handle = oiio.ImageInput.open(str(path))
-    if handle is None:
-        raise ImageError(f"cannot open image ({_first_line(oiio.geterror()) or 'unknown format'})", path)
-    try:
-        spec = handle.spec()
-        fmt = oiio.UINT8 if dtype == "uint8" else oiio.FLOAT
-        pixels = handle.read_image(0, 0, 0, spec.nchannels, fmt)
-        if pixels is None or handle.has_error:
-            raise ImageError(f"corrupt or truncated image ({_first_line(handle.geterror())})", path)
-    finally:
-        handle.close()
+    with native_stderr_filtered():  # libpng would print its error a second time on stderr
+        handle = oiio.ImageInput.open(str(path))
+        if handle is None:
+            raise ImageError(f"cannot open image ({_first_line(oiio.geterror()) or 'unknown format'})", path)
+        try:
+            spec = handle.spec()
+            fmt = oiio.UINT8 if dtype == "uint8" else oiio.FLOAT
+            pixels = handle.read_image(0, 0, 0, spec.nchannels, fmt)
+            if pixels is None or handle.has_error:
+                raise ImageError(f"corrupt or truncated image ({_first_line(handle.geterror())})", path)
+        finally:
+            handle.close()
     pixels = np.asarray(pixels)
     if pixels.ndim == 2:
         pixels = pixels[:, :, None]

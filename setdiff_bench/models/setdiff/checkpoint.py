@@ -15,6 +15,7 @@ import contextlib
 import dataclasses
 import json
 import os
+import pickle
 import shutil
 import tempfile
 from pathlib import Path
@@ -172,7 +173,11 @@ def load_training_state(checkpoint: Path, optimizer: torch.optim.Optimizer) -> i
     try:
         step = int(json.loads(trainer_path.read_text(encoding="utf-8"))["step"])
         state = torch.load(optimizer_path, map_location="cpu", weights_only=True)
-    except (OSError, KeyError, ValueError, json.JSONDecodeError, RuntimeError) as error:
+    except pickle.UnpicklingError as error:  # weights_only refused a global: anything but plain tensors
+        refused = next((line.strip() for line in str(error).splitlines() if "GLOBAL" in line), "")
+        raise CheckpointError(f"optimizer state refused by torch.load(weights_only=True), it holds more than "
+                              f"tensors{': ' + refused if refused else ''}", optimizer_path) from None
+    except (OSError, KeyError, TypeError, ValueError, EOFError, json.JSONDecodeError, RuntimeError) as error:
         raise CheckpointError(f"cannot resume from this checkpoint: {error}", checkpoint) from error
     try:
         optimizer.load_state_dict(state)
