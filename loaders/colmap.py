@@ -1,6 +1,8 @@
 """COLMAP sparse models (binary or text) through pycolmap, and the generic ``colmap`` dataset.
 
 Reading: pycolmap parses both formats, including legacy models without ``rigs``/``frames`` files.
+Its binary reader does not notice a cut file, so each ``.bin`` file's size is checked against the size
+of the records it declares (:func:`_check_binary_complete`).
 Two gaps are filled here: a text model without ``points3D.txt`` (Para-Lane ships only
 ``cameras.txt`` + ``images.txt``) is read by staging the two files next to an empty point file in a
 temporary folder; and since pycolmap's text reader pairs lines blindly (an image line without its
@@ -121,6 +123,8 @@ def read_colmap_model(sparse_dir: str | os.PathLike[str], *, distortion: Distort
     ext = ".bin" if fmt == "binary" else ".txt"
     images_file = sparse / f"images{ext}"
     reconstruction = _read_reconstruction(sparse, ext)
+    if fmt == "binary":
+        _check_binary_complete(sparse, reconstruction)
     if fmt == "text":
         expected = _count_text_image_records(images_file)
         if expected > len(reconstruction.images):  # lost records; (a purely numeric NAME is not counted)
@@ -195,6 +199,25 @@ def _read_reconstruction(sparse: Path, ext: str) -> object:
         else:
             (staged / "points3D.txt").write_text("", encoding="utf-8")
         return read(staged)
+
+
+def _check_binary_complete(sparse: Path, reconstruction: object) -> None:
+    """Refuse truncated or padded ``.bin`` files, which pycolmap's binary reader accepts silently.
+
+    pycolmap fills what a cut file lacks with zeros or stale bytes (a ``cameras.bin`` cut by 3 bytes
+    reads as a camera with a wrong ``cy``).  The binary format has no checksum, but its size follows
+    from its content: the model parsed is written back to a temporary folder and each file's size is
+    compared with the original's (a round trip of a complete file has the same size).
+    """
+    with tempfile.TemporaryDirectory(prefix="setdiff-colmap-check-") as folder:
+        reconstruction.write_binary(folder)  # type: ignore[attr-defined]
+        for stem in ("cameras", "images", "points3D", "rigs", "frames"):
+            original, rewritten = sparse / f"{stem}.bin", Path(folder) / f"{stem}.bin"
+            if original.is_file() and rewritten.is_file():
+                size, expected = original.stat().st_size, rewritten.stat().st_size
+                if size != expected:
+                    raise DatasetError(f"truncated or corrupt COLMAP binary file: {size} bytes, but the records it "
+                                       f"declares take {expected} bytes", original)
 
 
 def _count_text_image_records(images_txt: Path) -> int:

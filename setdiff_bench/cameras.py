@@ -153,6 +153,8 @@ class Camera:
             c2w = np.vstack([c2w, [0.0, 0.0, 0.0, 1.0]])
         if c2w.shape != (4, 4):
             raise CameraError(f"camera-to-world must be 4x4, got shape {c2w.shape}", source or "camera")
+        if not np.isfinite(c2w).all():  # before the product, which would warn about inf · 0
+            raise CameraError("camera has NaN or infinite values", source or "camera")
         return cls.from_c2w(c2w @ OPENGL_TO_OPENCV, K, width, height, distortion=distortion, source=source)
 
     @classmethod

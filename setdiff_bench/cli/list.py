@@ -85,7 +85,7 @@ def parse_option(text: str) -> tuple[str, Any]:
     """
     key, sep, raw = text.partition("=")
     if not sep or not key.strip():
-        raise UsageError(f"option {text!r} must look like KEY=VALUE")
+        raise UsageError(f"option {text!r} must look like KEY=VALUE", "-o/--option")
     try:
         value = json.loads(raw)
     except json.JSONDecodeError:
