@@ -162,6 +162,8 @@ class ModelConfig:
         timestep: the fixed UNet timestep (199, i.e. τ = 200); the clean latent is fed, no noise.
         prediction: the UNet output's meaning, ``v_prediction`` (SetDiff) or ``epsilon`` (DiFix, SD-Turbo).
         use_geometry: add Ψ(C-map, Plücker) to the latents.
+        geometry_inputs: the cues Ψ sees, a subset of ``("cmap", "plucker")`` (both in the paper; one
+            of them for the geometry-grounding ablation, Table 5 — the other's channels are zeroed).
         geometry_channels: the five conv blocks' widths of Ψ.
         geometry_groups: GroupNorm groups in Ψ (clipped to divide each width).
         cmap_clip: C-map coordinates are clamped to ±cmap_clip (packet units; the packet's cameras
@@ -192,6 +194,7 @@ class ModelConfig:
     timestep: int = 199
     prediction: Prediction = "v_prediction"
     use_geometry: bool = True
+    geometry_inputs: tuple[str, ...] = ("cmap", "plucker")
     geometry_channels: tuple[int, ...] = (32, 64, 128, 256, 256)
     geometry_groups: int = 8
     cmap_clip: float = 10.0
@@ -223,6 +226,11 @@ class ModelConfig:
             raise UsageError(f"timestep must be in [0, {steps}), got {self.timestep}", where)
         if len(self.geometry_channels) != 5:
             raise UsageError(f"geometry_channels must list 5 block widths, got {list(self.geometry_channels)}", where)
+        inputs = tuple(self.geometry_inputs)
+        if not inputs or set(inputs) - {"cmap", "plucker"} or len(set(inputs)) != len(inputs):
+            raise UsageError(f"geometry_inputs must be a non-empty subset of ['cmap', 'plucker'], got {list(inputs)}"
+                             " (use use_geometry = false for none)", where)
+        object.__setattr__(self, "geometry_inputs", inputs)
         if not 0.0 <= self.geometry_dropout < 1.0:
             raise UsageError(f"geometry_dropout must be in [0, 1), got {self.geometry_dropout}", where)
         if self.max_references is not None and self.max_references < 0:
@@ -274,7 +282,7 @@ class ModelConfig:
         left out: a checkpoint may be used with other values of those.
         """
         keep = ("method", "unet", "vae", "scheduler", "timestep", "prediction", "use_geometry",
-                "geometry_channels", "geometry_groups", "cmap_clip", "vae_decoder", "vae_lora_rank",
+                "geometry_inputs", "geometry_channels", "geometry_groups", "cmap_clip", "vae_decoder", "vae_lora_rank",
                 "vae_lora_alpha", "skip_connections", "skip_gamma", "text_length")
         return _jsonable({name: getattr(self, name) for name in keep})
 

@@ -66,13 +66,19 @@ class GeometryEncoder(nn.Module):
         return self.out(self.blocks(geometry))
 
 
-def geometry_input(cmaps: torch.Tensor, cameras: Sequence[Camera], *, cmap_clip: float = 0.0) -> torch.Tensor:
+GEOMETRY_INPUTS = ("cmap", "plucker")
+
+
+def geometry_input(cmaps: torch.Tensor, cameras: Sequence[Camera], *, cmap_clip: float = 0.0,
+                   inputs: Sequence[str] = GEOMETRY_INPUTS) -> torch.Tensor:
     """Stack a view set's C-maps and Plücker rays into Ψ's input.
 
     Args:
         cmaps: ``(V, 3, H, W)`` C-maps in the packet's normalised frame (0 where nothing was hit).
         cameras: the V normalised cameras (Plücker moments depend on that normalisation).
         cmap_clip: clamp C-map coordinates to ``±cmap_clip`` packet units; 0 = no clamp.
+        inputs: which cues Ψ sees, a subset of ``("cmap", "plucker")``; a cue left out is zeroed
+            (its channels then carry no information: the geometry-grounding ablation, paper Table 5).
 
     Returns:
         ``(V, 9, H, W)`` float32: C-map xyz, then ``(o × d, d)`` per pixel (pixel centres at +0.5).
@@ -85,5 +91,13 @@ def geometry_input(cmaps: torch.Tensor, cameras: Sequence[Camera], *, cmap_clip:
         cmaps = cmaps.clamp(-cmap_clip, cmap_clip)
     if not len(cameras):
         return cmaps.new_zeros((0, GEOMETRY_CHANNELS, height, width))
-    rays = torch.stack([plucker_rays(camera, height, width) for camera in cameras]).to(cmaps.device)
+    unknown = set(inputs) - set(GEOMETRY_INPUTS)
+    if unknown:
+        raise ValueError(f"unknown geometry inputs {sorted(unknown)}; choose from {GEOMETRY_INPUTS}")
+    if "plucker" in inputs:
+        rays = torch.stack([plucker_rays(camera, height, width) for camera in cameras]).to(cmaps.device)
+    else:
+        rays = cmaps.new_zeros((len(cameras), GEOMETRY_CHANNELS - 3, height, width))
+    if "cmap" not in inputs:
+        cmaps = torch.zeros_like(cmaps)
     return torch.cat([cmaps, rays], dim=1)

@@ -34,7 +34,8 @@ def enhance_packet(model: SetDiffModel, packet: Packet, *, guidance_scale: float
     check_packet(packet, config.latent_factor)
     parameter = next(model.parameters())
     images, geometry, num_refs = view_tensors(packet, use_geometry=config.use_geometry, cmap_clip=config.cmap_clip,
-                                              max_references=config.max_references)
+                                              max_references=config.max_references,
+                                              geometry_inputs=config.geometry_inputs)
     output = torch.empty((len(packet.targets), 3, packet.height, packet.width), dtype=torch.float32)
     for batch, target_ids in target_sets(images, geometry, num_refs, config.targets_per_set):
         step = batch.num_sets if sets_per_call is None else max(1, sets_per_call)

@@ -16,7 +16,7 @@ import torch
 
 from setdiff_bench.errors import PacketError
 from setdiff_bench.geometry import max_pairwise_distance, normalize_packet, overlap_score_matrix
-from setdiff_bench.models.setdiff.geometry_encoder import geometry_input
+from setdiff_bench.models.setdiff.geometry_encoder import GEOMETRY_INPUTS, geometry_input
 from setdiff_bench.types import Packet, TrainingSample, ViewSet
 
 
@@ -71,8 +71,8 @@ def check_packet(packet: Packet, factor: int) -> None:
     check_image_size(packet.height, packet.width, factor, where)
 
 
-def view_tensors(packet: Packet, *, use_geometry: bool, cmap_clip: float,
-                 max_references: int | None = None) -> tuple[torch.Tensor, torch.Tensor | None, int]:
+def view_tensors(packet: Packet, *, use_geometry: bool, cmap_clip: float, max_references: int | None = None,
+                 geometry_inputs: Sequence[str] = GEOMETRY_INPUTS) -> tuple[torch.Tensor, torch.Tensor | None, int]:
     """All views of a packet, references first.
 
     Returns:
@@ -86,7 +86,8 @@ def view_tensors(packet: Packet, *, use_geometry: bool, cmap_clip: float,
     images = torch.cat([v.images.float() for v in views])
     geometry = None
     if use_geometry:
-        geometry = torch.cat([geometry_input(v.cmaps, v.cameras, cmap_clip=cmap_clip) for v in views])
+        geometry = torch.cat([geometry_input(v.cmaps, v.cameras, cmap_clip=cmap_clip, inputs=geometry_inputs)
+                              for v in views])
     return images, geometry, len(references)
 
 
@@ -166,7 +167,8 @@ def best_reference_per_target(packet: Packet) -> list[int]:
 
 
 def training_set(sample: TrainingSample, rng: random.Random, *, min_views: int, max_views: int,
-                 use_geometry: bool, cmap_clip: float, pairs: bool = False) -> TrainingSet:
+                 use_geometry: bool, cmap_clip: float, pairs: bool = False,
+                 geometry_inputs: Sequence[str] = GEOMETRY_INPUTS) -> TrainingSet:
     """Draw the views of one training step from ``sample`` and build the tensors.
 
     A sample with more than ``max_views`` views is subset (:func:`choose_views`); a smaller one (e.g.
@@ -192,7 +194,8 @@ def training_set(sample: TrainingSample, rng: random.Random, *, min_views: int, 
                      targets=_subset(packet.targets, target_ids))
     if use_geometry:
         subset = renormalize(subset)
-    images, geometry, n = view_tensors(subset, use_geometry=use_geometry, cmap_clip=cmap_clip)
+    images, geometry, n = view_tensors(subset, use_geometry=use_geometry, cmap_clip=cmap_clip,
+                                       geometry_inputs=geometry_inputs)
     batch = SetBatch(images[None], None if geometry is None else geometry[None], n)
     gt = sample.target_gt[target_ids].float()[None]
     masks = sample.target_masks[target_ids].bool()[None]
