@@ -70,11 +70,17 @@ def evaluate_scene(scene: Scene) -> dict[str, float]:
 
 
 def grid_image(scene: Scene, out_path: Path) -> None:
-    """Ground truth (top row) vs fitted render (bottom row), one column per group, middle timestep."""
+    """Ground truth, fitted render and absolute error (rows), one column per group, middle timestep.
+
+    The PSNR in each title is over static pixels (dynamic mask), as in the table.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    from setdiff_bench.io.atomic import atomic_path
+    from setdiff_bench.metrics.psnr import psnr
 
     indices = sorted({int(f.metadata.get("index", 0)) for f in scene.frames})
     middle = indices[len(indices) // 2]
@@ -84,25 +90,28 @@ def grid_image(scene: Scene, out_path: Path) -> None:
         frames.sort(key=lambda f: (abs(int(f.metadata.get("index", 0)) - middle), f.name))
         if frames:
             picks.append((group, frames[0]))
-    pred, target, _ = render_frames(scene, [f for _, f in picks])
-    fig, axes = plt.subplots(2, len(picks), figsize=(3.2 * len(picks), 4.0), squeeze=False)
-    from setdiff_bench.metrics.psnr import psnr
-
+    pred, target, mask = render_frames(scene, [f for _, f in picks])
+    error = ((pred - target).abs().mean(dim=1) / 0.5).clamp(0, 1)  # (V, H, W), white at ≥ 0.5
+    error_rgb = error[:, None].repeat(1, 3, 1, 1)
+    error_rgb[:, 0] = torch.where(mask[:, 0], error_rgb[:, 0], torch.ones_like(error))  # dynamic pixels in red
+    error_rgb[:, 1:] = torch.where(mask, error_rgb[:, 1:], torch.zeros_like(error_rgb[:, 1:]))
+    fig, axes = plt.subplots(3, len(picks), figsize=(3.3 * len(picks), 6.4), squeeze=False)
     for column, (group, frame) in enumerate(picks):
-        value = float(psnr(pred[column:column + 1], target[column:column + 1]))
-        for row, (image, label) in enumerate(((target, "ground truth"), (pred, f"3DGS fit, {value:.1f} dB"))):
+        value = float(psnr(pred[column:column + 1], target[column:column + 1], mask[column:column + 1]))
+        panels = ((target[column].permute(1, 2, 0).numpy(), f"{group} — ground truth\n{frame.name}"),
+                  (pred[column].permute(1, 2, 0).numpy(), f"3DGS fit ({value:.1f} dB)"),
+                  (error_rgb[column].permute(1, 2, 0).numpy(), "|error|: black 0, white ≥ 0.5, red = masked"))
+        for row, (image, title) in enumerate(panels):
             ax = axes[row][column]
-            ax.imshow(image[column].permute(1, 2, 0).numpy(), interpolation="nearest")
+            ax.imshow(image, interpolation="nearest")
             ax.set_xticks([])
             ax.set_yticks([])
-            ax.set_title(f"{group}: {label}\n{frame.name}" if row == 0 else label, fontsize=7)
-    fig.suptitle(f"{scene.name}: fitted on lane0 front (train_set.txt); ground truth vs render per shift", fontsize=9)
+            ax.set_title(title, fontsize=8)
+    fig.suptitle(f"{scene.name}: 3DGS fitted on lane0 front (train_set.txt), rendered at held-out views", fontsize=10)
     fig.tight_layout()
     out_path.parent.mkdir(parents=True, exist_ok=True)
-    from setdiff_bench.io.atomic import atomic_path
-
     with atomic_path(out_path) as tmp:
-        fig.savefig(tmp, dpi=130)
+        fig.savefig(tmp, dpi=110)
     plt.close(fig)
 
 

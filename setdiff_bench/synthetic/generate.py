@@ -13,7 +13,6 @@ import json
 import os
 import shutil
 import tempfile
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,7 +24,7 @@ from setdiff_bench.errors import UsageError
 from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.io.atomic import write_text_atomic
 from setdiff_bench.io.images import write_png
-from setdiff_bench.synthetic.capture import CapturedFrame, capture_drive, frame_name
+from setdiff_bench.synthetic.capture import CapturedFrame, capture_drive
 from setdiff_bench.synthetic.colmap_writer import ColmapImage, write_colmap_model
 from setdiff_bench.synthetic.layout import (
     EGO_LANES,
@@ -104,11 +103,7 @@ def build_scene(preset: Preset, seed: int, index: int) -> SceneBuild:
             soup = GaussianSoup()
             soup.extend(car_soup(vehicle.car, detail, vehicle_rng, local=True))
             templates[traversal.name] = soup.to_model()
-    eligible = torch.zeros_like(categories, dtype=torch.bool)
-    for category in SFM_CATEGORIES:
-        eligible |= categories == category
     world = World(layout, static, categories, templates)
-    del eligible
     return SceneBuild(scene_name(seed, index), seed, index, preset, world, traversals, moving, sparse_rng)
 
 
@@ -188,6 +183,13 @@ def generate_scene(out_root: str | os.PathLike[str], preset: Preset, seed: int, 
     root = Path(out_root)
     final = root / scene_name(seed, index)
     if (final / "scene.json").is_file() and not overwrite:
+        try:
+            existing = json.loads((final / "scene.json").read_text(encoding="utf-8")).get("preset")
+        except (OSError, json.JSONDecodeError, AttributeError):
+            existing = None
+        if existing != preset.name:
+            raise UsageError(f"scene exists with preset {existing!r}, not {preset.name!r}; pass --overwrite to "
+                             "regenerate it", final / "scene.json")
         return final
     root.mkdir(parents=True, exist_ok=True)
     build = build_scene(preset, seed, index)
@@ -202,17 +204,3 @@ def generate_scene(out_root: str | os.PathLike[str], preset: Preset, seed: int, 
         shutil.rmtree(staging, ignore_errors=True)
         raise
     return final
-
-
-def frame_names(preset: Preset) -> list[str]:
-    """Every frame name a scene of ``preset`` has, sorted."""
-    names = [frame_name(t, spec.name, i) for t in ("lane0", "lane1", "lane2", "turn") for spec in RIG
-             for i in range(preset.timesteps)]
-    return sorted(names)
-
-
-def timed(fn: Callable[[], object]) -> tuple[object, float]:
-    """``(fn(), wall seconds)``."""
-    start = time.perf_counter()
-    value = fn()
-    return value, time.perf_counter() - start

@@ -2,26 +2,14 @@
 
 from __future__ import annotations
 
-import contextlib
 from collections.abc import Iterator
 
 import pytest
-import torch
+from fit_fixtures import single_thread
 
 from setdiff_bench.gaussians.fit_data import load_fit_scene, load_fit_views, select_fit_frames
 from setdiff_bench.synthetic.generate import generate_scene
 from setdiff_bench.synthetic.presets import get_preset
-
-
-@contextlib.contextmanager
-def single_thread() -> Iterator[None]:
-    """One torch thread: the rasteriser runs many small ops, which OpenMP slows down badly on a busy machine."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(before)
 
 
 @pytest.fixture(autouse=True)

@@ -82,7 +82,7 @@ def test_masked_pixels_add_no_loss_and_no_gradient():
     assert float(l1.detach()) == pytest.approx(expected, rel=1e-5)
     clean = target.clone().requires_grad_(True)
     zero, _ = photometric_loss(clean, target, None, 0.2)
-    assert float(zero) == pytest.approx(0.0, abs=1e-6)
+    assert float(zero.detach()) == pytest.approx(0.0, abs=1e-6)
 
 
 def _short_config() -> FitConfig:

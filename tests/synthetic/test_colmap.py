@@ -7,7 +7,7 @@ import json
 
 import numpy as np
 import pycolmap
-from conftest import SEED, small_preset
+from synthetic_fixtures import SEED, small_preset
 
 from setdiff_bench.io.images import read_rgb
 from setdiff_bench.synthetic.generate import build_scene

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from conftest import SEED, small_preset
+from synthetic_fixtures import SEED, small_preset
 
 from setdiff_bench.gaussians.render import render
 from setdiff_bench.io.atomic import sha256_file

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 import torch
-from conftest import SEED, small_preset
+from synthetic_fixtures import SEED, small_preset
 
 from setdiff_bench.gaussians.render import render
 from setdiff_bench.io.images import read_mask, read_rgb
