@@ -24,7 +24,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="base seed; scene i uses (seed, i)")
     parser.add_argument("--scenes", type=int, default=None, help="number of scenes (default: the preset's)")
     parser.add_argument("--no-fit", action="store_true", help="only generate the scenes")
-    parser.add_argument("--device", default=None, help="fit device: cpu or cuda (default: cuda if available)")
+    parser.add_argument("--device", default=None,
+                        help="cpu or cuda for rendering and fitting (default: cuda if available)")
     parser.add_argument("--overwrite", action="store_true", help="regenerate and refit existing scenes")
     parser.add_argument("--jobs", type=int, default=0,
                         help="scenes processed in parallel, one torch thread each (default: one per CPU core, "
@@ -60,7 +61,7 @@ def make_scene(out: Path, preset_name: str, seed: int, index: int, count: int, *
         bar.total = total
         bar.update(done - bar.n)
 
-    scene_dir = generate_scene(out, preset, seed, index, overwrite=overwrite, progress=report)
+    scene_dir = generate_scene(out, preset, seed, index, overwrite=overwrite, progress=report, device=device)
     bar.close()
     t1 = time.perf_counter()
     message = f"{scene_dir.name}: generated in {t1 - t0:.1f} s"

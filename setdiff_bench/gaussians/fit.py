@@ -23,6 +23,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -214,6 +215,7 @@ class _Trainer:
         self.position = 0
         self.iteration = 0  # iterations completed
         self.active_sh = 0
+        self.warned_no_grad = False
         self.images = [v.image.to(device)[None] for v in self.views]
         self.masks = [None if v.mask is None else v.mask.to(device)[None] for v in self.views]
 
@@ -249,6 +251,11 @@ class _Trainer:
             self.params.optimizer.zero_grad(set_to_none=True)
             if it < c.densify_until:
                 if it > c.densify_from and it % c.densify_every == 0:
+                    if not bool((self.stats.count > 0).any()) and not self.warned_no_grad:
+                        warnings.warn("densification found no view-space gradient statistics (the render "
+                                      "backend's meta['means2d'] had no .grad); no Gaussians were added",
+                                      stacklevel=2)
+                        self.warned_no_grad = True
                     size_limit = c.max_screen_size if it > c.opacity_reset_every else None
                     result = densify_and_prune(
                         self.params, self.stats, grad_threshold=c.grad_threshold, percent_dense=c.percent_dense,

@@ -82,15 +82,19 @@ def expected_depth(depth: torch.Tensor, alpha: torch.Tensor, min_alpha: float = 
 
 def capture_drive(static: GaussianModel, traversal: Traversal, rig: Sequence[CameraSpec], width: int, height: int, *,
                   vehicle: tuple[GaussianModel, MovingVehicle] | None = None, tile_size: int = 8,
-                  mask_dilation_px: int = 2) -> Iterator[CapturedFrame]:
-    """Render every timestep of ``traversal`` with all cameras of ``rig``, in timestep order."""
+                  mask_dilation_px: int = 2, device: str | torch.device = "cpu") -> Iterator[CapturedFrame]:
+    """Render every timestep of ``traversal`` with all cameras of ``rig``, in timestep order.
+
+    ``device``: where the (pure PyTorch) rasteriser runs; results come back as CPU numpy arrays.
+    """
+    static = static.to(device)
     for step in range(traversal.num_steps):
         cameras = [rig_camera(traversal, step, spec, width, height) for spec in rig]
         stamp = timestamp_us(step)
         model = static
         moving = None
         if vehicle is not None:
-            moving = posed_vehicle(vehicle[0], vehicle[1], stamp / 1e6)
+            moving = posed_vehicle(vehicle[0], vehicle[1], stamp / 1e6).to(device)
             model = concat_models(static, moving)
         with torch.no_grad():
             out = render(model, cameras, with_geometry=True, tile_size=tile_size)
@@ -101,12 +105,12 @@ def capture_drive(static: GaussianModel, traversal: Traversal, rig: Sequence[Cam
                 car_depth = expected_depth(car.depth, car.alpha, 1e-3)
                 dynamic = (car.alpha > DYNAMIC_ALPHA) & (car_depth <= depth * 1.05 + 0.3)
         for v, spec in enumerate(rig):
-            mask = dynamic[v, 0].numpy().astype(np.uint8)
+            mask = dynamic[v, 0].cpu().numpy().astype(np.uint8)
             if mask.any() and mask_dilation_px > 0:
                 kernel = np.ones((2 * mask_dilation_px + 1, 2 * mask_dilation_px + 1), np.uint8)
                 mask = cv2.dilate(mask, kernel)
             yield CapturedFrame(
                 name=frame_name(traversal.name, spec.name, step), traversal=traversal.name, sensor=spec.name,
                 index=step, timestamp_us=stamp, camera=cameras[v],
-                rgb=out.rgb[v].clamp(0, 1).permute(1, 2, 0).contiguous().numpy(),
-                static_mask=mask == 0, depth=depth[v, 0].numpy())
+                rgb=out.rgb[v].clamp(0, 1).permute(1, 2, 0).contiguous().cpu().numpy(),
+                static_mask=mask == 0, depth=depth[v, 0].cpu().numpy())

@@ -107,8 +107,9 @@ def build_scene(preset: Preset, seed: int, index: int) -> SceneBuild:
     return SceneBuild(scene_name(seed, index), seed, index, preset, world, traversals, moving, sparse_rng)
 
 
-def render_frames(build: SceneBuild, progress: Callable[[int, int], None] | None = None) -> list[CapturedFrame]:
-    """Ground truth for every drive, camera and timestep (sorted by frame name)."""
+def render_frames(build: SceneBuild, progress: Callable[[int, int], None] | None = None,
+                  device: str | torch.device = "cpu") -> list[CapturedFrame]:
+    """Ground truth for every drive, camera and timestep (sorted by frame name), rendered on ``device``."""
     p = build.preset
     frames: list[CapturedFrame] = []
     total = len(build.traversals) * p.timesteps * len(RIG)
@@ -117,7 +118,7 @@ def render_frames(build: SceneBuild, progress: Callable[[int, int], None] | None
         if traversal.name in build.moving:
             vehicle = (build.world.vehicles[traversal.name], build.moving[traversal.name])
         for frame in capture_drive(build.world.static, traversal, RIG, p.width, p.height, vehicle=vehicle,
-                                   tile_size=p.tile_size):
+                                   tile_size=p.tile_size, device=device):
             frames.append(frame)
             if progress is not None:
                 progress(len(frames), total)
@@ -175,10 +176,13 @@ def write_scene(build: SceneBuild, frames: list[CapturedFrame], destination: Pat
 
 
 def generate_scene(out_root: str | os.PathLike[str], preset: Preset, seed: int, index: int, *,
-                   overwrite: bool = False, progress: Callable[[int, int], None] | None = None) -> Path:
+                   overwrite: bool = False, progress: Callable[[int, int], None] | None = None,
+                   device: str | torch.device = "cpu") -> Path:
     """Generate scene ``index`` of ``seed`` under ``out_root``; returns its folder.
 
-    A complete existing scene (its ``scene.json`` present) is kept unless ``overwrite``.
+    A complete existing scene (its ``scene.json`` present) is kept unless ``overwrite``.  ``device`` runs
+    the ground-truth rasteriser (pure PyTorch) on a GPU for the large preset; files are byte-identical
+    for the same device type, torch build and thread count.
     """
     root = Path(out_root)
     final = root / scene_name(seed, index)
@@ -193,7 +197,7 @@ def generate_scene(out_root: str | os.PathLike[str], preset: Preset, seed: int, 
         return final
     root.mkdir(parents=True, exist_ok=True)
     build = build_scene(preset, seed, index)
-    frames = render_frames(build, progress)
+    frames = render_frames(build, progress, device)
     staging = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".tmp", dir=root))
     try:
         write_scene(build, frames, staging)
