@@ -56,8 +56,28 @@ def render(gaussians: GaussianModel, cameras: list[Camera], *, with_geometry: bo
     means2d = meta.get("means2d")
     if means2d is not None and means2d.requires_grad:
         means2d.retain_grad()
-    per_camera = [{"means2d": means2d[i] if means2d is not None else None,
+    per_camera = [{"means2d": CameraScreenPoints(means2d, i) if means2d is not None else None,
                    "radii": meta["radii"][i], "visible": (meta["radii"][i] > 0).reshape(len(g), -1).any(-1)}
                   for i in range(len(cameras))]
     return RenderOutput(rgb=rgb, cmap=renders[:, 3:6] if with_geometry else None,
                         depth=renders[:, 6:7] if with_geometry else None, alpha=alpha, meta=per_camera)
+
+
+class CameraScreenPoints:
+    """Camera ``index``'s slice of gsplat's ``(C, N, 2)`` ``means2d``, with a working ``.grad``.
+
+    A slice of a tensor never receives ``.grad`` itself (only the tensor ``retain_grad`` was called
+    on does), so the densification statistics read the slice of the full tensor's gradient here.
+    """
+
+    def __init__(self, full: torch.Tensor, index: int) -> None:
+        self.full = full
+        self.index = index
+
+    @property
+    def grad(self) -> torch.Tensor | None:
+        """``(N, 2)`` gradient of this camera's screen-space centres, or ``None`` before backward."""
+        return None if self.full.grad is None else self.full.grad[self.index]
+
+    def detach(self) -> torch.Tensor:
+        return self.full[self.index].detach()

@@ -212,31 +212,42 @@ def _composite_tiles(tiles: torch.Tensor, tile_starts: torch.Tensor, tile_counts
     px = ((tiles % tiles_x) * tile_size).to(dtype)[:, None] + offset_x[None, :]  # (B, P)
     py = ((tiles // tiles_x) * tile_size).to(dtype)[:, None] + offset_y[None, :]
     starts, counts = tile_starts[tiles], tile_counts[tiles]
+    channels = table.shape[1] - 6
+    # State of the rows still compositing ("live"), compacted as rows finish: a finished row's sums
+    # are set aside once, so no step ever copies the whole batch (an out-of-place index_add per step
+    # would, since autograd forbids in-place updates here).
+    live = torch.arange(B, device=device)
     log_t = torch.zeros(B, pix, device=device, dtype=dtype)  # log transmittance so far
     done = torch.zeros(B, pix, device=device, dtype=torch.bool)
-    acc = torch.zeros(B, pix, table.shape[1] - 6, device=device, dtype=dtype)
-    live = torch.arange(B, device=device)  # rows of this batch still compositing
+    acc = torch.zeros(B, pix, channels, device=device, dtype=dtype)
+    finished_rows: list[torch.Tensor] = []
+    finished_sums: list[torch.Tensor] = []
     k0 = 0
     while live.numel():
         # Sizes seen by the compiled step stay ≥ 2 (a lone row is duplicated, K padded with the dummy
         # Gaussian): dynamic-shape compilation specialises sizes 0 and 1, so this avoids recompiles.
-        rows_idx = live if live.numel() > 1 else live.repeat(2)
+        n_live = live.numel()
+        lone = n_live == 1
+        rows_idx = live.repeat(2) if lone else live
         k_len = max(2, min(k_chunk, int(counts[live].max()) - k0))
         k = torch.arange(k0, k0 + k_len, device=device)
         inside = k[None, :] < counts[rows_idx, None]  # (L, K)
         gather = torch.where(inside, starts[rows_idx, None] + k[None, :], torch.zeros_like(k)[None, :])
         gid = torch.where(inside, sorted_ids[gather], torch.full_like(gather, dummy))
         rows = table.index_select(0, gid.reshape(-1)).reshape(rows_idx.numel(), k_len, table.shape[1])
-        contribution, new_log_t, new_done = step(px[rows_idx], py[rows_idx], rows, log_t[rows_idx],
-                                                 done[rows_idx])
-        n_live = live.numel()
-        acc = acc.index_add(0, live, contribution[:n_live])
-        log_t = log_t.index_copy(0, live, new_log_t[:n_live])
-        done = done.index_copy(0, live, new_done[:n_live])
-        k0 += k_chunk
-        keep = ~new_done[:n_live].all(dim=1) & (counts[live] > k0)
-        live = live[keep]
-    return acc
+        state = (log_t.repeat(2, 1), done.repeat(2, 1)) if lone else (log_t, done)
+        contribution, log_t, done = step(px[rows_idx], py[rows_idx], rows, *state)
+        if lone:
+            contribution, log_t, done = contribution[:1], log_t[:1], done[:1]
+        acc = acc + contribution
+        k0 += k_len
+        keep = ~done.all(dim=1) & (counts[live] > k0)
+        if not bool(keep.all()):
+            finished_rows.append(live[~keep])
+            finished_sums.append(acc[~keep])
+            live, acc, log_t, done = live[keep], acc[keep], log_t[keep], done[keep]
+    order = torch.cat(finished_rows)
+    return torch.cat(finished_sums).index_select(0, torch.argsort(order))
 
 
 def composite_chunk(px: torch.Tensor, py: torch.Tensor, rows: torch.Tensor, log_t: torch.Tensor,
