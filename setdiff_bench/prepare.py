@@ -35,6 +35,7 @@ import multiprocessing
 import os
 import shutil
 import time
+from collections import OrderedDict
 from collections.abc import Iterable, Mapping, Sequence
 from concurrent.futures import FIRST_EXCEPTION, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field, replace
@@ -157,6 +158,8 @@ class FitSource:
 
 # ---------------------------------------------------------------------- one packet (worker side)
 _MODELS: dict[tuple[Path, int, int, str], Any] = {}
+_REFERENCE_RENDERS: OrderedDict[tuple[Any, ...], tuple[torch.Tensor, torch.Tensor]] = OrderedDict()
+_REFERENCE_CACHE_SIZE = 64  # views; 64 × (4 × 576 × 1024) float32 ≈ 600 MB at the real datasets' size
 
 
 def _model(path: Path, device: str) -> Any:
@@ -168,8 +171,36 @@ def _model(path: Path, device: str) -> Any:
     key = (path, stat.st_size if stat else -1, stat.st_mtime_ns if stat else -1, device)
     if key not in _MODELS:
         _MODELS.clear()  # jobs arrive grouped by fit: keep one model per process
+        _REFERENCE_RENDERS.clear()
         _MODELS[key] = read_ply(path).to(device)
     return _MODELS[key]
+
+
+def _reference_geometry(model: Any, references: Sequence[Any], options: dict[str, Any], height: int,
+                        width: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """World-frame C-maps ``(N, 3, H, W)`` and alphas ``(N, 1, H, W)`` of the references, cached per process.
+
+    A scene's fit frames serve as references of many packets; their renders do not depend on the
+    packet (normalisation is applied afterwards), so each is rendered once per process and model.
+    """
+    from setdiff_bench.gaussians.render import render
+
+    keys = [(id(model), v.frame, repr(v.camera.K.tolist()), repr(v.camera.w2c.tolist()),
+             repr(options["cmap_bound"]), repr(tuple(np.asarray(options["cmap_center"]).tolist())))
+            for v in references]
+    missing = [i for i, key in enumerate(keys) if key not in _REFERENCE_RENDERS]
+    if missing:
+        out = render(model, [references[i].camera for i in missing], **options)
+        for j, i in enumerate(missing):
+            _REFERENCE_RENDERS[keys[i]] = (out.cmap[j].float().cpu(), out.alpha[j].float().cpu())
+            while len(_REFERENCE_RENDERS) > _REFERENCE_CACHE_SIZE:
+                _REFERENCE_RENDERS.popitem(last=False)
+    if not references:
+        return torch.zeros(0, 3, height, width), torch.zeros(0, 1, height, width)
+    for key in keys:
+        _REFERENCE_RENDERS.move_to_end(key)
+    return (torch.stack([_REFERENCE_RENDERS[key][0] for key in keys]),
+            torch.stack([_REFERENCE_RENDERS[key][1] for key in keys]))
 
 
 def resample(image: np.ndarray, crop: Crop, resolution: tuple[int, int], *, nearest: bool = False) -> np.ndarray:
@@ -211,9 +242,14 @@ def build_packet(job: PacketJob, root: Path, backend: str, device: str) -> JobSt
     cameras = [v.camera for v in views]
     start = time.perf_counter()
     model = _model(job.fit_path, device if backend == "torch" else "cuda")
+    options = dict(backend=backend, cmap_bound=job.cmap_bound, cmap_center=job.cmap_center)
     with torch.no_grad():
-        out = render(model, cameras, backend=backend, cmap_bound=job.cmap_bound, cmap_center=job.cmap_center)
-    rgb, cmap, alpha = out.rgb.float().cpu(), out.cmap.float().cpu(), out.alpha.float().cpu()
+        size = (job.targets[0].camera.height, job.targets[0].camera.width)
+        ref_cmap, ref_alpha = _reference_geometry(model, job.references, options, *size)
+        out = render(model, [v.camera for v in job.targets], **options)
+    rgb = out.rgb.float().cpu()
+    cmap = torch.cat([ref_cmap, out.cmap.float().cpu()])
+    alpha = torch.cat([ref_alpha, out.alpha.float().cpu()])
     normalised = normalize_packet(cameras, cmap, len(job.references), alphas=alpha)
     rendered = time.perf_counter()
     contents = []
@@ -222,7 +258,7 @@ def build_packet(job: PacketJob, root: Path, backend: str, device: str) -> JobSt
         contents.append(ViewContent(
             frame=view.frame, sensor=view.sensor, traversal=view.traversal, timestamp_us=view.timestamp_us,
             camera=normalised.cameras[i], camera_world=view.camera,
-            image=to_numpy_hwc(rgb[i]) if is_target else _capture(view, job.resolution),
+            image=to_numpy_hwc(rgb[i - len(job.references)]) if is_target else _capture(view, job.resolution),
             cmap=to_numpy_hwc(normalised.cmaps[i]), alpha=alpha[i, 0].numpy(),
             gt=_capture(view, job.resolution) if is_target else None,
             mask=_mask(view, job.resolution) if is_target else None, overlap_score=view.overlap_score))
