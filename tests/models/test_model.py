@@ -205,3 +205,15 @@ def test_gradient_checkpointing_keeps_gradients() -> None:
     assert gradients[0].keys() == gradients[1].keys()
     for key, value in gradients[0].items():
         torch.testing.assert_close(gradients[1][key], value, atol=1e-6, rtol=1e-5, msg=key)
+
+
+def test_inference_set_size_overrides_equal_explicit_subsets(model: SetDiffModel) -> None:
+    """max_references = N keeps the first N references; targets_per_set = M enhances M targets per set."""
+    packet = make_packet(3, 4)
+    limited = enhance_packet(model, packet, max_references=1, targets_per_set=2)
+    for chunk in ([0, 1], [2, 3]):
+        explicit = make_packet(3, 4)
+        explicit.references = packet.references.subset([0])
+        explicit.targets = packet.targets.subset(chunk)
+        torch.testing.assert_close(limited[chunk], enhance_packet(model, explicit), atol=1e-5, rtol=0)
+    assert (limited - enhance_packet(model, packet)).abs().max() > 1e-5

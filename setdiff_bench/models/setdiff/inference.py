@@ -18,7 +18,8 @@ from setdiff_bench.types import Packet
 
 @torch.no_grad()
 def enhance_packet(model: SetDiffModel, packet: Packet, *, guidance_scale: float | None = None,
-                   sets_per_call: int | None = None) -> torch.Tensor:
+                   sets_per_call: int | None = None, max_references: int | None = None,
+                   targets_per_set: int | None = None) -> torch.Tensor:
     """The packet's M targets enhanced, ``(M, 3, H, W)`` float32 in [0, 1] on the CPU, packet order.
 
     Args:
@@ -26,6 +27,9 @@ def enhance_packet(model: SetDiffModel, packet: Packet, *, guidance_scale: float
         packet: N ≥ 0 references and M ≥ 1 targets; H and W divisible by 8.
         guidance_scale: geometry CFG scale (default: the model config's).
         sets_per_call: at most this many sets per UNet call (memory bound); ``None`` = all.
+        max_references, targets_per_set: override the config's set sizes (N = the first
+            ``max_references`` references, best first by Eq. 2; targets enhanced ``targets_per_set`` at a
+            time, each set with all N references) — the set-size ablation (paper Table 6).
 
     Raises:
         PacketError: no targets, mixed sizes, or a size not divisible by the latent factor.
@@ -34,10 +38,12 @@ def enhance_packet(model: SetDiffModel, packet: Packet, *, guidance_scale: float
     check_packet(packet, config.latent_factor)
     parameter = next(model.parameters())
     images, geometry, num_refs = view_tensors(packet, use_geometry=config.use_geometry, cmap_clip=config.cmap_clip,
-                                              max_references=config.max_references,
+                                              max_references=config.max_references if max_references is None
+                                              else max_references,
                                               geometry_inputs=config.geometry_inputs)
     output = torch.empty((len(packet.targets), 3, packet.height, packet.width), dtype=torch.float32)
-    for batch, target_ids in target_sets(images, geometry, num_refs, config.targets_per_set):
+    per_set_targets = config.targets_per_set if targets_per_set is None else targets_per_set
+    for batch, target_ids in target_sets(images, geometry, num_refs, per_set_targets):
         step = batch.num_sets if sets_per_call is None else max(1, sets_per_call)
         per_set = batch.num_targets
         for start in range(0, batch.num_sets, step):
