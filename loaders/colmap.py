@@ -137,6 +137,10 @@ def read_colmap_model(sparse_dir: str | os.PathLike[str], *, distortion: Distort
     camera_ids: dict[str, int] = {}
     for image_id in sorted(reconstruction.images):
         image = reconstruction.images[image_id]
+        try:
+            image.name  # noqa: B018 - pybind11 decodes the name here
+        except UnicodeDecodeError:
+            raise DatasetError(f"image {image_id} has a NAME that is not valid UTF-8", images_file) from None
         if image.name in cameras:
             raise DatasetError(f"duplicate image name {image.name!r} (ids {image_ids[image.name]} and {image_id})",
                                images_file)

@@ -26,6 +26,7 @@ without pulling in nerfstudio itself.
 from __future__ import annotations
 
 import json
+import math
 import os
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
@@ -34,7 +35,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from setdiff_bench.cameras import Camera, Distortion, check_rotation, intrinsics_matrix
+from setdiff_bench.cameras import Camera, Distortion, check_rotation, float_errors_raised, intrinsics_matrix
 from setdiff_bench.errors import CameraError, DatasetError
 from setdiff_bench.io.paths import resolve_inside
 from setdiff_bench.types import Frame, Scene
@@ -126,12 +127,12 @@ def read_transforms(path: str | os.PathLike[str], *, images_dir: str | None = No
         K, width, height, lens = _intrinsics(meta, entry, distortion, where)
         c2w = _matrix(entry.get("transform_matrix"), where)
         if world_from_file is not None:
-            c2w = world_from_file(c2w)
+            with float_errors_raised(where):
+                c2w = world_from_file(c2w)
         camera = Camera.from_opengl_c2w(c2w, K, width, height, distortion=lens, source=where)
         camera = fit_camera_to_image(camera, image_path, allow_rescale=images_dir is not None)
         colmap_id = entry.get("colmap_im_id")
-        out.append(TransformsFrame(index, file_path, image_path, name, camera,
-                                   int(colmap_id) if isinstance(colmap_id, int | float) else None))
+        out.append(TransformsFrame(index, file_path, image_path, name, camera, _integer_or_none(colmap_id)))
     return out
 
 
@@ -145,9 +146,13 @@ def _number(value: Any, key: str, where: str, *, required: bool = True, default:
         if required:
             raise DatasetError(f"missing intrinsic {key!r}", where)
         return default
-    if isinstance(value, bool) or not isinstance(value, int | float) or not np.isfinite(value):
-        raise DatasetError(f"intrinsic {key!r} must be a finite number, got {value!r}", where)
-    return float(value)
+    try:
+        number = None if isinstance(value, bool) or not isinstance(value, int | float) else float(value)
+    except OverflowError:  # an integer beyond float range
+        number = None
+    if number is None or not math.isfinite(number):
+        raise DatasetError(f"intrinsic {key!r} must be a finite number, got {value!r:.40}", where)
+    return number
 
 
 def _intrinsics(meta: Mapping[str, Any], entry: Mapping[str, Any], policy: str,
@@ -182,10 +187,19 @@ def _intrinsics(meta: Mapping[str, Any], entry: Mapping[str, Any], policy: str,
     return intrinsics_matrix(fx, fy, cx, cy), int(width), int(height), lens
 
 
+def _integer_or_none(value: Any) -> int | None:
+    """An integral JSON number as ``int`` (``3`` or ``3.0``), anything else ``None``."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return None
+    if isinstance(value, float) and not (math.isfinite(value) and value.is_integer()):
+        return None
+    return int(value)
+
+
 def _matrix(value: Any, where: str) -> np.ndarray:
     try:
         matrix = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:
         raise DatasetError("'transform_matrix' is not a numeric matrix", where) from exc
     if matrix.shape == (3, 4):
         matrix = np.vstack([matrix, [0.0, 0.0, 0.0, 1.0]])
@@ -205,8 +219,11 @@ def _undo_applied_transform(meta: Mapping[str, Any], transforms: Path):
         return None
     where = f"{transforms} (applied_transform)"
     A = _matrix(meta["applied_transform"], where)
+    if not np.isfinite(A).all():
+        raise DatasetError("applied_transform has NaN or infinite values", transforms)
     M, t = A[:3, :3], A[:3, 3]
-    det = float(np.linalg.det(M))
+    with float_errors_raised(where):
+        det = float(np.linalg.det(M))
     if not det > 0:
         raise DatasetError(f"applied_transform has determinant {det:.4g}; expected a rotation with positive scale",
                            transforms)

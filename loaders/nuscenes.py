@@ -33,9 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from setdiff_bench.cameras import Camera, rigid_from_quaternion
+from setdiff_bench.cameras import Camera, numeric_array, rigid_from_quaternion
 from setdiff_bench.errors import DatasetError, ImageError
 from setdiff_bench.io.paths import resolve_inside
 from setdiff_bench.types import Frame, Scene
@@ -82,9 +80,41 @@ def load_table(tables: Path, name: str) -> list[dict[str, Any]]:
         records = json.loads(path.read_text(encoding="utf-8"))
     except json.JSONDecodeError as exc:
         raise DatasetError(f"invalid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}", path) from exc
-    if not isinstance(records, list) or not all(isinstance(r, dict) and "token" in r for r in records):
-        raise DatasetError("expected a JSON list of records with a 'token' field", path)
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DatasetError(f"cannot read table ({exc.__class__.__name__})", path) from exc
+    if not isinstance(records, list) or not all(isinstance(r, dict) and isinstance(r.get("token"), str)
+                                                for r in records):
+        raise DatasetError("expected a JSON list of records with a string 'token' field", path)
     return records
+
+
+_TOKEN = (str,)
+_LIST = (list,)
+#: Types of the fields this loader reads, per table (checked when present; ``bool`` is not an ``int`` here).
+FIELD_TYPES: dict[str, dict[str, tuple[type, ...]]] = {
+    "scene": {"name": (str,), "first_sample_token": _TOKEN, "log_token": _TOKEN, "description": (str,)},
+    "sample": {"scene_token": _TOKEN, "next": _TOKEN, "prev": _TOKEN},
+    "sample_data": {"sample_token": _TOKEN, "ego_pose_token": _TOKEN, "calibrated_sensor_token": _TOKEN,
+                    "timestamp": (int,), "is_key_frame": (bool,), "filename": (str,), "width": (int,),
+                    "height": (int,), "prev": _TOKEN, "next": _TOKEN},
+    "calibrated_sensor": {"sensor_token": _TOKEN, "rotation": _LIST, "translation": _LIST,
+                          "camera_intrinsic": _LIST},
+    "sensor": {"channel": (str,), "modality": (str,)},
+    "ego_pose": {"rotation": _LIST, "translation": _LIST},
+    "log": {"location": (str,), "logfile": (str,)},
+}
+
+
+def check_field_types(record: Mapping[str, Any], table: str, path: Path) -> None:
+    """Raise ``DatasetError`` when a field the loader reads has another JSON type than the schema's."""
+    for field, kinds in FIELD_TYPES.get(table, {}).items():
+        if field not in record:
+            continue
+        value = record[field]
+        if not isinstance(value, kinds) or (isinstance(value, bool) and bool not in kinds):
+            expected = " or ".join("list" if k is list else k.__name__ for k in kinds)
+            raise DatasetError(f"{table} {record['token']!r} field {field!r} must be a JSON {expected}, "
+                               f"got {value!r:.60}", path)
 
 
 @dataclass
@@ -101,6 +131,7 @@ class _Table:
         for record in load_table(tables, name):
             if record["token"] in rows:
                 raise DatasetError(f"duplicate token {record['token']!r}", tables / f"{name}.json")
+            check_field_types(record, name, tables / f"{name}.json")
             rows[record["token"]] = record
         return cls(name, tables / f"{name}.json", rows)
 
@@ -251,7 +282,8 @@ def _frame(record: Record, channel: str, t: Mapping[str, _Table], dataroot: Path
                                             source=f"{t['calibrated_sensor'].path} (token {calib['token']!r})")
     world_from_ego = rigid_from_quaternion(ego.get("rotation", ()), ego.get("translation", ()), order="wxyz",
                                            source=f"{t['ego_pose'].path} (token {ego['token']!r})")
-    K = np.asarray(calib.get("camera_intrinsic") or [], dtype=np.float64)
+    K = numeric_array(calib.get("camera_intrinsic") or [], "camera_intrinsic",
+                      f"{t['calibrated_sensor'].path} (token {calib['token']!r})")
     if K.shape != (3, 3):
         raise DatasetError(f"calibrated_sensor {calib['token']!r} of camera {channel} has no 3x3 camera_intrinsic",
                            t["calibrated_sensor"].path)

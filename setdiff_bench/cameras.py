@@ -10,7 +10,9 @@ Numbers are float64 numpy arrays: poses are small and precision matters more tha
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import contextlib
+import math
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -22,6 +24,9 @@ QuaternionOrder = Literal["wxyz", "xyzw"]
 ORTHONORMAL_TOLERANCE = 1e-4
 QUATERNION_NORM_TOLERANCE = 1e-3
 OPENGL_TO_OPENCV = np.diag([1.0, -1.0, -1.0, 1.0])
+#: Largest image side accepted (pixels).  Larger sizes are corrupt data: pycolmap reads a width of -32 in
+#: ``cameras.txt`` as 2**64 - 32.  Raise it here for gigapixel captures.
+MAX_IMAGE_SIDE = 1 << 16
 
 
 @dataclass(frozen=True)
@@ -55,9 +60,9 @@ class Camera:
     source: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
-        K = np.array(self.K, dtype=np.float64, copy=True)
-        w2c = np.array(self.w2c, dtype=np.float64, copy=True)
         where = self.source or "camera"
+        K = numeric_array(self.K, "intrinsics", where).copy()
+        w2c = numeric_array(self.w2c, "extrinsics", where).copy()
         if K.shape != (3, 3):
             raise CameraError(f"intrinsics must be 3x3, got shape {K.shape}", where)
         if w2c.shape == (3, 4):
@@ -68,13 +73,16 @@ class Camera:
             raise CameraError("camera has NaN or infinite values", where)
         if not np.allclose(w2c[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
             raise CameraError(f"extrinsics last row must be [0 0 0 1], got {w2c[3].tolist()}", where)
-        check_rotation(w2c[:3, :3], where)
+        with float_errors_raised(where):
+            check_rotation(w2c[:3, :3], where)
         if not (K[0, 0] > 0 and K[1, 1] > 0):
             raise CameraError(f"focal lengths must be positive, got fx={K[0, 0]:g} fy={K[1, 1]:g}", where)
         if not np.allclose(K[2], [0.0, 0.0, 1.0]) or K[1, 0] != 0.0:
             raise CameraError(f"intrinsics must be upper triangular with last row [0 0 1], got {K.tolist()}", where)
         if int(self.width) != self.width or int(self.height) != self.height or self.width <= 0 or self.height <= 0:
             raise CameraError(f"image size must be positive integers, got {self.width}x{self.height}", where)
+        if self.width > MAX_IMAGE_SIDE or self.height > MAX_IMAGE_SIDE:  # e.g. a negative size read as unsigned
+            raise CameraError(f"image size {self.width}x{self.height} exceeds {MAX_IMAGE_SIDE} px per side", where)
         K.setflags(write=False)
         w2c.setflags(write=False)
         object.__setattr__(self, "K", K)
@@ -134,7 +142,7 @@ class Camera:
     def from_c2w(cls, c2w: np.ndarray, K: np.ndarray, width: int, height: int, *,
                  distortion: Distortion | None = None, source: str = "") -> Camera:
         """From an OpenCV-axes camera-to-world ``(4, 4)`` or ``(3, 4)`` matrix."""
-        c2w = np.asarray(c2w, dtype=np.float64)
+        c2w = numeric_array(c2w, "camera-to-world", source or "camera")
         if c2w.shape == (3, 4):
             c2w = np.vstack([c2w, [0.0, 0.0, 0.0, 1.0]])
         if c2w.shape != (4, 4):
@@ -142,20 +150,24 @@ class Camera:
         if not np.isfinite(c2w).all():
             raise CameraError("camera has NaN or infinite values", source or "camera")
         check_rotation(c2w[:3, :3], source or "camera")
-        return cls(K, invert_rigid(c2w), width, height, distortion, source)
+        with float_errors_raised(source or "camera"):
+            w2c = invert_rigid(c2w)
+        return cls(K, w2c, width, height, distortion, source)
 
     @classmethod
     def from_opengl_c2w(cls, c2w: np.ndarray, K: np.ndarray, width: int, height: int, *,
                         distortion: Distortion | None = None, source: str = "") -> Camera:
         """From an OpenGL/Blender/nerfstudio camera-to-world (x right, y up, z back)."""
-        c2w = np.asarray(c2w, dtype=np.float64)
+        c2w = numeric_array(c2w, "camera-to-world", source or "camera")
         if c2w.shape == (3, 4):
             c2w = np.vstack([c2w, [0.0, 0.0, 0.0, 1.0]])
         if c2w.shape != (4, 4):
             raise CameraError(f"camera-to-world must be 4x4, got shape {c2w.shape}", source or "camera")
         if not np.isfinite(c2w).all():  # before the product, which would warn about inf · 0
             raise CameraError("camera has NaN or infinite values", source or "camera")
-        return cls.from_c2w(c2w @ OPENGL_TO_OPENCV, K, width, height, distortion=distortion, source=source)
+        with float_errors_raised(source or "camera"):
+            c2w = c2w @ OPENGL_TO_OPENCV
+        return cls.from_c2w(c2w, K, width, height, distortion=distortion, source=source)
 
     @classmethod
     def from_quaternion(cls, quaternion: Sequence[float], translation: Sequence[float], K: np.ndarray,
@@ -173,7 +185,10 @@ class Camera:
         R = quaternion_to_matrix(quaternion, order=order, source=source or "camera")
         T = np.eye(4)
         T[:3, :3] = R
-        T[:3, 3] = np.asarray(translation, dtype=np.float64)
+        t = numeric_array(translation, "translation", source or "camera").reshape(-1)
+        if t.shape != (3,):
+            raise CameraError(f"translation must be 3 numbers, got {t.size}", source or "camera")
+        T[:3, 3] = t
         if direction == "c2w":
             return cls.from_c2w(T, K, width, height, distortion=distortion, source=source)
         return cls(K, T, width, height, distortion, source)
@@ -281,6 +296,9 @@ def check_rotation(R: np.ndarray, where: str) -> None:
     R = np.asarray(R, dtype=np.float64)
     if not np.isfinite(R).all():
         raise CameraError("rotation has NaN or infinite values", where)
+    largest = float(np.abs(R).max())
+    if largest > 1.0 + ORTHONORMAL_TOLERANCE:  # checked first: R·Rᵀ of huge entries would overflow
+        raise CameraError(f"rotation is not orthonormal (an entry has magnitude {largest:.3g} > 1)", where)
     error = float(np.abs(R @ R.T - np.eye(3)).max())
     if error > ORTHONORMAL_TOLERANCE:
         raise CameraError(f"rotation is not orthonormal (max |R·Rᵀ − I| = {error:.2e} > {ORTHONORMAL_TOLERANCE:g})",
@@ -299,6 +317,35 @@ def invert_rigid(T: np.ndarray) -> np.ndarray:
     return out
 
 
+@contextlib.contextmanager
+def float_errors_raised(source: str) -> Iterator[None]:
+    """Turn floating-point overflow and invalid operations in the block into a :class:`CameraError`.
+
+    They only happen for absurd values read from a file (1e308 in a pose); numpy would otherwise print
+    a ``RuntimeWarning`` line and carry ``inf``/``NaN`` on.
+    """
+    try:
+        with np.errstate(over="raise", invalid="raise", divide="raise"):
+            yield
+    except FloatingPointError as error:
+        raise CameraError(f"camera arithmetic overflowed or became invalid ({error}); values out of range",
+                          source) from None
+
+
+def numeric_array(values: object, what: str, source: str) -> np.ndarray:
+    """``values`` as a float64 array; a :class:`CameraError` naming ``what`` when they are not numbers
+    (a string, a ragged nested list, an integer too large for a float: values read from dataset files)."""
+    try:
+        return np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        raise CameraError(f"{what} must be numbers, got {_preview(values)}", source) from None
+
+
+def _preview(values: object, limit: int = 80) -> str:
+    text = repr(values)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
 def quaternion_to_matrix(q: Sequence[float], *, order: QuaternionOrder, source: str = "quaternion",
                          tolerance: float = QUATERNION_NORM_TOLERANCE) -> np.ndarray:
     """Unit quaternion → ``(3, 3)`` rotation.
@@ -310,7 +357,7 @@ def quaternion_to_matrix(q: Sequence[float], *, order: QuaternionOrder, source: 
     Raises:
         CameraError: wrong length, non-finite, or norm off by more than ``tolerance``.
     """
-    q = np.asarray(q, dtype=np.float64).reshape(-1)
+    q = numeric_array(q, "quaternion", source).reshape(-1)
     if q.shape != (4,):
         raise CameraError(f"quaternion must have 4 numbers, got {q.size}", source)
     if not np.isfinite(q).all():
@@ -321,7 +368,7 @@ def quaternion_to_matrix(q: Sequence[float], *, order: QuaternionOrder, source: 
         w, x, y, z = q
     else:
         raise ValueError(f"unknown quaternion order {order!r}; use 'wxyz' or 'xyzw'")
-    norm = float(np.sqrt(w * w + x * x + y * y + z * z))
+    norm = math.hypot(w, x, y, z)  # no overflow for huge components
     if abs(norm - 1.0) > tolerance:
         raise CameraError(f"quaternion ({order}) has norm {norm:.6f}, not 1 within {tolerance:g}", source)
     w, x, y, z = w / norm, x / norm, y / norm, z / norm
@@ -341,9 +388,9 @@ def rigid_from_quaternion(quaternion: Sequence[float], translation: Sequence[flo
     """
     T = np.eye(4)
     T[:3, :3] = quaternion_to_matrix(quaternion, order=order, source=source)
-    t = np.asarray(translation, dtype=np.float64).reshape(-1)
+    t = numeric_array(translation, "translation", source).reshape(-1)
     if t.shape != (3,) or not np.isfinite(t).all():
-        raise CameraError(f"translation must be 3 finite numbers, got {np.asarray(translation).tolist()}", source)
+        raise CameraError(f"translation must be 3 finite numbers, got {_preview(translation)}", source)
     T[:3, 3] = t
     return T
 

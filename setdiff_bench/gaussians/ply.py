@@ -12,6 +12,7 @@ writes binary little-endian.
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +29,7 @@ _PLY_TYPES = {
     "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
 }
 _MAX_HEADER_BYTES = 1 << 16
+_REST_NAME = re.compile(r"^f_rest_[0-9]{1,4}$")
 _REQUIRED = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
              "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
 
@@ -48,8 +50,12 @@ def read_ply(path: str | os.PathLike[str]) -> GaussianModel:
     missing = [name for name in _REQUIRED if name not in names]
     if missing:
         raise PlyError(f"missing vertex properties {', '.join(missing)}", path)
-    rest = sorted((n for n in names if n.startswith("f_rest_")), key=lambda n: int(n.split("_")[-1]))
-    if [int(n.split("_")[-1]) for n in rest] != list(range(len(rest))):
+    rest_names = [n for n in names if n.startswith("f_rest_")]
+    malformed = next((n for n in rest_names if not _REST_NAME.match(n)), None)
+    if malformed is not None:
+        raise PlyError(f"malformed property name {malformed!r} (expected f_rest_<number>)", path)
+    rest = sorted(rest_names, key=lambda n: int(n[len("f_rest_"):]))
+    if [int(n[len("f_rest_"):]) for n in rest] != list(range(len(rest))):
         raise PlyError("f_rest_* properties are not numbered 0..n-1", path)
     bases = len(rest) // 3 + 1
     if len(rest) % 3 or bases not in (1, 4, 9, 16):
