@@ -457,3 +457,43 @@ def _jsonable(value: Any) -> Any:
     if isinstance(value, list | tuple):
         return [_jsonable(v) for v in value]
     return value
+
+
+def config_toml_data(source: str | Path) -> dict[str, dict[str, Any]]:
+    """The raw ``{"model": {...}, "train": {...}}`` tables of a TOML config file or packaged name."""
+    load_config(source)  # validates, and resolves packaged names
+    path = Path(source) if Path(source).exists() else packaged_configs()[str(source)]
+    data = tomllib.loads(path.read_text(encoding="utf-8"))
+    return {table: dict(data.get(table, {})) for table in ("model", "train")}
+
+
+def write_config_toml(path: str | Path, data: Mapping[str, Mapping[str, Any]], comment: str = "") -> Path:
+    """Write ``{"model": {...}, "train": {...}}`` as a TOML config (flat tables of scalars and lists).
+
+    The result is validated by reading it back with :func:`load_config`.
+    """
+    from setdiff_bench.io.atomic import write_text_atomic
+
+    lines = [f"# {line}" for line in comment.splitlines()] if comment else []
+    for table in ("model", "train"):
+        lines.append(f"[{table}]")
+        for key, value in data.get(table, {}).items():
+            if value is not None:
+                lines.append(f"{key} = {_toml_value(value, f'[{table}] {key}')}")
+        lines.append("")
+    path = Path(path)
+    write_text_atomic(path, "\n".join(lines))
+    load_config(path)
+    return path
+
+
+def _toml_value(value: Any, where: str) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int | float):
+        return repr(value)
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(_toml_value(v, where) for v in value) + "]"
+    raise UsageError(f"cannot write {type(value).__name__} values to a TOML config", where)

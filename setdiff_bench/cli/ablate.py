@@ -1,0 +1,137 @@
+"""``setdiff-bench ablate geometry|setsize``: the paper's Tables 5 and 6 on a packet store.
+
+    setdiff-bench ablate geometry --packets P --out DIR [--config tiny_setdiff] [--steps N]
+    setdiff-bench ablate setsize --packets P --checkpoint CKPT --out DIR [--sizes 1+1,2+1,3+1,3+2,3+4,3+6]
+
+``geometry`` trains four SetDiff variants (no geometry, C-maps only, camera poses only, both) with
+the same config, seed and steps, and runs each on the test packets; ``setsize`` runs one trained
+SetDiff at several N + M set sizes.  Every stage is an ordinary ``setdiff-bench`` command (listed in
+the output tables) and resumes, so an interrupted ablation continues where it stopped.  Tables go to
+``<out>/ablation_geometry.{md,tex,parquet}`` and ``<out>/ablation_setsize.{md,tex,parquet}``;
+checkpoints and runs to ``--work`` (default ``<out>/work``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from setdiff_bench.stages import Pipeline
+
+VERB = "ablate"
+HELP = "the paper's ablations: geometric grounding (Table 5) and set size (Table 6)"
+DESCRIPTION = __doc__.split("\n\n", 1)[1] if __doc__ else HELP
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    sub = parser.add_subparsers(dest="study", metavar="STUDY", required=True)
+    geometry = sub.add_parser("geometry", help="train and score SetDiff without / with C-maps / poses / both")
+    geometry.add_argument("--config", default="tiny_setdiff", help="base SetDiff config (TOML or packaged name)")
+    geometry.add_argument("--steps", type=int, default=None, help="training steps per variant (default: the config's)")
+    geometry.add_argument("--seed", type=int, default=None, help="training seed (default: the config's)")
+    setsize = sub.add_parser("setsize", help="score one trained SetDiff at several reference + target set sizes")
+    setsize.add_argument("--checkpoint", required=True, type=Path, help="trained SetDiff (setdiff-bench train --out)")
+    setsize.add_argument("--sizes", default="1+1,2+1,3+1,3+2,3+4,3+6", help="comma list of N+M set sizes")
+    for study in (geometry, setsize):
+        study.add_argument("--packets", required=True, type=Path, help="packet store (setdiff-bench prepare)")
+        study.add_argument("--out", required=True, type=Path, help="folder for the ablation tables")
+        study.add_argument("--work", type=Path, default=None, help="checkpoints and runs (default: <out>/work)")
+        study.add_argument("--device", default=None, help="device for training and inference (default: auto)")
+        study.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def run(args: argparse.Namespace) -> int:
+    from setdiff_bench.stages import Pipeline, StageFailed
+
+    pipeline = Pipeline(quiet=args.no_progress)
+    work = (args.work or args.out / "work") / f"ablation_{args.study}"
+    invocation = _invocation(args)
+    try:
+        if args.study == "geometry":
+            paths = _geometry(args, pipeline, work, invocation)
+        else:
+            paths = _setsize(args, pipeline, work, invocation)
+    except StageFailed as failure:
+        return failure.code
+    for path in paths.values():
+        print(f"wrote {path}")
+    return 0
+
+
+def _invocation(args: argparse.Namespace) -> str:
+    """The command line that reproduces this ablation, from the parsed arguments."""
+    parts = ["ablate", args.study, "--packets", args.packets, "--out", args.out]
+    if args.study == "geometry":
+        parts += ["--config", args.config]
+        parts += ["--steps", args.steps] if args.steps is not None else []
+        parts += ["--seed", args.seed] if args.seed is not None else []
+    else:
+        parts += ["--checkpoint", args.checkpoint, "--sizes", args.sizes]
+    parts += ["--work", args.work] if args.work else []
+    parts += ["--device", args.device] if args.device else []
+    return "setdiff-bench " + shlex.join(str(p) for p in parts)
+
+
+def _run_args(args: argparse.Namespace) -> list[str]:
+    extra = ["--device", args.device] if args.device else []
+    return [*extra, "--no-progress"] if args.no_progress else extra
+
+
+def _geometry(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocation: str) -> dict[str, Path]:
+    from setdiff_bench import ablation
+    from setdiff_bench.models.setdiff.config import config_toml_data, write_config_toml
+
+    base = config_toml_data(args.config)
+    if base["model"].get("method", "setdiff") != "setdiff":
+        from setdiff_bench.errors import UsageError
+
+        raise UsageError("the geometry ablation needs a SetDiff config (method = \"setdiff\")", args.config)
+    results = {}
+    for variant in ablation.GEOMETRY_VARIANTS:
+        data = {"model": {**base["model"], **variant.overrides}, "train": dict(base["train"])}
+        if args.steps is not None:
+            data["train"]["steps"] = args.steps
+        if args.seed is not None:
+            data["train"]["seed"] = args.seed
+        config = write_config_toml(work / "configs" / f"{variant.key}.toml", data,
+                                   f"Geometry ablation variant '{variant.label}' of {args.config}")
+        checkpoints = work / "checkpoints" / variant.key
+        train = ["train", "--config", config, "--packets", args.packets, "--out", checkpoints]
+        if args.device == "cpu":
+            train.append("--cpu")
+        if args.no_progress:
+            train.append("--no-progress")
+        pipeline.run(f"train {variant.key}", train)
+        runs = work / "runs" / variant.key
+        pipeline.run(f"run {variant.key}", ["run", "--method", "setdiff", "--checkpoint", checkpoints,
+                                           "--packets", args.packets, "--split", "test", "--out", runs,
+                                           *_run_args(args)])
+        results[variant.key] = ablation.pooled_means(runs / "metrics.parquet")
+    frame = ablation.geometry_frame(results)
+    caption = "Geometric grounding ablation on the synthetic streets (paper Table 5 shape)"
+    commands = f"`{invocation}`, which ran:\n\n" + pipeline.commands_markdown()
+    markdown = ablation.geometry_markdown(frame, ablation.ordering_geometry(frame), commands, caption)
+    return ablation.write_tables(args.out, "ablation_geometry", frame, markdown, ablation.geometry_latex(frame, caption))
+
+
+def _setsize(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocation: str) -> dict[str, Path]:
+    from setdiff_bench import ablation
+
+    sizes = ablation.parse_sizes(args.sizes)
+    results = {}
+    for refs, targets in sizes:
+        runs = work / "runs" / f"{refs}+{targets}"
+        pipeline.run(f"run {refs}+{targets}", ["run", "--method", "setdiff", "--checkpoint", args.checkpoint,
+                                               "--packets", args.packets, "--split", "test", "--out", runs,
+                                               "-o", f"max_references={refs}", "-o", f"targets_per_set={targets}",
+                                               *_run_args(args)])
+        results[(refs, targets)] = ablation.pooled_means(runs / "metrics.parquet")
+    frame = ablation.setsize_frame(results)
+    caption = "Set-size ablation on the synthetic streets (paper Table 6 shape)"
+    commands = f"`{invocation}`, which ran:\n\n" + pipeline.commands_markdown()
+    targets = int(next(iter(results.values()))["targets"])
+    markdown = ablation.setsize_markdown(frame, ablation.ordering_setsize(results), commands, caption, targets)
+    return ablation.write_tables(args.out, "ablation_setsize", frame, markdown, ablation.setsize_latex(frame, caption))
