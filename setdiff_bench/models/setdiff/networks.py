@@ -1,6 +1,8 @@
 """Build the UNet and VAE from config, or load them from a local diffusers SD-Turbo folder.
 
-Nothing is ever downloaded: ``from_pretrained`` runs with ``local_files_only=True`` on a folder laid
+Nothing is ever downloaded, and only safetensors weights are read (``use_safetensors=True``: a folder
+holding pickled ``.bin`` weights instead is refused, never unpickled).  ``from_pretrained`` runs with
+``local_files_only=True`` on a folder laid
 out like the Hugging Face repo (``unet/``, ``vae/``, ``scheduler/``, optionally ``text_encoder/`` +
 ``tokenizer/``).  With a text encoder the fixed prompt is encoded once (``last_hidden_state``,
 ``(1, 77, 1024)``) and the encoder is dropped; without one the caller uses a learned null embedding.
@@ -60,7 +62,7 @@ def load_pretrained_networks(root: Path, config: ModelConfig) -> Networks:
     modules: dict[str, Any] = {}
     for part, cls in (("unet", UNet2DConditionModel), ("vae", AutoencoderKL)):
         try:
-            modules[part] = cls.from_pretrained(root, subfolder=part, local_files_only=True,
+            modules[part] = cls.from_pretrained(root, subfolder=part, local_files_only=True, use_safetensors=True,
                                                 torch_dtype=torch.float32)
         except (OSError, ValueError, RuntimeError) as error:
             raise WeightsError(f"cannot load {part}: {error}", root / part) from error
@@ -99,7 +101,7 @@ def encode_prompt(root: Path, prompt: str, length: int) -> torch.Tensor:
 
     try:
         tokenizer = AutoTokenizer.from_pretrained(root / "tokenizer", local_files_only=True)
-        encoder = CLIPTextModel.from_pretrained(root / "text_encoder", local_files_only=True)
+        encoder = CLIPTextModel.from_pretrained(root / "text_encoder", local_files_only=True, use_safetensors=True)
     except (OSError, ValueError) as error:
         raise WeightsError(f"cannot load the text encoder / tokenizer: {error}", root) from error
     tokens = tokenizer(prompt, padding="max_length", max_length=length, truncation=True, return_tensors="pt")

@@ -1,0 +1,226 @@
+"""Crash safety: ``prepare`` and ``run`` are SIGKILLed at random moments and resumed with the same command;
+the finished outputs must be byte-identical to an uninterrupted run.
+
+Each kill lands at a random moment of the command's work: the test waits until the process has started
+writing (the first change under the output folder since its launch, temporary files included; ``run``
+writes nothing before its first packet is scored), then sleeps a uniformly random time in ``[0, window]`` (``window``: the
+in-process duration of the same work) and kills the whole process group (``prepare`` workers
+included).  If the process finishes first, the attempt is not counted and the next attempt starts in a
+fresh folder.  The default run kills each command twice, the slow suite ten times each.
+
+Byte identity: the whole packet store (every packet file, fragment, ``index.parquet``), and for ``run``
+every enhanced PNG, ``run.json``, ``enhancer.json``, the fragments and ``metrics.parquet`` without their
+timing column (:func:`setdiff_bench.run.comparable_metrics`), and ``manifest.json`` without its ``timing``
+block, the fragment digest (fragments hold timing) and the git block (other helpers commit meanwhile).  No temporary file may be left behind.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from setdiff_bench.prepare import prepare
+from setdiff_bench.run import RunSettings, comparable_metrics, run_method
+from tests.packets.packet_fixtures import tree_bytes
+from tests.reliability.world import World, tree_state
+from tests.run.store_fixtures import StoreSpec, build_store, files_of, one_thread
+
+REPO = Path(__file__).parents[2]
+ENV = {**os.environ, "OMP_NUM_THREADS": "1"}
+RUN_METRICS = "psnr,ssim"
+RUN_METHOD = "reproject"
+
+
+@dataclass
+class CrashLog:
+    """What the kill loop did: one entry per SIGKILL (seconds after work began, outputs complete then)."""
+
+    kills: list[tuple[float, int]] = field(default_factory=list)
+    folders: list[Path] = field(default_factory=list)
+
+    def mid_work(self, total: int) -> int:
+        """Kills after which some, but not all, of ``total`` results existed."""
+        return sum(1 for _, done in self.kills if 0 < done < total)
+
+
+def crash_and_resume(command: Callable[[Path, int], list[str]], fresh_folder: Callable[[int], Path],
+                     done: Callable[[Path], int], *, kills: int, window_s: float, rng: random.Random,
+                     verify: Callable[[Path], None], max_attempts: int = 60) -> CrashLog:
+    """SIGKILL ``command`` ``kills`` times at random moments of its work, resuming it in the same folder.
+
+    A moment is drawn once the process has begun writing (the first change under its folder since it was
+    launched, temporary files included), uniformly in ``[0, window_s]``.
+
+    Args:
+        command: ``(folder, attempt) -> argv`` of the process writing into ``folder``.
+        fresh_folder: ``(index) -> folder`` for a new output folder (used when a process finished unkilled).
+        done: how many result units (packets) the folder holds complete.
+        verify: called on every folder once a resumed command has completed it.
+    """
+    log = CrashLog()
+    folder = fresh_folder(0)
+    log.folders.append(folder)
+    for attempt in range(max_attempts):
+        at_launch = tree_state([folder])
+        process = subprocess.Popen(command(folder, attempt), cwd=REPO, env=ENV, stdout=subprocess.PIPE,
+                                   stderr=subprocess.PIPE, text=True, start_new_session=True)
+        if len(log.kills) < kills:
+            deadline = time.monotonic() + 300
+            while tree_state([folder]) == at_launch and process.poll() is None:
+                assert time.monotonic() < deadline, "the command never started writing"
+                time.sleep(0.005)
+            began = time.monotonic()
+            delay = rng.uniform(0.0, window_s)
+            while time.monotonic() - began < delay and process.poll() is None:
+                time.sleep(0.002)
+            if process.poll() is None:
+                os.killpg(process.pid, signal.SIGKILL)
+                process.communicate()
+                log.kills.append((round(time.monotonic() - began, 3), done(folder)))
+                continue
+        _, stderr = process.communicate(timeout=600)
+        assert process.returncode == 0, stderr
+        verify(folder)
+        if len(log.kills) >= kills:
+            return log
+        folder = fresh_folder(len(log.folders))  # finished before the kill: start over elsewhere
+        log.folders.append(folder)
+    raise AssertionError(f"could not kill the command {kills} times in {max_attempts} attempts: {log}")
+
+
+def no_temporaries(folder: Path) -> None:
+    leftovers = [p for p in folder.rglob(".*") if ".tmp" in p.name]
+    assert not leftovers, leftovers
+
+
+# ---------------------------------------------------------------------- prepare
+@pytest.fixture(scope="module")
+def prepared_reference(world: World, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, float]:
+    """The street dataset prepared once, uninterrupted and in-process; and how long that took."""
+    out = tmp_path_factory.mktemp("prepared") / "store"
+    start = time.perf_counter()
+    with one_thread():
+        prepare("synthetic", world.street, out, fits=world.street, progress=False)
+    return out, time.perf_counter() - start
+
+
+def prepare_crashes(world: World, reference: Path, seconds: float, tmp_path: Path, kills: int, seed: int) -> CrashLog:
+    expected = tree_bytes(reference)
+    total = sum(1 for p in (reference / "packets").iterdir())
+
+    def command(folder: Path, attempt: int) -> list[str]:
+        workers = ["--workers", "2"] if attempt % 3 == 2 else []  # now and then, killed with its worker processes
+        return [sys.executable, "-m", "setdiff_bench", "prepare", "synthetic", "--root", str(world.street), "--fits",
+                str(world.street), "--out", str(folder), "--quiet", *workers]
+
+    def done(folder: Path) -> int:
+        packets = folder / "packets"
+        return sum(1 for p in packets.iterdir() if not p.name.startswith(".")) if packets.is_dir() else 0
+
+    def verify(folder: Path) -> None:
+        no_temporaries(folder)
+        assert tree_bytes(folder) == expected
+
+    log = crash_and_resume(command, lambda i: tmp_path / f"store_{i}", done, kills=kills, window_s=seconds,
+                           rng=random.Random(seed), verify=verify)
+    assert all(d <= total for _, d in log.kills)
+    return log
+
+
+def test_prepare_killed_twice_resumes_byte_identical(world: World, prepared_reference, tmp_path: Path) -> None:
+    reference, seconds = prepared_reference
+    log = prepare_crashes(world, reference, seconds, tmp_path, kills=2, seed=1)
+    assert len(log.kills) == 2
+
+
+@pytest.mark.slow
+def test_prepare_killed_ten_times_resumes_byte_identical(world: World, prepared_reference, tmp_path: Path) -> None:
+    reference, seconds = prepared_reference
+    log = prepare_crashes(world, reference, seconds, tmp_path, kills=10, seed=2)
+    print(f"prepare: window {seconds:.2f} s, (s after work began, packets complete) per kill: {log.kills}")
+    total = sum(1 for _ in (reference / "packets").iterdir())
+    assert len(log.kills) == 10 and log.mid_work(total) >= 3, log
+
+
+# ---------------------------------------------------------------------- run
+@pytest.fixture(scope="module")
+def run_reference(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, float]:
+    """A 12-packet store, and one uninterrupted in-process run of it; and how long the run took."""
+    base = tmp_path_factory.mktemp("run_reference")
+    with one_thread():
+        store = build_store(base / "store", StoreSpec(scenes=("scene_a", "scene_b"), packets_per_group=3))
+        start = time.perf_counter()
+        run_method(store, base / "run", RunSettings(RUN_METHOD, metrics=tuple(RUN_METRICS.split(",")), device="cpu",
+                                                    warp_cache=None), progress=False)
+    return store, base / "run", time.perf_counter() - start
+
+
+def comparable_manifest(folder: Path) -> dict:
+    manifest = json.loads((folder / "manifest.json").read_text())
+    for key in ("timing", "fragments_sha256", "git"):  # git: other helpers commit to this tree meanwhile
+        manifest.pop(key)
+    return manifest
+
+
+def comparable_fragments(folder: Path) -> dict[str, pd.DataFrame]:
+    return {p.name: comparable_metrics(p) for p in sorted((folder / "fragments").glob("*.parquet"))}
+
+
+def run_crashes(store: Path, reference: Path, seconds: float, tmp_path: Path, kills: int, seed: int) -> CrashLog:
+    expected_images = files_of(reference)
+    expected_files = files_of(reference, ("run.json", "enhancer.json"))
+    expected_metrics = comparable_metrics(reference / "metrics.parquet")
+    expected_fragments = comparable_fragments(reference)
+    expected_manifest = comparable_manifest(reference)
+    total = len(expected_fragments)
+
+    def command(folder: Path, attempt: int) -> list[str]:
+        return [sys.executable, "-m", "setdiff_bench", "run", "--method", RUN_METHOD, "--packets", str(store),
+                "--out", str(folder), "--device", "cpu", "--metrics", RUN_METRICS, "--warp-cache", "none",
+                "--no-progress"]
+
+    def done(folder: Path) -> int:
+        return sum(1 for p in folder.glob("fragments/*.parquet") if not p.name.startswith("."))
+
+    def verify(folder: Path) -> None:
+        no_temporaries(folder)
+        assert files_of(folder) == expected_images
+        assert files_of(folder, ("run.json", "enhancer.json")) == expected_files
+        pd.testing.assert_frame_equal(comparable_metrics(folder / "metrics.parquet"), expected_metrics)
+        fragments = comparable_fragments(folder)
+        assert fragments.keys() == expected_fragments.keys()
+        for name, frame in fragments.items():
+            pd.testing.assert_frame_equal(frame, expected_fragments[name])
+        assert comparable_manifest(folder) == expected_manifest
+        assert sorted(p.name for p in folder.iterdir()) == sorted(p.name for p in reference.iterdir())
+
+    log = crash_and_resume(command, lambda i: tmp_path / f"run_{i}", done, kills=kills, window_s=seconds,
+                           rng=random.Random(seed), verify=verify)
+    assert all(d <= total for _, d in log.kills)
+    return log
+
+
+def test_run_killed_twice_resumes_byte_identical(run_reference, tmp_path: Path) -> None:
+    store, reference, seconds = run_reference
+    log = run_crashes(store, reference, seconds, tmp_path, kills=2, seed=3)
+    assert len(log.kills) == 2
+
+
+@pytest.mark.slow
+def test_run_killed_ten_times_resumes_byte_identical(run_reference, tmp_path: Path) -> None:
+    store, reference, seconds = run_reference
+    log = run_crashes(store, reference, seconds, tmp_path, kills=10, seed=4)
+    print(f"run: window {seconds:.2f} s, (s after work began, packets complete) per kill: {log.kills}")
+    total = sum(1 for _ in (reference / "fragments").glob("*.parquet"))
+    assert len(log.kills) == 10 and log.mid_work(total) >= 3, log
