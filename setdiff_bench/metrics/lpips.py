@@ -24,7 +24,7 @@ from torch import nn
 from setdiff_bench.errors import ImageError, WeightsError
 from setdiff_bench.metrics._inputs import check_mask, check_pair
 from setdiff_bench.metrics.lpips_arch import MIN_SIZE, NETS, TRUNKS, canonical_net, tap_channels
-from setdiff_bench.metrics.weights import load_lpips_state
+from setdiff_bench.metrics.weights import load_lpips_state, resolve_lpips_weights
 
 Net = Literal["alex", "vgg"]
 
@@ -129,9 +129,17 @@ def load_lpips(net: Net = "alex", weights: str | os.PathLike[str] | None = None,
     return model.to(device)
 
 
-@functools.lru_cache(maxsize=8)
 def _cached_model(net: str, device: str, rescale_input: bool) -> LPIPS:
-    return load_lpips(net, device=device, rescale_input=rescale_input)  # type: ignore[arg-type]
+    """The default-resolved model, cached per weights file (path and mtime): weights that change within a
+    process (another ``$SETDIFF_LPIPS_WEIGHTS``, a re-converted cache file) are loaded, not the old ones."""
+    path = resolve_lpips_weights(net)
+    return _model_for_file(net, device, rescale_input, str(path), path.stat().st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=8)
+def _model_for_file(net: str, device: str, rescale_input: bool, path: str, mtime_ns: int) -> LPIPS:
+    del mtime_ns  # part of the cache key only
+    return load_lpips(net, weights=path, device=device, rescale_input=rescale_input)  # type: ignore[arg-type]
 
 
 def lpips(pred: torch.Tensor, target: torch.Tensor, *, net: Net = "alex", mask: torch.Tensor | None = None,

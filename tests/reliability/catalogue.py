@@ -835,3 +835,14 @@ def _(tmp: Path, world: World) -> Call:
 def _(tmp: Path, world: World) -> Call:
     return Call(["leaderboard", "--dataset", "synthetic", "--runs", str(tmp / "no_runs"), "--out", str(tmp / "out")],
                 str(tmp / "no_runs"))
+
+
+@case("ablate-bad-set-size", "cli", "`ablate setsize --sizes 3x`", "UsageError", "set size '3x' is not N+M")
+def _(tmp: Path, world: World) -> Call:
+    return Call(["ablate", "setsize", "--checkpoint", str(world.setdiff_run), "--sizes", "1+1,3x", "--packets",
+                 str(world.store), "--out", str(tmp / "out"), "--no-progress"], "--sizes")
+
+
+@case("demo-zero-jobs", "cli", "`demo --jobs 0`", "UsageError", "--jobs must be >= 1, got 0")
+def _(tmp: Path, world: World) -> Call:
+    return Call(["demo", "--out", str(tmp / "out"), "--jobs", "0", "--no-progress"], "--jobs")
