@@ -75,7 +75,7 @@ def read_ply(path: str | os.PathLike[str]) -> GaussianModel:
             raise PlyError(f"{available - needed} bytes after the {count} declared vertices "
                            "(vertex count wrong, or unsupported extra elements)", path)
         data = np.frombuffer(raw, dtype=dtype, count=count, offset=body_offset)
-        columns = {name: data[name].astype(np.float32) for name, _ in props}
+        columns = {name: _as_float32(data[name]) for name, _ in props}
 
     def stack(keys: list[str]) -> np.ndarray:
         return np.stack([columns[k] for k in keys], axis=1) if keys else np.zeros((count, 0), np.float32)
@@ -188,4 +188,10 @@ def _read_ascii(body: bytes, count: int, props: list[tuple[str, str]], path: Pat
         table = np.array(rows, dtype=np.float64).reshape(count, width)
     except ValueError as exc:
         raise PlyError(f"non-numeric vertex value ({exc})", path) from exc
-    return {name: table[:, i].astype(np.float32) for i, (name, _) in enumerate(props)}
+    return {name: _as_float32(table[:, i]) for i, (name, _) in enumerate(props)}
+
+
+def _as_float32(values: np.ndarray) -> np.ndarray:
+    """float32 copy; values beyond its range become ±inf quietly (refused by the finiteness check after)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        return values.astype(np.float32)

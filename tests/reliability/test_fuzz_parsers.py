@@ -291,3 +291,57 @@ def test_fuzz_nuscenes_tables_10k(nuscenes_case) -> None:
     root, tables = nuscenes_case
     assert_count(fuzz(nuscenes_inputs(tables), check_nuscenes(root, tables), SLOW_EXAMPLES, slow=True),
                  SLOW_EXAMPLES)
+
+
+# ---------------------------------------------------------------------- regressions
+PLY_HEADER = ("ply\nformat ascii 1.0\nelement vertex 1\n"
+              + "".join(f"property float {n}\n" for n in ("x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
+                                                          "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2",
+                                                          "rot_3")) + "end_header\n")
+
+
+@pytest.mark.parametrize("raw, problem", [
+    ((PLY_HEADER + "1e252 0 0 0 0 0 0 0 0 0 1 0 0 0\n").encode(), "NaN or infinite means"),  # float32 overflow
+    (PLY_HEADER.replace("property float rot_3\n", "property float rot_3\nproperty float f_rest_\x000\n").encode()
+     + b"0 0 0 0 0 0 0 0 0 0 1 0 0 0 0\n", "malformed property name"),
+])
+def test_ply_inputs_the_fuzzer_found(raw: bytes, problem: str, ply_case) -> None:
+    path, _ = ply_case
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(SetDiffBenchError, match=problem):
+            check_ply(path)(raw)
+
+
+@pytest.mark.parametrize("edit, problem", [
+    (lambda meta: meta.__setitem__("fl_x", 10**400), "intrinsic 'fl_x' must be a finite number"),
+    (lambda meta: meta["applied_transform"][0].__setitem__(0, float("nan")), "applied_transform has NaN"),
+    (lambda meta: [row.__setitem__(3, 1.7e308) for row in meta["frames"][0]["transform_matrix"][:3]], "overflowed"),
+])
+def test_transforms_inputs_the_fuzzer_found(edit, problem: str, transforms_case) -> None:  # type: ignore[no-untyped-def]
+    path, bases = transforms_case
+    meta = json.loads(json.dumps(bases[0]))
+    edit(meta)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(SetDiffBenchError, match=problem):
+            check_transforms(path)(json.dumps(meta).encode())
+    meta = json.loads(json.dumps(bases[0]))
+    meta["frames"][0]["colmap_im_id"] = float("nan")  # not an id: ignored, not a crash
+    check_transforms(path)(json.dumps(meta).encode())
+
+
+@pytest.mark.parametrize("table, edit, problem", [
+    ("calibrated_sensor", lambda r: r[0].__setitem__("token", ["x"]), "string 'token' field"),
+    ("sample_data", lambda r: r[0].__setitem__("sample_token", [1]), "field 'sample_token' must be a JSON str"),
+    ("calibrated_sensor", lambda r: r[0].__setitem__("translation", [[1.0], 0.3, 1.6]), "translation must be numbers"),
+    ("sample_data", lambda r: r[0].__setitem__("width", [32]), "field 'width' must be a JSON int"),
+])
+def test_nuscenes_inputs_the_fuzzer_found(table: str, edit, problem: str, nuscenes_case) -> None:  # type: ignore[no-untyped-def]
+    root, tables = nuscenes_case
+    records = json.loads(json.dumps(tables[table]))
+    edit(records)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(SetDiffBenchError, match=problem):
+            check_nuscenes(root, tables)((table, json.dumps(records).encode()))
