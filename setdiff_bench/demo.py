@@ -61,7 +61,7 @@ DEMO_PRESETS: dict[str, DemoPreset] = {
     "tiny": DemoPreset("tiny", "smoke test: 3 tiny scenes, a few steps (about 2 minutes on 2 CPU cores)",
                        "tiny", 3, "tiny_setdiff", "tiny_difix", 20, 20, 2),
     "default": DemoPreset("default", "6 scenes at 256x144, short CPU training (<= 15 minutes on 2 CPU cores)",
-                          "default", None, "tiny_setdiff", "tiny_difix", 160, 300, 6),
+                          "default", None, "tiny_setdiff", "tiny_difix", 230, 200, 6),
     "full": DemoPreset("full", "8 scenes at 512x288, long training: for a GPU", "large", None,
                        "tiny_setdiff", "tiny_difix", 20000, 20000, 8),
 }

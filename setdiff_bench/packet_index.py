@@ -31,10 +31,8 @@ was made from; a changed recipe makes ``prepare`` rewrite the packet).
 from __future__ import annotations
 
 import contextlib
-import fcntl
-import os
 import re
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -42,7 +40,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from setdiff_bench.errors import PacketError
-from setdiff_bench.io.atomic import atomic_path
+from setdiff_bench.io.atomic import atomic_path, file_lock
 
 INDEX_FILE = "index.parquet"
 PACKETS_DIR = "packets"
@@ -119,17 +117,9 @@ def fragment_paths(root: Path) -> list[Path]:
                   if p.is_dir() and not p.name.startswith(".") and (p / INDEX_FILE).is_file())
 
 
-@contextlib.contextmanager
-def index_lock(root: Path) -> Iterator[None]:
+def index_lock(root: Path) -> contextlib.AbstractContextManager[None]:
     """Exclusive advisory lock on ``root/.index.lock`` for the duration of the block."""
-    root.mkdir(parents=True, exist_ok=True)
-    fd = os.open(root / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
-        yield
-    finally:
-        fcntl.flock(fd, fcntl.LOCK_UN)
-        os.close(fd)
+    return file_lock(root / LOCK_FILE)
 
 
 def merge_index(root: Path) -> bool:

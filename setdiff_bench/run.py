@@ -37,12 +37,11 @@ SHA-256), so scoring a second method on the same store does not recompute optica
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import hashlib
 import json
 import os
 import time
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -61,7 +60,7 @@ from setdiff_bench.enhancers.base import (
     create_enhancer,
 )
 from setdiff_bench.errors import PacketError, SetDiffBenchError, UsageError
-from setdiff_bench.io.atomic import atomic_path, sha256_file, write_text_atomic
+from setdiff_bench.io.atomic import atomic_path, file_lock, sha256_file, write_text_atomic
 from setdiff_bench.io.images import read_rgb, to_tensor_chw, write_png
 from setdiff_bench.metrics.registry import PRESETS, MetricSpec
 from setdiff_bench.run_paths import IMAGES_DIR, image_relative, safe_component
@@ -285,7 +284,7 @@ def _claim_folder(out: Path, identity: dict[str, Any]) -> None:
         raise UsageError("output folder is not empty and holds no run.json; choose another --out", out)
     out.mkdir(parents=True, exist_ok=True)
     run_file = out / RUN_FILE
-    with _locked(out):
+    with file_lock(out / LOCK_FILE):
         if not run_file.is_file():
             if _has_visible_files(out):
                 raise UsageError("output folder is not empty and holds no run.json; choose another --out", out)
@@ -418,17 +417,6 @@ def comparable_metrics(path: str | os.PathLike[str]) -> pd.DataFrame:
 
 
 # ---------------------------------------------------------------------- merging
-@contextlib.contextmanager
-def _locked(out: Path) -> Iterator[None]:
-    fd = os.open(out / LOCK_FILE, os.O_RDWR | os.O_CREAT, 0o644)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
-        yield
-    finally:
-        fcntl.flock(fd, fcntl.LOCK_UN)
-        os.close(fd)
-
-
 def warp_enabled(settings: RunSettings, protocols: Sequence[str]) -> bool:
     """Whether warp error is computed for a run over ``protocols``."""
     if settings.warp == "auto":
@@ -442,7 +430,7 @@ def merge_run(store: Any, out: Path, settings: RunSettings, specs: Sequence[Metr
 
     Idempotent: nothing is rewritten when the manifest already records the same fragments.
     """
-    with _locked(out):
+    with file_lock(out / LOCK_FILE):
         _remove_stale_temporaries(out)
         paths = [fragment_path(out, pid) for pid in selection]
         digest = hashlib.sha256()
