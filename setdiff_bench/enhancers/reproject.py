@@ -1,7 +1,11 @@
 """``--method reproject``: a geometry-only baseline that copies reference colours through the C-maps.
 
-For every target pixel with a valid C-map point ``X`` (Eq. 1 map divided by the render's alpha, where
-alpha > ``alpha_threshold``):
+For every target pixel with a valid C-map point (Eq. 1 map divided by the render's alpha, where
+alpha > ``alpha_threshold``), take its surface point ``X``: with ``surface="ray"`` (default) the point on
+the pixel's ray at the C-map point's depth — the 3DGS expected depth, since the alpha-weighted
+Gaussian *centres* of Eq. 1 can lie far off the ray for large Gaussians (a road splat several metres
+wide) — or, with ``surface="cmap"``, the raw C-map point.  Reference surface points are built the
+same way.  Then:
 
 1. project ``X`` into each reference camera (pixel centres at +0.5), giving pixel ``uv`` and depth ``z``;
 2. visibility / depth test: read the reference's own C-map point ``Y`` at ``uv`` (nearest pixel) and
@@ -41,6 +45,7 @@ class ReprojectConfig:
         alpha_threshold: a C-map point is valid where the render's alpha exceeds this (in (0, 1)).
         tolerance: accept a reference when its surface point is within ``tolerance × depth`` of the
             target's point (depth in the reference camera; 0.03 = 3 %).
+        surface: ``"ray"`` (C-map depth on the pixel's ray) or ``"cmap"`` (the raw Eq. 1 point).
         min_weight: floor of the Eq. 2 blend weight (scores can be ≤ 0 for opposing views).
         overlap_alpha, overlap_beta: Eq. 2 coefficients.
         pixel_chunk: target pixels processed at once (bounds memory: ~60 bytes × references × chunk).
@@ -48,6 +53,7 @@ class ReprojectConfig:
 
     alpha_threshold: float = 0.5
     tolerance: float = 0.03
+    surface: str = "ray"
     min_weight: float = 1e-3
     overlap_alpha: float = OVERLAP_ALPHA
     overlap_beta: float = OVERLAP_BETA
@@ -56,6 +62,8 @@ class ReprojectConfig:
     def __post_init__(self) -> None:
         if not 0.0 < self.alpha_threshold < 1.0:
             raise UsageError(f"alpha_threshold must be in (0, 1), got {self.alpha_threshold}", "reproject")
+        if self.surface not in ("ray", "cmap"):
+            raise UsageError(f"surface must be 'ray' or 'cmap', got {self.surface!r}", "reproject")
         if not self.tolerance > 0.0:
             raise UsageError(f"tolerance must be > 0, got {self.tolerance}", "reproject")
         if not self.min_weight > 0.0:
@@ -77,6 +85,34 @@ def cmap_points(cmaps: torch.Tensor, alphas: torch.Tensor, alpha_threshold: floa
     valid = alphas > alpha_threshold
     points = torch.where(valid, cmaps / alphas.clamp_min(alpha_threshold), torch.zeros_like(cmaps))
     return points, valid
+
+
+def snap_to_rays(points: torch.Tensor, valid: torch.Tensor, cameras: tuple[Camera, ...]) -> torch.Tensor:
+    """Move each view's surface points onto their pixels' rays, keeping their camera-frame depth.
+
+    Args:
+        points: ``(V, 3, H, W)`` points in the packet frame (e.g. from :func:`cmap_points`).
+        valid: ``(V, 1, H, W)`` bool; invalid pixels stay 0.
+        cameras: the V cameras.
+
+    Returns:
+        ``(V, 3, H, W)``: ``X' = Rᵀ(z · [x_n, y_n, 1] − t)`` with ``z`` the camera-frame depth of ``X`` and
+        ``(x_n, y_n)`` the pixel centre's normalised coordinates (undistorted if the camera has distortion).
+    """
+    from setdiff_bench.geometry import pixel_centers
+
+    height, width = points.shape[-2:]
+    snapped = torch.zeros_like(points)
+    for v, camera in enumerate(cameras):
+        R = torch.tensor(camera.R, dtype=points.dtype, device=points.device)
+        t = torch.tensor(camera.t, dtype=points.dtype, device=points.device)
+        xn, yn = camera.pixel_to_normalized(pixel_centers(height, width))
+        rays = torch.from_numpy(np.stack([xn, yn, np.ones_like(xn)], axis=1)).to(points)  # (HW, 3)
+        flat = points[v].reshape(3, -1).T
+        depth = (flat @ R.T + t)[:, 2:3]
+        world = (rays * depth - t) @ R  # Rᵀ (z d − t) for row vectors
+        snapped[v] = torch.where(valid[v], world.T.reshape(3, height, width), torch.zeros_like(points[v]))
+    return snapped
 
 
 def project(cameras: tuple[Camera, ...], points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -137,11 +173,15 @@ class ReprojectEnhancer:
         refs = packet.references
         ref_points, ref_valid = cmap_points(refs.cmaps.to(self.device, torch.float32),
                                             refs.alphas.to(self.device, torch.float32), cfg.alpha_threshold)
+        if cfg.surface == "ray":
+            ref_points = snap_to_rays(ref_points, ref_valid, refs.cameras)
         # (N, 4, Hr, Wr): point xyz + validity, sampled together with nearest-neighbour lookups
         ref_geometry = torch.cat([ref_points, ref_valid.float()], dim=1)
         ref_images = refs.images.to(self.device, torch.float32)
         tgt_points, tgt_valid = cmap_points(packet.targets.cmaps.to(self.device, torch.float32),
                                             packet.targets.alphas.to(self.device, torch.float32), cfg.alpha_threshold)
+        if cfg.surface == "ray":
+            tgt_points = snap_to_rays(tgt_points, tgt_valid, packet.targets.cameras)
         weights = blend_weights(packet, cfg).to(self.device, torch.float32)
         output = render.clone()
         for m in range(len(packet.targets)):
@@ -191,7 +231,9 @@ def _check(packet: Packet) -> None:
 
 
 def create(alpha_threshold: float = ReprojectConfig.alpha_threshold, tolerance: float = ReprojectConfig.tolerance,
-           min_weight: float = ReprojectConfig.min_weight, device: str | None = None) -> ReprojectEnhancer:
+           min_weight: float = ReprojectConfig.min_weight, surface: str = ReprojectConfig.surface,
+           device: str | None = None) -> ReprojectEnhancer:
     """Factory of ``--method reproject`` (``device`` defaults to the CPU)."""
-    config = ReprojectConfig(alpha_threshold=alpha_threshold, tolerance=tolerance, min_weight=min_weight)
+    config = ReprojectConfig(alpha_threshold=alpha_threshold, tolerance=tolerance, min_weight=min_weight,
+                             surface=surface)
     return ReprojectEnhancer(config, device=device or "cpu")

@@ -150,3 +150,23 @@ def test_cuda_matches_cpu() -> None:
     cpu = ReprojectEnhancer().enhance(pk)
     gpu = ReprojectEnhancer(device="cuda").enhance(pk)
     torch.testing.assert_close(gpu, cpu, atol=1e-4, rtol=0)
+
+
+def test_ray_surface_tolerates_cmap_points_off_the_ray() -> None:
+    """Eq. 1 averages Gaussian *centres*: a large splat's centre lies off the pixel's ray.  Shifting every
+    C-map point sideways within its depth plane (as such centres do) must not break reprojection with
+    ``surface="ray"`` (the pixel's ray at the point's depth), while the raw points mislead it."""
+    camera = camera_at(0.0)
+    image, points, _ = plane_view(camera, DEPTH)
+    offset = np.zeros_like(points)
+    offset[..., 0] = 0.3  # 0.3 scene units sideways, at the same camera depth (camera x axis = world x here)
+    shifted = points + offset
+    uv, z = camera.project(shifted.reshape(-1, 3))
+    assert np.allclose(z.reshape(points.shape[:2]), camera.project(points.reshape(-1, 3))[1].reshape(points.shape[:2]))
+    render = render_of(camera)
+    target = view_set([camera], images=[render], points=[shifted])
+    reference = view_set([camera], images=[image], points=[shifted])
+    ray = ReprojectEnhancer(ReprojectConfig(surface="ray")).enhance(packet(reference, target))[0]
+    np.testing.assert_allclose(ray.permute(1, 2, 0).numpy(), image, atol=1e-5)
+    raw = ReprojectEnhancer(ReprojectConfig(surface="cmap")).enhance(packet(reference, target))[0]
+    assert np.abs(raw.permute(1, 2, 0).numpy() - image).mean() > 0.01
