@@ -161,7 +161,7 @@ def test_ray_surface_tolerates_cmap_points_off_the_ray() -> None:
     offset = np.zeros_like(points)
     offset[..., 0] = 0.3  # 0.3 scene units sideways, at the same camera depth (camera x axis = world x here)
     shifted = points + offset
-    uv, z = camera.project(shifted.reshape(-1, 3))
+    _uv, z = camera.project(shifted.reshape(-1, 3))
     assert np.allclose(z.reshape(points.shape[:2]), camera.project(points.reshape(-1, 3))[1].reshape(points.shape[:2]))
     render = render_of(camera)
     target = view_set([camera], images=[render], points=[shifted])
