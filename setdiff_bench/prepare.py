@@ -59,6 +59,7 @@ from setdiff_bench.packets import (
 )
 from setdiff_bench.prepare_plan import Crop, GroupPlan, PacketJob, ViewJob, applicable_groups, plan_scene
 from setdiff_bench.protocols import Protocol, load_protocol
+from setdiff_bench.threads import torch_threads
 from setdiff_bench.types import Frame, Scene
 
 SPLIT_CHOICES = ("train", "test", "all")
@@ -340,15 +341,11 @@ def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[s
         raise UsageError(f"threads must be >= 1, got {threads}", "--threads")
     if cmap_precision not in ("float32", "half"):
         raise UsageError(f"cmap precision must be float32 or half, got {cmap_precision!r}", "--cmap-precision")
-    previous_threads = torch.get_num_threads()
-    torch.set_num_threads(threads)
-    try:
+    with torch_threads(threads):
         return _prepare(dataset, root, out, protocol=protocol, fits=fits, fit=fit, split=split, scenes=scenes,
                         workers=workers, shard=shard, backend=backend, device=device, loader_options=loader_options,
                         fit_iterations=fit_iterations, threads=threads, cmap_half=cmap_precision == "half",
                         progress=progress)
-    finally:
-        torch.set_num_threads(previous_threads)
 
 
 def _prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[str], *,

@@ -5,22 +5,22 @@ from __future__ import annotations
 from collections.abc import Iterator
 
 import pytest
-from fit_fixtures import single_thread
 
 from setdiff_bench.gaussians.fit_data import load_fit_scene, load_fit_views, select_fit_frames
 from setdiff_bench.synthetic.generate import generate_scene
 from setdiff_bench.synthetic.presets import get_preset
+from setdiff_bench.threads import torch_threads
 
 
 @pytest.fixture(autouse=True)
-def _one_thread() -> Iterator[None]:
-    with single_thread():
+def _single_torch_thread() -> Iterator[None]:
+    with torch_threads(1):
         yield
 
 
 @pytest.fixture(scope="session")
 def tiny_scene_dir(tmp_path_factory):
-    with single_thread():
+    with torch_threads(1):
         return generate_scene(tmp_path_factory.mktemp("fit"), get_preset("tiny"), 0, 0)
 
 

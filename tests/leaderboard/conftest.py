@@ -8,19 +8,20 @@ from pathlib import Path
 import pytest
 
 from setdiff_bench.run import RunSettings, run_method
-from tests.run.store_fixtures import StoreSpec, build_store, one_thread
+from setdiff_bench.threads import torch_threads
+from tests.run.store_fixtures import StoreSpec, build_store
 
 
 @pytest.fixture(autouse=True)
-def _one_thread() -> Iterator[None]:
-    with one_thread():
+def _single_torch_thread() -> Iterator[None]:
+    with torch_threads(1):
         yield
 
 
 @pytest.fixture(scope="package")
 def lb_store(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """One scene, groups lane+1 / lane+2, two packets of two targets each per group."""
-    with one_thread():
+    with torch_threads(1):
         return build_store(tmp_path_factory.mktemp("lb_store"), StoreSpec(packets_per_group=2, targets=2))
 
 
@@ -28,7 +29,7 @@ def lb_store(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def lb_runs(lb_store: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """``runs/identity`` and ``runs/reproject`` on :func:`lb_store`."""
     runs = tmp_path_factory.mktemp("lb_runs")
-    with one_thread():
+    with torch_threads(1):
         for method in ("identity", "reproject"):
             run_method(lb_store, runs / method, RunSettings(method), progress=False)
     return runs

@@ -6,32 +6,26 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-import torch
 from packet_fixtures import StreetScene, write_dataset
 
 from setdiff_bench.packets import PacketStore
 from setdiff_bench.prepare import PrepareSummary, prepare
+from setdiff_bench.threads import torch_threads
 
 
 @pytest.fixture(autouse=True)
 def _one_thread() -> Iterator[None]:
     """The tile rasteriser's ops are tiny: one thread is fastest, and much faster on a busy machine."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+    with torch_threads(1):
+        yield
 
 
 @pytest.fixture(scope="session")
 def street(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, StreetScene]]:
     """``(root, scenes)``: street_00, street_01 (train) and street_02 (test under the 60/40 rule)."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
+    with torch_threads(1):
         root = tmp_path_factory.mktemp("street")
         return root, write_dataset(root)
-    finally:
-        torch.set_num_threads(threads)
 
 
 @pytest.fixture(scope="session")
@@ -39,10 +33,6 @@ def prepared(street, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Pr
     """The whole dataset prepared in-process with the fits found under ``<scene>/fits/``."""
     root, _ = street
     out = tmp_path_factory.mktemp("store")
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
+    with torch_threads(1):
         summary = prepare("synthetic", root, out, fits=root, progress=False)
-    finally:
-        torch.set_num_threads(threads)
     return out, summary, PacketStore(out)

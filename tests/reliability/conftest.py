@@ -6,13 +6,13 @@ from collections.abc import Iterator
 
 import pytest
 
+from setdiff_bench.threads import torch_threads
 from tests.reliability.world import World
-from tests.run.store_fixtures import one_thread
 
 
 @pytest.fixture(autouse=True)
-def _one_thread() -> Iterator[None]:
-    with one_thread():
+def _single_torch_thread() -> Iterator[None]:
+    with torch_threads(1):
         yield
 
 

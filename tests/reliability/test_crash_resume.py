@@ -32,9 +32,10 @@ import pytest
 
 from setdiff_bench.prepare import prepare
 from setdiff_bench.run import RunSettings, comparable_metrics, run_method
+from setdiff_bench.threads import torch_threads
 from tests.packets.packet_fixtures import tree_bytes
 from tests.reliability.world import World, tree_state
-from tests.run.store_fixtures import StoreSpec, build_store, files_of, one_thread
+from tests.run.store_fixtures import StoreSpec, build_store, files_of
 
 REPO = Path(__file__).parents[2]
 ENV = {**os.environ, "OMP_NUM_THREADS": "1"}
@@ -110,7 +111,7 @@ def prepared_reference(world: World, tmp_path_factory: pytest.TempPathFactory) -
     """The street dataset prepared once, uninterrupted and in-process; and how long that took."""
     out = tmp_path_factory.mktemp("prepared") / "store"
     start = time.perf_counter()
-    with one_thread():
+    with torch_threads(1):
         prepare("synthetic", world.street, out, fits=world.street, progress=False)
     return out, time.perf_counter() - start
 
@@ -158,7 +159,7 @@ def test_prepare_killed_ten_times_resumes_byte_identical(world: World, prepared_
 def run_reference(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, float]:
     """A 12-packet store, and one uninterrupted in-process run of it; and how long the run took."""
     base = tmp_path_factory.mktemp("run_reference")
-    with one_thread():
+    with torch_threads(1):
         store = build_store(base / "store", StoreSpec(scenes=("scene_a", "scene_b"), packets_per_group=3))
         start = time.perf_counter()
         run_method(store, base / "run", RunSettings(RUN_METHOD, metrics=tuple(RUN_METRICS.split(",")), device="cpu",

@@ -26,8 +26,9 @@ import torch
 
 from setdiff_bench.io.atomic import sha256_file
 from setdiff_bench.packet_index import FILE_COLUMNS, INDEX_FILE, PACKETS_DIR, merge_index, write_rows
+from setdiff_bench.threads import torch_threads
 from tests.packets.packet_fixtures import write_dataset
-from tests.run.store_fixtures import StoreSpec, build_store, one_thread
+from tests.run.store_fixtures import StoreSpec, build_store
 
 STREET_SCENE = "street_00"
 
@@ -41,18 +42,18 @@ class World:
     @functools.cached_property
     def street(self) -> Path:
         root = self.base / "street"
-        with one_thread():
+        with torch_threads(1):
             write_dataset(root, seeds=(11,))
         return root
 
     @functools.cached_property
     def store(self) -> Path:
-        with one_thread():
+        with torch_threads(1):
             return build_store(self.base / "store", StoreSpec(scenes=("scene_a",)))
 
     @functools.cached_property
     def train_store(self) -> Path:
-        with one_thread():
+        with torch_threads(1):
             return build_store(self.base / "train_store", StoreSpec(scenes=("scene_a",), split="train"))
 
     @functools.cached_property
@@ -64,7 +65,7 @@ class World:
 
         out = self.base / "setdiff_run"
         config = load_config("tiny_setdiff")
-        with one_thread():
+        with torch_threads(1):
             torch.manual_seed(0)
             model = SetDiffModel(config.model, load_pretrained=False)
             optimizer = torch.optim.AdamW(model.trainable_parameters(), lr=1e-3)

@@ -8,15 +8,13 @@ that is worse than the capture), references are clean captures.
 
 from __future__ import annotations
 
-import contextlib
 import math
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import numpy as np
-import torch
 
 from setdiff_bench.cameras import Camera
 from setdiff_bench.packet_index import merge_index, packet_id
@@ -24,17 +22,6 @@ from setdiff_bench.packets import PacketHeader, ViewContent, write_packet
 
 HEIGHT, WIDTH = 32, 48
 
-
-@contextlib.contextmanager
-def one_thread() -> Iterator[None]:
-    """Torch on one thread: these images are tiny, and on a busy 2-core machine two threads ran a
-    whole test run 2.7× slower (0.78 s vs 2.1 s for a reproject run, measured)."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(threads)
 
 
 def texture(x: np.ndarray, y: np.ndarray) -> np.ndarray:

@@ -15,7 +15,7 @@ import pytest
 
 from setdiff_bench.leaderboard import build_leaderboard, load_runs, write_leaderboard
 from setdiff_bench.run import RunSettings, comparable_metrics, run_method
-from tests.run.store_fixtures import one_thread
+from setdiff_bench.threads import torch_threads
 
 
 @pytest.mark.slow
@@ -24,7 +24,7 @@ def test_synthetic_packets_end_to_end(tmp_path: Path) -> None:
     from setdiff_bench.synthetic.generate import generate_scene
     from setdiff_bench.synthetic.presets import get_preset
 
-    with one_thread():
+    with torch_threads(1):
         generate_scene(tmp_path / "data", get_preset("tiny"), seed=0, index=0)
         prepare("synthetic", tmp_path / "data", tmp_path / "packets", fit=True, fit_iterations=60, progress=False)
         runs = tmp_path / "runs"

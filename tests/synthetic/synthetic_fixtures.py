@@ -2,11 +2,7 @@
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
-from collections.abc import Iterator
-
-import torch
 
 from setdiff_bench.synthetic.presets import Preset, get_preset
 
@@ -18,12 +14,3 @@ def small_preset() -> Preset:
     return dataclasses.replace(get_preset("tiny"), timesteps=3, holdout_every=3)
 
 
-@contextlib.contextmanager
-def single_thread() -> Iterator[None]:
-    """One torch thread: the rasteriser runs many small ops, which OpenMP slows down badly on a busy machine."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(before)
