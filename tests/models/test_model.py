@@ -4,14 +4,15 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 import torch
 from setdiff_fixtures import make_packet
 
 from setdiff_bench.errors import PacketError
 from setdiff_bench.models.setdiff.config import model_config_from_dict
-from setdiff_bench.models.setdiff.inference import enhance_packet
-from setdiff_bench.models.setdiff.inputs import SetBatch, view_tensors
+from setdiff_bench.models.setdiff.inference import enhance_packet, set_packets
+from setdiff_bench.models.setdiff.inputs import SetBatch, renormalize, view_tensors
 from setdiff_bench.models.setdiff.model import SetDiffModel
 
 # shared/reference/model.md §1.1: SD-Turbo scaled_linear schedule at t = 199.
@@ -208,12 +209,47 @@ def test_gradient_checkpointing_keeps_gradients() -> None:
 
 
 def test_inference_set_size_overrides_equal_explicit_subsets(model: SetDiffModel) -> None:
-    """max_references = N keeps the first N references; targets_per_set = M enhances M targets per set."""
+    """max_references = N keeps the first N references; targets_per_set = M enhances M targets per set,
+    each subset re-normalised into its own first target's frame as training does."""
     packet = make_packet(3, 4)
     limited = enhance_packet(model, packet, max_references=1, targets_per_set=2)
     for chunk in ([0, 1], [2, 3]):
         explicit = make_packet(3, 4)
         explicit.references = packet.references.subset([0])
         explicit.targets = packet.targets.subset(chunk)
-        torch.testing.assert_close(limited[chunk], enhance_packet(model, explicit), atol=1e-5, rtol=0)
+        torch.testing.assert_close(limited[chunk], enhance_packet(model, renormalize(explicit)), atol=1e-5, rtol=0)
     assert (limited - enhance_packet(model, packet)).abs().max() > 1e-5
+
+
+def camera_points(camera, points: np.ndarray) -> np.ndarray:
+    """``(3, P)`` world points → camera coordinates."""
+    w2c = np.asarray(camera.w2c, dtype=np.float64)
+    return w2c[:3, :3] @ points + w2c[:3, 3:]
+
+
+def project(camera, points: np.ndarray) -> np.ndarray:
+    """``(3, P)`` world points → ``(2, P)`` pixels."""
+    uv = np.asarray(camera.K, dtype=np.float64) @ camera_points(camera, points)
+    return uv[:2] / uv[2:]
+
+
+def test_inference_subsets_satisfy_the_training_normalisation() -> None:
+    """Every proper subset: first target at the identity pose, largest camera-centre distance 1 (the
+    packet invariant), C-maps moved by the same similarity; the whole packet is left as it is."""
+    packet = make_packet(3, 4)
+    whole = set_packets(packet, None, None, renormalise=True)
+    assert len(whole) == 1 and whole[0][0] is packet
+    for subset, chunk in set_packets(packet, 2, 2, renormalise=True):
+        cameras = (*subset.references.cameras, *subset.targets.cameras)
+        centres = np.stack([c.center for c in cameras])
+        assert len(subset.references) == 2 and len(subset.targets) == len(chunk) == 2
+        np.testing.assert_allclose(np.asarray(subset.targets.cameras[0].w2c), np.eye(4), atol=1e-5)
+        distances = np.linalg.norm(centres[:, None] - centres[None], axis=-1)
+        assert distances.max() == pytest.approx(1.0, abs=1e-5)
+        # a C-map point keeps its pixel: project the first target's C-map with its (new) camera
+        first = subset.targets.cameras[0]
+        cmap = subset.targets.cmaps[0].double().numpy().reshape(3, -1)
+        original = packet.targets.cameras[chunk[0]]
+        before = packet.targets.cmaps[chunk[0]].double().numpy().reshape(3, -1)
+        valid = np.abs(camera_points(original, before)[2]) > 0.1
+        np.testing.assert_allclose(project(first, cmap)[:, valid], project(original, before)[:, valid], atol=1e-3)

@@ -91,33 +91,6 @@ def view_tensors(packet: Packet, *, use_geometry: bool, cmap_clip: float, max_re
     return images, geometry, len(references)
 
 
-def target_sets(images: torch.Tensor, geometry: torch.Tensor | None, num_references: int,
-                targets_per_set: int | None) -> list[tuple[SetBatch, list[int]]]:
-    """Split the targets into sets that each carry all references.
-
-    Args:
-        images, geometry, num_references: as from :func:`view_tensors`.
-        targets_per_set: targets per set (``None`` = all in one set).
-
-    Returns:
-        ``(batch, target_indices)`` pairs: equal-sized sets are stacked on the batch axis; the
-        indices say which packet targets the batch's targets are, in "(b m)" order.
-    """
-    total = int(images.shape[0]) - num_references
-    size = total if targets_per_set is None else min(targets_per_set, total)
-    chunks = [list(range(start, min(start + size, total))) for start in range(0, total, size)]
-    by_size: dict[int, list[list[int]]] = {}
-    for chunk in chunks:
-        by_size.setdefault(len(chunk), []).append(chunk)
-    result = []
-    refs = list(range(num_references))
-    for group in by_size.values():
-        index = torch.tensor([refs + [num_references + t for t in chunk] for chunk in group])
-        batch_geometry = None if geometry is None else geometry[index]
-        result.append((SetBatch(images[index], batch_geometry, num_references), [t for c in group for t in c]))
-    return result
-
-
 @dataclass
 class TrainingSet:
     """One training set drawn from a :class:`TrainingSample`.
