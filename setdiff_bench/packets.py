@@ -296,6 +296,10 @@ class PacketStore:
         """Rebuild ``index.parquet`` from the packet fragments (see :func:`merge_index`)."""
         return merge_index(self.root)
 
+    def file_path(self, row: pd.Series, column: str) -> Path:
+        """The file of an index row's ``column`` (``image``, ``gt``, ``mask``, ``cmap``), verified against its SHA-256."""
+        return self._file(row, column)
+
     # ------------------------------------------------------------------ helpers
     def _file(self, row: pd.Series, column: str) -> Path:
         """The file of ``row[column]``, checked against the index's SHA-256 before anything decodes it

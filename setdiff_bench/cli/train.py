@@ -5,6 +5,10 @@ The config (a TOML file, or a packaged one by name: ``tiny_setdiff``, ``tiny_dif
 from the packet store's ``train`` split, validation packets from its ``test`` split.  Re-running the
 same command resumes from ``CKPT_DIR/latest``; a checkpoint of another configuration is refused.
 Several GPUs: ``accelerate launch -m setdiff_bench.cli.main train ...`` (DDP, one process per GPU).
+
+``setdiff-bench train autoencoder --packets DIR --out AE_DIR`` trains the tiny autoencoder that the
+tiny configs freeze as their VAE (see :mod:`setdiff_bench.models.setdiff.autoencoder`) on the
+ground-truth frames of the store's ``train`` split; re-running it resumes.
 """
 
 from __future__ import annotations
@@ -19,7 +23,9 @@ DESCRIPTION = __doc__.split("\n\n", 1)[1] if __doc__ else HELP
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--config", required=True, metavar="FILE",
+    parser.add_argument("model", nargs="?", default="enhancer", choices=("enhancer", "autoencoder"),
+                        help="what to train: an enhancer (default; needs --config) or the tiny autoencoder")
+    parser.add_argument("--config", metavar="FILE",
                         help="TOML config, or a packaged name: tiny_setdiff, tiny_difix, sd_turbo_setdiff, "
                              "sd_turbo_difix")
     parser.add_argument("--packets", required=True, metavar="DIR", type=Path, help="packet store (setdiff-bench prepare)")
@@ -31,6 +37,35 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-resume", action="store_true", help="refuse to continue an existing run in CKPT_DIR")
     parser.add_argument("--cpu", action="store_true", help="train on the CPU even when CUDA is available")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    autoencoder = parser.add_argument_group("autoencoder options")
+    defaults = _autoencoder_defaults()
+    for name, value in defaults.items():
+        if name not in ("seed", "steps"):
+            autoencoder.add_argument("--" + name.replace("_", "-"), type=type(value), default=value,
+                                     help=f"autoencoder {name.replace('_', ' ')} (default {value})")
+
+
+def _autoencoder_defaults() -> dict[str, int | float]:
+    from dataclasses import asdict
+
+    from setdiff_bench.models.setdiff.autoencoder import AutoencoderTraining
+
+    return asdict(AutoencoderTraining())
+
+
+def run_autoencoder(args: argparse.Namespace) -> int:
+    from setdiff_bench.models.setdiff.autoencoder import AutoencoderTraining, train_autoencoder
+
+    values = {name: getattr(args, name) for name in _autoencoder_defaults() if name not in ("seed", "steps")}
+    defaults = AutoencoderTraining()
+    settings = AutoencoderTraining(**values, steps=args.steps or defaults.steps,
+                                   seed=defaults.seed if args.seed is None else args.seed)
+    manifest = train_autoencoder(args.packets, args.out, settings, progress=not args.no_progress)
+    test = manifest["reconstruction_test"] or {}
+    print(f"trained autoencoder ({manifest['train_frames']} frames, {settings.steps} steps, "
+          f"{manifest['wall_seconds']:.0f} s): {args.out}; reconstruction PSNR train "
+          f"{manifest['reconstruction_train']['psnr']:.2f} dB" + (f", test {test['psnr']:.2f} dB" if test else ""))
+    return 0
 
 
 def run(args: argparse.Namespace) -> int:
@@ -40,6 +75,10 @@ def run(args: argparse.Namespace) -> int:
     from setdiff_bench.packets import PacketStore
     from setdiff_bench.types import TrainingSample
 
+    if args.model == "autoencoder":
+        return run_autoencoder(args)
+    if not args.config:
+        raise UsageError("training an enhancer needs --config (a TOML file or a packaged name)", "--config")
     config = with_overrides(load_config(args.config), steps=args.steps, seed=args.seed)
     if args.pretrained:
         config = dataclasses.replace(config, model=dataclasses.replace(config.model, pretrained=str(args.pretrained)))

@@ -36,6 +36,8 @@ from setdiff_bench.errors import UsageError
 Method = Literal["setdiff", "difix"]
 Prediction = Literal["v_prediction", "epsilon"]
 DecoderTraining = Literal["lora", "full", "frozen"]
+OutputMode = Literal["direct", "residual"]
+AttentionBias = Literal["none", "cmap_distance"]
 
 CONFIG_FORMAT = 1
 DEFAULT_PROMPT = "remove degradation"
@@ -184,6 +186,16 @@ class ModelConfig:
         targets_per_set: enhance targets in sets of this many (DiFix: 1); ``None`` = all at once.
         pretrained: a local diffusers SD-Turbo folder (``unet/``, ``vae/``, ``scheduler/``, optional
             ``text_encoder/`` + ``tokenizer/``) to initialise from; ``None`` = random init.
+        autoencoder: a pretrained tiny autoencoder (folder or packaged name, see :mod:`.autoencoder`):
+            its VAE config replaces the preset's and its weights are loaded when the model is built
+            (the encoder stays frozen, as the paper freezes SD's).  ``None`` = the preset's VAE.
+        output_mode: ``direct`` (the paper: x̂0 from the prediction, image = D(x̂0)) or ``residual``
+            (identity at initialisation, for models trained from scratch): the UNet's output conv
+            starts at zero, ``x̂0 = z − √(1−ᾱ)·û`` and the image is ``clamp(render + D(x̂0) − D(z))``,
+            so an untrained model returns its input and training learns only the correction.
+        attention_bias: ``none`` (the paper's set mixer) or ``cmap_distance`` (beyond the paper): each
+            set-mixer logit gets ``−s·min(‖p_q − p_k‖², cap)`` from the tokens' C-map surface points
+            (learnable s ≥ 0 per layer), steering attention to geometrically corresponding tokens.
     """
 
     method: Method = "setdiff"
@@ -212,9 +224,18 @@ class ModelConfig:
     max_references: int | None = None
     targets_per_set: int | None = None
     pretrained: str | None = None
+    autoencoder: str | None = None
+    output_mode: OutputMode = "direct"
+    attention_bias: AttentionBias = "none"
 
     def __post_init__(self) -> None:
         where = "[model]"
+        if self.output_mode not in ("direct", "residual"):
+            raise UsageError(f"output_mode must be 'direct' or 'residual', got {self.output_mode!r}", where)
+        if self.attention_bias not in ("none", "cmap_distance"):
+            raise UsageError(f"attention_bias must be 'none' or 'cmap_distance', got {self.attention_bias!r}", where)
+        if self.attention_bias != "none" and not self.use_geometry:
+            raise UsageError("attention_bias needs C-maps: set use_geometry = true", where)
         if self.method not in ("setdiff", "difix"):
             raise UsageError(f"method must be 'setdiff' or 'difix', got {self.method!r}", where)
         if self.prediction not in ("v_prediction", "epsilon"):
@@ -283,7 +304,7 @@ class ModelConfig:
         """
         keep = ("method", "unet", "vae", "scheduler", "timestep", "prediction", "use_geometry",
                 "geometry_inputs", "geometry_channels", "geometry_groups", "cmap_clip", "vae_decoder", "vae_lora_rank",
-                "vae_lora_alpha", "skip_connections", "skip_gamma", "text_length")
+                "vae_lora_alpha", "skip_connections", "skip_gamma", "text_length", "output_mode", "attention_bias")
         return _jsonable({name: getattr(self, name) for name in keep})
 
     def to_dict(self) -> dict[str, Any]:
@@ -314,6 +335,8 @@ class TrainConfig:
         num_workers: DataLoader worker processes.
         gradient_checkpointing: recompute UNet blocks in the backward pass (less memory, ~30 % slower);
             needed for sets of 8–12 views at 576×1024 on 80 GB GPUs.
+        identity_fraction: probability per set of an identity sample (every target's input replaced by
+            its ground truth: a clean view must come back unchanged); 0 = off (the paper).
     """
 
     steps: int = 40_000
@@ -340,9 +363,12 @@ class TrainConfig:
     seed: int = 0
     num_workers: int = 0
     gradient_checkpointing: bool = False
+    identity_fraction: float = 0.0
 
     def __post_init__(self) -> None:
         where = "[train]"
+        if not 0.0 <= self.identity_fraction < 1.0:
+            raise UsageError(f"identity_fraction must be in [0, 1), got {self.identity_fraction}", where)
         if self.steps < 0 or self.gradient_accumulation < 1:
             raise UsageError("steps must be >= 0 and gradient_accumulation >= 1", where)
         if not 2 <= self.min_views <= self.max_views:
@@ -420,7 +446,14 @@ def model_config_from_dict(data: Mapping[str, Any]) -> ModelConfig:
     preset_name = data.get("preset", "sd-turbo")
     if preset_name not in PRESETS:
         raise UsageError(f"unknown preset {preset_name!r}; known: {', '.join(PRESETS)}", "[model]")
-    preset = PRESETS[preset_name]
+    preset = copy.deepcopy(PRESETS[preset_name])
+    if data.get("autoencoder") and not _complete_vae(data.get("vae", {})):
+        from setdiff_bench.models.setdiff.autoencoder import read_autoencoder_config
+
+        autoencoder = read_autoencoder_config(str(data["autoencoder"]))
+        preset["vae"] = {**preset["vae"], **autoencoder}
+        channels = int(autoencoder["latent_channels"])
+        preset["unet"] = {**preset["unet"], "in_channels": channels, "out_channels": channels}
     for part in ("unet", "vae"):
         overrides = data.get(part, {})
         if not isinstance(overrides, Mapping):
@@ -431,6 +464,11 @@ def model_config_from_dict(data: Mapping[str, Any]) -> ModelConfig:
     data.setdefault("geometry_channels", list(preset["geometry_channels"]))
     data.setdefault("scheduler", dict(SD_TURBO_SCHEDULE))
     return _build(ModelConfig, data, "[model]")
+
+
+def _complete_vae(table: Any) -> bool:
+    """A saved (checkpoint) config carries the whole VAE table, scale included; a TOML override does not."""
+    return isinstance(table, Mapping) and {"latent_channels", "scaling_factor", "block_out_channels"} <= set(table)
 
 
 def with_overrides(config: Config, **train_overrides: Any) -> Config:

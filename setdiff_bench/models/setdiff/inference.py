@@ -19,7 +19,13 @@ from dataclasses import replace
 
 import torch
 
-from setdiff_bench.models.setdiff.inputs import SetBatch, check_packet, renormalize, view_tensors
+from setdiff_bench.models.setdiff.inputs import (
+    SetBatch,
+    check_packet,
+    renormalize,
+    surface_points,
+    view_tensors,
+)
 from setdiff_bench.models.setdiff.model import SetDiffModel
 from setdiff_bench.types import Packet
 
@@ -89,7 +95,9 @@ def enhance_packet(model: SetDiffModel, packet: Packet, *, guidance_scale: float
                                     geometry_inputs=config.geometry_inputs) for subset, _ in part]
             num_refs = tensors[0][2]
             geometry = None if tensors[0][1] is None else torch.stack([g for _, g, _ in tensors])
-            batch = SetBatch(torch.stack([images for images, _, _ in tensors]), geometry, num_refs)
+            points = (torch.stack([surface_points(subset) for subset, _ in part])
+                      if config.attention_bias != "none" else None)
+            batch = SetBatch(torch.stack([images for images, _, _ in tensors]), geometry, num_refs, points)
             enhanced = model.enhance(batch.to(parameter.device, parameter.dtype), guidance_scale=guidance_scale)
             ids = [t for _, chunk in part for t in chunk]
             output[ids] = enhanced.reshape(-1, *enhanced.shape[2:]).float().cpu()

@@ -28,11 +28,14 @@ class SetBatch:
         images: ``(B, V, 3, H, W)`` float32 in [0, 1]; views ``[0, N)`` are references.
         geometry: ``(B, V, 9, H, W)`` C-map + Plücker input of Ψ, or ``None`` (RGB-only model).
         num_references: N.
+        points: ``(B, V, 4, H, W)`` surface points × validity and validity (:func:`surface_points`)
+            for the C-map distance attention bias, or ``None``.
     """
 
     images: torch.Tensor
     geometry: torch.Tensor | None
     num_references: int
+    points: torch.Tensor | None = None
 
     @property
     def num_sets(self) -> int:
@@ -48,7 +51,8 @@ class SetBatch:
 
     def to(self, device: torch.device | str, dtype: torch.dtype | None = None) -> SetBatch:
         geometry = None if self.geometry is None else self.geometry.to(device=device, dtype=dtype)
-        return SetBatch(self.images.to(device=device, dtype=dtype), geometry, self.num_references)
+        points = None if self.points is None else self.points.to(device=device, dtype=dtype)
+        return SetBatch(self.images.to(device=device, dtype=dtype), geometry, self.num_references, points)
 
 
 def check_image_size(height: int, width: int, factor: int, where: str) -> None:
@@ -89,6 +93,20 @@ def view_tensors(packet: Packet, *, use_geometry: bool, cmap_clip: float, max_re
         geometry = torch.cat([geometry_input(v.cmaps, v.cameras, cmap_clip=cmap_clip, inputs=geometry_inputs)
                               for v in views])
     return images, geometry, len(references)
+
+
+#: A pixel has a surface point where the render's alpha exceeds this (the C-map / alpha is then stable).
+SURFACE_ALPHA = 0.5
+
+
+def surface_points(packet: Packet) -> torch.Tensor:
+    """Per pixel of every view (references first): the surface point ``C-map / alpha`` times its
+    validity (alpha > :data:`SURFACE_ALPHA`), and the validity — ``(V, 4, H, W)`` float32, packet units."""
+    views = [v for v in (packet.references, packet.targets) if len(v)]
+    cmaps = torch.cat([v.cmaps.float() for v in views])
+    alphas = torch.cat([v.alphas.float() for v in views])
+    valid = (alphas > SURFACE_ALPHA).float()
+    return torch.cat([cmaps / alphas.clamp_min(SURFACE_ALPHA) * valid, valid], dim=1)
 
 
 @dataclass
@@ -141,7 +159,8 @@ def best_reference_per_target(packet: Packet) -> list[int]:
 
 def training_set(sample: TrainingSample, rng: random.Random, *, min_views: int, max_views: int,
                  use_geometry: bool, cmap_clip: float, pairs: bool = False,
-                 geometry_inputs: Sequence[str] = GEOMETRY_INPUTS) -> TrainingSet:
+                 geometry_inputs: Sequence[str] = GEOMETRY_INPUTS, with_points: bool = False,
+                 identity_probability: float = 0.0) -> TrainingSet:
     """Draw the views of one training step from ``sample`` and build the tensors.
 
     A sample with more than ``max_views`` views is subset (:func:`choose_views`); a smaller one (e.g.
@@ -151,6 +170,9 @@ def training_set(sample: TrainingSample, rng: random.Random, *, min_views: int, 
     Args:
         pairs: DiFix mode: one random target and its best reference by Eq. 2 (the training data may
             be permuted, so the packet's first reference need not be the best one).
+        with_points: also build the surface points of the attention bias (:func:`surface_points`).
+        identity_probability: with this probability the set is an *identity sample*: every target's
+            input is its own ground truth, so the model learns to leave a clean view unchanged.
     """
     packet = sample.packet
     check_packet(packet, 1)
@@ -169,9 +191,12 @@ def training_set(sample: TrainingSample, rng: random.Random, *, min_views: int, 
         subset = renormalize(subset)
     images, geometry, n = view_tensors(subset, use_geometry=use_geometry, cmap_clip=cmap_clip,
                                        geometry_inputs=geometry_inputs)
-    batch = SetBatch(images[None], None if geometry is None else geometry[None], n)
     gt = sample.target_gt[target_ids].float()[None]
     masks = sample.target_masks[target_ids].bool()[None]
+    if identity_probability > 0 and rng.random() < identity_probability:
+        images = torch.cat([images[:n], gt[0]])
+    points = surface_points(subset)[None] if with_points else None
+    batch = SetBatch(images[None], None if geometry is None else geometry[None], n, points)
     return TrainingSet(batch=batch, target_gt=gt, target_masks=masks)
 
 

@@ -13,6 +13,13 @@ Forward pass for B sets of N references + M targets (paper §3.1–3.3, model.md
    readings agree at the start);
 5. only the targets' x̂0 are decoded (decoder with LoRA, optional DiFix skip convs).
 
+With ``output_mode = "residual"`` (models trained from scratch) the UNet's output conv starts at
+zero, ``x̂0 = z − √(1−ᾱ)·û`` and a target's image is ``clamp(render + D(x̂0) − D(z), 0, 1)`` (both
+latents decoded in one call with the same skips): an untrained model returns its input exactly, and
+training learns the correction only.  With ``attention_bias = "cmap_distance"`` the set mixer's
+logits get a C-map distance bias (:func:`.set_mixer.distance_bias`); the points travel with each
+UNet call and are removed, like Ψ's output, for the unconditional CFG branch and dropped sets.
+
 Geometry classifier-free guidance: training removes C-maps and poses together for a whole set with
 probability ``geometry_dropout``; at inference ``x̂0 = x̂0_u + s·(x̂0_c − x̂0_u)`` with s = 2.0, the
 conditional and unconditional UNet passes batched into one call (``cfg_batched``).  As both branches
@@ -31,7 +38,7 @@ from setdiff_bench.models.setdiff.config import ModelConfig
 from setdiff_bench.models.setdiff.geometry_encoder import GeometryEncoder
 from setdiff_bench.models.setdiff.inputs import SetBatch, check_image_size
 from setdiff_bench.models.setdiff.networks import build_networks
-from setdiff_bench.models.setdiff.set_mixer import install_set_mixer, set_kwargs
+from setdiff_bench.models.setdiff.set_mixer import add_bias_parameters, install_set_mixer, set_kwargs
 from setdiff_bench.models.setdiff.vae_codec import Encoded, LatentCodec
 
 
@@ -63,6 +70,11 @@ class SetDiffModel(nn.Module):
         networks = build_networks(config, load_pretrained=load_pretrained)
         self.unet = networks.unet
         self.mixed_attention = install_set_mixer(self.unet)
+        if config.attention_bias == "cmap_distance":
+            add_bias_parameters(self.unet, self.mixed_attention)
+        if config.output_mode == "residual":
+            nn.init.zeros_(self.unet.conv_out.weight)
+            nn.init.zeros_(self.unet.conv_out.bias)
         self.codec = LatentCodec(networks.vae, skip_connections=config.skip_connections,
                                  skip_gamma=config.skip_gamma, decoder_training=config.vae_decoder,
                                  lora_rank=config.vae_lora_rank, lora_alpha=config.vae_lora_alpha)
@@ -94,16 +106,28 @@ class SetDiffModel(nn.Module):
             raise RuntimeError("this model has no geometry encoder (use_geometry = false)")
         return self.geometry_encoder(geometry)
 
-    def unet_output(self, unet_input: torch.Tensor, num_views: int) -> torch.Tensor:
-        """One UNet pass at the fixed timestep over ``(B·V, C, h, w)`` sets of ``num_views`` views."""
+    def unet_output(self, unet_input: torch.Tensor, num_views: int,
+                    points: torch.Tensor | None = None) -> torch.Tensor:
+        """One UNet pass at the fixed timestep over ``(B·V, C, h, w)`` sets of ``num_views`` views
+        (``points``: ``(B·V, 4, h, w)`` latent-cell surface points for the attention bias, or ``None``)."""
         text = self.text_embedding.to(unet_input.dtype).expand(unet_input.shape[0], -1, -1)
         timestep = torch.full((unet_input.shape[0],), self.config.timestep, device=unet_input.device,
                               dtype=torch.long)
         return self.unet(unet_input, timestep, encoder_hidden_states=text,
-                         cross_attention_kwargs=set_kwargs(num_views)).sample
+                         cross_attention_kwargs=set_kwargs(num_views, points)).sample
+
+    def latent_points(self, points: torch.Tensor | None) -> torch.Tensor | None:
+        """Pixel surface points ``(B·V, 4, H, W)`` → latent cells ``(B·V, 4, H/8, W/8)`` (area means),
+        or ``None`` when the model has no attention bias."""
+        if points is None or self.config.attention_bias == "none":
+            return None
+        factor = self.config.latent_factor
+        return torch.nn.functional.avg_pool2d(points.float(), factor) if factor > 1 else points.float()
 
     def to_x0(self, latents: torch.Tensor, prediction: torch.Tensor) -> torch.Tensor:
-        """Analytic one-step x̂0 from the image latent and the UNet output (v or ε)."""
+        """Analytic one-step x̂0 from the image latent and the UNet output (v or ε; residual: a correction)."""
+        if self.config.output_mode == "residual":
+            return latents - self.sqrt_one_minus_alpha_bar * prediction
         if self.config.prediction == "v_prediction":
             return self.sqrt_alpha_bar * latents - self.sqrt_one_minus_alpha_bar * prediction
         return (latents - self.sqrt_one_minus_alpha_bar * prediction) / self.sqrt_alpha_bar
@@ -112,8 +136,22 @@ class SetDiffModel(nn.Module):
         """Scaled latents ``(K, C, h, w)`` → images ``(K, 3, H, W)`` in [0, 1]."""
         return self.codec.decode(latents, skips)
 
+    def output_images(self, x0: torch.Tensor, latents: torch.Tensor, renders: torch.Tensor,
+                      skips: tuple[torch.Tensor, ...] | None) -> torch.Tensor:
+        """The enhanced images ``(K, 3, H, W)`` of K targets from their x̂0 ``(K, C, h, w)``.
+
+        ``direct``: ``D(x̂0)``.  ``residual``: ``clamp(render + D(x̂0) − D(z), 0, 1)`` with ``z`` the
+        render's latent ``(K, C, h, w)`` and ``renders`` ``(K, 3, H, W)``, both decoded in one call.
+        """
+        if self.config.output_mode == "direct":
+            return self.decode(x0, skips)
+        doubled = None if skips is None else tuple(torch.cat([s, s]) for s in skips)
+        changed, unchanged = self.decode(torch.cat([x0, latents.to(x0.dtype)]), doubled).chunk(2)
+        return (renders.to(changed.dtype) + changed - unchanged).clamp(0.0, 1.0)
+
     def predict_x0(self, latents: torch.Tensor, geometry: torch.Tensor | None, num_views: int, *,
-                   guidance_scale: float = 1.0, geometry_keep: torch.Tensor | None = None) -> torch.Tensor:
+                   guidance_scale: float = 1.0, geometry_keep: torch.Tensor | None = None,
+                   points: torch.Tensor | None = None) -> torch.Tensor:
         """x̂0 for every view, ``(B·V, C, h, w)``.
 
         Args:
@@ -122,20 +160,26 @@ class SetDiffModel(nn.Module):
             guidance_scale: geometry CFG scale; 1 = conditional only.
             geometry_keep: ``(B,)`` 0/1 per set multiplying Ψ's output (training dropout); the
                 multiplication keeps Ψ in the graph so DDP sees all parameters used.
+            points: ``(B·V, 4, H, W)`` pixel surface points for the attention bias (or ``None``);
+                dropped with the geometry.
         """
         if geometry is None or self.geometry_encoder is None:
             return self.to_x0(latents, self.unet_output(latents, num_views))
         g = self.geometry_latents(geometry.to(latents.dtype))
+        cells = self.latent_points(points)
         if geometry_keep is not None:
             keep = geometry_keep.to(g.dtype).repeat_interleave(num_views)
             g = g * keep.view(-1, 1, 1, 1)
+            if cells is not None:
+                cells = cells * keep.view(-1, 1, 1, 1).to(cells.dtype)
         if guidance_scale == 1.0:
-            return self.to_x0(latents, self.unet_output(latents + g, num_views))
+            return self.to_x0(latents, self.unet_output(latents + g, num_views, cells))
         if self.config.cfg_batched:
-            both = self.unet_output(torch.cat([latents + g, latents]), num_views)
+            both_cells = None if cells is None else torch.cat([cells, torch.zeros_like(cells)])
+            both = self.unet_output(torch.cat([latents + g, latents]), num_views, both_cells)
             conditional, unconditional = both.chunk(2)
         else:
-            conditional = self.unet_output(latents + g, num_views)
+            conditional = self.unet_output(latents + g, num_views, cells)
             unconditional = self.unet_output(latents, num_views)
         guided = unconditional + guidance_scale * (conditional - unconditional)
         return self.to_x0(latents, guided)
@@ -158,13 +202,15 @@ class SetDiffModel(nn.Module):
             offsets = torch.arange(sets, device=decode_index.device)[:, None] * views
             flat_decode = (offsets + n + decode_index[None, :].to(offsets.device)).reshape(-1)
         encoded = self.encode(images, flat_decode)
-        x0 = self.predict_x0(encoded.latents, geometry, views, geometry_keep=geometry_keep)
+        points = None if batch.points is None else batch.points.reshape(sets * views, *batch.points.shape[2:])
+        x0 = self.predict_x0(encoded.latents, geometry, views, geometry_keep=geometry_keep, points=points)
         x0 = x0.reshape(sets, views, *x0.shape[1:])
         target_x0 = x0[:, n:]
         decoded = None
         if flat_decode is not None:
-            chosen = x0.reshape(sets * views, *x0.shape[2:])[flat_decode.to(x0.device)]
-            decoded = self.decode(chosen, encoded.skips)
+            chosen = flat_decode.to(x0.device)
+            decoded = self.output_images(x0.reshape(sets * views, *x0.shape[2:])[chosen], encoded.latents[chosen],
+                                         images[chosen], encoded.skips)
             decoded = decoded.reshape(sets, -1, *decoded.shape[1:])
         return SetPrediction(target_x0=target_x0, decoded=decoded)
 
@@ -181,8 +227,10 @@ class SetDiffModel(nn.Module):
         geometry = None if batch.geometry is None else batch.geometry.reshape(sets * views, *batch.geometry.shape[2:])
         targets = (torch.arange(sets)[:, None] * views + torch.arange(n, views)[None, :]).reshape(-1)
         encoded = self.encode(images, targets.to(images.device))
-        x0 = self.predict_x0(encoded.latents, geometry, views, guidance_scale=scale)
-        decoded = self.decode(x0[targets.to(x0.device)], encoded.skips)
+        points = None if batch.points is None else batch.points.reshape(sets * views, *batch.points.shape[2:])
+        x0 = self.predict_x0(encoded.latents, geometry, views, guidance_scale=scale, points=points)
+        chosen = targets.to(x0.device)
+        decoded = self.output_images(x0[chosen], encoded.latents[chosen], images[chosen], encoded.skips)
         return decoded.reshape(sets, views - n, *decoded.shape[1:]).float()
 
     def trainable_parameters(self) -> list[nn.Parameter]:

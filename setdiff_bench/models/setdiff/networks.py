@@ -35,13 +35,18 @@ class Networks:
 
 
 def build_networks(config: ModelConfig, *, load_pretrained: bool = True) -> Networks:
-    """Random-init networks from ``config``, or ``config.pretrained`` when set and ``load_pretrained``."""
+    """Random-init networks from ``config``, or ``config.pretrained`` when set and ``load_pretrained``
+    (then also the VAE weights of ``config.autoencoder``, when set)."""
     from diffusers import AutoencoderKL, UNet2DConditionModel
 
     if config.pretrained and load_pretrained:
         return load_pretrained_networks(Path(config.pretrained), config)
     unet = UNet2DConditionModel.from_config(dict(config.unet))
     vae = AutoencoderKL.from_config(dict(config.vae))
+    if config.autoencoder and load_pretrained:
+        from setdiff_bench.models.setdiff.autoencoder import load_autoencoder_weights
+
+        load_autoencoder_weights(vae, config.autoencoder)
     return Networks(unet=unet, vae=vae, prompt_embedding=None)
 
 

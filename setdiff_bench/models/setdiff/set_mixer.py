@@ -22,19 +22,78 @@ Written here because diffusers ships no processor for joint attention across bat
 from __future__ import annotations
 
 import functools
+import math
 from typing import Any
 
 import torch
 import torch.nn.functional as F
+from torch import nn
 
 NUM_VIEWS_KEY = "num_views"
+POINTS_KEY = "token_points"
+BIAS_PARAMETER = "set_bias_log_scale"
+#: Initial strength s of the C-map distance bias (logits −s·d², d in packet units).
+BIAS_INITIAL_SCALE = 2.0
+#: Squared distances are capped here (packet units²): beyond it a token is simply "elsewhere".
+BIAS_DISTANCE_CAP = 4.0
 
 
-def set_kwargs(num_views: int) -> dict[str, int]:
-    """The ``cross_attention_kwargs`` of a UNet call whose batch is ``(B·num_views)`` in "(b v)" order."""
+def set_kwargs(num_views: int, points: torch.Tensor | None = None) -> dict[str, Any]:
+    """The ``cross_attention_kwargs`` of a UNet call whose batch is ``(B·num_views)`` in "(b v)" order.
+
+    Args:
+        points: ``(B·V, 4, h, w)`` per latent cell: the C-map surface point × validity (3) and the
+            validity (1) — for the C-map distance attention bias; ``None`` = no bias.
+    """
     if num_views < 1:
         raise ValueError(f"a set needs at least one view, got {num_views}")
-    return {NUM_VIEWS_KEY: int(num_views)}
+    kwargs: dict[str, Any] = {NUM_VIEWS_KEY: int(num_views)}
+    if points is not None:
+        kwargs[POINTS_KEY] = points
+    return kwargs
+
+
+def token_grid(height: int, width: int, tokens: int) -> tuple[int, int]:
+    """The token grid of a UNet level with ``tokens`` tokens whose latent is ``height × width``
+    (each UNet downsampler maps a side s to ⌈s/2⌉)."""
+    h, w = height, width
+    while h * w > tokens:
+        h, w = math.ceil(h / 2), math.ceil(w / 2)
+    if h * w != tokens:
+        raise RuntimeError(f"{tokens} tokens do not match a downsampled {height}x{width} latent grid")
+    return h, w
+
+
+def pool_token_points(points: torch.Tensor, tokens: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """Latent-cell points ``(B·V, 4, h, w)`` → per-token mean surface points ``(B·V, L, 3)`` and
+    validity ``(B·V, L)`` bool (more than half the token's area has a surface point)."""
+    h, w = token_grid(int(points.shape[-2]), int(points.shape[-1]), tokens)
+    pooled = F.adaptive_avg_pool2d(points.float(), (h, w))
+    coverage = pooled[:, 3:]
+    xyz = pooled[:, :3] / coverage.clamp_min(1e-6)
+    return xyz.flatten(2).transpose(1, 2), (coverage > 0.5).flatten(1)
+
+
+def distance_bias(points: torch.Tensor, valid: torch.Tensor, scale: torch.Tensor) -> torch.Tensor:
+    """Additive attention logits ``(B, 1, T, T)`` = ``−scale · min(‖p_q − p_k‖², cap)``; pairs where either
+    token has no surface point get the cap (a query without a point thus gets a constant row: no effect).
+
+    Args:
+        points: ``(B, T, 3)`` token surface points (packet units); valid: ``(B, T)`` bool.
+    """
+    squared = torch.cdist(points, points).square().clamp(max=BIAS_DISTANCE_CAP)
+    both = valid[:, :, None] & valid[:, None, :]
+    squared = torch.where(both, squared, torch.full_like(squared, BIAS_DISTANCE_CAP))
+    return (-scale * squared)[:, None]
+
+
+def add_bias_parameters(unet: torch.nn.Module, names: list[str]) -> None:
+    """Give each set-mixing ``attn1`` a learnable log-strength of the distance bias (saved with the UNet)."""
+    modules = dict(unet.named_modules())
+    for name in names:
+        module = modules[name.removesuffix(".processor")]
+        if not hasattr(module, BIAS_PARAMETER):
+            module.register_parameter(BIAS_PARAMETER, nn.Parameter(torch.tensor(math.log(BIAS_INITIAL_SCALE))))
 
 
 class SetSelfAttnProcessor:
@@ -42,8 +101,12 @@ class SetSelfAttnProcessor:
 
     def __call__(self, attn: Any, hidden_states: torch.Tensor, encoder_hidden_states: torch.Tensor | None = None,
                  attention_mask: torch.Tensor | None = None, temb: torch.Tensor | None = None,
-                 num_views: int | None = None, **kwargs: Any) -> torch.Tensor:
-        """``hidden_states`` ``(B·V, L, C)`` → ``(B·V, L, C_out)``, attending across the V views of each set."""
+                 num_views: int | None = None, token_points: torch.Tensor | None = None,
+                 **kwargs: Any) -> torch.Tensor:
+        """``hidden_states`` ``(B·V, L, C)`` → ``(B·V, L, C_out)``, attending across the V views of each set.
+
+        With ``token_points`` and a layer that has the bias parameter, the logits get the C-map
+        distance bias (:func:`distance_bias`)."""
         if num_views is None:
             raise RuntimeError("set mixer called without cross_attention_kwargs={'num_views': V}")
         if encoder_hidden_states is not None or attention_mask is not None:
@@ -63,7 +126,13 @@ class SetSelfAttnProcessor:
         def to_heads(x: torch.Tensor) -> torch.Tensor:  # (B·V, L, h·d) → (B, h, V·L, d); a view in "(b v)" order
             return x.reshape(sets, num_views * tokens, heads, head_dim).transpose(1, 2)
 
-        mixed = F.scaled_dot_product_attention(to_heads(query), to_heads(key), to_heads(value))
+        bias = None
+        log_scale = getattr(attn, BIAS_PARAMETER, None)
+        if token_points is not None and log_scale is not None:
+            points, valid = pool_token_points(token_points, tokens)
+            bias = distance_bias(points.reshape(sets, num_views * tokens, 3), valid.reshape(sets, -1),
+                                 log_scale.exp()).to(query.dtype)
+        mixed = F.scaled_dot_product_attention(to_heads(query), to_heads(key), to_heads(value), attn_mask=bias)
         mixed = mixed.transpose(1, 2).reshape(batch_views, tokens, heads * head_dim).to(query.dtype)
         mixed = attn.to_out[0](mixed)
         mixed = attn.to_out[1](mixed)
@@ -80,7 +149,8 @@ def per_view_processor_class() -> type:
 
         def __call__(self, attn: Any, hidden_states: torch.Tensor, encoder_hidden_states: torch.Tensor | None = None,
                      attention_mask: torch.Tensor | None = None, temb: torch.Tensor | None = None,
-                     num_views: int | None = None, **kwargs: Any) -> torch.Tensor:
+                     num_views: int | None = None, token_points: torch.Tensor | None = None,
+                     **kwargs: Any) -> torch.Tensor:
             return super().__call__(attn, hidden_states, encoder_hidden_states, attention_mask, temb, **kwargs)
 
     return PerViewAttnProcessor

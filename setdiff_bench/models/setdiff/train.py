@@ -245,7 +245,8 @@ def _micro_step(model: Any, core: SetDiffModel, sample: TrainingSample, rng: ran
     tc, mc = config.train, config.model
     device = accelerator.device
     drawn = training_set(sample, rng, min_views=tc.min_views, max_views=tc.max_views, use_geometry=mc.use_geometry,
-                         cmap_clip=mc.cmap_clip, pairs=mc.method == "difix", geometry_inputs=mc.geometry_inputs)
+                         cmap_clip=mc.cmap_clip, pairs=mc.method == "difix", geometry_inputs=mc.geometry_inputs,
+                         with_points=mc.attention_bias != "none", identity_probability=tc.identity_fraction)
     batch = drawn.batch.to(device)
     keep = None
     if mc.use_geometry:

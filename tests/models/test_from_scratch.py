@@ -1,0 +1,166 @@
+"""Pieces that let a from-scratch SetDiff use its set: the toolkit's tiny autoencoder, the identity-at-
+initialisation output, identity training samples and the C-map distance attention bias."""
+
+from __future__ import annotations
+
+import json
+import math
+import random
+from pathlib import Path
+
+import pytest
+import torch
+from setdiff_fixtures import make_packet, make_sample
+from test_store_training import write_store
+
+from setdiff_bench.cli.main import main
+from setdiff_bench.models.setdiff.autoencoder import (
+    CONFIG_FILE,
+    MANIFEST_FILE,
+    WEIGHTS_FILE,
+    read_autoencoder_config,
+)
+from setdiff_bench.models.setdiff.config import model_config_from_dict
+from setdiff_bench.models.setdiff.inference import enhance_packet
+from setdiff_bench.models.setdiff.inputs import surface_points, training_set
+from setdiff_bench.models.setdiff.model import SetDiffModel
+from setdiff_bench.models.setdiff.set_mixer import BIAS_DISTANCE_CAP, distance_bias, token_grid
+
+
+def residual_model(**overrides: object) -> SetDiffModel:
+    torch.manual_seed(0)
+    config = model_config_from_dict({"preset": "tiny", "output_mode": "residual", "skip_connections": True,
+                                     "vae_decoder": "full", **overrides})
+    return SetDiffModel(config).eval()
+
+
+@pytest.mark.parametrize("bias", ["none", "cmap_distance"])
+def test_untrained_residual_model_returns_the_render(bias: str) -> None:
+    """Identity at initialisation: to the last 8-bit level, with geometry CFG on and the set mixer active."""
+    packet = make_packet(3, 2, size=(32, 48))
+    output = enhance_packet(residual_model(attention_bias=bias), packet)
+    renders = packet.targets.images.float()
+    assert (output * 255).round().equal((renders * 255).round())
+    assert float((output - renders).abs().max()) < 0.5 / 255
+
+
+def test_direct_model_does_not_return_the_render() -> None:
+    """The paper's parameterisation has to learn the identity (the contrast the switch exists for)."""
+    packet = make_packet(3, 2)
+    output = enhance_packet(residual_model(output_mode="direct"), packet)
+    assert float((output - packet.targets.images).abs().mean()) > 0.05
+
+
+def test_residual_model_learns_a_correction() -> None:
+    """The zero-initialised heads still receive gradients, so the output can move off the render."""
+    model = residual_model().train()
+    drawn = training_set(make_sample(2, 2), random.Random(0), min_views=4, max_views=4, use_geometry=True,
+                         cmap_clip=10.0)
+    prediction = model(drawn.batch, geometry_keep=torch.ones(1), decode_index=torch.tensor([0, 1]))
+    (prediction.decoded - drawn.target_gt[0]).square().mean().backward()
+    assert float(model.unet.conv_out.weight.grad.abs().sum()) > 0
+
+
+def test_identity_samples_feed_ground_truth_as_input() -> None:
+    sample = make_sample(2, 3)
+    rng_state = 7
+    always = training_set(sample, random.Random(rng_state), min_views=5, max_views=5, use_geometry=True,
+                          cmap_clip=10.0, identity_probability=0.999999)
+    never = training_set(sample, random.Random(rng_state), min_views=5, max_views=5, use_geometry=True,
+                         cmap_clip=10.0)
+    n = always.batch.num_references
+    assert torch.equal(always.batch.images[0, n:], always.target_gt[0])
+    assert torch.equal(always.batch.images[0, :n], never.batch.images[0, :n])
+    assert not torch.equal(never.batch.images[0, n:], never.target_gt[0])
+
+
+def test_distance_bias_by_hand() -> None:
+    """Three tokens: two 0.5 apart, one without a surface point."""
+    points = torch.tensor([[[0.0, 0.0, 0.0], [0.0, 0.3, 0.4], [9.0, 9.0, 9.0]]])
+    valid = torch.tensor([[True, True, False]])
+    bias = distance_bias(points, valid, torch.tensor(2.0))[0, 0]
+    cap = BIAS_DISTANCE_CAP
+    expected = torch.tensor([[0.0, -0.5, -2 * cap], [-0.5, 0.0, -2 * cap], [-2 * cap, -2 * cap, -2 * cap]])
+    torch.testing.assert_close(bias, expected)
+
+
+def test_token_grid_follows_the_unet_downsamplers() -> None:
+    assert token_grid(18, 32, 18 * 32) == (18, 32)
+    assert token_grid(18, 32, 9 * 16) == (9, 16)
+    assert token_grid(9, 16, 5 * 8) == (5, 8)  # ⌈9/2⌉ = 5
+    with pytest.raises(RuntimeError):
+        token_grid(18, 32, 100)
+
+
+def test_attention_bias_equals_explicit_attention() -> None:
+    """The set mixer with the bias equals softmax(QKᵀ/√d − s·d²)·V written out by hand."""
+    model = residual_model(attention_bias="cmap_distance")
+    name = model.mixed_attention[0].removesuffix(".processor")
+    attn = dict(model.unet.named_modules())[name]
+    processor = attn.processor
+    views, tokens, channels = 2, 16, attn.to_q.in_features
+    generator = torch.Generator().manual_seed(0)
+    hidden = torch.randn(views, tokens, channels, generator=generator)
+    cells = torch.cat([torch.randn(views, 3, 4, 4, generator=generator), torch.ones(views, 1, 4, 4)], dim=1)
+    cells[1, :, 0, 0] = 0.0  # one cell without a surface point
+    with torch.no_grad():
+        output = processor(attn, hidden, num_views=views, token_points=cells)
+        q, k, v = attn.to_q(hidden), attn.to_k(hidden), attn.to_v(hidden)
+        heads = attn.heads
+        d = q.shape[-1] // heads
+        split = lambda x: x.reshape(1, views * tokens, heads, d).transpose(1, 2)  # noqa: E731
+        xyz = cells[:, :3].flatten(2).transpose(1, 2).reshape(1, -1, 3)
+        ok = cells[:, 3].flatten(1).reshape(1, -1) > 0.5
+        squared = ((xyz[:, :, None] - xyz[:, None]) ** 2).sum(-1).clamp(max=BIAS_DISTANCE_CAP)
+        squared[~(ok[:, :, None] & ok[:, None, :])] = BIAS_DISTANCE_CAP
+        scale = math.exp(float(attn.set_bias_log_scale))
+        logits = split(q) @ split(k).transpose(-1, -2) / math.sqrt(d) - scale * squared[:, None]
+        mixed = (logits.softmax(-1) @ split(v)).transpose(1, 2).reshape(views, tokens, heads * d)
+        expected = attn.to_out[1](attn.to_out[0](mixed)) / attn.rescale_output_factor
+    torch.testing.assert_close(output, expected, atol=1e-5, rtol=1e-4)
+
+
+def test_surface_points_divide_by_alpha_where_valid() -> None:
+    packet = make_packet(1, 1)
+    points = surface_points(packet)
+    alphas = torch.cat([packet.references.alphas, packet.targets.alphas])
+    cmaps = torch.cat([packet.references.cmaps, packet.targets.cmaps])
+    valid = alphas > 0.5
+    assert torch.equal(points[:, 3:] > 0, valid)
+    torch.testing.assert_close(points[:, :3][valid.expand(-1, 3, -1, -1)],
+                               (cmaps / alphas)[valid.expand(-1, 3, -1, -1)])
+
+
+def test_train_autoencoder_and_build_a_model_on_it(tmp_path: Path) -> None:
+    """`train autoencoder` writes weights, config and manifest; a config naming it builds a model whose
+    VAE has its architecture, scale and weights, and a frozen encoder."""
+    write_store(tmp_path / "packets")
+    out = tmp_path / "ae"
+    assert main(["train", "autoencoder", "--packets", str(tmp_path / "packets"), "--out", str(out), "--steps", "3",
+                 "--batch-size", "2", "--crop", "16", "--latent-channels", "6", "--no-progress"]) == 0
+    assert {p.name for p in out.iterdir()} == {CONFIG_FILE, WEIGHTS_FILE, MANIFEST_FILE}
+    manifest = json.loads((out / MANIFEST_FILE).read_text())
+    assert manifest["settings"]["steps"] == 3 and manifest["train_frames"] == 6 and manifest["test_frames"] == 6
+    assert manifest["train_scenes"] == ["s0"] and manifest["test_scenes"] == ["s1"]
+    assert len(manifest["data_sha256"]) == 64 and math.isfinite(manifest["reconstruction_test"]["psnr"])
+    config = read_autoencoder_config(out)
+    assert config["latent_channels"] == 6 and config["scaling_factor"] == manifest["scaling_factor"] > 0
+    model = SetDiffModel(model_config_from_dict({"preset": "tiny", "autoencoder": str(out), "vae_decoder": "full"}))
+    assert model.config.unet["in_channels"] == 6 and model.codec.scaling_factor == config["scaling_factor"]
+    from safetensors.torch import load_file
+
+    saved = load_file(str(out / WEIGHTS_FILE))
+    state = model.codec.vae.state_dict()
+    assert all(torch.equal(state[k], v) for k, v in saved.items())
+    assert not any(p.requires_grad for p in model.codec.vae.encoder.parameters())
+
+
+def test_missing_autoencoder_is_one_clear_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    config = tmp_path / "c.toml"
+    config.write_text('[model]\npreset = "tiny"\nautoencoder = "no_such_autoencoder"\n')
+    write_store(tmp_path / "packets")
+    code = main(["train", "--config", str(config), "--packets", str(tmp_path / "packets"), "--out",
+                 str(tmp_path / "run"), "--no-progress"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "no_such_autoencoder" in err[0] and "autoencoder" in err[0]
+    assert not (tmp_path / "run").exists()
