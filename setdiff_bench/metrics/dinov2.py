@@ -64,7 +64,7 @@ def preprocess_mask(mask: np.ndarray) -> torch.Tensor:
 
 
 def _crop_offsets(height: int, width: int) -> tuple[int, int]:
-    return int(round((height - INPUT_SIZE) / 2.0)), int(round((width - INPUT_SIZE) / 2.0))
+    return round((height - INPUT_SIZE) / 2.0), round((width - INPUT_SIZE) / 2.0)
 
 
 def masked_cosine(model: Any, render: np.ndarray, ground_truth: np.ndarray, mask: np.ndarray) -> float:

@@ -7,7 +7,13 @@ import pytest
 import torch
 
 from setdiff_bench.errors import WeightsError
-from setdiff_bench.metrics.dinov2 import final_score, load_dinov2, masked_cosine, preprocess_image, preprocess_mask
+from setdiff_bench.metrics.dinov2 import (
+    final_score,
+    load_dinov2,
+    masked_cosine,
+    preprocess_image,
+    preprocess_mask,
+)
 
 
 class PatchNet(torch.nn.Module):
@@ -67,7 +73,7 @@ def test_final_score_weights():
 def test_missing_weights_are_one_clear_error(tmp_path):
     with pytest.raises(WeightsError, match="--dinov2 DIR"):
         load_dinov2(tmp_path / "absent")
-    with pytest.raises(WeightsError, match="model.safetensors"):
+    with pytest.raises(WeightsError, match=r"model\.safetensors"):
         (tmp_path / "config.json").write_text("{}")
         load_dinov2(tmp_path)
 

@@ -7,6 +7,7 @@ import pandas as pd
 import pytest
 
 from setdiff_bench.errors import UsageError
+from setdiff_bench.profile_scoring import profile_pair
 from setdiff_bench.profiles import (
     PROFILES,
     aggregate,
@@ -16,7 +17,6 @@ from setdiff_bench.profiles import (
     pil_resize,
     render_size,
 )
-from setdiff_bench.profile_scoring import profile_pair
 
 
 def test_render_size_caps_width_at_1600_as_3dgs():
