@@ -59,3 +59,19 @@ def test_packaged_protocol_and_evaluation_tables():
     assert load_protocol("euvs").evaluation == ("paper", "euvs_official")
     assert load_protocol("dl3dv").evaluation == ("paper", "dl3dv_3dgs_enhancer")
     assert load_protocol("nuscenes").evaluation == ("paper",)
+
+
+def test_on_loaded_nuscenes_every_camera_is_held_out_at_the_same_timesteps(tmp_path):
+    from dataclasses import replace
+
+    from setdiff_bench.loaders import load_scenes
+    from tests.loaders.loader_fixtures import build_nuscenes
+
+    build_nuscenes(tmp_path, np.random.default_rng(0)).write()
+    protocol = load_protocol("nuscenes_drivestudio")
+    scene = load_scenes("nuscenes", tmp_path, ["scene-0061"], **dict(protocol.loader_options))[0]
+    group = replace(protocol.groups[0], params={**protocol.groups[0].params, "stride": 3, "first": 2})
+    frames = group.select(scene)
+    assert frames.targets and frames.fit
+    assert {f.sensor for f in frames.targets} == set(scene.sensors)
+    assert not {f.name for f in frames.fit} & {f.name for f in frames.targets}
