@@ -91,7 +91,7 @@ LAYOUTS: dict[str, Layout] = {
                         title="Synthetic streets (fit on lane 0, front camera)"),
 }
 
-HEADERS = {"psnr": "PSNR", "ssim": "SSIM", "lpips": "LPIPS", "warp": "Warp"}
+HEADERS = {"psnr": "PSNR", "ssim": "SSIM", "lpips": "LPIPS", "warp": "Warp", "cos": "Cos", "final": "Final"}
 DECIMALS = {"psnr": 2, "ssim": 3, "lpips": 3, "warp": 1}
 SECTIONS = ("reconstruction", "enhancer", "ablation", "measured")
 
@@ -108,7 +108,7 @@ def metric_decimals(name: str) -> int:
 def higher_is_better(name: str) -> bool:
     if name in METRICS:
         return METRICS[name].higher_is_better
-    return name.split("_")[0] in {"psnr", "ssim"}
+    return name.split("_")[0] in {"psnr", "ssim", "cos", "final"}
 
 
 def natural_key(text: str) -> list[Any]:
@@ -246,10 +246,13 @@ def build_leaderboard(dataset: str, images: pd.DataFrame, sequences: pd.DataFram
     frame = frame[frame["dataset"] == dataset]
     spec = get_profile(profile)
     frame = _profile_rows(frame, profile)
+    if metrics is None and profile != DEFAULT_PROFILE:   # the profile's metrics (+ the DINOv2 columns when scored)
+        metric_names = spec.metrics + tuple(m for m in ("cos_dinov2", "final_score") if m in frame.columns
+                                            and frame[m].notna().any())
     if profile != DEFAULT_PROFILE and reported is not None and len(reported):
         raise LeaderboardError(f"the paper's reported numbers use the {DEFAULT_PROFILE} profile; they cannot share "
                                f"a table with profile {profile} (drop --with-reported)")
-    if split is not None and len(frame):
+    if split is not None and len(frame) and spec.scenes == "split":   # "all": the profile averages every scene
         frame = frame[frame["split"] == split]
     if methods is not None and len(frame):
         unknown = sorted(set(methods) - set(frame["method"]))

@@ -158,19 +158,16 @@ def score_run(run: str | Path, profile: EvaluationProfile, *, packets: str | Pat
         record[PROFILE_COLUMN] = profile.name
         record.update(image_metrics(profile, pair, device))
         if profile.dinov2 and dinov2 is not None:
-            from setdiff_bench.metrics.dinov2 import masked_cosine
+            from setdiff_bench.metrics.dinov2 import final_score, masked_cosine
 
             record["cos_dinov2"] = masked_cosine(dinov2, pair.prediction, pair.ground_truth, pair.mask)
+            # linear in the four metrics, so its mean over images equals the score of the means
+            record["final_score"] = final_score(record["ssim_euvs"], record["psnr_euvs"], record["lpips_euvs"],
+                                                record["cos_dinov2"])
         records.append(record)
     frame = pd.DataFrame.from_records(records)
-    metric_names = [*profile.metrics, *(["cos_dinov2"] if "cos_dinov2" in frame.columns else [])]
-    groups, scenes = aggregate(frame, metric_names, profile.aggregation)
-    if "cos_dinov2" in metric_names:
-        from setdiff_bench.metrics.dinov2 import final_score
-
-        for table in (groups, scenes):
-            table["final_score"] = [final_score(r.ssim_euvs, r.psnr_euvs, r.lpips_euvs, r.cos_dinov2)
-                                    for r in table.itertuples()]
+    extra = ["cos_dinov2", "final_score"] if "cos_dinov2" in frame.columns else []
+    groups, scenes = aggregate(frame, [*profile.metrics, *extra], profile.aggregation)
     out = run / PROFILES_DIR / profile.name
     out.mkdir(parents=True, exist_ok=True)
     for name, table in (("metrics.parquet", frame), ("scenes.parquet", scenes), ("groups.parquet", groups)):

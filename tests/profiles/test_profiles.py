@@ -92,3 +92,20 @@ def test_euvs_pair_is_scored_at_1600x900_and_dl3dv_pair_at_960x512():
                         (0, 0, 960, 540))
     assert pair.ground_truth.shape == (512, 960, 3) and pair.prediction.shape == (512, 960, 3)
     assert np.array_equal(pair.ground_truth, small[14:526])     # native size: GT untouched, rows 14..525
+
+
+def test_leaderboard_of_euvs_official_uses_every_scene_scene_means_and_its_metrics():
+    from setdiff_bench.leaderboard import build_leaderboard, render_markdown
+
+    # level1: scene A (test split) images 10 and 20 dB, scene B (train split) one image 40 dB
+    frame = pd.DataFrame({
+        "dataset": "euvs", "protocol": "euvs", "group": "level1", "method": "identity", "run": "r",
+        "profile": "euvs_official", "scene": ["A", "A", "B"], "frame": ["a1", "a2", "b1"],
+        "split": ["test", "test", "train"], "psnr_euvs": [10.0, 20.0, 40.0], "ssim_euvs": [0.5, 0.7, 0.9],
+        "lpips_euvs": [0.3, 0.1, 0.2], "cos_dinov2": [0.8, 0.6, 1.0], "final_score": [1.0, 2.0, 3.0]})
+    board = build_leaderboard("euvs", frame, profile="euvs_official")
+    values = board.rows[0].values
+    assert values[("level1", "psnr_euvs")] == pytest.approx((15.0 + 40.0) / 2)     # not 23.33 pooled, not 15 test-only
+    assert values[("level1", "cos_dinov2")] == pytest.approx((0.7 + 1.0) / 2)
+    assert values[("level1", "final_score")] == pytest.approx((1.5 + 3.0) / 2)
+    assert "evaluation profile: euvs_official" in render_markdown(board)
