@@ -26,14 +26,14 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
-import pandas as pd
-import torch
-import torch.nn.functional as F
 
 from setdiff_bench.errors import UsageError
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 ScoringSize = Literal["working", "render_capped", "native"]
 Aggregation = Literal["pooled", "scene_mean"]
@@ -154,6 +154,9 @@ def pil_resize(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
 def nearest_resize_mask(mask: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     """``(H, W)`` bool → ``(h, w)`` bool with ``torch.nn.functional.interpolate(mode="nearest")``
     (source index ``⌊i · H / h⌋``), as the EUVS script resizes its masks (``size = (w, h)``)."""
+    import torch
+    import torch.nn.functional as F
+
     tensor = torch.from_numpy(np.ascontiguousarray(mask).astype(np.float32))[None, None]
     return F.interpolate(tensor, size=(size[1], size[0]), mode="nearest")[0, 0].numpy() > 0.5
 
