@@ -245,7 +245,7 @@ def build_leaderboard(dataset: str, images: pd.DataFrame, sequences: pd.DataFram
     frame = images if len(images) else pd.DataFrame(columns=["dataset"])
     frame = frame[frame["dataset"] == dataset]
     spec = get_profile(profile)
-    frame = _profile_rows(frame, profile)
+    frame = profile_rows(frame, profile)
     if metrics is None and profile != DEFAULT_PROFILE:   # the profile's metrics (+ the DINOv2 columns when scored)
         metric_names = spec.metrics + tuple(m for m in ("cos_dinov2", "final_score") if m in frame.columns
                                             and frame[m].notna().any())
@@ -300,7 +300,7 @@ def build_leaderboard(dataset: str, images: pd.DataFrame, sequences: pd.DataFram
     return board
 
 
-def _profile_rows(frame: pd.DataFrame, profile: str) -> pd.DataFrame:
+def profile_rows(frame: pd.DataFrame, profile: str) -> pd.DataFrame:
     """The rows scored under ``profile``: plain run rows are ``paper``; a ``paper`` table written by
     ``setdiff-bench evaluate`` is used only where no plain run rows exist (they hold the same numbers)."""
     if PROFILE_COLUMN not in frame.columns:

@@ -57,13 +57,21 @@ def _command(args: argparse.Namespace) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from setdiff_bench.errors import UsageError
-    from setdiff_bench.leaderboard import build_leaderboard, load_runs, reported_for, write_leaderboard
+    from setdiff_bench.leaderboard import (
+        build_leaderboard,
+        load_runs,
+        profile_rows,
+        reported_for,
+        write_leaderboard,
+    )
 
     formats = [f.strip() for f in args.format.split(",") if f.strip()]
     split = None if args.split == "all" else args.split
     methods = [m.strip() for m in args.methods.split(",")] if args.methods else None
     metrics = [m.strip() for m in args.metrics.split(",")] if args.metrics else None
     images, sequences = load_runs(args.runs)
+    if len(images):
+        images = profile_rows(images, args.profile)   # plots and grids see the tabulated profile's rows only
     reported = None
     if args.with_reported:
         reported = reported_for(args.dataset)
