@@ -70,3 +70,14 @@ def test_profiles_needing_the_dataset_say_so(identity_run: Path, store: Path, ca
     assert main(["evaluate", str(identity_run), "--profile", "euvs_official", "--packets", str(store),
                  "--dinov2", str(store / "absent")]) == 2
     assert "DINOv2 weights folder not found" in capsys.readouterr().err
+
+
+def test_evaluate_and_leaderboard_commands(run_copy: Path, store: Path, tmp_path: Path, capsys):
+    assert main(["evaluate", str(run_copy), "--profile", "paper", "--packets", str(store)]) == 0
+    assert "evaluation profile: paper" in capsys.readouterr().out
+    assert (run_copy / "profiles" / "paper" / "groups.parquet").is_file()
+    dataset = pd.read_parquet(run_copy / "metrics.parquet")["dataset"].iloc[0]
+    out = tmp_path / "boards"
+    assert main(["leaderboard", "--dataset", dataset, "--runs", str(run_copy), "--out", str(out),
+                 "--format", "md"]) == 0
+    assert "evaluation profile: paper" in (out / f"{dataset}.md").read_text()
