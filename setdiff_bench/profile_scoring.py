@@ -14,7 +14,8 @@ PIL bicubic (what 3DGS's ``PILtoTorch`` does), the mask with nearest; the run's 
 the working resolution over the protocol's crop window) is resized with PIL bicubic onto that window
 at the profile's size.  This upsampling is the one difference no profile can remove: a method that
 renders directly at 1600×900 has detail a 576×1024 enhancer never produced (docs/evaluation_profiles.md).
-A target seen in several packets is scored once (its first packet).
+A target seen in several packets is scored once (its first packet). Profiles with ``scenes = "split"``
+score the test-split rows only; ``"all"`` profiles score every row (run with ``--split all``).
 """
 
 from __future__ import annotations
@@ -138,6 +139,10 @@ def score_run(run: str | Path, profile: EvaluationProfile, *, packets: str | Pat
     if not metrics_path.is_file():
         raise UsageError("not a finished run (no metrics.parquet)", run)
     rows = pd.read_parquet(metrics_path).drop_duplicates(["method", "group", "scene", "frame"], keep="first")
+    if profile.scenes == "split":      # the protocol's test scenes only (a --split all run holds train scenes too)
+        rows = rows[rows["split"] == "test"]
+        if not len(rows):
+            raise UsageError(f"profile {profile.name} scores the test scenes; this run has none", run)
     if packets is None:
         raise UsageError("scoring under a profile needs the packet store the run was made on (--packets)", run)
     store = PacketStore(packets)
