@@ -126,16 +126,20 @@ def load_dinov2(folder: str | Path, device: str = "cpu") -> TransformersDinov2:
     path = Path(folder)
     if not path.is_dir():
         raise WeightsError("DINOv2 weights folder not found (pass --dinov2 DIR: a transformers folder with "
-                              "config.json and model.safetensors, e.g. facebook/dinov2-base)", path)
+                           "config.json and model.safetensors, e.g. facebook/dinov2-base)", path)
     for name in ("config.json", "model.safetensors"):
         if not (path / name).is_file():
             raise WeightsError(f"DINOv2 folder has no {name} (expected a transformers Dinov2Model folder; "
-                                  "weights are read from safetensors only)", path)
-    from transformers import AutoConfig, Dinov2Model
+                               "weights are read from safetensors only)", path)
+    import json
 
-    config = AutoConfig.from_pretrained(path, local_files_only=True)
-    if getattr(config, "model_type", "") != "dinov2":
-        raise WeightsError(f"config.json has model_type {getattr(config, 'model_type', None)!r}, expected "
-                              "'dinov2'", path / "config.json")
+    from transformers import Dinov2Model
+
+    try:
+        model_type = json.loads((path / "config.json").read_text(encoding="utf-8")).get("model_type")
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, AttributeError) as error:
+        raise WeightsError(f"unreadable config.json ({type(error).__name__})", path / "config.json") from None
+    if model_type != "dinov2":
+        raise WeightsError(f"config.json has model_type {model_type!r}, expected 'dinov2'", path / "config.json")
     model = Dinov2Model.from_pretrained(path, local_files_only=True, use_safetensors=True)
     return TransformersDinov2(model.eval().to(device))
