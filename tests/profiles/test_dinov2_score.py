@@ -76,6 +76,10 @@ def test_missing_weights_are_one_clear_error(tmp_path):
     with pytest.raises(WeightsError, match=r"model\.safetensors"):
         (tmp_path / "config.json").write_text("{}")
         load_dinov2(tmp_path)
+    (tmp_path / "model.safetensors").write_bytes(b"")
+    (tmp_path / "config.json").write_text('{"model_type": "vit"}')
+    with pytest.raises(WeightsError, match="expected 'dinov2'"):
+        load_dinov2(tmp_path)
 
 
 def test_transformers_folder_adapter_returns_patch_tokens(tmp_path):
