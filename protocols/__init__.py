@@ -17,6 +17,8 @@ A protocol file (``protocols/<name>.toml``, format ``setdiff-protocol/1``) decla
   ``cmap_clip × d_max`` around the mean camera centre of the scene before the C-map is composited
   (the paper's "clipped by scene scale"; ``d_max`` = largest pairwise camera distance in the scene;
   0 = no clipping);
+* ``[evaluation]`` — ``profiles``: the evaluation profiles that apply to this protocol's runs
+  (:data:`setdiff_bench.profiles.PROFILES`; default ``["paper"]``, the first is the default);
 * ``[[groups]]`` — evaluation groups: a name, a rule (:mod:`.rules`) with its parameters, the
   ``fit_key`` naming the 3DGS fit (``<fits>/<scene>/<fit_key>.ply``) and an optional ``scenes``
   filter on ``Scene.metadata`` (EUVS ``level``).
@@ -144,6 +146,7 @@ class Protocol:
     packets: PacketSpec
     cmap_clip: float
     groups: tuple[GroupSpec, ...]
+    evaluation: tuple[str, ...] = ("paper",)
 
     def group(self, name: str) -> GroupSpec:
         for group in self.groups:
@@ -204,7 +207,7 @@ def parse_protocol(data: Mapping[str, Any], path: Path) -> Protocol:
     """Validate parsed TOML ``data`` (read from ``path``, named in errors) into a :class:`Protocol`."""
     root = Table(data, path)
     root.check_keys(("format", "name", "dataset", "description", "loader", "split", "images", "references",
-                     "packets", "render", "groups"))
+                     "packets", "render", "groups", "evaluation"))
     if root.raw("format") != FORMAT:
         raise root.error("format", f"expected {FORMAT!r}, got {root.raw('format')!r}")
     loader = root.table("loader", {})
@@ -225,7 +228,8 @@ def parse_protocol(data: Mapping[str, Any], path: Path) -> Protocol:
         name=root.string("name"), dataset=root.string("dataset"), description=root.string("description", "-"),
         path=path, loader_options=dict(loader.data), split=_split(root.table("split")),
         images=_images(root.table("images")), references=references, packets=packets,
-        cmap_clip=render.number("cmap_clip", 0.0, minimum=0.0), groups=groups)
+        cmap_clip=render.number("cmap_clip", 0.0, minimum=0.0), groups=groups,
+        evaluation=_evaluation(root.table("evaluation", {})))
 
 
 # ---------------------------------------------------------------------- sections
@@ -265,6 +269,17 @@ def _images(table: Table) -> ImageSpec:
         resolution = (size[0], size[1])
     return ImageSpec(resolution=resolution, resize=table.string("resize", "crop", choices=("crop", "stretch")),
                      masks=table.string("masks", choices=("dataset", "foreground", "none")))  # type: ignore[arg-type]
+
+
+def _evaluation(table: Table) -> tuple[str, ...]:
+    from setdiff_bench.profiles import PROFILES
+
+    table.check_keys(("profiles",))
+    names = table.strings("profiles", ["paper"])
+    unknown = [name for name in names if name not in PROFILES]
+    if unknown:
+        raise table.error("profiles", f"unknown profile {unknown[0]!r}; known: {', '.join(PROFILES)}")
+    return names
 
 
 def _references(table: Table) -> ReferenceSpec:

@@ -28,6 +28,13 @@ Rules
     ``gap · n <= N``, else ``⌊N / n⌋``; fit = indices ``0, gap, …, (n − 1)·gap``; targets = every
     frame strictly between the first and last fit frame that is not a fit frame
     (xiliu8006/3dgs_dataset_generator ``select_lr_cams`` and ``render_lr_hr_pairs``).
+``timestep_stride`` (nuScenes, drivestudio/OmniRe interpolation split)
+    timesteps are the ``sensors[0]`` keyframe instants, each gap between consecutive keyframes split
+    into ``interpolate + 1`` equal steps (drivestudio's ``--interpolate_N``, 4 → 10 Hz); at each timestep
+    every sensor contributes its frame nearest in time.  Test timesteps are ``first, first + stride, …``
+    (ziyc/drivestudio ``datasets/driving_dataset.py:split_train_test``: ``first = stride − 1`` at
+    commit 7759550e, ``stride`` in other versions); their frames are the targets, the frames of every
+    other timestep the fit (a frame nearest to both kinds of timestep is a target only).
 ``select`` (synthetic)
     fit and targets are filters over frame attributes: ``split``, ``sensor``, ``traversal`` and
     metadata keys ``lane_offset``, ``traversal_kind``; a filter value may be a list (any of).
@@ -35,6 +42,7 @@ Rules
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -183,6 +191,54 @@ def _select_sparse_views(scene: Scene, params: Mapping[str, Any]) -> GroupFrames
     return GroupFrames(fit=tuple(frames[i] for i in fit_idx), targets=targets)
 
 
+# ---------------------------------------------------------------------- timestep_stride
+def _validate_timestep_stride(table: Table) -> dict[str, Any]:
+    table.check_keys(("sensors", "stride", "first", "interpolate"))
+    stride = table.integer("stride", minimum=2)
+    params = {"sensors": table.strings("sensors"), "stride": stride,
+              "first": table.integer("first", stride - 1, minimum=0),
+              "interpolate": table.integer("interpolate", 4, minimum=0)}
+    if params["first"] > stride:
+        raise table.error("first", f"expected an integer <= stride ({stride}), got {params['first']}")
+    return params
+
+
+def timesteps_us(keyframes_us: Sequence[int], interpolate: int) -> list[int]:
+    """Keyframe instants with ``interpolate`` evenly spaced instants inserted in each gap (integer µs, floor)."""
+    keys = sorted(keyframes_us)
+    out: list[int] = []
+    for start, end in itertools.pairwise(keys):
+        out += [start + (end - start) * j // (interpolate + 1) for j in range(interpolate + 1)]
+    return out + keys[-1:]
+
+
+def _select_timestep_stride(scene: Scene, params: Mapping[str, Any]) -> GroupFrames:
+    sensors = params["sensors"]
+    by_sensor = {s: sorted((f for f in scene.frames if f.sensor == s and f.timestamp_us is not None),
+                           key=lambda f: int(f.timestamp_us)) for s in sensors}  # type: ignore[arg-type]
+    keys = [int(f.timestamp_us) for f in by_sensor[sensors[0]]  # type: ignore[arg-type]
+            if bool(f.metadata.get("is_key_frame", True))]
+    steps = timesteps_us(keys, params["interpolate"])
+    test_steps = set(range(params["first"], len(steps), params["stride"]))
+
+    def nearest(frames: Sequence[Frame], t: int) -> Frame | None:
+        return min(frames, key=lambda f: (abs(int(f.timestamp_us) - t), f.name)) if frames else None  # type: ignore[arg-type]
+
+    targets: dict[str, Frame] = {}
+    fit: dict[str, Frame] = {}
+    for index, t in enumerate(steps):
+        for sensor in sensors:
+            frame = nearest(by_sensor[sensor], t)
+            if frame is not None:
+                (targets if index in test_steps else fit)[frame.name] = frame
+    order = {f.name: i for i, f in enumerate(scene.frames)}
+
+    def pick(chosen: Mapping[str, Frame]) -> tuple[Frame, ...]:
+        return tuple(sorted(chosen.values(), key=lambda f: order[f.name]))
+
+    return GroupFrames(fit=pick({k: v for k, v in fit.items() if k not in targets}), targets=pick(targets))
+
+
 # ---------------------------------------------------------------------- select
 def _filter(table: Table, name: str) -> dict[str, tuple[Any, ...]]:
     sub = table.table(name)
@@ -226,4 +282,5 @@ RULES: dict[str, Rule] = {rule.name: rule for rule in (
     Rule("time_window", _validate_time_window, _select_time_window),
     Rule("sparse_views", _validate_sparse_views, _select_sparse_views),
     Rule("select", _validate_select, _select_select),
+    Rule("timestep_stride", _validate_timestep_stride, _select_timestep_stride),
 )}

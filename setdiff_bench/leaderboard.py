@@ -39,6 +39,7 @@ import pyarrow.parquet as pq
 from setdiff_bench.errors import SetDiffBenchError, UsageError
 from setdiff_bench.io.atomic import atomic_path, write_text_atomic
 from setdiff_bench.metrics.registry import METRICS
+from setdiff_bench.profiles import DEFAULT_PROFILE, PROFILE_COLUMN, get_profile
 
 FORMATS = ("parquet", "latex", "md")
 ALL = ""  # block key of the pooled block (every group)
@@ -90,7 +91,7 @@ LAYOUTS: dict[str, Layout] = {
                         title="Synthetic streets (fit on lane 0, front camera)"),
 }
 
-HEADERS = {"psnr": "PSNR", "ssim": "SSIM", "lpips": "LPIPS", "warp": "Warp"}
+HEADERS = {"psnr": "PSNR", "ssim": "SSIM", "lpips": "LPIPS", "warp": "Warp", "cos": "Cos", "final": "Final"}
 DECIMALS = {"psnr": 2, "ssim": 3, "lpips": 3, "warp": 1}
 SECTIONS = ("reconstruction", "enhancer", "ablation", "measured")
 
@@ -107,7 +108,7 @@ def metric_decimals(name: str) -> int:
 def higher_is_better(name: str) -> bool:
     if name in METRICS:
         return METRICS[name].higher_is_better
-    return name.split("_")[0] in {"psnr", "ssim"}
+    return name.split("_")[0] in {"psnr", "ssim", "cos", "final"}
 
 
 def natural_key(text: str) -> list[Any]:
@@ -199,6 +200,12 @@ class Leaderboard:
     best: dict[tuple[str, str], set[int]]
     title: str
     notes: list[str]
+    profile: str = DEFAULT_PROFILE
+
+    @property
+    def stem(self) -> str:
+        """Output file stem: ``<dataset>``, or ``<dataset>.<profile>`` for a profile other than ``paper``."""
+        return self.dataset if self.profile == DEFAULT_PROFILE else f"{self.dataset}.{self.profile}"
 
     def cells(self) -> list[tuple[str, str]]:
         return [(block.key, metric) for block, metrics in self.columns for metric in metrics]
@@ -214,7 +221,7 @@ class Leaderboard:
 def build_leaderboard(dataset: str, images: pd.DataFrame, sequences: pd.DataFrame | None = None, *,
                       split: str | None = "test", reported: pd.DataFrame | None = None,
                       metrics: Sequence[str] | None = None, methods: Sequence[str] | None = None,
-                      layout: Layout | None = None) -> Leaderboard:
+                      layout: Layout | None = None, profile: str = DEFAULT_PROFILE) -> Leaderboard:
     """Aggregate runs (and optional reported rows) of ``dataset`` into a :class:`Leaderboard`.
 
     Args:
@@ -226,6 +233,9 @@ def build_leaderboard(dataset: str, images: pd.DataFrame, sequences: pd.DataFram
         metrics: image metric columns (default: the layout's).
         methods: measured methods to show, in this order (default: all, sorted).
         layout: override the dataset's layout.
+        profile: the evaluation profile tabulated (:mod:`setdiff_bench.profiles`): rows of plain runs are
+            ``paper``; ``setdiff-bench evaluate`` tables carry their profile.  The caption names it, and the
+            profile's averaging is used (``scene_mean``: the mean of per-scene means).
 
     Raises:
         LeaderboardError: no rows, a metric column missing, duplicate rows, or a method missing rows.
@@ -234,7 +244,15 @@ def build_leaderboard(dataset: str, images: pd.DataFrame, sequences: pd.DataFram
     metric_names = tuple(metrics or layout.metrics)
     frame = images if len(images) else pd.DataFrame(columns=["dataset"])
     frame = frame[frame["dataset"] == dataset]
-    if split is not None and len(frame):
+    spec = get_profile(profile)
+    frame = profile_rows(frame, profile)
+    if metrics is None and profile != DEFAULT_PROFILE:   # the profile's metrics (+ the DINOv2 columns when scored)
+        metric_names = spec.metrics + tuple(m for m in ("cos_dinov2", "final_score") if m in frame.columns
+                                            and frame[m].notna().any())
+    if profile != DEFAULT_PROFILE and reported is not None and len(reported):
+        raise LeaderboardError(f"the paper's reported numbers use the {DEFAULT_PROFILE} profile; they cannot share "
+                               f"a table with profile {profile} (drop --with-reported)")
+    if split is not None and len(frame) and spec.scenes == "split":   # "all": the profile averages every scene
         frame = frame[frame["split"] == split]
     if methods is not None and len(frame):
         unknown = sorted(set(methods) - set(frame["method"]))
@@ -264,17 +282,33 @@ def build_leaderboard(dataset: str, images: pd.DataFrame, sequences: pd.DataFram
     rows = _reported_rows(reported, blocks, layout.reported_tables) if reported is not None and len(reported) else []
     order = list(methods) if methods is not None else sorted(frame["method"].unique()) if len(frame) else []
     for method in order:
-        rows.append(_measured_row(method, frame, seq, blocks, metric_names, seq_names))
+        rows.append(_measured_row(method, frame, seq, blocks, metric_names, seq_names,
+                                  scene_mean=spec.aggregation == "scene_mean"))
     _check_complete(frame, blocks)
     filled = {key for row in rows for key, _ in row.values}
     columns = [(block, metrics) for block, metrics in columns if block.key in filled]
     if not columns:
         raise LeaderboardError(f"no {dataset} results fall in the table's blocks "
                                f"({', '.join(b.label for b in blocks)})")
-    board = Leaderboard(dataset, columns, rows, {}, layout.title or dataset, [])
+    board = Leaderboard(dataset, columns, rows, {}, f"{layout.title or dataset}; {spec.caption()}", [],
+                        profile)
     board.best = _best(board)
     board.notes = _notes(board, frame, seq)
+    if spec.aggregation == "scene_mean":
+        board.notes[0] = board.notes[0].replace("Cells are means of per-image values over each block's targets",
+                                                "Cells are means over scenes of each scene's mean over its targets")
     return board
+
+
+def profile_rows(frame: pd.DataFrame, profile: str) -> pd.DataFrame:
+    """The rows scored under ``profile``: plain run rows are ``paper``; a ``paper`` table written by
+    ``setdiff-bench evaluate`` is used only where no plain run rows exist (they hold the same numbers)."""
+    if PROFILE_COLUMN not in frame.columns:
+        return frame if profile == DEFAULT_PROFILE else frame.iloc[0:0]
+    plain = frame[PROFILE_COLUMN].isna()
+    if profile == DEFAULT_PROFILE and plain.any():
+        return frame[plain]
+    return frame[frame[PROFILE_COLUMN].fillna(DEFAULT_PROFILE) == profile]
 
 
 def _check_duplicates(frame: pd.DataFrame) -> None:
@@ -316,7 +350,7 @@ def _check_complete(frame: pd.DataFrame, blocks: Sequence[Block]) -> None:
 
 
 def _measured_row(method: str, frame: pd.DataFrame, seq: pd.DataFrame | None, blocks: Sequence[Block],
-                  metric_names: Sequence[str], seq_names: Sequence[str]) -> Row:
+                  metric_names: Sequence[str], seq_names: Sequence[str], *, scene_mean: bool = False) -> Row:
     row = Row(label=method, method=method, source="measured", section="measured")
     own = frame[frame["method"] == method]
     for block in blocks:
@@ -325,7 +359,8 @@ def _measured_row(method: str, frame: pd.DataFrame, seq: pd.DataFrame | None, bl
             continue
         for metric in metric_names:
             values = rows[metric].to_numpy(dtype=np.float64)
-            row.values[(block.key, metric)] = float(values.mean())
+            mean = rows.groupby("scene")[metric].mean().mean() if scene_mean else values.mean()
+            row.values[(block.key, metric)] = float(mean)
             row.decimals[(block.key, metric)] = metric_decimals(metric)
             row.counts[(block.key, metric)] = len(values)
         if block.key == ALL and seq is not None:
@@ -398,7 +433,7 @@ def to_frame(board: Leaderboard) -> pd.DataFrame:
                 cell = (block.key, metric)
                 if cell not in row.values:
                     continue
-                records.append({"dataset": board.dataset, "row_order": index, "source": row.source,
+                records.append({"dataset": board.dataset, "profile": board.profile, "row_order": index, "source": row.source,
                                 "section": row.section, "method": row.method, "label": row.label,
                                 "block": block.key, "block_label": block.label, "metric": metric,
                                 "value": row.values[cell], "decimals": row.decimals.get(cell, metric_decimals(metric)),
@@ -491,7 +526,7 @@ def render_markdown(board: Leaderboard, command: str | None = None) -> str:
 
 def write_leaderboard(board: Leaderboard, out: str | Path, formats: Sequence[str] = FORMATS,
                       command: str | None = None) -> dict[str, Path]:
-    """Write ``<out>/<dataset>.{parquet,tex,md}`` atomically; returns format → path."""
+    """Write ``<out>/<stem>.{parquet,tex,md}`` atomically (:attr:`Leaderboard.stem`); returns format → path."""
     unknown = [f for f in formats if f not in FORMATS]
     if unknown:
         raise UsageError(f"unknown format(s) {', '.join(unknown)}; choose from {', '.join(FORMATS)}", "--format")
@@ -499,16 +534,16 @@ def write_leaderboard(board: Leaderboard, out: str | Path, formats: Sequence[str
     out.mkdir(parents=True, exist_ok=True)
     written: dict[str, Path] = {}
     if "parquet" in formats:
-        path = out / f"{board.dataset}.parquet"
+        path = out / f"{board.stem}.parquet"
         table = pa.Table.from_pandas(to_frame(board), preserve_index=False)
         with atomic_path(path) as tmp:
             pq.write_table(table, tmp, compression="zstd")
         written["parquet"] = path
     if "latex" in formats:
-        written["latex"] = out / f"{board.dataset}.tex"
+        written["latex"] = out / f"{board.stem}.tex"
         write_text_atomic(written["latex"], render_latex(board, command))
     if "md" in formats:
-        written["md"] = out / f"{board.dataset}.md"
+        written["md"] = out / f"{board.stem}.md"
         write_text_atomic(written["md"], render_markdown(board, command))
     return written
 

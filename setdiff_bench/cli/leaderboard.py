@@ -34,6 +34,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--methods", default=None, help="comma list of methods, in row order (default all)")
     parser.add_argument("--metrics", default=None,
                         help="comma list of metric columns (default psnr,ssim,lpips; e.g. psnr_euvs,ssim_euvs,lpips_euvs)")
+    parser.add_argument("--profile", default="paper",
+                        help="evaluation profile to tabulate (paper = plain runs; others come from "
+                             "`setdiff-bench evaluate`); named in every caption")
     parser.add_argument("--plots", action="store_true", help="also write the dataset's metric plots (PNG)")
     parser.add_argument("--grids", type=int, default=0, metavar="K",
                         help="also write a qualitative grid of K targets (needs --packets)")
@@ -43,7 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _command(args: argparse.Namespace) -> str:
     """The command line that reproduces this table (recorded in the outputs)."""
     parts = ["setdiff-bench", "leaderboard", "--dataset", args.dataset, "--runs", str(args.runs), "--format",
-             args.format, "--out", str(args.out), "--split", args.split]
+             args.format, "--out", str(args.out), "--split", args.split, "--profile", args.profile]
     for flag, value in (("--methods", args.methods), ("--metrics", args.metrics)):
         if value:
             parts += [flag, value]
@@ -54,20 +57,28 @@ def _command(args: argparse.Namespace) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from setdiff_bench.errors import UsageError
-    from setdiff_bench.leaderboard import build_leaderboard, load_runs, reported_for, write_leaderboard
+    from setdiff_bench.leaderboard import (
+        build_leaderboard,
+        load_runs,
+        profile_rows,
+        reported_for,
+        write_leaderboard,
+    )
 
     formats = [f.strip() for f in args.format.split(",") if f.strip()]
     split = None if args.split == "all" else args.split
     methods = [m.strip() for m in args.methods.split(",")] if args.methods else None
     metrics = [m.strip() for m in args.metrics.split(",")] if args.metrics else None
     images, sequences = load_runs(args.runs)
+    if len(images):
+        images = profile_rows(images, args.profile)   # plots and grids see the tabulated profile's rows only
     reported = None
     if args.with_reported:
         reported = reported_for(args.dataset)
         if reported.empty:
             print(f"note: the paper reports no numbers for dataset {args.dataset!r}", file=sys.stderr)
     board = build_leaderboard(args.dataset, images, sequences, split=split, reported=reported, metrics=metrics,
-                              methods=methods)
+                              methods=methods, profile=args.profile)
     command = _command(args)
     for fmt, path in write_leaderboard(board, args.out, formats, command).items():
         print(f"{fmt}: {path}")

@@ -133,7 +133,7 @@ BUILTIN_METHODS: dict[str, MethodSpec] = {spec.name: spec for spec in (
     _builtin("setdiff", "setdiff",
              "SetDiff: geometry-grounded set diffusion over all references + targets (--checkpoint CKPT)",
              needs_weights=True),
-    _builtin("difix", "difix", "DiFix3D-style baseline: best reference + one target, RGB only (--checkpoint CKPT)",
+    _builtin("difix", "difix", "DiFix3D-style baseline: nearest-pose reference + one target, RGB only (--checkpoint CKPT)",
              needs_weights=True),
 )}
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import pytest
@@ -50,7 +51,16 @@ def test_difix_enhancer(tmp_path: Path) -> None:
     packet = make_packet(3, 2)
     output = enhancer.enhance(packet)
     assert output.shape == (2, 3, 32, 32)
-    assert torch.equal(output, enhance_packet(model, packet))
+    # default: each target with its nearest-pose reference (Difix3D's rule), one set per target
+    from setdiff_bench.enhancers.difix import nearest_pose_assignments
+
+    choice = nearest_pose_assignments(packet.references.cameras, packet.targets.cameras)
+    for target, reference in enumerate(choice):
+        single = dataclasses.replace(packet, references=packet.references.subset([reference]),
+                                     targets=packet.targets.subset([target]))
+        assert torch.allclose(output[target:target + 1], enhance_packet(model, single), atol=1e-5)
+    eq2 = create_enhancer("difix", checkpoint=str(folder), device="cpu", references="eq2")
+    assert torch.equal(eq2.enhance(packet), enhance_packet(model, packet))   # the packet's first reference
 
 
 def test_method_and_checkpoint_must_match(tmp_path: Path) -> None:

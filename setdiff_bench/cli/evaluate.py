@@ -1,0 +1,63 @@
+"""``setdiff-bench evaluate``: score a finished run under an evaluation profile (paper, euvs_official, ...).
+
+Examples::
+
+    setdiff-bench evaluate results/runs/euvs-setdiff --profile euvs_official --packets packets/euvs \\
+        --data /data/EUVS --dinov2 /weights/dinov2-base --euvs-compat-report
+    setdiff-bench evaluate results/runs/dl3dv-setdiff --profile dl3dv_3dgs_enhancer --packets packets/dl3dv \\
+        --data /data/DL3DV-10K/1K
+
+Writes ``<run>/profiles/<profile>/{metrics,scenes,groups}.parquet`` and ``profile.json``; the leaderboard
+tabulates them with ``--profile``.  Profiles and the official rules they follow: docs/evaluation_profiles.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+VERB = "evaluate"
+HELP = "score a finished run under an evaluation profile (the official EUVS / 3DGS-Enhancer scoring)"
+DESCRIPTION = ("Rescore a finished run's enhanced images under an evaluation profile: scoring size and filters, "
+               "crop, metrics, per-scene or pooled averaging (profiles: paper, euvs_official, dl3dv_3dgs_enhancer).")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("run", type=Path, help="a finished run folder (metrics.parquet, images/)")
+    parser.add_argument("--profile", default="paper", help="evaluation profile (default: paper)")
+    parser.add_argument("--packets", type=Path, required=True, help="the packet store the run was made on")
+    parser.add_argument("--data", type=Path, default=None,
+                        help="dataset root (official layout): original images and masks, for profiles that score "
+                             "at another size than the working one")
+    parser.add_argument("--dinov2", type=Path, default=None, metavar="DIR",
+                        help="local DINOv2 transformers folder (config.json + model.safetensors) for the EUVS "
+                             "cosine and Final_Score; nothing is downloaded")
+    parser.add_argument("--euvs-compat-report", action="store_true",
+                        help="print the frames where EUVS's positional mask pairing differs from ours")
+    parser.add_argument("--device", default="cpu", help="where metrics run (cpu, cuda)")
+
+
+def run(args: argparse.Namespace) -> int:
+    from setdiff_bench.errors import UsageError
+    from setdiff_bench.profile_scoring import score_run
+    from setdiff_bench.profiles import get_profile
+
+    profile = get_profile(args.profile)
+    dinov2 = None
+    if args.dinov2 is not None:
+        if not profile.dinov2:
+            raise UsageError(f"profile {profile.name} has no DINOv2 score", "--dinov2")
+        from setdiff_bench.metrics.dinov2 import load_dinov2
+
+        dinov2 = load_dinov2(args.dinov2, args.device)
+    if args.euvs_compat_report and not profile.name.startswith("euvs"):
+        raise UsageError("--euvs-compat-report applies to EUVS profiles (euvs_official)", "--euvs-compat-report")
+    out = score_run(args.run, profile, packets=args.packets, data=args.data, dinov2=dinov2, device=args.device)
+    print(f"{profile.caption()}")
+    print(f"tables: {out}")
+    if profile.dinov2 and dinov2 is None:
+        print("note: no --dinov2 weights given: Cos_Similarity and Final_Score are not computed", file=sys.stderr)
+    if args.euvs_compat_report:
+        sys.stdout.write((out / "euvs_compat.txt").read_text())
+    return 0
