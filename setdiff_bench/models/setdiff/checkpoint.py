@@ -17,14 +17,13 @@ import json
 import os
 import pickle
 import shutil
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import torch
 
 from setdiff_bench.errors import CheckpointError, UsageError
-from setdiff_bench.io.atomic import write_text_atomic
+from setdiff_bench.io.atomic import staging_dir, write_text_atomic
 from setdiff_bench.models.setdiff.config import Config, ModelConfig, config_from_dict
 
 WEIGHTS_FILE = "model.safetensors"
@@ -91,7 +90,7 @@ def save_checkpoint(folder: str | os.PathLike[str], model: torch.nn.Module, conf
     if isinstance(model_config, ModelConfig):  # the model's resolved choices (e.g. learn_text_embedding)
         config = dataclasses.replace(config, model=model_config)
     folder.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", suffix=".tmp", dir=folder.parent))
+    tmp = staging_dir(folder.parent, prefix=f".{folder.name}.", suffix=".tmp")
     try:
         state = {name: tensor.detach().cpu().contiguous() for name, tensor in model.state_dict().items()}
         save_file(state, str(tmp / WEIGHTS_FILE), metadata={"format": "setdiff-bench", "config": config.to_json()})
