@@ -77,8 +77,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         where = f"{error.filename}: " if error.filename else ""
         print(f"setdiff-bench {args.verb}: error: {where}{error.strerror or error}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"setdiff-bench {args.verb}: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as interrupt:  # Interrupted says where the work was saved
+        detail = f" ({interrupt})" if str(interrupt) else ""
+        print(f"setdiff-bench {args.verb}: interrupted{detail}", file=sys.stderr)
         return 130
 
 
