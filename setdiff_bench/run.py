@@ -213,7 +213,9 @@ def run_method(packets: str | os.PathLike[str] | Any, out: str | os.PathLike[str
     specs = resolve_metrics(settings.metrics)
     selection = store.packet_ids(settings.split)
     if not selection:
-        raise UsageError(f"no packets of split {settings.split or 'any'!r} in the store", store.root)
+        splits = sorted(set(store.index["split"]))
+        raise UsageError(f"no packets of split {settings.split or 'any'!r} in the store; splits: {', '.join(splits)}",
+                         store.root)
     if settings.method not in available_methods() and enhancer is None:
         raise UsageError(f"unknown method {settings.method!r}; available: {', '.join(sorted(available_methods()))}",
                          "--method")

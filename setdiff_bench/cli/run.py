@@ -16,8 +16,7 @@ from pathlib import Path
 
 VERB = "run"
 HELP = "enhance every packet of a store with one method and score it (PSNR, SSIM, LPIPS; warp error)"
-DESCRIPTION = ("Run one enhancer over a packet store: write the enhanced targets as PNG, per-target metrics "
-               "(metrics.parquet) and a manifest. Resumes where it stopped; --shard i/n splits the work.")
+DESCRIPTION = __doc__
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
