@@ -24,6 +24,7 @@ import torch
 
 from setdiff_bench.errors import CheckpointError, UsageError
 from setdiff_bench.io.atomic import staging_dir, write_text_atomic
+from setdiff_bench.io.safetensors_header import sort_metadata
 from setdiff_bench.models.setdiff.config import Config, ModelConfig, config_from_dict
 
 WEIGHTS_FILE = "model.safetensors"
@@ -94,6 +95,7 @@ def save_checkpoint(folder: str | os.PathLike[str], model: torch.nn.Module, conf
     try:
         state = {name: tensor.detach().cpu().contiguous() for name, tensor in model.state_dict().items()}
         save_file(state, str(tmp / WEIGHTS_FILE), metadata={"format": "setdiff-bench", "config": config.to_json()})
+        sort_metadata(tmp / WEIGHTS_FILE)  # same run, same bytes
         (tmp / CONFIG_FILE).write_text(config.to_json() + "\n", encoding="utf-8")
         if optimizer is not None:
             torch.save(optimizer.state_dict(), tmp / OPTIMIZER_FILE)
