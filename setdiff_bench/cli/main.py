@@ -23,6 +23,7 @@ from typing import NoReturn
 import setdiff_bench.cli as cli_package
 from setdiff_bench import __version__
 from setdiff_bench.errors import SetDiffBenchError
+from setdiff_bench.threads import verb_threads
 
 
 def verb_modules() -> list[ModuleType]:
@@ -87,7 +88,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return int(args._run(args) or 0)
+        with verb_threads():  # one fixed thread count: same command, same machine, same bytes
+            return int(args._run(args) or 0)
     except SetDiffBenchError as error:
         if os.environ.get("SETDIFF_DEBUG"):
             raise

@@ -82,7 +82,6 @@ def make_scene(out: Path, preset_name: str, seed: int, index: int, count: int, *
 
 def run(args: argparse.Namespace) -> int:
     import multiprocessing
-    import os
     import time
     from concurrent.futures import ProcessPoolExecutor
 
@@ -90,6 +89,7 @@ def run(args: argparse.Namespace) -> int:
 
     from setdiff_bench.errors import UsageError
     from setdiff_bench.synthetic.presets import get_preset
+    from setdiff_bench.threads import compute_threads
 
     preset = get_preset(args.preset)
     count = preset.num_scenes if args.scenes is None else args.scenes
@@ -98,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
     if args.seed < 0:
         raise UsageError(f"--seed must be ≥ 0, got {args.seed}", "--seed")
     device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
-    cores = os.cpu_count() or 1
+    cores = compute_threads()  # the machine's CPU count unless SETDIFF_THREADS says otherwise
     jobs = args.jobs or (1 if device.startswith("cuda") else min(count, cores))
     if jobs < 1:
         raise UsageError(f"--jobs must be ≥ 1, got {jobs}", "--jobs")
