@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pandas as pd
@@ -52,3 +53,11 @@ def test_leaderboard_names_what_there_is() -> None:
         build_leaderboard("synthetic", rows, split="val")
     with pytest.raises(Exception, match="methods with runs: identity, setdiff"):
         build_leaderboard("synthetic", rows, methods=["difix"])
+
+
+def test_readme_links_only_files_in_the_repository() -> None:
+    root = Path(__file__).resolve().parents[2]
+    text = (root / "README.md").read_text(encoding="utf-8")
+    assert "shared/" not in text
+    targets = [t.split("#")[0] for t in re.findall(r"\]\(([^)\s]+)\)", text) if "://" not in t]
+    assert targets and all((root / target).exists() for target in targets), targets
