@@ -23,7 +23,7 @@ from typing import Any
 import torch
 
 from setdiff_bench.errors import CheckpointError, UsageError
-from setdiff_bench.io.atomic import staging_dir, write_text_atomic
+from setdiff_bench.io.atomic import new_file_mode, staging_dir, write_text_atomic
 from setdiff_bench.io.safetensors_header import sort_metadata
 from setdiff_bench.models.setdiff.config import Config, ModelConfig, config_from_dict
 
@@ -96,6 +96,7 @@ def save_checkpoint(folder: str | os.PathLike[str], model: torch.nn.Module, conf
         state = {name: tensor.detach().cpu().contiguous() for name, tensor in model.state_dict().items()}
         save_file(state, str(tmp / WEIGHTS_FILE), metadata={"format": "setdiff-bench", "config": config.to_json()})
         sort_metadata(tmp / WEIGHTS_FILE)  # same run, same bytes
+        os.chmod(tmp / WEIGHTS_FILE, new_file_mode())  # safetensors creates it 0600 whatever the umask
         (tmp / CONFIG_FILE).write_text(config.to_json() + "\n", encoding="utf-8")
         if optimizer is not None:
             torch.save(optimizer.state_dict(), tmp / OPTIMIZER_FILE)
