@@ -3,7 +3,7 @@
 Results depend on the thread count: CPU kernels (convolution weight gradients, matrix products, the
 compiled rasteriser's reductions) split their sums by thread, so two counts round differently in the
 last bits, and training amplifies that (measured on the tiny demo: 1 vs 2 threads changed trained
-weights by up to 0.008 and the leaderboard in the second decimal).  Every verb therefore runs with
+weights by up to 0.008 and DiFix's leaderboard cells by up to 0.88 dB PSNR).  Every verb therefore runs with
 :func:`compute_threads` — ``SETDIFF_THREADS`` when set, else the machine's CPU count — never with
 whatever ``OMP_NUM_THREADS`` or the load would give, and the demo records the count it used.
 
