@@ -22,6 +22,14 @@ def test_signal_sets_the_request_and_handlers_come_back(signum: int) -> None:
 
 
 def test_a_second_signal_interrupts_at_once() -> None:
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # Python's own Ctrl-C behaviour
+    try:
+        _second_signal_and_after()
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _second_signal_and_after() -> None:
     with pytest.raises(KeyboardInterrupt), stop_at_safe_point():
         os.kill(os.getpid(), signal.SIGINT)
         os.kill(os.getpid(), signal.SIGINT)
