@@ -65,5 +65,7 @@ def run(args: argparse.Namespace) -> int:
                            progress=not args.no_progress, invocation=invocation(args))
     except StageFailed as failure:
         return failure.code
-    print(f"demo finished in {summary['total_seconds'] / 60:.1f} min: {args.out / 'README.md'}")
+    this_run = sum(s["rerun_seconds"] if s["resumed"] else s["seconds"] for s in summary["stages"])
+    print(f"demo finished: {summary['total_seconds'] / 60:.1f} min of stage work, {this_run / 60:.1f} min in this run: "
+          f"{args.out / 'README.md'}")
     return 0
