@@ -1,6 +1,6 @@
 """setdiff-bench: benchmark and enhancers for 3D Gaussian Splatting novel-view synthesis.
 
-The data path (see ``shared/ARCHITECTURE.md``): loaders → protocols → fit → render → packets →
+The data path (see ``docs/architecture.md``): loaders → protocols → fit → render → packets →
 enhancers → metrics → leaderboards.  Importing the package is cheap: heavy parts load lazily.
 """
 

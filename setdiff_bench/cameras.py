@@ -1,6 +1,6 @@
 """Pinhole cameras in the project convention, and the conversions every loader needs.
 
-Convention (shared/ARCHITECTURE.md): OpenCV camera axes (x right, y down, z forward); extrinsics
+Convention (docs/architecture.md): OpenCV camera axes (x right, y down, z forward); extrinsics
 stored world-to-camera as a 4×4 matrix ``w2c`` (COLMAP's and gsplat's ``viewmats``); ``K`` in
 pixels with pixel centres at +0.5 (pixel (i, j) covers [j, j+1) × [i, i+1) and is sampled at its
 centre).  Loaders convert at their boundary with the constructors here, nowhere else.

@@ -5,8 +5,15 @@ grids (and, on request, the two ablations).
 Every stage is an ordinary ``setdiff-bench`` command run in its own process
 (:mod:`setdiff_bench.stages`); the demo records each command and its wall time in
 ``<out>/README.md`` and ``<out>/demo.json``.  Bulky intermediate data (scenes, packets,
-checkpoints, runs) goes to ``<out>/work`` (git-ignored); the published outputs sit in ``<out>``.
-Every stage resumes, so an interrupted demo continues where it stopped.
+checkpoints, runs) goes to ``<out>/work``; tables, plots and the report sit in ``<out>``, by default
+the scratch folder ``runs/demo`` (git-ignored).  The project's published results are replaced only
+on purpose, by ``setdiff-bench publish`` (:mod:`setdiff_bench.publish`).  Every stage resumes, so an
+interrupted demo continues where it stopped; a stage finished by an earlier run keeps its original
+time in the report, marked resumed (``<work>/stages.json``).
+
+``demo.json`` is written last (and removed when a run starts), so its presence means the outputs
+beside it are complete and from one run; it records the provenance (git revision, command, seed,
+torch thread count, package versions) and the SHA-256 of every output.
 
 Presets (``--preset``):
 
@@ -20,6 +27,8 @@ Presets (``--preset``):
 from __future__ import annotations
 
 import json
+import os
+import platform
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -27,10 +36,18 @@ from typing import Any
 import pandas as pd
 
 from setdiff_bench.errors import UsageError
-from setdiff_bench.io.atomic import write_text_atomic
+from setdiff_bench.io.atomic import sha256_file, write_text_atomic
 from setdiff_bench.stages import Pipeline, relative
+from setdiff_bench.threads import compute_threads
 
 METHODS = ("identity", "reproject", "difix", "setdiff")
+#: Where the demo writes unless told otherwise: a scratch folder, git-ignored, never the published results.
+DEFAULT_OUT = "runs/demo"
+#: The demo's summary in ``<out>``; written last, so a folder with it holds one complete run.
+SUMMARY_FILE = "demo.json"
+REPORT_FILE = "README.md"
+#: Stage timings kept across runs, in the work folder.
+LEDGER_FILE = "stages.json"
 
 
 @dataclass(frozen=True)
@@ -105,7 +122,8 @@ def run_demo(preset: DemoPreset, paths: DemoPaths, *, seed: int = 0, jobs: int =
         StageFailed: a stage exited non-zero (it printed its own error line).
     """
     base = Path.cwd()
-    pipeline = Pipeline(cwd=base, quiet=not progress)
+    (paths.out / SUMMARY_FILE).unlink(missing_ok=True)  # until this run completes, the folder is not a run
+    pipeline = Pipeline(cwd=base, quiet=not progress, ledger=paths.work / LEDGER_FILE)
     rel = lambda p: relative(p, base)  # noqa: E731 - commands read better with short relative paths
     quiet = [] if progress else ["--no-progress"]
     steps = {"setdiff": setdiff_steps or preset.setdiff_steps, "difix": difix_steps or preset.difix_steps}
@@ -140,9 +158,27 @@ def run_demo(preset: DemoPreset, paths: DemoPaths, *, seed: int = 0, jobs: int =
         pipeline.run("ablate setsize", ["ablate", "setsize", "--checkpoint", rel(paths.checkpoints("setdiff")),
                                         *ablate_common])
     summary = summarize(paths, preset, steps, pipeline, invocation)
-    write_text_atomic(paths.out / "demo.json", json.dumps(summary, indent=2, sort_keys=True) + "\n")
-    write_text_atomic(paths.out / "README.md", report_markdown(summary, paths))
+    summary["provenance"] = run_provenance(seed)
+    write_text_atomic(paths.out / REPORT_FILE, report_markdown(summary, paths))
+    summary["files"] = {p.name: sha256_file(p) for p in sorted(paths.out.iterdir())
+                        if p.is_file() and not p.name.startswith(".") and p.name != SUMMARY_FILE}
+    write_text_atomic(paths.out / SUMMARY_FILE, json.dumps(summary, indent=2, sort_keys=True) + "\n")
     return summary
+
+
+def run_provenance(seed: int) -> dict[str, Any]:
+    """What the numbers depend on: code revision, seed, torch thread count, versions, CPU.
+
+    On the same machine the same command gives byte-identical scenes, fits, packets, checkpoints and
+    leaderboards; another thread count, CPU instruction set, torch build or a GPU changes the last bits
+    of every float sum, and training amplifies them (README "Reproducibility").
+    """
+    from setdiff_bench.provenance import git_revision, package_versions
+
+    return {"git": git_revision(), "seed": seed, "torch_threads": compute_threads(),
+            "machine": {"cpu": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(),
+                        "system": platform.system()},
+            "versions": package_versions()}
 
 
 def lane_shift_verdict(metrics: pd.DataFrame, group: str = "lane+2") -> dict[str, Any]:
@@ -176,10 +212,13 @@ def summarize(paths: DemoPaths, preset: DemoPreset, steps: dict[str, int], pipel
         "invocation": invocation,
         "preset": asdict(preset),
         "training_steps": steps,
-        "stages": [{"name": r.name, "command": r.command, "seconds": round(r.seconds, 1)} for r in pipeline.records],
+        "stages": [{"name": r.name, "command": r.command, "seconds": round(r.seconds, 1), "resumed": r.resumed,
+                    "rerun_seconds": None if r.rerun_seconds is None else round(r.rerun_seconds, 1)}
+                   for r in pipeline.records],
         "total_seconds": round(sum(r.seconds for r in pipeline.records), 1),
         "lane_plus_2": lane_shift_verdict(metrics) if len(metrics) else {},
-        "outputs": sorted(p.name for p in paths.out.iterdir() if p.is_file() and p.name not in ("README.md",))
+        "outputs": sorted(p.name for p in paths.out.iterdir()
+                          if p.is_file() and not p.name.startswith(".") and p.name not in (REPORT_FILE, SUMMARY_FILE))
         if paths.out.is_dir() else [],
     }
 
@@ -189,6 +228,12 @@ def report_markdown(summary: dict[str, Any], paths: DemoPaths) -> str:
     lines = ["# Synthetic benchmark: SetDiff against the baselines", ""]
     lines += [f"Produced by `{summary['invocation']}` (preset `{summary['preset']['name']}`: "
               f"{summary['preset']['description']}); total stage time {summary['total_seconds'] / 60:.1f} min.", ""]
+    provenance = summary.get("provenance") or {}
+    if provenance:
+        git = provenance["git"]
+        revision = (git["revision"] or "unknown")[:12] + (" with uncommitted changes" if git["dirty"] else "")
+        lines += [f"Code revision {revision}; seed {provenance['seed']}; {provenance['torch_threads']} torch "
+                  f"threads on {provenance['machine']['cpu']} (set `SETDIFF_THREADS` to repeat it elsewhere).", ""]
     board = paths.out / "synthetic.md"
     if board.is_file():
         lines += ["## Leaderboard (test scenes)", "", board.read_text(encoding="utf-8").strip(), ""]
@@ -210,7 +255,11 @@ def report_markdown(summary: dict[str, Any], paths: DemoPaths) -> str:
         if (paths.out / name).is_file():
             lines += [f"- {title}: [{name}]({name})"]
     lines += ["", "## Commands, in order", ""]
-    lines += [f"1. `{s['command']}` ({s['name']}, {s['seconds']:.0f} s)" for s in summary["stages"]]
+    for stage in summary["stages"]:
+        timing = f"{stage['seconds']:.0f} s"
+        if stage.get("resumed"):
+            timing += f", resumed: work done by an earlier run; this run {stage['rerun_seconds']:.0f} s"
+        lines.append(f"1. `{stage['command']}` ({stage['name']}, {timing})")
     lines += ["", "## Files", ""]
     lines += [f"- `{name}`" for name in summary["outputs"]]
     lines += ["", f"Intermediate data (scenes, packets, checkpoints, runs): `{paths.work}` (not versioned).", ""]

@@ -1,5 +1,8 @@
 """Qualitative image grids: one row per chosen target, columns render | each method | ground truth.
 
+When a method's outputs are the render itself (``identity``), its column stands for both ("identity =
+3DGS render") instead of repeating the same images.
+
 Cells come from the packet store (the 3DGS render and the ground truth) and from finished runs (each
 method's written 8-bit output, found through its ``metrics.parquet``).  Labels are drawn with OpenCV's
 Hershey font into white bands: the column titles on top, the frame (scene / group / name) left of each
@@ -100,7 +103,8 @@ def compose(cells: Sequence[Sequence[np.ndarray]], column_labels: Sequence[str],
 
 def qualitative_grid(store: object, runs: Mapping[str, str | Path], frames: Sequence[GridFrame], out: str | Path, *,
                      cell_width: int = 256, metric: str = "psnr") -> Path:
-    """Write a PNG grid: render | one column per run (label → run folder) | ground truth.
+    """Write a PNG grid: render | one column per run (label → run folder) | ground truth (a run whose
+    images all equal the render replaces the render column, labelled "<run> = 3DGS render").
 
     Args:
         store: a :class:`~setdiff_bench.packets.PacketStore` (or its folder) holding the packets.
@@ -139,12 +143,17 @@ def qualitative_grid(store: object, runs: Mapping[str, str | Path], frames: Sequ
         cells.append(_resized(row_cells, cell_width))
         notes.append(row_notes)
         labels.append(f"{packet.scene}\n{packet.group}\n{packet.targets.names[0]}")
+    columns = ["3DGS render", *runs, "ground truth"]
+    same = [j for j in range(1, len(columns) - 1) if all(np.array_equal(row[0], row[j]) for row in cells)]
+    if same:  # a method that returns the render (identity): one column for both, not two identical ones
+        columns[same[0]] = f"{columns[same[0]]} = 3DGS render"
+        columns, cells, notes = columns[1:], [row[1:] for row in cells], [row[1:] for row in notes]
     sizes = {cell.shape for row in cells for cell in row}
     if len(sizes) > 1:  # rows of different aspect ratios: pad to the largest
         height = max(s[0] for s in sizes)
         cells = [[np.pad(c, ((0, height - c.shape[0]), (0, 0), (0, 0)), constant_values=255) for c in row]
                  for row in cells]
-    grid = compose(cells, ["3DGS render", *runs, "ground truth"], labels, notes if metric else None)
+    grid = compose(cells, columns, labels, notes if metric else None)
     write_png(out, grid)
     return Path(out)
 

@@ -38,6 +38,7 @@ import pyarrow.parquet as pq
 
 from setdiff_bench.errors import SetDiffBenchError, UsageError
 from setdiff_bench.io.atomic import atomic_path, write_text_atomic
+from setdiff_bench.loaders import DATASETS
 from setdiff_bench.metrics.registry import METRICS
 from setdiff_bench.profiles import DEFAULT_PROFILE, PROFILE_COLUMN, get_profile
 
@@ -218,6 +219,11 @@ class Leaderboard:
         return f"{value:.{row.decimals.get(cell, metric_decimals(cell[1]))}f}"
 
 
+def _present(what: str, names: Sequence[str]) -> str:
+    """``"; <what>: a, b"`` for an error message, or nothing when ``names`` is empty."""
+    return f"; {what}: {', '.join(names)}" if len(names) else ""
+
+
 def build_leaderboard(dataset: str, images: pd.DataFrame, sequences: pd.DataFrame | None = None, *,
                       split: str | None = "test", reported: pd.DataFrame | None = None,
                       metrics: Sequence[str] | None = None, methods: Sequence[str] | None = None,
@@ -243,6 +249,11 @@ def build_leaderboard(dataset: str, images: pd.DataFrame, sequences: pd.DataFram
     layout = layout or LAYOUTS.get(dataset, Layout(None))
     metric_names = tuple(metrics or layout.metrics)
     frame = images if len(images) else pd.DataFrame(columns=["dataset"])
+    present = sorted(set(frame["dataset"]))
+    no_reported = reported is None or not len(reported)
+    if dataset not in present and dataset not in DATASETS and no_reported:
+        raise UsageError(f"unknown dataset {dataset!r}; choose from {', '.join(DATASETS)}"
+                         + _present("runs found for", present), "--dataset")
     frame = frame[frame["dataset"] == dataset]
     spec = get_profile(profile)
     frame = profile_rows(frame, profile)
@@ -253,14 +264,19 @@ def build_leaderboard(dataset: str, images: pd.DataFrame, sequences: pd.DataFram
         raise LeaderboardError(f"the paper's reported numbers use the {DEFAULT_PROFILE} profile; they cannot share "
                                f"a table with profile {profile} (drop --with-reported)")
     if split is not None and len(frame) and spec.scenes == "split":   # "all": the profile averages every scene
+        splits = sorted(set(frame["split"]))
         frame = frame[frame["split"] == split]
+        if not len(frame) and no_reported:
+            raise LeaderboardError(f"no {dataset} results of split {split!r}" + _present("splits with results", splits))
     if methods is not None and len(frame):
         unknown = sorted(set(methods) - set(frame["method"]))
         if unknown:
-            raise LeaderboardError(f"no {dataset} runs of method(s) {', '.join(unknown)}")
+            raise LeaderboardError(f"no {dataset} runs of method(s) {', '.join(unknown)}"
+                                   + _present("methods with runs", sorted(set(frame["method"]))))
         frame = frame[frame["method"].isin(list(methods))]
-    if not len(frame) and (reported is None or not len(reported)):
-        raise LeaderboardError(f"no {dataset} results{f' of split {split}' if split else ''} to tabulate")
+    if not len(frame) and no_reported:
+        raise LeaderboardError(f"no {dataset} results{f' of split {split}' if split else ''} to tabulate"
+                               + _present("runs found for", present))
     missing_columns = [m for m in metric_names if len(frame) and m not in frame.columns]
     if missing_columns:
         raise LeaderboardError(f"runs have no column(s) {', '.join(missing_columns)} "

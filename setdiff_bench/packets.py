@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import tempfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -42,7 +41,7 @@ import torch
 from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import PacketError, SetDiffBenchError
 from setdiff_bench.geometry import normalize_packet
-from setdiff_bench.io.atomic import sha256_file
+from setdiff_bench.io.atomic import sha256_file, staging_dir
 from setdiff_bench.io.images import read_exr, read_mask, read_rgb, to_tensor_chw, write_exr, write_png
 from setdiff_bench.packet_index import (
     FILE_COLUMNS,
@@ -128,7 +127,7 @@ def write_packet(root: Path, header: PacketHeader, references: Sequence[ViewCont
     base = root / PACKETS_DIR
     base.mkdir(parents=True, exist_ok=True)
     remove_temporaries(root, header.packet_id)
-    tmp = Path(tempfile.mkdtemp(prefix=f"{TEMP_PREFIX}{header.packet_id}-", dir=base))
+    tmp = staging_dir(base, prefix=f"{TEMP_PREFIX}{header.packet_id}-")
     try:
         rows = [_write_view(root, tmp, header, "ref", i, v) for i, v in enumerate(references)]
         rows += [_write_view(root, tmp, header, "target", i, v) for i, v in enumerate(targets)]

@@ -60,6 +60,13 @@ def group_summary(images: pd.DataFrame, metric: str, position: Callable[[str], t
     return pd.DataFrame.from_records(records, columns=["method", "group", "x", "label", "mean", "sem", "count"])
 
 
+def error_bar_caption(summary: pd.DataFrame) -> str:
+    """What the points and bars of a plot are, with the number of targets behind each point."""
+    counts = summary.loc[summary["count"] > 0, "count"]
+    n = f"n = {counts.min()}" if counts.min() == counts.max() else f"n = {counts.min()}–{counts.max()}"
+    return f"points: mean over the targets of a group ({n} per point); error bars: ±1 standard error of the mean"
+
+
 def plot_metric_by_group(images: pd.DataFrame, out: str | Path, *, position: Callable[[str], tuple[float, str] | None],
                          xlabel: str, metrics: Sequence[str] = ("psnr", "ssim", "lpips"), title: str = "",
                          methods: Sequence[str] | None = None) -> Path:
@@ -107,7 +114,9 @@ def plot_metric_by_group(images: pd.DataFrame, out: str | Path, *, position: Cal
     axes[0][0].legend(fontsize="small")
     if title:
         figure.suptitle(title)
-    figure.tight_layout()
+    figure.text(0.5, 0.01, error_bar_caption(pd.concat(list(summaries.values()))), ha="center", va="bottom",
+                fontsize="small")
+    figure.tight_layout(rect=(0.0, 0.06, 1.0, 1.0))
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(out) as tmp:

@@ -337,6 +337,9 @@ def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[s
         UsageError / ProtocolError / DatasetError: bad arguments, a protocol that does not fit the
             dataset, missing fits or data.
     """
+    from setdiff_bench.loaders import dataset_spec
+
+    dataset_spec(dataset)  # an unknown key is refused with the list of known ones
     if threads < 1:
         raise UsageError(f"threads must be >= 1, got {threads}", "--threads")
     if cmap_precision not in ("float32", "half"):

@@ -189,7 +189,8 @@ def fragment_path(out: Path, packet_id: str) -> Path:
 
 # ---------------------------------------------------------------------- the run
 def run_method(packets: str | os.PathLike[str] | Any, out: str | os.PathLike[str], settings: RunSettings, *,
-               shard: Shard = Shard(), progress: bool | None = None, enhancer: Enhancer | None = None) -> RunResult:
+               shard: Shard = Shard(), progress: bool | None = None, enhancer: Enhancer | None = None,
+               verify: bool = True) -> RunResult:
     """Enhance and score every packet of ``settings.split`` in this shard; merge when all are done.
 
     Args:
@@ -200,6 +201,8 @@ def run_method(packets: str | os.PathLike[str] | Any, out: str | os.PathLike[str
         progress: tqdm bar (``None``: only on a terminal).
         enhancer: an already built enhancer to use instead of building ``settings.method`` (tests,
             notebooks); its ``name`` must equal ``settings.method``.
+        verify: re-hash every file of the packets to enhance before starting (seconds for a store of
+            thousands of files), so that a corrupt file stops the run at once.
 
     Raises:
         SetDiffBenchError: bad store, unknown method or option, an output of the wrong shape, ...
@@ -213,7 +216,9 @@ def run_method(packets: str | os.PathLike[str] | Any, out: str | os.PathLike[str
     specs = resolve_metrics(settings.metrics)
     selection = store.packet_ids(settings.split)
     if not selection:
-        raise UsageError(f"no packets of split {settings.split or 'any'!r} in the store", store.root)
+        splits = sorted(set(store.index["split"]))
+        raise UsageError(f"no packets of split {settings.split or 'any'!r} in the store; splits: {', '.join(splits)}",
+                         store.root)
     if settings.method not in available_methods() and enhancer is None:
         raise UsageError(f"unknown method {settings.method!r}; available: {', '.join(sorted(available_methods()))}",
                          "--method")
@@ -223,6 +228,16 @@ def run_method(packets: str | os.PathLike[str] | Any, out: str | os.PathLike[str
     mine = shard.select(selection)
     todo = [pid for pid in mine if not fragment_path(out, pid).is_file()]
     targets = _target_rows(store, selection)
+    if todo and verify and hasattr(store, "verify"):
+        # every file of the packets to enhance against the index's SHA-256, before any work: a corrupt
+        # file is reported at once, not when the run reaches it
+        problems = store.verify(todo)  # "packet_id: relative path: missing | SHA-256 mismatch"
+        if problems:
+            _, relative, what = problems[0].split(": ", 2)
+            what = "packet file missing" if what == "missing" else what
+            more = f", {len(problems) - 1} more problem(s) in other files" if len(problems) > 1 else ""
+            raise PacketError(f"{what} (found by the check before any work{more}); run `setdiff-bench prepare` "
+                              "again to rewrite the packets, or pass --no-verify", Path(store.root) / relative)
     if todo:
         if enhancer is None:
             enhancer = create_enhancer(settings.method, optional={"device": settings.device}, **settings.options)

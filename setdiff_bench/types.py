@@ -1,6 +1,6 @@
 """The shared vocabulary of the data path: Camera, Frame, Scene, ViewSet, Packet.
 
-Shapes follow shared/ARCHITECTURE.md: images are float32 ``(V, 3, H, W)`` in [0, 1]; C-maps
+Shapes follow docs/architecture.md: images are float32 ``(V, 3, H, W)`` in [0, 1]; C-maps
 ``(V, 3, H, W)`` in the packet's normalised frame; alphas ``(V, 1, H, W)`` in [0, 1]; masks
 bool ``(V, 1, H, W)`` (True = evaluate).
 """

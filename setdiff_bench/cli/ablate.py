@@ -46,8 +46,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from setdiff_bench.stages import Pipeline, StageFailed
 
-    pipeline = Pipeline(quiet=args.no_progress)
     work = (args.work or args.out / "work") / f"ablation_{args.study}"
+    pipeline = Pipeline(quiet=args.no_progress, ledger=work / "stages.json")  # reruns keep the original times
     invocation = _invocation(args)
     try:
         if args.study == "geometry":

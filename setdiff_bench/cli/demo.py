@@ -1,6 +1,9 @@
 """``setdiff-bench demo``: the embedded synthetic benchmark end to end (see :mod:`setdiff_bench.demo`).
 
-    setdiff-bench demo [--preset tiny|default|full] [--out results/synthetic] [--ablations]
+    setdiff-bench demo [--preset tiny|default|full] [--out runs/demo] [--ablations]
+
+The outputs go to a scratch folder (default ``runs/demo``, git-ignored); ``setdiff-bench publish``
+copies a finished run over the published results on purpose.
 """
 
 from __future__ import annotations
@@ -13,15 +16,17 @@ VERB = "demo"
 HELP = "the embedded benchmark end to end: synthetic scenes, 3DGS fits, packets, SetDiff vs baselines, leaderboard"
 DESCRIPTION = ("Generate synthetic multi-lane street scenes, fit their 3DGS, build packets, train a small SetDiff "
                "and DiFix, run identity, reproject, difix and setdiff on the test scenes, and write the "
-               "leaderboard, plots and grids. Every stage resumes.")
+               "leaderboard, plots and grids into a scratch folder (default runs/demo, git-ignored; `setdiff-bench "
+               "publish` copies a finished run to results/). Every stage resumes.")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from setdiff_bench.demo import DEMO_PRESETS
+    from setdiff_bench.demo import DEFAULT_OUT, DEMO_PRESETS
 
     parser.add_argument("--preset", default="default", choices=tuple(DEMO_PRESETS),
                         help="; ".join(f"{p.name}: {p.description}" for p in DEMO_PRESETS.values()))
-    parser.add_argument("--out", type=Path, default=Path("results/synthetic"), help="published outputs")
+    parser.add_argument("--out", type=Path, default=Path(DEFAULT_OUT),
+                        help=f"output folder (default {DEFAULT_OUT}, a git-ignored scratch folder)")
     parser.add_argument("--work", type=Path, default=None, help="intermediate data (default: <out>/work)")
     parser.add_argument("--seed", type=int, default=0, help="scene and training seed")
     parser.add_argument("--jobs", type=int, default=2, help="processes for scene generation and packet rendering")
@@ -60,5 +65,7 @@ def run(args: argparse.Namespace) -> int:
                            progress=not args.no_progress, invocation=invocation(args))
     except StageFailed as failure:
         return failure.code
-    print(f"demo finished in {summary['total_seconds'] / 60:.1f} min: {args.out / 'README.md'}")
+    this_run = sum(s["rerun_seconds"] if s["resumed"] else s["seconds"] for s in summary["stages"])
+    print(f"demo finished: {summary['total_seconds'] / 60:.1f} min of stage work, {this_run / 60:.1f} min in this run: "
+          f"{args.out / 'README.md'}")
     return 0

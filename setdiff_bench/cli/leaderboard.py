@@ -19,8 +19,7 @@ from pathlib import Path
 
 VERB = "leaderboard"
 HELP = "tabulate finished runs per method and group: Parquet, LaTeX (booktabs), Markdown; plots and grids"
-DESCRIPTION = ("Aggregate finished runs (metrics.parquet under --runs) into per-group means per method, in the "
-               "paper's table shape; optionally mix in the paper's reported rows (marked), draw plots and grids.")
+DESCRIPTION = __doc__
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

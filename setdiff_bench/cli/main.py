@@ -13,7 +13,9 @@ import argparse
 import importlib
 import os
 import pkgutil
+import re
 import sys
+import textwrap
 from collections.abc import Sequence
 from types import ModuleType
 from typing import NoReturn
@@ -21,6 +23,7 @@ from typing import NoReturn
 import setdiff_bench.cli as cli_package
 from setdiff_bench import __version__
 from setdiff_bench.errors import SetDiffBenchError
+from setdiff_bench.threads import verb_threads
 
 
 def verb_modules() -> list[ModuleType]:
@@ -36,13 +39,32 @@ def verb_modules() -> list[ModuleType]:
 
 
 class OneLineArgumentParser(argparse.ArgumentParser):
-    """argparse with one-line usage errors: ``<prog>: error: <message> (see <prog> --help)``, exit code 2.
+    """argparse with one-line usage errors: ``setdiff-bench <verb>: error: <message> (see <prog> --help)``,
+    exit code 2 — the same prefix as every other error of the verb, also for ``list`` targets.
 
     Sub-parsers (verbs, ``list`` targets) inherit the class through ``add_subparsers``.
     """
 
     def error(self, message: str) -> NoReturn:
-        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
+        prefix = " ".join(self.prog.split()[:2])  # "setdiff-bench list scenes" -> "setdiff-bench list"
+        self.exit(2, f"{prefix}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
+
+
+class ParagraphHelpFormatter(argparse.HelpFormatter):
+    """Help text from module docstrings: paragraphs are re-wrapped, indented blocks (examples) kept line
+    by line, reStructuredText ``literal`` / ``Examples::`` markup shown plainly."""
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        text = re.sub(r":\w+:`", "`", textwrap.dedent(text).replace("``", "`").replace("::\n", ":\n"))
+        blocks = []
+        for paragraph in re.split(r"\n\s*\n", text.strip("\n")):
+            lines = paragraph.splitlines()
+            if all(line.startswith((" ", "\t")) or not line.strip() for line in lines):
+                blocks.append("\n".join(indent + line.rstrip() for line in lines))
+            else:
+                blocks.append(textwrap.fill(" ".join(paragraph.split()), width, initial_indent=indent,
+                                            subsequent_indent=indent))
+        return "\n\n".join(blocks)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -54,7 +76,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="verb", metavar="VERB", required=True)
     for module in verb_modules():
         verb_parser = sub.add_parser(module.VERB, help=module.HELP, description=getattr(module, "DESCRIPTION",
-                                                                                            module.HELP))
+                                                                                            module.HELP),
+                                     formatter_class=ParagraphHelpFormatter)
         module.add_arguments(verb_parser)
         verb_parser.set_defaults(_run=module.run)
     return parser
@@ -65,7 +88,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return int(args._run(args) or 0)
+        with verb_threads():  # one fixed thread count: same command, same machine, same bytes
+            return int(args._run(args) or 0)
     except SetDiffBenchError as error:
         if os.environ.get("SETDIFF_DEBUG"):
             raise
@@ -77,8 +101,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         where = f"{error.filename}: " if error.filename else ""
         print(f"setdiff-bench {args.verb}: error: {where}{error.strerror or error}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"setdiff-bench {args.verb}: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as interrupt:  # Interrupted says where the work was saved
+        detail = f" ({interrupt})" if str(interrupt) else ""
+        print(f"setdiff-bench {args.verb}: interrupted{detail}", file=sys.stderr)
         return 130
 
 

@@ -16,8 +16,7 @@ from pathlib import Path
 
 VERB = "run"
 HELP = "enhance every packet of a store with one method and score it (PSNR, SSIM, LPIPS; warp error)"
-DESCRIPTION = ("Run one enhancer over a packet store: write the enhanced targets as PNG, per-target metrics "
-               "(metrics.parquet) and a manifest. Resumes where it stopped; --shard i/n splits the work.")
+DESCRIPTION = __doc__
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -41,6 +40,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--warp-cache", default="auto", metavar="DIR",
                         help="cache of ground-truth flows for warp error, shared by methods (auto: the user cache; "
                              "none: off)")
+    parser.add_argument("--no-verify", action="store_true",
+                        help="skip the up-front SHA-256 check of the packets' files (each file is still checked "
+                             "when it is read)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -71,7 +73,8 @@ def run(args: argparse.Namespace) -> int:
                            batch_size=args.batch_size,
                            warp_cache=None if args.warp_cache == "none" else args.warp_cache)
     out = args.out or Path("results") / "runs" / Path(args.packets).resolve().name / args.method
-    result = run_method(args.packets, out, settings, shard=shard, progress=False if args.no_progress else None)
+    result = run_method(args.packets, out, settings, shard=shard, progress=False if args.no_progress else None,
+                        verify=not args.no_verify)
     print(f"{args.method} [{shard}]: enhanced {result.enhanced} packets, {result.skipped} already done → {out}")
     if result.merged:
         print(f"complete: {out / 'metrics.parquet'}, {out / 'manifest.json'}")

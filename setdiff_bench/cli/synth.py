@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 VERB = "synth"
 HELP = "generate synthetic multi-lane street scenes (EUVS layout) and fit their 3DGS"
@@ -38,14 +39,69 @@ def fit_path(scene_dir: Path) -> Path:
     return scene_dir / "fits" / f"{FIT_NAME}.ply"
 
 
+class ProgressEvents:
+    """Where :func:`make_scene` reports progress: ``(kind, scene index, done, total)`` tuples put on a
+    queue (a ``multiprocessing`` manager queue for worker processes) for :class:`SceneProgress`.
+
+    ``kind`` is ``"render"`` (ground-truth frames) or ``"fit"`` (3DGS iterations, about every 1 %).
+    """
+
+    def __init__(self, queue: Any) -> None:
+        self.queue = queue
+
+    def __call__(self, kind: str, index: int, done: int, total: int) -> None:
+        self.queue.put((kind, index, done, total))
+
+
+class SceneProgress:
+    """Per-scene progress in the main process: one tqdm bar per scene at work, or, without bars, a line
+    when a scene starts rendering or fitting and at each quarter of its fit (so that a 10-minute
+    ``synth`` never goes silent)."""
+
+    def __init__(self, count: int, bars: bool) -> None:
+        self.count, self.bars = count, bars
+        self.open: dict[int, Any] = {}
+        self.phase: dict[int, str] = {}
+        self.quarter: dict[int, int] = {}
+
+    def update(self, kind: str, index: int, done: int, total: int) -> None:
+        from tqdm.auto import tqdm
+
+        label = f"scene {index + 1}/{self.count} {kind}"
+        if self.phase.get(index) != kind:
+            self.phase[index] = kind
+            if index in self.open:
+                self.open.pop(index).close()
+            if self.bars:
+                self.open[index] = tqdm(total=total, desc=label, unit="frame" if kind == "render" else "it",
+                                        leave=False, dynamic_ncols=True)
+            else:
+                print(f"{label}: started ({total} {'frames' if kind == 'render' else 'iterations'})", flush=True)
+        if index in self.open:
+            self.open[index].update(done - self.open[index].n)
+        elif kind == "fit" and total and 4 * done // total > self.quarter.get(index, 0) and done < total:
+            self.quarter[index] = 4 * done // total
+            print(f"{label}: {done}/{total} iterations", flush=True)
+
+    def finish(self, index: int) -> None:
+        if index in self.open:
+            self.open.pop(index).close()
+
+    def close(self) -> None:
+        for index in list(self.open):
+            self.finish(index)
+
+
 def make_scene(out: Path, preset_name: str, seed: int, index: int, count: int, *, fit: bool, device: str,
-               overwrite: bool, progress: bool, threads: int | None = None) -> str:
-    """Generate (and fit) scene ``index``; returns a one-line summary.  Runs in a worker process with ``--jobs``."""
+               overwrite: bool, report: Any = None, threads: int | None = None) -> str:
+    """Generate (and fit) scene ``index``; returns a one-line summary.  Runs in a worker process with ``--jobs``.
+
+    ``report(kind, index, done, total)`` receives render and fit progress (:class:`ProgressEvents`).
+    """
     import shutil
     import time
 
     import torch
-    from tqdm.auto import tqdm
 
     from setdiff_bench.gaussians.fit import fit_scene
     from setdiff_bench.synthetic.generate import generate_scene
@@ -55,14 +111,12 @@ def make_scene(out: Path, preset_name: str, seed: int, index: int, count: int, *
         torch.set_num_threads(threads)
     preset = get_preset(preset_name)
     t0 = time.perf_counter()
-    bar = tqdm(total=None, desc=f"scene {index + 1}/{count} render", unit="frame", disable=not progress, leave=False)
 
-    def report(done: int, total: int) -> None:
-        bar.total = total
-        bar.update(done - bar.n)
+    def rendered(done: int, total: int) -> None:
+        if report is not None:
+            report("render", index, done, total)
 
-    scene_dir = generate_scene(out, preset, seed, index, overwrite=overwrite, progress=report, device=device)
-    bar.close()
+    scene_dir = generate_scene(out, preset, seed, index, overwrite=overwrite, progress=rendered, device=device)
     t1 = time.perf_counter()
     message = f"{scene_dir.name}: generated in {t1 - t0:.1f} s"
     if fit:
@@ -71,8 +125,16 @@ def make_scene(out: Path, preset_name: str, seed: int, index: int, count: int, *
             checkpoint = ply.with_suffix(".checkpoint")
             if overwrite:
                 shutil.rmtree(checkpoint, ignore_errors=True)
+            iterations = preset.fit.iterations
+            every = max(1, iterations // 100)
+
+            def fitted(iteration: int, loss: float) -> None:
+                del loss
+                if report is not None and (iteration % every == 0 or iteration == iterations):
+                    report("fit", index, iteration, iterations)
+
             result = fit_scene(scene_dir, ply, preset.fit, device=device, checkpoint_dir=checkpoint,
-                               checkpoint_every=max(1, preset.fit.iterations // 5), progress=progress)
+                               checkpoint_every=max(1, iterations // 5), progress=False, on_iteration=fitted)
             shutil.rmtree(checkpoint, ignore_errors=True)
             message += f", fitted {len(result.model)} Gaussians in {time.perf_counter() - t1:.1f} s"
         else:
@@ -81,8 +143,9 @@ def make_scene(out: Path, preset_name: str, seed: int, index: int, count: int, *
 
 
 def run(args: argparse.Namespace) -> int:
+    import contextlib
     import multiprocessing
-    import os
+    import queue as queues
     import time
     from concurrent.futures import ProcessPoolExecutor
 
@@ -90,6 +153,7 @@ def run(args: argparse.Namespace) -> int:
 
     from setdiff_bench.errors import UsageError
     from setdiff_bench.synthetic.presets import get_preset
+    from setdiff_bench.threads import compute_threads
 
     preset = get_preset(args.preset)
     count = preset.num_scenes if args.scenes is None else args.scenes
@@ -98,22 +162,37 @@ def run(args: argparse.Namespace) -> int:
     if args.seed < 0:
         raise UsageError(f"--seed must be ≥ 0, got {args.seed}", "--seed")
     device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
-    cores = os.cpu_count() or 1
+    cores = compute_threads()  # the machine's CPU count unless SETDIFF_THREADS says otherwise
     jobs = args.jobs or (1 if device.startswith("cuda") else min(count, cores))
     if jobs < 1:
         raise UsageError(f"--jobs must be ≥ 1, got {jobs}", "--jobs")
     start = time.perf_counter()
     options = {"fit": not args.no_fit, "device": device, "overwrite": args.overwrite}
-    if jobs == 1:
-        for index in range(count):
-            print(make_scene(args.out, preset.name, args.seed, index, count, progress=not args.no_progress,
-                             **options), flush=True)
-    else:
-        threads = max(1, cores // jobs)
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
-            futures = [pool.submit(make_scene, args.out, preset.name, args.seed, index, count, progress=False,
-                                   threads=threads, **options) for index in range(count)]
-            for future in futures:
-                print(future.result(), flush=True)
+    progress = SceneProgress(count, bars=not args.no_progress)
+    try:
+        if jobs == 1:
+            for index in range(count):
+                message = make_scene(args.out, preset.name, args.seed, index, count, report=progress.update,
+                                     **options)
+                progress.finish(index)
+                print(message, flush=True)
+        else:
+            threads = max(1, cores // jobs)
+            context = multiprocessing.get_context("spawn")
+            with context.Manager() as manager, ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+                events = manager.Queue()
+                futures = {pool.submit(make_scene, args.out, preset.name, args.seed, index, count,
+                                       report=ProgressEvents(events), threads=threads, **options): index
+                           for index in range(count)}
+                pending = dict(futures)
+                while pending:
+                    with contextlib.suppress(queues.Empty):
+                        progress.update(*events.get(timeout=0.5))
+                    for future in [f for f in pending if f.done()]:
+                        index = pending.pop(future)
+                        progress.finish(index)
+                        print(future.result(), flush=True)
+    finally:
+        progress.close()
     print(f"{count} scene(s) in {args.out} ({time.perf_counter() - start:.1f} s, {jobs} job(s))")
     return 0

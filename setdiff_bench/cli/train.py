@@ -4,6 +4,8 @@ The config (a TOML file, or a packaged one by name: ``tiny_setdiff``, ``tiny_dif
 ``sd_turbo_setdiff``, ``sd_turbo_difix``) says which method and architecture; training samples come
 from the packet store's ``train`` split, validation packets from its ``test`` split.  Re-running the
 same command resumes from ``CKPT_DIR/latest``; a checkpoint of another configuration is refused.
+Checkpoints are saved every min(checkpoint_every, 500, steps/4) steps, and on Ctrl-C or SIGTERM at
+the step in progress (exit code 130; a second Ctrl-C stops at once).
 Several GPUs: ``accelerate launch -m setdiff_bench.cli.main train ...`` (DDP, one process per GPU).
 
 ``setdiff-bench train autoencoder --packets DIR --out AE_DIR`` trains the tiny autoencoder that the
@@ -70,6 +72,7 @@ def run_autoencoder(args: argparse.Namespace) -> int:
 
 def run(args: argparse.Namespace) -> int:
     from setdiff_bench.errors import UsageError
+    from setdiff_bench.interrupts import stop_at_safe_point
     from setdiff_bench.models.setdiff.config import load_config, with_overrides
     from setdiff_bench.models.setdiff.train import train
     from setdiff_bench.packets import PacketStore
@@ -92,8 +95,9 @@ def run(args: argparse.Namespace) -> int:
         for packet_id in list(store.packet_ids(args.validation_split))[: tc.validation_packets]:
             gt, masks = store.load_ground_truth(packet_id)
             validation.append(TrainingSample(packet=store.load_packet(packet_id), target_gt=gt, target_masks=masks))
-    result = train(config, dataset, args.out, validation=validation, resume=not args.no_resume,
-                   cpu=True if args.cpu else None, progress=not args.no_progress)
+    with stop_at_safe_point():  # Ctrl-C / SIGTERM: checkpoint at the current step, then exit 130
+        result = train(config, dataset, args.out, validation=validation, resume=not args.no_resume,
+                       cpu=True if args.cpu else None, progress=not args.no_progress)
     losses = ", ".join(f"{k} {v:.4f}" for k, v in result.losses.items())
     print(f"trained {config.model.method} to step {result.step}: {result.checkpoint}" + (f" ({losses})" if losses else ""))
     if result.validation:

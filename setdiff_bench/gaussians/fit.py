@@ -381,11 +381,12 @@ def fit_gaussians(views: Sequence[FitView], config: FitConfig, *, points: np.nda
 def fit_scene(scene_dir: str | os.PathLike[str], out_ply: str | os.PathLike[str], config: FitConfig, *,
               frames: Sequence[str] | None = None, device: str | torch.device = "cpu",
               checkpoint_dir: str | os.PathLike[str] | None = None, checkpoint_every: int = 0, resume: bool = True,
-              progress: bool = True) -> FitResult:
+              progress: bool = True, on_iteration: Callable[[int, float], None] | None = None) -> FitResult:
     """Fit a scene folder's training frames (or ``frames``) and write the standard 3DGS PLY to ``out_ply``.
 
     The scene is read through the loaders (:func:`setdiff_bench.gaussians.fit_data.load_fit_scene`);
-    its sparse points, when present, initialise the Gaussians.
+    its sparse points, when present, initialise the Gaussians.  ``on_iteration(iteration, loss)`` is
+    called after every optimiser step (progress reports from worker processes).
     """
     from setdiff_bench.gaussians.fit_data import load_fit_scene, load_fit_views, select_fit_frames
     from setdiff_bench.gaussians.ply import write_ply
@@ -395,6 +396,6 @@ def fit_scene(scene_dir: str | os.PathLike[str], out_ply: str | os.PathLike[str]
     views = load_fit_views(scene, names)
     result = fit_gaussians(views, config, points=scene.points3d, colors=scene.points_rgb, device=device,
                            checkpoint_dir=checkpoint_dir, checkpoint_every=checkpoint_every, resume=resume,
-                           progress=progress)
+                           progress=progress, on_iteration=on_iteration)
     write_ply(out_ply, result.model)
     return result

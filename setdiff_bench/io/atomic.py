@@ -2,6 +2,10 @@
 
 A reader (or a resumed run) therefore sees either the old file or the complete new one, never a
 half-written file, even if the process is killed with SIGKILL.
+
+``tempfile`` creates its files ``0600`` and folders ``0700`` whatever the umask; outputs that are
+renamed into place from there are given the modes an ordinary ``open``/``mkdir`` would have
+(``0644`` / ``0755`` under umask 022), so that a shared results folder stays readable.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ def atomic_path(destination: str | os.PathLike[str], suffix: str | None = None) 
     tmp = Path(tmp_name)
     try:
         yield tmp
+        os.chmod(tmp, new_file_mode())
         _fsync_file(tmp)
         os.replace(tmp, destination)
         _fsync_dir(destination.parent)
@@ -37,6 +42,37 @@ def atomic_path(destination: str | os.PathLike[str], suffix: str | None = None) 
         with contextlib.suppress(FileNotFoundError):
             tmp.unlink()
         raise
+
+
+def current_umask() -> int:
+    """The process umask, read without changing it (Linux ``/proc``); elsewhere set and restored at once."""
+    with contextlib.suppress(OSError, ValueError):
+        for line in Path("/proc/self/status").read_text(encoding="ascii").splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def new_file_mode() -> int:
+    """The mode ``open`` gives a new file under the current umask (``0o644`` under umask 022)."""
+    return 0o666 & ~current_umask()
+
+
+def new_dir_mode() -> int:
+    """The mode ``mkdir`` gives a new folder under the current umask (``0o755`` under umask 022)."""
+    return 0o777 & ~current_umask()
+
+
+def staging_dir(parent: str | os.PathLike[str], prefix: str, suffix: str = "") -> Path:
+    """A new, uniquely named folder in ``parent`` with the umask's folder mode (``tempfile.mkdtemp`` gives 0700).
+
+    Used to build an output folder that is renamed into place when complete.
+    """
+    folder = Path(tempfile.mkdtemp(prefix=prefix, suffix=suffix, dir=parent))
+    os.chmod(folder, new_dir_mode())
+    return folder
 
 
 def write_bytes_atomic(destination: str | os.PathLike[str], data: bytes) -> None:

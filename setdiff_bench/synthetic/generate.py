@@ -12,7 +12,6 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,7 +21,7 @@ import torch
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.gaussians.model import GaussianModel
-from setdiff_bench.io.atomic import write_text_atomic
+from setdiff_bench.io.atomic import staging_dir, write_text_atomic
 from setdiff_bench.io.images import write_png
 from setdiff_bench.synthetic.capture import CapturedFrame, capture_drive
 from setdiff_bench.synthetic.colmap_writer import ColmapImage, write_colmap_model
@@ -198,7 +197,7 @@ def generate_scene(out_root: str | os.PathLike[str], preset: Preset, seed: int, 
     root.mkdir(parents=True, exist_ok=True)
     build = build_scene(preset, seed, index)
     frames = render_frames(build, progress, device)
-    staging = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".tmp", dir=root))
+    staging = staging_dir(root, prefix=f".{final.name}.", suffix=".tmp")
     try:
         write_scene(build, frames, staging)
         if final.exists():

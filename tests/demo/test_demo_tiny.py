@@ -1,8 +1,11 @@
-"""CI smoke test: ``setdiff-bench demo --preset tiny`` runs end to end and writes well-formed outputs."""
+"""CI smoke test: ``setdiff-bench demo --preset tiny`` runs end to end, writes well-formed, shareable outputs, and
+gives byte-identical results when run again."""
 
 from __future__ import annotations
 
 import json
+import os
+import stat
 from pathlib import Path
 
 import pandas as pd
@@ -11,13 +14,73 @@ import pytest
 from setdiff_bench.cli.main import main
 from setdiff_bench.demo import METHODS
 from setdiff_bench.io.images import read_image_raw
+from setdiff_bench.threads import compute_threads
+
+
+def run_tiny_demo(folder: Path, omp_threads: str) -> Path:
+    """``setdiff-bench demo --preset tiny`` from ``folder`` (relative ``--out``, so that the recorded commands
+    match between folders), under umask 022 and the given ``OMP_NUM_THREADS`` (which must not matter)."""
+    previous_cwd, previous_umask = Path.cwd(), os.umask(0o022)
+    previous_omp = os.environ.get("OMP_NUM_THREADS")
+    os.environ["OMP_NUM_THREADS"] = omp_threads
+    try:
+        os.chdir(folder)
+        assert main(["demo", "--preset", "tiny", "--out", "runs/demo", "--no-progress"]) == 0
+    finally:
+        os.chdir(previous_cwd)
+        os.umask(previous_umask)
+        if previous_omp is None:
+            os.environ.pop("OMP_NUM_THREADS", None)
+        else:
+            os.environ["OMP_NUM_THREADS"] = previous_omp
+    return folder / "runs" / "demo"
 
 
 @pytest.fixture(scope="module")
 def demo_out(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("demo") / "synthetic"
-    assert main(["demo", "--preset", "tiny", "--out", str(out), "--no-progress"]) == 0
-    return out
+    return run_tiny_demo(tmp_path_factory.mktemp("demo"), omp_threads="1")
+
+
+@pytest.fixture(scope="module")
+def second_demo_out(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return run_tiny_demo(tmp_path_factory.mktemp("demo_again"), omp_threads="2")
+
+
+#: Files that record wall times or absolute paths, never results (compared without those fields below).
+TIMED_OR_LOCAL = {"demo.json", "README.md", "stages.json", "train_log.jsonl", "run.json",
+                  "manifest.json", "enhancer.json", ".index.lock"}
+
+
+def test_same_command_gives_byte_identical_results(demo_out: Path, second_demo_out: Path) -> None:
+    """Scenes, fits, packets, checkpoints, enhanced images and leaderboards are byte-identical between two
+    runs of the same command (another OMP_NUM_THREADS, another moment's load); per-target metrics equal
+    except their timing column."""
+    files = sorted(p.relative_to(demo_out) for p in demo_out.rglob("*") if p.is_file())
+    assert files == sorted(p.relative_to(second_demo_out) for p in second_demo_out.rglob("*") if p.is_file())
+    compared = 0
+    for relative in files:
+        first, second = demo_out / relative, second_demo_out / relative
+        if relative.name in TIMED_OR_LOCAL:
+            continue
+        if relative.name == "metrics.parquet" or "fragments" in relative.parts:
+            a, b = pd.read_parquet(first).drop(columns="ms_per_frame"), pd.read_parquet(second).drop(columns="ms_per_frame")
+            pd.testing.assert_frame_equal(a, b, check_exact=True)
+        else:
+            assert first.read_bytes() == second.read_bytes(), relative
+        compared += 1
+    groups = {p.parts[0] if p.parts[0] != "work" else "/".join(p.parts[:2]) for p in files}
+    assert {"work/scenes", "work/packets", "work/checkpoints", "work/runs", "synthetic.md", "synthetic.parquet",
+            "synthetic_grid.png", "synthetic_lane_shift.png"} <= groups
+    assert compared > 300
+    summaries = [json.loads((out / "demo.json").read_text()) for out in (demo_out, second_demo_out)]
+    assert summaries[0]["provenance"]["torch_threads"] == summaries[1]["provenance"]["torch_threads"] == compute_threads()
+    assert summaries[0]["files"] == summaries[1]["files"] | {"README.md": summaries[0]["files"]["README.md"]}
+
+
+def test_outputs_are_shareable_under_umask_022(demo_out: Path) -> None:
+    for path in [demo_out, *demo_out.rglob("*")]:
+        mode = stat.S_IMODE(path.stat().st_mode)
+        assert mode == (0o755 if path.is_dir() else 0o644), (path, oct(mode))
 
 
 def test_demo_writes_leaderboard_with_every_method_and_group(demo_out: Path) -> None:

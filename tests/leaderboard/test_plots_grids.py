@@ -12,7 +12,14 @@ import pytest
 from setdiff_bench.errors import UsageError
 from setdiff_bench.grids import BAND, GAP, GridFrame, pick_frames, qualitative_grid
 from setdiff_bench.packets import PacketStore
-from setdiff_bench.plots import group_summary, lane_shift, plot_lane_shift, plot_time_buckets, time_bucket
+from setdiff_bench.plots import (
+    error_bar_caption,
+    group_summary,
+    lane_shift,
+    plot_lane_shift,
+    plot_time_buckets,
+    time_bucket,
+)
 
 
 def per_image(method: str, group: str, psnr: list[float]) -> pd.DataFrame:
@@ -35,6 +42,13 @@ def test_group_summary_is_mean_and_standard_error() -> None:
     assert summary.loc["10-11s", "mean"] == pytest.approx(22.0)
     assert summary.loc["10-11s", "sem"] == pytest.approx(2.0 / np.sqrt(3))
     assert summary.loc["11-12s", "sem"] == 0.0 and summary.loc["11-12s", "count"] == 1
+
+
+def test_plot_caption_says_what_the_error_bars_are() -> None:
+    summary = group_summary(pd.concat([per_image("identity", "lane+1", [20.0, 22.0, 21.0]),
+                                       per_image("identity", "lane+2", [18.0, 19.0])]), "psnr", lane_shift)
+    caption = error_bar_caption(summary)
+    assert "±1 standard error of the mean" in caption and "n = 2–3" in caption
 
 
 def test_plots_are_written(tmp_path: Path) -> None:
@@ -63,12 +77,13 @@ def test_grid_layout_and_cells(lb_store: Path, lb_runs: Path, tmp_path: Path) ->
     path = qualitative_grid(store, runs, frames, tmp_path / "grid.png", cell_width=96)
     grid = cv2.imread(str(path))[:, :, ::-1]
     cell_h = 32 * 96 // 48
-    assert grid.shape == (BAND + 2 * (cell_h + BAND + GAP), 150 + 4 * (96 + GAP), 3)
+    # identity's images are the render: one column "identity = 3DGS render", then reproject, ground truth
+    assert grid.shape == (BAND + 2 * (cell_h + BAND + GAP), 150 + 3 * (96 + GAP), 3)
     rows = store.index[store.index["role"] == "target"].set_index(["packet_id", "view"])
     for r, frame in enumerate(frames):
         top = BAND + r * (cell_h + BAND + GAP)
         record = rows.loc[(frame.packet_id, frame.view)]
-        for c, source in enumerate((lb_store / record["image"], lb_runs / "identity" /
+        for c, source in enumerate((lb_runs / "identity" /
                                     pd.read_parquet(lb_runs / "identity" / "metrics.parquet")
                                     .set_index(["packet_id", "view"]).loc[(frame.packet_id, frame.view), "image"],
                                     None, lb_store / record["gt"])):
@@ -77,5 +92,11 @@ def test_grid_layout_and_cells(lb_store: Path, lb_runs: Path, tmp_path: Path) ->
             expected = cv2.resize(cv2.imread(str(source))[:, :, ::-1], (96, cell_h), interpolation=cv2.INTER_NEAREST)
             left = 150 + c * (96 + GAP)
             np.testing.assert_array_equal(grid[top:top + cell_h, left:left + 96], expected)
+        first = cv2.resize(cv2.imread(str(lb_store / record["image"]))[:, :, ::-1], (96, cell_h),
+                           interpolation=cv2.INTER_NEAREST)
+        np.testing.assert_array_equal(grid[top:top + cell_h, 150:150 + 96], first)  # = the 3DGS render
+    without_identity = cv2.imread(str(qualitative_grid(store, {"reproject": lb_runs / "reproject"}, frames,
+                                                       tmp_path / "grid2.png", cell_width=96)))
+    assert without_identity.shape[1] == 150 + 3 * (96 + GAP)  # render | reproject | ground truth
     with pytest.raises(UsageError, match="no frames chosen"):
         qualitative_grid(store, runs, [], tmp_path / "empty.png")

@@ -17,14 +17,14 @@ import json
 import os
 import pickle
 import shutil
-import tempfile
 from pathlib import Path
 from typing import Any
 
 import torch
 
 from setdiff_bench.errors import CheckpointError, UsageError
-from setdiff_bench.io.atomic import write_text_atomic
+from setdiff_bench.io.atomic import new_file_mode, staging_dir, write_text_atomic
+from setdiff_bench.io.safetensors_header import sort_metadata
 from setdiff_bench.models.setdiff.config import Config, ModelConfig, config_from_dict
 
 WEIGHTS_FILE = "model.safetensors"
@@ -91,10 +91,12 @@ def save_checkpoint(folder: str | os.PathLike[str], model: torch.nn.Module, conf
     if isinstance(model_config, ModelConfig):  # the model's resolved choices (e.g. learn_text_embedding)
         config = dataclasses.replace(config, model=model_config)
     folder.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", suffix=".tmp", dir=folder.parent))
+    tmp = staging_dir(folder.parent, prefix=f".{folder.name}.", suffix=".tmp")
     try:
         state = {name: tensor.detach().cpu().contiguous() for name, tensor in model.state_dict().items()}
         save_file(state, str(tmp / WEIGHTS_FILE), metadata={"format": "setdiff-bench", "config": config.to_json()})
+        sort_metadata(tmp / WEIGHTS_FILE)  # same run, same bytes
+        os.chmod(tmp / WEIGHTS_FILE, new_file_mode())  # safetensors creates it 0600 whatever the umask
         (tmp / CONFIG_FILE).write_text(config.to_json() + "\n", encoding="utf-8")
         if optimizer is not None:
             torch.save(optimizer.state_dict(), tmp / OPTIMIZER_FILE)

@@ -13,6 +13,9 @@ train ...``), bf16 autocast on CUDA and float32 on the CPU by default; total bat
 processes × ``gradient_accumulation``.  Every random choice derives from ``seed``, the process rank and
 the step, so a resumed run draws the same sets as an uninterrupted one (for map-style datasets).
 
+Checkpoints are written every ``min(checkpoint_every, 500, steps // 4)`` steps, at the end, and, inside
+:func:`setdiff_bench.interrupts.stop_at_safe_point` (the ``train`` verb), at the step where SIGINT or
+SIGTERM arrived, before :class:`~setdiff_bench.interrupts.Interrupted` is raised.
 Outputs in ``OUT``: ``checkpoints/step-XXXXXXXX/`` (see :mod:`.checkpoint`), ``latest``,
 ``train_log.jsonl`` (losses every ``log_every`` steps) and ``validation.jsonl`` (PSNR/SSIM[/LPIPS]
 of the enhanced targets of the validation samples every ``validate_every`` steps).
@@ -34,6 +37,7 @@ from typing import Any
 import torch
 
 from setdiff_bench.errors import UsageError
+from setdiff_bench.interrupts import Interrupted, stop_requested
 from setdiff_bench.models.setdiff.checkpoint import (
     check_compatible,
     load_training_state,
@@ -230,8 +234,13 @@ def train(config: Config, dataset: Sequence[TrainingSample] | Iterable[TrainingS
                 _append_jsonl(out / VALIDATION_FILE, record)
                 bar.write(f"step {done}: " + ", ".join(f"{k} {v:.4f}" for k, v in record.items() if k != "step"))
             accelerator.wait_for_everyone()
-        if done % tc.checkpoint_every == 0 or done == tc.steps:
+        stopping = _any_process(accelerator, stop_requested())
+        if done % checkpoint_interval(tc.checkpoint_every, tc.steps) == 0 or done == tc.steps or stopping:
             result.checkpoint = _save(accelerator, core, optimizer, config, out, done)
+        if stopping:
+            bar.close()
+            raise Interrupted(f"stopped at step {done}/{tc.steps}; checkpoint {result.checkpoint}; "
+                              "rerun the same command to resume")
     bar.close()
     if result.step == start and previous is None:
         result.checkpoint = _save(accelerator, core, optimizer, config, out, start)
@@ -311,6 +320,22 @@ def _save(accelerator: Any, core: SetDiffModel, optimizer: Any, config: Config, 
         mark_latest(out, folder, config.train.keep_checkpoints)
     accelerator.wait_for_everyone()
     return folder
+
+
+#: The longest interval between checkpoints, whatever the config says (steps).
+MAX_CHECKPOINT_INTERVAL = 500
+
+
+def checkpoint_interval(every: int, steps: int) -> int:
+    """Steps between checkpoints: ``min(every, 500, steps // 4)`` (at least 1), so that a short run resumes too."""
+    return max(1, min(every, MAX_CHECKPOINT_INTERVAL, steps // 4))
+
+
+def _any_process(accelerator: Any, flag: bool) -> bool:
+    """``flag`` or-ed over the processes, so that every rank stops (and saves) at the same step."""
+    if accelerator.num_processes == 1:
+        return flag
+    return bool(accelerator.reduce(torch.tensor([float(flag)], device=accelerator.device), reduction="sum") > 0)
 
 
 def _gather_mean(accelerator: Any, value: float) -> float:

@@ -1,0 +1,53 @@
+"""A corrupt packet file stops ``run`` before any work (the up-front SHA-256 check), not when the run reaches it."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from setdiff_bench.enhancers.identity import IdentityEnhancer
+from setdiff_bench.errors import PacketError
+from setdiff_bench.run import RunSettings, run_method
+
+
+class CountingIdentity(IdentityEnhancer):
+    def __init__(self) -> None:
+        super().__init__()
+        self.calls = 0
+
+    def enhance(self, packet):  # type: ignore[no-untyped-def]
+        self.calls += 1
+        return super().enhance(packet)
+
+
+def corrupt_last_packet(store: Path, tmp_path: Path) -> tuple[Path, Path]:
+    copy = tmp_path / "store"
+    shutil.copytree(store, copy)
+    index = pd.read_parquet(copy / "index.parquet")
+    last = sorted(index["packet_id"].unique())[-1]
+    victim = copy / index[(index["packet_id"] == last) & (index["role"] == "target")]["gt"].iloc[0]
+    victim.write_bytes(victim.read_bytes()[:-7])  # a truncated ground-truth PNG
+    return copy, victim
+
+
+def test_corrupt_file_is_found_before_any_work(store: Path, tmp_path: Path) -> None:
+    copy, victim = corrupt_last_packet(store, tmp_path)
+    enhancer = CountingIdentity()
+    with pytest.raises(PacketError) as error:
+        run_method(copy, tmp_path / "out", RunSettings(method="identity", device="cpu"), progress=False,
+                   enhancer=enhancer)
+    assert enhancer.calls == 0 and error.value.path == str(victim)
+    assert "SHA-256 mismatch" in error.value.problem and "before any work" in error.value.problem
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").rglob("*.parquet"))
+
+
+def test_without_the_check_the_run_finds_it_late(store: Path, tmp_path: Path) -> None:
+    copy, _ = corrupt_last_packet(store, tmp_path)
+    enhancer = CountingIdentity()
+    with pytest.raises(PacketError, match="SHA-256 mismatch"):
+        run_method(copy, tmp_path / "out", RunSettings(method="identity", device="cpu"), progress=False,
+                   enhancer=enhancer, verify=False)
+    assert enhancer.calls > 0  # packets before the corrupt one were enhanced first
