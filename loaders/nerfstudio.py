@@ -179,7 +179,7 @@ def _intrinsics(meta: Mapping[str, Any], entry: Mapping[str, Any], policy: str,
         raise CameraError(f"unsupported camera_model {model!r}; supported: OPENCV, PINHOLE, SIMPLE_PINHOLE", where)
     if lens is not None and policy == "error":
         raise CameraError(f"camera has non-zero distortion {list(coefficients)}; undistort the images first or "
-                          "pass distortion='ignore'", where)
+                          "pass -o distortion=ignore (Python: distortion='ignore')", where)
     if policy == "ignore":
         lens = None
     if int(width) != width or int(height) != height:
