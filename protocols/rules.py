@@ -28,6 +28,8 @@ Rules
     ``gap · n <= N``, else ``⌊N / n⌋``; fit = indices ``0, gap, …, (n − 1)·gap``; targets = every
     frame strictly between the first and last fit frame that is not a fit frame
     (xiliu8006/3dgs_dataset_generator ``select_lr_cams`` and ``render_lr_hr_pairs``).
+``holdout_every`` (generic COLMAP / nerfstudio captures, the Mip-NeRF 360 / 3DGS convention)
+    frames in name order; targets = indices ``0, every, 2·every, …`` (``every`` = 8), fit = the rest.
 ``select`` (synthetic)
     fit and targets are filters over frame attributes: ``split``, ``sensor``, ``traversal`` and
     metadata keys ``lane_offset``, ``traversal_kind``; a filter value may be a list (any of).
@@ -183,6 +185,18 @@ def _select_sparse_views(scene: Scene, params: Mapping[str, Any]) -> GroupFrames
     return GroupFrames(fit=tuple(frames[i] for i in fit_idx), targets=targets)
 
 
+# ---------------------------------------------------------------------- holdout_every
+def _validate_holdout_every(table: Table) -> dict[str, Any]:
+    table.check_keys(("every",))
+    return {"every": table.integer("every", 8, minimum=2)}
+
+
+def _select_holdout_every(scene: Scene, params: Mapping[str, Any]) -> GroupFrames:
+    every = params["every"]
+    return GroupFrames(fit=tuple(f for i, f in enumerate(scene.frames) if i % every != 0),
+                       targets=tuple(f for i, f in enumerate(scene.frames) if i % every == 0))
+
+
 # ---------------------------------------------------------------------- select
 def _filter(table: Table, name: str) -> dict[str, tuple[Any, ...]]:
     sub = table.table(name)
@@ -225,5 +239,6 @@ RULES: dict[str, Rule] = {rule.name: rule for rule in (
     Rule("lanes", _validate_lanes, _select_lanes),
     Rule("time_window", _validate_time_window, _select_time_window),
     Rule("sparse_views", _validate_sparse_views, _select_sparse_views),
+    Rule("holdout_every", _validate_holdout_every, _select_holdout_every),
     Rule("select", _validate_select, _select_select),
 )}

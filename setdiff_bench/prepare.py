@@ -61,6 +61,7 @@ from setdiff_bench.prepare_plan import Crop, GroupPlan, PacketJob, ViewJob, appl
 from setdiff_bench.protocols import Protocol, load_protocol
 from setdiff_bench.threads import torch_threads
 from setdiff_bench.types import Frame, Scene
+from setdiff_bench.undistort import is_distorted, undistort_image, undistortion_maps
 
 SPLIT_CHOICES = ("train", "test", "all")
 
@@ -221,17 +222,23 @@ def resample(image: np.ndarray, crop: Crop, resolution: tuple[int, int], *, near
 
 def _capture(view: ViewJob, resolution: tuple[int, int]) -> np.ndarray:
     """The capture of ``view`` at the working resolution, ``(H, W, 3)`` float32 in [0, 1]."""
-    image = read_rgb(view.image_path)
-    return np.clip(resample(image, view.crop, resolution), 0.0, 1.0).astype(np.float32)
+    image = resample(read_rgb(view.image_path), view.crop, resolution)
+    if is_distorted(view.camera):  # the renderer draws the pinhole camera: resample the capture to it
+        image = undistort_image(image, view.camera)[0]
+    return np.clip(image, 0.0, 1.0).astype(np.float32)
 
 
 def _mask(view: ViewJob, resolution: tuple[int, int]) -> np.ndarray:
+    covered = undistortion_maps(view.camera)[2] if is_distorted(view.camera) else np.ones(resolution, dtype=bool)
     if view.mask_path is None:
-        return np.ones(resolution, dtype=bool)
+        return covered
     keep = read_mask(view.mask_path)
     if view.invert_mask:
         keep = ~keep
-    return resample(keep.astype(np.uint8), view.crop, resolution, nearest=True).astype(bool)
+    keep = resample(keep.astype(np.uint8), view.crop, resolution, nearest=True)
+    if is_distorted(view.camera):
+        keep = undistort_image(keep, view.camera)[0][..., 0] if keep.ndim == 3 else undistort_image(keep, view.camera)[0]
+    return keep.astype(bool) & covered
 
 
 def build_packet(job: PacketJob, root: Path, backend: str, device: str) -> JobStats:

@@ -141,7 +141,9 @@ def scene_resolution(protocol: Protocol, scene: Scene) -> tuple[int, int]:
     if len(sizes) != 1:
         raise ProtocolError(f"resolution = \"native\" needs one image size per scene; scene {scene.name!r} has "
                             f"{', '.join(f'{w}x{h}' for h, w in sizes)}", protocol.path)
-    return sizes[0]
+    height, width = sizes[0]
+    scale = protocol.images.downscale
+    return max(1, round(height / scale)), max(1, round(width / scale))
 
 
 def mask_source(protocol: Protocol, frame: Frame) -> tuple[Path | None, bool]:

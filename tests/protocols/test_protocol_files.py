@@ -18,13 +18,13 @@ LAST_DL3DV_TEST = "efdf19ca82bba7bccc73f64273405d077abd61dd2f5339a0a642bc75d7d90
 
 
 def test_packaged_protocols_state_the_papers_settings():
-    assert list_protocols() == ["dl3dv", "euvs", "nuscenes", "paralane", "synthetic"]
+    assert list_protocols() == ["colmap", "dl3dv", "euvs", "nerfstudio", "nuscenes", "paralane", "synthetic"]
     for name in list_protocols():
         protocol = load_protocol(name)
         assert protocol.name == protocol.dataset == name
         assert (protocol.references.alpha, protocol.references.beta) == (0.8, 0.2)
         assert protocol.references.aggregate == "mean"
-        expected_resolution = None if name == "synthetic" else (576, 1024)
+        expected_resolution = None if name in ("synthetic", "colmap", "nerfstudio") else (576, 1024)
         assert protocol.images.resolution == expected_resolution
         if name == "nuscenes":
             assert dict(protocol.packets.views) == {"train": 12, "test": 24}
@@ -118,7 +118,7 @@ def test_invalid_protocol_files_name_the_file_and_key(tmp_path, base, old, new, 
 
 
 def test_unknown_protocol_lists_the_packaged_ones():
-    with pytest.raises(ProtocolError, match=r"unknown protocol 'waymo'.*dl3dv, euvs, nuscenes, paralane, synthetic"):
+    with pytest.raises(ProtocolError, match=r"unknown protocol 'waymo'.*colmap, dl3dv, euvs, nerfstudio, nuscenes, paralane, synthetic"):
         load_protocol("waymo")
     with pytest.raises(ProtocolError, match="protocol file not found"):
         load_protocol("/nonexistent/p.toml")
