@@ -319,7 +319,8 @@ def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[s
             fit: bool = False, split: str = "all", scenes: Sequence[str] | None = None,
             workers: int = 1, shard: tuple[int, int] = (0, 1), backend: str = "auto", device: str = "auto",
             loader_options: Mapping[str, Any] | None = None, fit_iterations: int = 30_000, threads: int = 1,
-            cmap_precision: str = "float32", progress: bool = True) -> PrepareSummary:
+            cmap_precision: str = "float32", progress: bool = True,
+            groups: Sequence[str] | None = None) -> PrepareSummary:
     """Prepare the packets of ``dataset`` under ``protocol`` into the store ``out`` (module docstring).
 
     Args:
@@ -339,6 +340,7 @@ def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[s
         fit_iterations: 3DGS iterations with ``fit``.
         cmap_precision: ``"float32"`` (default) or ``"half"`` C-map EXRs (see :mod:`setdiff_bench.packets`).
         progress: show tqdm bars.
+        groups: only these protocol groups (default all), e.g. ``["holdout8"]`` of a generic capture.
 
     Raises:
         UsageError / ProtocolError / DatasetError: bad arguments, a protocol that does not fit the
@@ -352,14 +354,14 @@ def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[s
         return _prepare(dataset, root, out, protocol=protocol, fits=fits, fit=fit, split=split, scenes=scenes,
                         workers=workers, shard=shard, backend=backend, device=device, loader_options=loader_options,
                         fit_iterations=fit_iterations, threads=threads, cmap_half=cmap_precision == "half",
-                        progress=progress)
+                        progress=progress, groups=groups)
 
 
 def _prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[str], *,
              protocol: str | os.PathLike[str] | None, fits: str | os.PathLike[str] | None, fit: bool, split: str,
              scenes: Sequence[str] | None, workers: int, shard: tuple[int, int], backend: str, device: str,
              loader_options: Mapping[str, Any] | None, fit_iterations: int, threads: int, cmap_half: bool,
-             progress: bool) -> PrepareSummary:
+             progress: bool, groups: Sequence[str] | None = None) -> PrepareSummary:
     from setdiff_bench.loaders import list_scenes, load_scenes
     from setdiff_bench.loaders.common import select_scenes
 
@@ -367,6 +369,13 @@ def _prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[
     spec = load_protocol(protocol or dataset)
     if spec.dataset != dataset:
         raise ProtocolError(f"protocol {spec.name!r} is for dataset {spec.dataset!r}, not {dataset!r}", spec.path)
+    if groups:
+        known = [g.name for g in spec.groups]
+        unknown = [name for name in groups if name not in known]
+        if unknown:
+            raise UsageError(f"protocol {spec.name!r} has no group {unknown[0]!r}; groups: {', '.join(known)}",
+                             "--group")
+        spec = replace(spec, groups=tuple(g for g in spec.groups if g.name in groups))
     if split not in SPLIT_CHOICES:
         raise UsageError(f"split must be one of {', '.join(SPLIT_CHOICES)}, got {split!r}", "--split")
     if workers < 1:
