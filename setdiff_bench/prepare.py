@@ -105,11 +105,12 @@ class FitSource:
     """Finds (or trains) the PLY of each (scene, fit key) and hashes it once."""
 
     def __init__(self, *, fits_dir: Path | None, fit: bool, out: Path, fit_iterations: int = 30_000,
-                 fit_device: str = "auto", progress: bool = True) -> None:
+                 fit_device: str = "auto", progress: bool = True, downscale: int = 1) -> None:
         if (fits_dir is None) == (not fit):
             raise UsageError("give exactly one of --fits DIR (your 3DGS PLYs) or --fit (fit them here)", "--fits")
         self.fits_dir, self.fit, self.out = fits_dir, fit, out
         self.fit_iterations, self.fit_device, self.progress = fit_iterations, fit_device, progress
+        self.downscale = downscale  # fit at the protocol's working scale ([images] downscale)
         self.trained = 0
         self._hashes: dict[Path, str] = {}
 
@@ -138,7 +139,7 @@ class FitSource:
         device = self.fit_device
         if device == "auto":
             device = "cuda" if torch.cuda.is_available() else "cpu"
-        views = load_fit_views(scene, [f.name for f in fit_frames])
+        views = load_fit_views(scene, [f.name for f in fit_frames], downscale=self.downscale)
         result = fit_gaussians(views, config, points=scene.points3d, colors=scene.points_rgb, device=device,
                                checkpoint_dir=target.with_suffix(".ckpt"), checkpoint_every=1000,
                                progress=self.progress)
@@ -385,7 +386,7 @@ def _prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[
     out = Path(out)
     options = {**spec.loader_options, **(loader_options or {})}
     source = FitSource(fits_dir=None if fits is None else Path(fits), fit=fit, out=out,
-                       fit_iterations=fit_iterations, progress=progress)
+                       fit_iterations=fit_iterations, progress=progress, downscale=spec.images.downscale)
 
     assignment = spec.split.assign(list_scenes(dataset, root, **options))
     chosen = sorted(assignment) if scenes is None else select_scenes(sorted(assignment), scenes, Path(root), dataset)
