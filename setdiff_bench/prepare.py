@@ -140,7 +140,10 @@ class FitSource:
         if device == "auto":
             device = "cuda" if torch.cuda.is_available() else "cpu"
         views = load_fit_views(scene, [f.name for f in fit_frames], downscale=self.downscale)
-        result = fit_gaussians(views, config, points=scene.points3d, colors=scene.points_rgb, device=device,
+        from setdiff_bench.gaussians.triangulate import initial_points
+
+        points, colors = initial_points(scene, views)  # sparse points, else triangulated from the poses
+        result = fit_gaussians(views, config, points=points, colors=colors, device=device,
                                checkpoint_dir=target.with_suffix(".ckpt"), checkpoint_every=1000,
                                progress=self.progress)
         write_ply(target, result.model)

@@ -24,6 +24,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--root", type=Path, default=None, help="dataset folder for --dataset")
     parser.add_argument("-o", "--option", action="append", default=[], metavar="KEY=VALUE",
                         help="loader option, e.g. -o missing=skip, -o images_dir=images_4")
+    parser.add_argument("--init", default="auto", choices=("auto", "sparse", "triangulate", "random"),
+                        help="initial Gaussians: auto = the scene's sparse points, else points triangulated from "
+                             "the known poses (pycolmap), else random points sized to the scene")
     parser.add_argument("--downscale", type=int, default=1,
                         help="fit on images downscaled by this integer factor (intrinsics scaled to match)")
     parser.add_argument("--out", required=True, type=Path, help="output PLY")
@@ -109,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
                        checkpoint_every=args.checkpoint_every if args.checkpoint else 0,
                        progress=not args.no_progress, dataset=args.dataset,
                        scene_name=args.scene if args.dataset else None, loader_options=options,
-                       downscale=args.downscale)
+                       downscale=args.downscale, init=args.init)
     elapsed = time.perf_counter() - start
     final = sum(result.losses[-10:]) / max(1, len(result.losses[-10:])) if result.losses else float("nan")
     print(f"fitted {len(result.model)} Gaussians in {config.iterations} iterations ({elapsed:.1f} s, "

@@ -8,8 +8,9 @@ learning rates (position rate × scene extent, decayed exponentially), then adap
 ``sh_increase_every`` iterations.  Pixels outside a view's mask (EUVS dynamic masks: 0 = moving
 object) take the ground-truth value in the prediction, so they add neither loss nor gradient.
 
-Initialisation: the scene's sparse points (COLMAP ``points3D``) when present, else
-:func:`random_init_count` uniform points in the box of the camera centres grown by the scene radius on
+Initialisation (:func:`fit_gaussians`): the given points — for :func:`fit_scene` the scene's sparse
+points (COLMAP ``points3D``) when present, else points triangulated from the known poses
+(:mod:`setdiff_bench.gaussians.triangulate`) — else :func:`random_init_count` uniform points in the box of the camera centres grown by the scene radius on
 every side (colour grey), each as an isotropic Gaussian (nearest-neighbour scale, opacity 0.1).
 
 Checkpoints (``checkpoint_dir``): parameters, Adam moments, density statistics and the random state in
@@ -395,13 +396,14 @@ def fit_scene(scene_dir: str | os.PathLike[str], out_ply: str | os.PathLike[str]
               frames: Sequence[str] | None = None, device: str | torch.device = "cpu",
               checkpoint_dir: str | os.PathLike[str] | None = None, checkpoint_every: int = 0, resume: bool = True,
               progress: bool = True, dataset: str | None = None, scene_name: str | None = None,
-              loader_options: dict[str, object] | None = None, downscale: int = 1) -> FitResult:
+              loader_options: dict[str, object] | None = None, downscale: int = 1, init: str = "auto") -> FitResult:
     """Fit a scene folder's training frames (or ``frames``) and write the standard 3DGS PLY to ``out_ply``.
 
     The scene is read through the loaders (:func:`setdiff_bench.gaussians.fit_data.load_fit_scene`;
     with ``dataset``, ``scene_dir`` is its root and ``scene_name`` the scene); images are undistorted
     and downscaled by ``downscale`` (:func:`~setdiff_bench.gaussians.fit_data.load_fit_views`).  Its
-    sparse points, when present, initialise the Gaussians.
+    sparse points, when present, initialise the Gaussians, else points triangulated from the known
+    poses (``init``: :func:`setdiff_bench.gaussians.triangulate.initial_points`).
     """
     from setdiff_bench.gaussians.fit_data import load_fit_scene, load_fit_views, select_fit_frames
     from setdiff_bench.gaussians.ply import write_ply
@@ -409,7 +411,10 @@ def fit_scene(scene_dir: str | os.PathLike[str], out_ply: str | os.PathLike[str]
     scene = load_fit_scene(scene_dir, dataset=dataset, scene=scene_name, options=loader_options)
     names = select_fit_frames(scene, frames)
     views = load_fit_views(scene, names, downscale=downscale)
-    result = fit_gaussians(views, config, points=scene.points3d, colors=scene.points_rgb, device=device,
+    from setdiff_bench.gaussians.triangulate import initial_points
+
+    points, colors = initial_points(scene, views, init)
+    result = fit_gaussians(views, config, points=points, colors=colors, device=device,
                            checkpoint_dir=checkpoint_dir, checkpoint_every=checkpoint_every, resume=resume,
                            progress=progress)
     write_ply(out_ply, result.model)

@@ -60,7 +60,7 @@ def test_views_are_undistorted_and_downscaled(capture):
 def test_fit_cli_reads_a_dataset_with_loader_options(capture, tmp_path, capsys):
     out = tmp_path / "fit.ply"
     args = ["fit", "--dataset", "nerfstudio", "--root", str(capture), "--scene", "capture", "--out", str(out),
-            "--downscale", "2", "--preset", "tiny", "--iterations", "2", "--device", "cpu", "--no-progress"]
+            "--downscale", "2", "--preset", "tiny", "--iterations", "2", "--device", "cpu", "--no-progress", "--init", "random"]
     assert main(args) == 2  # the absent image is refused by default ...
     assert "-o missing=skip" in capsys.readouterr().err
     assert not out.exists()
