@@ -44,6 +44,15 @@ def triangulate_views(views: Sequence[FitView]) -> tuple[np.ndarray, np.ndarray]
 
     if any(v.camera.distortion is not None and not v.camera.distortion.is_zero() for v in views):
         raise DatasetError("triangulation needs pinhole views; undistort them first (load_fit_views does)")
+    previous_level = pycolmap.logging.minloglevel
+    pycolmap.logging.minloglevel = 2  # COLMAP's per-image INFO lines would flood the progress bar; errors stay
+    try:
+        return _triangulate(views, pycolmap)
+    finally:
+        pycolmap.logging.minloglevel = previous_level
+
+
+def _triangulate(views: Sequence[FitView], pycolmap) -> tuple[np.ndarray, np.ndarray]:
     with tempfile.TemporaryDirectory(prefix="setdiff-triangulate-") as tmp:
         work = Path(tmp)
         (work / "images").mkdir()
