@@ -152,7 +152,7 @@ def read_colmap_model(sparse_dir: str | os.PathLike[str], *, distortion: Distort
         if lens is not None and not lens.is_zero():
             if distortion == "error":
                 raise DatasetError(f"camera {image.camera_id} is {colmap_camera.model.name} with non-zero distortion "
-                                   f"{list(lens.params)}; undistort the images first or pass distortion='ignore'",
+                                   f"{list(lens.params)}; undistort the images first or pass -o distortion=ignore (Python: distortion='ignore')",
                                    sparse / f"cameras{ext}")
             if distortion == "ignore":
                 lens = None

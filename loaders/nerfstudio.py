@@ -17,6 +17,9 @@ Conversion at this boundary:
 * intrinsics: rescaled per axis to the real image size read from its header when ``images_dir``
   is given (a uniform downscale is required); otherwise the sizes must match exactly.
 * distortion: the policy of :mod:`setdiff_bench.loaders.colmap` (``keep`` / ``ignore`` / ``error``).
+* missing images: captures made for instant-ngp list frames whose image was removed (instant-ngp
+  skips them; its ``fox`` lists 67 frames for 50 photos).  ``missing="error"`` (default) refuses with
+  the count and the first file; ``missing="skip"`` leaves them out with one warning.
 
 Frame order of the ``nerfstudio`` dataset: natural order of the frame name (the image path relative
 to the scene folder).  JSON is parsed by hand here because no maintained library reads this format
@@ -28,6 +31,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import warnings
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
@@ -46,6 +50,8 @@ from .common import dataset_root, discover_scenes, fit_camera_to_image, natural_
 WorldFrame = Literal["colmap", "file"]
 PINHOLE_MODELS = ("PINHOLE", "SIMPLE_PINHOLE")
 DISTORTION_KEYS = ("k1", "k2", "p1", "p2")
+MissingPolicy = Literal["error", "skip"]
+MISSING_POLICIES: tuple[str, ...] = ("error", "skip")
 
 
 @dataclass(frozen=True)
@@ -70,7 +76,8 @@ class TransformsFrame:
 
 
 def read_transforms(path: str | os.PathLike[str], *, images_dir: str | None = None, world: WorldFrame = "colmap",
-                    distortion: DistortionPolicy = "keep") -> list[TransformsFrame]:
+                    distortion: DistortionPolicy = "keep", missing: MissingPolicy = "error"
+                    ) -> list[TransformsFrame]:
     """Read a ``transforms.json`` into cameras in the project convention (module docstring).
 
     Args:
@@ -79,6 +86,7 @@ def read_transforms(path: str | os.PathLike[str], *, images_dir: str | None = No
             uses ``file_path`` as written.
         world: ``"colmap"`` undoes ``applied_transform``; ``"file"`` keeps the file's world.
         distortion: ``"keep"``, ``"ignore"`` or ``"error"``.
+        missing: ``"error"`` or ``"skip"`` frames whose image file does not exist (module docstring).
 
     Returns:
         The frames in file order.
@@ -92,6 +100,9 @@ def read_transforms(path: str | os.PathLike[str], *, images_dir: str | None = No
         raise DatasetError(f"unknown world frame {world!r}; use 'colmap' or 'file'", path)
     if distortion not in DISTORTION_POLICIES:
         raise DatasetError(f"unknown distortion policy {distortion!r}; use one of {', '.join(DISTORTION_POLICIES)}",
+                           path)
+    if missing not in MISSING_POLICIES:
+        raise DatasetError(f"unknown missing-image policy {missing!r}; use one of {', '.join(MISSING_POLICIES)}",
                            path)
     transforms = Path(path)
     if not transforms.is_file():
@@ -110,6 +121,7 @@ def read_transforms(path: str | os.PathLike[str], *, images_dir: str | None = No
     scene_dir = transforms.parent
     out: list[TransformsFrame] = []
     seen: dict[str, int] = {}
+    absent: list[Path] = []
     for index, entry in enumerate(meta["frames"]):
         where = f"{transforms} (frames[{index}])"
         if not isinstance(entry, dict):
@@ -124,6 +136,9 @@ def read_transforms(path: str | os.PathLike[str], *, images_dir: str | None = No
             raise DatasetError(f"duplicate frame name {name!r} (frames[{seen[name]}] and frames[{index}])",
                                transforms)
         seen[name] = index
+        if not image_path.is_file():
+            absent.append(image_path)
+            continue
         K, width, height, lens = _intrinsics(meta, entry, distortion, where)
         c2w = _matrix(entry.get("transform_matrix"), where)
         if world_from_file is not None:
@@ -133,6 +148,12 @@ def read_transforms(path: str | os.PathLike[str], *, images_dir: str | None = No
         camera = fit_camera_to_image(camera, image_path, allow_rescale=images_dir is not None)
         colmap_id = entry.get("colmap_im_id")
         out.append(TransformsFrame(index, file_path, image_path, name, camera, _integer_or_none(colmap_id)))
+    if absent:
+        counted = f"{len(absent)} of {len(meta['frames'])} frames name an image that does not exist"
+        if missing == "error" or not out:
+            hint = "; pass -o missing=skip to leave them out" if missing == "error" else ""
+            raise DatasetError(f"{counted} (first: {absent[0]}){hint}", transforms)
+        warnings.warn(f"{transforms}: {counted}; skipped (first: {absent[0].name})", stacklevel=2)
     return out
 
 
@@ -179,7 +200,7 @@ def _intrinsics(meta: Mapping[str, Any], entry: Mapping[str, Any], policy: str,
         raise CameraError(f"unsupported camera_model {model!r}; supported: OPENCV, PINHOLE, SIMPLE_PINHOLE", where)
     if lens is not None and policy == "error":
         raise CameraError(f"camera has non-zero distortion {list(coefficients)}; undistort the images first or "
-                          "pass distortion='ignore'", where)
+                          "pass -o distortion=ignore (Python: distortion='ignore')", where)
     if policy == "ignore":
         lens = None
     if int(width) != width or int(height) != height:
@@ -257,7 +278,8 @@ def list_scenes(root: str | os.PathLike[str]) -> list[str]:
 
 
 def load_scenes(root: str | os.PathLike[str], scenes: Iterable[str] | None = None, *, images_dir: str | None = None,
-                world: WorldFrame = "colmap", distortion: DistortionPolicy = "keep") -> list[Scene]:
+                world: WorldFrame = "colmap", distortion: DistortionPolicy = "keep",
+                missing: MissingPolicy = "error") -> list[Scene]:
     """Load nerfstudio scenes (see :func:`read_transforms` for the options).
 
     Returns:
@@ -269,7 +291,7 @@ def load_scenes(root: str | os.PathLike[str], scenes: Iterable[str] | None = Non
     for name in select_scenes(list(found), scenes, base, "nerfstudio"):
         scene_dir = found[name]
         entries = read_transforms(scene_dir / "transforms.json", images_dir=images_dir, world=world,
-                                  distortion=distortion)
+                                  distortion=distortion, missing=missing)
         frames = tuple(Frame(name=e.name, image_path=e.image_path, camera=e.camera,
                              metadata={"transforms_index": e.index, "colmap_im_id": e.colmap_im_id})
                        for e in sorted(entries, key=lambda e: natural_key(e.name)))

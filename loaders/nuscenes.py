@@ -105,12 +105,18 @@ FIELD_TYPES: dict[str, dict[str, tuple[type, ...]]] = {
 }
 
 
-def check_field_types(record: Mapping[str, Any], table: str, path: Path) -> None:
-    """Raise ``DatasetError`` when a field the loader reads has another JSON type than the schema's."""
+def check_field_types(record: dict[str, Any], table: str, path: Path) -> None:
+    """Raise ``DatasetError`` when a field the loader reads has another JSON type than the schema's.
+
+    An integral float where the schema has an int (``1556675185850000.0``: nuScenes-format tables
+    written by other tools, e.g. Lyft tables trimmed by mmdetection3d) is accepted and stored as the int.
+    """
     for field, kinds in FIELD_TYPES.get(table, {}).items():
         if field not in record:
             continue
         value = record[field]
+        if int in kinds and isinstance(value, float) and value.is_integer():
+            record[field] = value = int(value)
         if not isinstance(value, kinds) or (isinstance(value, bool) and bool not in kinds):
             expected = " or ".join("list" if k is list else k.__name__ for k in kinds)
             raise DatasetError(f"{table} {record['token']!r} field {field!r} must be a JSON {expected}, "
@@ -138,6 +144,8 @@ class _Table:
     def get(self, token: Any, referrer: _Table, referrer_token: str, field: str) -> dict[str, Any]:
         """The record ``token`` names; a dangling token is a ``DatasetError`` naming the referring file."""
         record = self.rows.get(token) if isinstance(token, str) else None
+        if record is None and field not in referrer.rows.get(referrer_token, {}):
+            raise DatasetError(f"{referrer.name} {referrer_token!r}: missing field {field!r}", referrer.path)
         if record is None:
             raise DatasetError(f"{referrer.name} {referrer_token!r} field {field!r} refers to token {token!r}, "
                                f"which is not in {self.name}.json", referrer.path)

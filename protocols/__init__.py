@@ -54,7 +54,7 @@ if TYPE_CHECKING:
     from setdiff_bench.types import Scene
 
 FORMAT = "setdiff-protocol/1"
-PROTOCOL_NAMES = ("euvs", "paralane", "nuscenes", "dl3dv", "synthetic")
+PROTOCOL_NAMES = ("euvs", "paralane", "nuscenes", "dl3dv", "synthetic", "colmap", "nerfstudio")
 SPLITS = ("train", "test")
 MaskSource = Literal["dataset", "foreground", "none"]
 
@@ -67,11 +67,13 @@ class ImageSpec:
         resolution: ``(height, width)`` in pixels, or ``None`` for the scene's own size.
         resize: ``"crop"`` (centre-crop to the working aspect ratio, then resize) or ``"stretch"``.
         masks: ``"dataset"``, ``"foreground"`` or ``"none"`` (module docstring).
+        downscale: with ``"native"``, the scene's own size divided by this integer (rounded).
     """
 
     resolution: tuple[int, int] | None
     resize: Literal["crop", "stretch"]
     masks: MaskSource
+    downscale: int = 1
 
 
 @dataclass(frozen=True)
@@ -258,7 +260,7 @@ def _split(table: Table) -> SceneSplit:
 
 
 def _images(table: Table) -> ImageSpec:
-    table.check_keys(("resolution", "resize", "masks"))
+    table.check_keys(("resolution", "resize", "masks", "downscale"))
     value = table.raw("resolution")
     if value == "native":
         resolution = None
@@ -268,7 +270,8 @@ def _images(table: Table) -> ImageSpec:
             raise table.error("resolution", f"expected [height, width] or \"native\", got {value!r}")
         resolution = (size[0], size[1])
     return ImageSpec(resolution=resolution, resize=table.string("resize", "crop", choices=("crop", "stretch")),
-                     masks=table.string("masks", choices=("dataset", "foreground", "none")))  # type: ignore[arg-type]
+                     masks=table.string("masks", choices=("dataset", "foreground", "none")),  # type: ignore[arg-type]
+                     downscale=table.integer("downscale", 1, minimum=1))
 
 
 def _evaluation(table: Table) -> tuple[str, ...]:

@@ -35,6 +35,8 @@ Rules
     (ziyc/drivestudio ``datasets/driving_dataset.py:split_train_test``: ``first = stride − 1`` at
     commit 7759550e, ``stride`` in other versions); their frames are the targets, the frames of every
     other timestep the fit (a frame nearest to both kinds of timestep is a target only).
+``holdout_every`` (generic COLMAP / nerfstudio captures, the Mip-NeRF 360 / 3DGS convention)
+    frames in name order; targets = indices ``0, every, 2·every, …`` (``every`` = 8), fit = the rest.
 ``select`` (synthetic)
     fit and targets are filters over frame attributes: ``split``, ``sensor``, ``traversal`` and
     metadata keys ``lane_offset``, ``traversal_kind``; a filter value may be a list (any of).
@@ -238,6 +240,17 @@ def _select_timestep_stride(scene: Scene, params: Mapping[str, Any]) -> GroupFra
 
     return GroupFrames(fit=pick({k: v for k, v in fit.items() if k not in targets}), targets=pick(targets))
 
+# ---------------------------------------------------------------------- holdout_every
+def _validate_holdout_every(table: Table) -> dict[str, Any]:
+    table.check_keys(("every",))
+    return {"every": table.integer("every", 8, minimum=2)}
+
+
+def _select_holdout_every(scene: Scene, params: Mapping[str, Any]) -> GroupFrames:
+    every = params["every"]
+    return GroupFrames(fit=tuple(f for i, f in enumerate(scene.frames) if i % every != 0),
+                       targets=tuple(f for i, f in enumerate(scene.frames) if i % every == 0))
+
 
 # ---------------------------------------------------------------------- select
 def _filter(table: Table, name: str) -> dict[str, tuple[Any, ...]]:
@@ -281,6 +294,7 @@ RULES: dict[str, Rule] = {rule.name: rule for rule in (
     Rule("lanes", _validate_lanes, _select_lanes),
     Rule("time_window", _validate_time_window, _select_time_window),
     Rule("sparse_views", _validate_sparse_views, _select_sparse_views),
+    Rule("holdout_every", _validate_holdout_every, _select_holdout_every),
     Rule("select", _validate_select, _select_select),
     Rule("timestep_stride", _validate_timestep_stride, _select_timestep_stride),
 )}

@@ -61,6 +61,7 @@ from setdiff_bench.prepare_plan import Crop, GroupPlan, PacketJob, ViewJob, appl
 from setdiff_bench.protocols import Protocol, load_protocol
 from setdiff_bench.threads import torch_threads
 from setdiff_bench.types import Frame, Scene
+from setdiff_bench.undistort import is_distorted, undistort_image, undistortion_maps
 
 SPLIT_CHOICES = ("train", "test", "all")
 
@@ -104,11 +105,12 @@ class FitSource:
     """Finds (or trains) the PLY of each (scene, fit key) and hashes it once."""
 
     def __init__(self, *, fits_dir: Path | None, fit: bool, out: Path, fit_iterations: int = 30_000,
-                 fit_device: str = "auto", progress: bool = True) -> None:
+                 fit_device: str = "auto", progress: bool = True, downscale: int = 1) -> None:
         if (fits_dir is None) == (not fit):
             raise UsageError("give exactly one of --fits DIR (your 3DGS PLYs) or --fit (fit them here)", "--fits")
         self.fits_dir, self.fit, self.out = fits_dir, fit, out
         self.fit_iterations, self.fit_device, self.progress = fit_iterations, fit_device, progress
+        self.downscale = downscale  # fit at the protocol's working scale ([images] downscale)
         self.trained = 0
         self._hashes: dict[Path, str] = {}
 
@@ -137,8 +139,11 @@ class FitSource:
         device = self.fit_device
         if device == "auto":
             device = "cuda" if torch.cuda.is_available() else "cpu"
-        views = load_fit_views(scene, [f.name for f in fit_frames])
-        result = fit_gaussians(views, config, points=scene.points3d, colors=scene.points_rgb, device=device,
+        views = load_fit_views(scene, [f.name for f in fit_frames], downscale=self.downscale)
+        from setdiff_bench.gaussians.triangulate import initial_points
+
+        points, colors = initial_points(scene, views)  # sparse points, else triangulated from the poses
+        result = fit_gaussians(views, config, points=points, colors=colors, device=device,
                                checkpoint_dir=target.with_suffix(".ckpt"), checkpoint_every=1000,
                                progress=self.progress)
         write_ply(target, result.model)
@@ -221,17 +226,23 @@ def resample(image: np.ndarray, crop: Crop, resolution: tuple[int, int], *, near
 
 def _capture(view: ViewJob, resolution: tuple[int, int]) -> np.ndarray:
     """The capture of ``view`` at the working resolution, ``(H, W, 3)`` float32 in [0, 1]."""
-    image = read_rgb(view.image_path)
-    return np.clip(resample(image, view.crop, resolution), 0.0, 1.0).astype(np.float32)
+    image = resample(read_rgb(view.image_path), view.crop, resolution)
+    if is_distorted(view.camera):  # the renderer draws the pinhole camera: resample the capture to it
+        image = undistort_image(image, view.camera)[0]
+    return np.clip(image, 0.0, 1.0).astype(np.float32)
 
 
 def _mask(view: ViewJob, resolution: tuple[int, int]) -> np.ndarray:
+    covered = undistortion_maps(view.camera)[2] if is_distorted(view.camera) else np.ones(resolution, dtype=bool)
     if view.mask_path is None:
-        return np.ones(resolution, dtype=bool)
+        return covered
     keep = read_mask(view.mask_path)
     if view.invert_mask:
         keep = ~keep
-    return resample(keep.astype(np.uint8), view.crop, resolution, nearest=True).astype(bool)
+    keep = resample(keep.astype(np.uint8), view.crop, resolution, nearest=True)
+    if is_distorted(view.camera):
+        keep = undistort_image(keep, view.camera)[0][..., 0] if keep.ndim == 3 else undistort_image(keep, view.camera)[0]
+    return keep.astype(bool) & covered
 
 
 def build_packet(job: PacketJob, root: Path, backend: str, device: str) -> JobStats:
@@ -312,7 +323,8 @@ def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[s
             fit: bool = False, split: str = "all", scenes: Sequence[str] | None = None,
             workers: int = 1, shard: tuple[int, int] = (0, 1), backend: str = "auto", device: str = "auto",
             loader_options: Mapping[str, Any] | None = None, fit_iterations: int = 30_000, threads: int = 1,
-            cmap_precision: str = "float32", progress: bool = True) -> PrepareSummary:
+            cmap_precision: str = "float32", progress: bool = True,
+            groups: Sequence[str] | None = None) -> PrepareSummary:
     """Prepare the packets of ``dataset`` under ``protocol`` into the store ``out`` (module docstring).
 
     Args:
@@ -332,6 +344,7 @@ def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[s
         fit_iterations: 3DGS iterations with ``fit``.
         cmap_precision: ``"float32"`` (default) or ``"half"`` C-map EXRs (see :mod:`setdiff_bench.packets`).
         progress: show tqdm bars.
+        groups: only these protocol groups (default all), e.g. ``["holdout8"]`` of a generic capture.
 
     Raises:
         UsageError / ProtocolError / DatasetError: bad arguments, a protocol that does not fit the
@@ -348,14 +361,14 @@ def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[s
         return _prepare(dataset, root, out, protocol=protocol, fits=fits, fit=fit, split=split, scenes=scenes,
                         workers=workers, shard=shard, backend=backend, device=device, loader_options=loader_options,
                         fit_iterations=fit_iterations, threads=threads, cmap_half=cmap_precision == "half",
-                        progress=progress)
+                        progress=progress, groups=groups)
 
 
 def _prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[str], *,
              protocol: str | os.PathLike[str] | None, fits: str | os.PathLike[str] | None, fit: bool, split: str,
              scenes: Sequence[str] | None, workers: int, shard: tuple[int, int], backend: str, device: str,
              loader_options: Mapping[str, Any] | None, fit_iterations: int, threads: int, cmap_half: bool,
-             progress: bool) -> PrepareSummary:
+             progress: bool, groups: Sequence[str] | None = None) -> PrepareSummary:
     from setdiff_bench.loaders import list_scenes, load_scenes
     from setdiff_bench.loaders.common import select_scenes
 
@@ -363,6 +376,13 @@ def _prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[
     spec = load_protocol(protocol or dataset)
     if spec.dataset != dataset:
         raise ProtocolError(f"protocol {spec.name!r} is for dataset {spec.dataset!r}, not {dataset!r}", spec.path)
+    if groups:
+        known = [g.name for g in spec.groups]
+        unknown = [name for name in groups if name not in known]
+        if unknown:
+            raise UsageError(f"protocol {spec.name!r} has no group {unknown[0]!r}; groups: {', '.join(known)}",
+                             "--group")
+        spec = replace(spec, groups=tuple(g for g in spec.groups if g.name in groups))
     if split not in SPLIT_CHOICES:
         raise UsageError(f"split must be one of {', '.join(SPLIT_CHOICES)}, got {split!r}", "--split")
     if workers < 1:
@@ -372,7 +392,7 @@ def _prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[
     out = Path(out)
     options = {**spec.loader_options, **(loader_options or {})}
     source = FitSource(fits_dir=None if fits is None else Path(fits), fit=fit, out=out,
-                       fit_iterations=fit_iterations, progress=progress)
+                       fit_iterations=fit_iterations, progress=progress, downscale=spec.images.downscale)
 
     assignment = spec.split.assign(list_scenes(dataset, root, **options))
     chosen = sorted(assignment) if scenes is None else select_scenes(sorted(assignment), scenes, Path(root), dataset)

@@ -141,7 +141,9 @@ def scene_resolution(protocol: Protocol, scene: Scene) -> tuple[int, int]:
     if len(sizes) != 1:
         raise ProtocolError(f"resolution = \"native\" needs one image size per scene; scene {scene.name!r} has "
                             f"{', '.join(f'{w}x{h}' for h, w in sizes)}", protocol.path)
-    return sizes[0]
+    height, width = sizes[0]
+    scale = protocol.images.downscale
+    return max(1, round(height / scale)), max(1, round(width / scale))
 
 
 def mask_source(protocol: Protocol, frame: Frame) -> tuple[Path | None, bool]:
@@ -200,11 +202,8 @@ def plan_scene(protocol: Protocol, scene: Scene, split: str, fit_path_for: Any, 
             targets that are also fit frames.
     """
     groups = applicable_groups(protocol, scene)
-    for frame in scene.frames:
-        if frame.camera.distortion is not None and not frame.camera.distortion.is_zero():
-            raise ProtocolError(f"scene {scene.name!r} frame {frame.name!r} has lens distortion; the renderer is "
-                                "pinhole — undistort the images or set the loader option distortion = \"ignore\"",
-                                protocol.path)
+    # Distorted cameras stay distorted here: prepare resamples their captures to the pinhole camera
+    # (setdiff_bench.undistort) before they enter a packet, as the renderer draws pinhole images.
     resolution = scene_resolution(protocol, scene)
     centers = np.stack([f.camera.center for f in scene.frames])
     d_max = max_pairwise_distance(centers)

@@ -15,7 +15,20 @@ HELP = "fit 3D Gaussian Splatting to a scene's training frames and write the sta
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--scene", required=True, type=Path, help="scene folder (synthetic, EUVS or COLMAP layout)")
+    from setdiff_bench.loaders import DATASETS
+
+    parser.add_argument("--scene", required=True, help="scene folder (synthetic, EUVS or COLMAP layout), or with "
+                                                       "--dataset the scene's name under --root")
+    parser.add_argument("--dataset", default=None, choices=list(DATASETS),
+                        help="read the scene through this dataset's loader (with --root and -o options)")
+    parser.add_argument("--root", type=Path, default=None, help="dataset folder for --dataset")
+    parser.add_argument("-o", "--option", action="append", default=[], metavar="KEY=VALUE",
+                        help="loader option, e.g. -o missing=skip, -o images_dir=images_4")
+    parser.add_argument("--init", default="auto", choices=("auto", "sparse", "triangulate", "random"),
+                        help="initial Gaussians: auto = the scene's sparse points, else points triangulated from "
+                             "the known poses (pycolmap), else random points sized to the scene")
+    parser.add_argument("--downscale", type=int, default=1,
+                        help="fit on images downscaled by this integer factor (intrinsics scaled to match)")
     parser.add_argument("--out", required=True, type=Path, help="output PLY")
     parser.add_argument("--frames", default=None,
                         help="frames to fit: 'train' (default: the scene's training split), comma-separated "
@@ -48,11 +61,27 @@ def fit_config(preset: str, iterations: int | None, seed: int):  # -> FitConfig
 
         base = get_preset(preset).fit
     if iterations is not None and iterations != base.iterations:
-        scaled = FitConfig.schedule(iterations, densify_every=max(1, round(base.densify_every * iterations
-                                                                             / base.iterations)))
-        base = dataclasses.replace(scaled, **{k: getattr(base, k) for k in (
-            "tile_size", "max_gaussians", "max_screen_size", "sh_degree", "background")})
+        base = rescale_schedule(base, iterations)
     return dataclasses.replace(base, seed=seed)
+
+
+#: FitConfig fields counted in iterations: the only ones ``--iterations`` changes.
+SCHEDULE_FIELDS = ("densify_from", "densify_until", "densify_every", "opacity_reset_every", "sh_increase_every")
+
+
+def rescale_schedule(base, iterations: int):  # (FitConfig, int) -> FitConfig
+    """``base`` run for ``iterations`` instead of ``base.iterations``: every schedule field scales by the
+    same ratio (at least 1); an event ``base`` never reaches (e.g. an opacity reset after the last
+    iteration, i.e. disabled) stays unreached; every other setting (learning rates, background points,
+    Gaussian cap, …) is kept as the preset has it."""
+    import dataclasses
+
+    ratio = iterations / base.iterations
+    values: dict[str, int] = {}
+    for name in SCHEDULE_FIELDS:
+        value = getattr(base, name)
+        values[name] = iterations + 1 if value > base.iterations else max(1, round(value * ratio))
+    return dataclasses.replace(base, iterations=iterations, **values)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -70,9 +99,20 @@ def run(args: argparse.Namespace) -> int:
 
         frames = parse_frame_list(args.frames)
     start = time.perf_counter()
-    result = fit_scene(args.scene, args.out, config, frames=frames, device=device, checkpoint_dir=args.checkpoint,
+    from setdiff_bench.cli.list import parse_option
+    from setdiff_bench.errors import UsageError
+
+    options = dict(parse_option(text) for text in args.option)
+    if args.dataset is None and (args.root is not None or options):
+        raise UsageError("--root and -o need --dataset", "--dataset")
+    if args.dataset is not None and args.root is None:
+        raise UsageError("--dataset needs --root (the dataset folder)", "--root")
+    source = Path(args.scene) if args.dataset is None else args.root
+    result = fit_scene(source, args.out, config, frames=frames, device=device, checkpoint_dir=args.checkpoint,
                        checkpoint_every=args.checkpoint_every if args.checkpoint else 0,
-                       progress=not args.no_progress)
+                       progress=not args.no_progress, dataset=args.dataset,
+                       scene_name=args.scene if args.dataset else None, loader_options=options,
+                       downscale=args.downscale, init=args.init)
     elapsed = time.perf_counter() - start
     final = sum(result.losses[-10:]) / max(1, len(result.losses[-10:])) if result.losses else float("nan")
     print(f"fitted {len(result.model)} Gaussians in {config.iterations} iterations ({elapsed:.1f} s, "

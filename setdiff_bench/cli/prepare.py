@@ -35,6 +35,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="which scenes of the protocol's scene split (default: all)")
     parser.add_argument("--scene", action="append", dest="scenes", metavar="NAME",
                         help="only this scene (repeatable)")
+    parser.add_argument("--group", action="append", dest="groups", metavar="NAME",
+                        help="only this protocol group (repeatable), e.g. --group holdout8; default all")
     parser.add_argument("--workers", type=int, default=1, metavar="K", help="render processes (default 1)")
     parser.add_argument("--shard", default="0/1", metavar="i/n", help="process work units i, i+n, ... (default 0/1)")
     parser.add_argument("--threads", type=int, default=1, help="torch threads per render process (default 1)")
@@ -73,6 +75,6 @@ def run(args: argparse.Namespace) -> int:
                       split=args.split, scenes=args.scenes, workers=args.workers, shard=parse_shard(args.shard),
                       backend=args.backend, device=args.device, threads=args.threads, cmap_precision=args.cmap_precision,
                       loader_options=parse_loader_options(args.loader_option), fit_iterations=args.fit_iterations,
-                      progress=not args.quiet)
+                      progress=not args.quiet, groups=args.groups)
     print(summary.line())
     return 0

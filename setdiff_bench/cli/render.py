@@ -8,6 +8,7 @@ Each file is written atomically; an interrupted run resumes by skipping complete
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 VERB = "render"
@@ -22,6 +23,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--images", nargs="+", metavar="NAME", help="only these COLMAP image names (default: all)")
     parser.add_argument("--backend", choices=("torch", "gsplat"), default="torch")
     parser.add_argument("--device", default="cpu", help="torch device for the torch backend (cpu, cuda)")
+    parser.add_argument("--downscale", type=int, default=1,
+                        help="render at the image size divided by this integer (as fit --downscale)")
     parser.add_argument("--cmap-bound", type=float, default=None,
                         help="clip Gaussian centres to ±BOUND around the origin in the C-map")
 
@@ -41,19 +44,34 @@ def run(args: argparse.Namespace) -> int:
     from setdiff_bench.gaussians.render import render
     from setdiff_bench.io.images import to_numpy_hwc, write_exr, write_png
     from setdiff_bench.loaders.colmap import read_colmap_model
+    from setdiff_bench.undistort import is_distorted, pinhole_camera
 
     model = read_colmap_model(args.colmap)
     names = list(model.cameras) if not args.images else list(args.images)
     missing = [n for n in names if n not in model.cameras]
     if missing:
         raise UsageError(f"images not in the COLMAP model: {', '.join(missing[:10])}", args.colmap)
+    if args.downscale < 1:
+        raise UsageError(f"--downscale must be ≥ 1, got {args.downscale}", "--downscale")
+    cameras = {}
+    for name in names:
+        camera = pinhole_camera(model.cameras[name])
+        if args.downscale > 1:
+            camera = camera.resized(max(1, round(camera.width / args.downscale)),
+                                    max(1, round(camera.height / args.downscale)))
+        cameras[name] = camera
+    distorted = [n for n in names if is_distorted(model.cameras[n])]
+    if distorted:  # said once, never silent: the renderer is pinhole
+        print(f"note: {len(distorted)} of {len(names)} camera(s) have lens distortion (first {distorted[0]!r}); "
+              "rendered as the undistorted pinhole camera with the same K (fit and prepare undistort the "
+              "captures to match)", file=sys.stderr)
     gaussians = read_ply(args.ply).to(args.device if args.backend == "torch" else "cuda")
     args.out.mkdir(parents=True, exist_ok=True)
     todo = [n for n in names if not all((args.out / view_folder_name(n) / f).is_file() for f in OUTPUT_FILES)]
     for name in tqdm(todo, desc="render", unit="view", disable=None):
         folder = args.out / view_folder_name(name)
         with torch.no_grad():
-            out = render(gaussians, [model.cameras[name]], backend=args.backend, cmap_bound=args.cmap_bound)
+            out = render(gaussians, [cameras[name]], backend=args.backend, cmap_bound=args.cmap_bound)
         write_exr(folder / "cmap.exr", to_numpy_hwc(out.cmap[0]), ("X", "Y", "Z"))
         write_exr(folder / "depth.exr", to_numpy_hwc(out.depth[0]), ("Z",))
         write_png(folder / "alpha.png", to_numpy_hwc(out.alpha[0]))

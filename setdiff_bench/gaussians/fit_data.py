@@ -3,16 +3,23 @@
 A scene folder is recognised by what it holds: ``scene.json`` → the synthetic loader, ``test_set.txt``
 → the EUVS loader (both with optional masks), otherwise a generic COLMAP scene.  The fit frames are
 the scene's training split (EUVS rule: every posed image not listed in ``test_set.txt``) unless a
-list of frame names is given.
+list of frame names is given.  Any registered dataset is read with ``dataset=``/``root=``/``scene=``
+and the loader's own options.
+
+Images reach the fit as pinhole images: a camera with lens distortion is undistorted first
+(:mod:`setdiff_bench.undistort`; the border its lens does not cover leaves the loss through the
+mask), then the image is downscaled by ``downscale`` (area average, ``K`` scaled to match).
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
+import cv2
 import numpy as np
 import torch
 
@@ -20,6 +27,7 @@ from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import DatasetError, UsageError
 from setdiff_bench.io.images import read_mask, read_rgb, to_tensor_chw
 from setdiff_bench.types import Scene
+from setdiff_bench.undistort import is_distorted, undistort_image
 
 
 @dataclass
@@ -38,10 +46,17 @@ class FitView:
     mask: torch.Tensor | None
 
 
-def load_fit_scene(scene_dir: str | os.PathLike[str]) -> Scene:
-    """Load the scene folder with the loader its files call for (see the module docstring)."""
+def load_fit_scene(scene_dir: str | os.PathLike[str], *, dataset: str | None = None, scene: str | None = None,
+                   options: Mapping[str, Any] | None = None) -> Scene:
+    """Load the scene folder with the loader its files call for (see the module docstring); with
+    ``dataset``, ``scene_dir`` is that dataset's root and ``scene`` picks one of its scenes."""
     from setdiff_bench.loaders import load_scenes
 
+    if dataset is not None:
+        scenes = load_scenes(dataset, scene_dir, None if scene is None else [scene], **dict(options or {}))
+        if len(scenes) != 1:
+            raise DatasetError(f"{dataset} root holds {len(scenes)} scenes; pick one with --scene", scene_dir)
+        return scenes[0]
     folder = Path(scene_dir)
     if not folder.is_dir():
         raise DatasetError("scene folder not found", folder)
@@ -86,16 +101,28 @@ def select_fit_frames(scene: Scene, names: Sequence[str] | None) -> list[str]:
     return train
 
 
-def load_fit_views(scene: Scene, names: Sequence[str]) -> list[FitView]:
-    """Images, cameras and masks of the frames ``names`` (in that order)."""
+def load_fit_views(scene: Scene, names: Sequence[str], *, downscale: int = 1) -> list[FitView]:
+    """Pinhole images, cameras and masks of the frames ``names`` (in that order), downscaled by
+    ``downscale`` (module docstring)."""
+    if not isinstance(downscale, int) or downscale < 1:
+        raise UsageError(f"--downscale must be an integer ≥ 1, got {downscale!r}", "--downscale")
     views = []
     for frame in scene.select(names):
         camera = frame.camera
-        image = to_tensor_chw(read_rgb(frame.image_path, expected_size=(camera.height, camera.width)))
-        mask = None
+        pixels = read_rgb(frame.image_path, expected_size=(camera.height, camera.width))
+        keep = np.ones((camera.height, camera.width), bool)
         if frame.mask_path is not None:
             keep = read_mask(frame.mask_path, expected_size=(camera.height, camera.width))
-            if not keep.all():
-                mask = torch.from_numpy(np.ascontiguousarray(keep))[None]
-        views.append(FitView(frame.name, camera, image, mask))
+        if is_distorted(camera):
+            pixels, pinhole, covered = undistort_image(pixels, camera)
+            keep = undistort_image(keep.astype(np.float32), camera)[0] > 0.5
+            keep &= covered
+            camera = pinhole
+        if downscale > 1:
+            width, height = max(1, round(camera.width / downscale)), max(1, round(camera.height / downscale))
+            pixels = cv2.resize(pixels, (width, height), interpolation=cv2.INTER_AREA)
+            keep = cv2.resize(keep.astype(np.float32), (width, height), interpolation=cv2.INTER_AREA) > 0.999
+            camera = camera.resized(width, height)
+        mask = None if keep.all() else torch.from_numpy(np.ascontiguousarray(keep))[None]
+        views.append(FitView(frame.name, camera, to_tensor_chw(pixels), mask))
     return views

@@ -39,3 +39,22 @@ def test_fit_errors_are_one_line(tiny_scene_dir, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and "nope.png" in err
     assert not (tmp_path / "m.ply").exists()
+
+
+def test_iterations_keeps_the_preset_settings():
+    """Regression: ``--preset default --iterations 300`` rebuilt the schedule from scratch, turning the
+    preset's disabled opacity reset (10 000) into a reset every 90 iterations and dropping its 3000
+    background points."""
+    from setdiff_bench.cli.fit import fit_config
+    from setdiff_bench.synthetic.presets import get_preset
+
+    preset = get_preset("default").fit
+    config = fit_config("default", 300, seed=0)
+    assert config.iterations == 300
+    assert config.opacity_reset_every > 300  # still never reached
+    assert config.background_points == preset.background_points == 3000
+    assert config.max_gaussians == preset.max_gaussians
+    assert config.lr_means == preset.lr_means
+    # schedule fields scale by 300 / 250 = 1.2: densify every 20 -> 24, from 25 -> 30, until 150 -> 180
+    assert (config.densify_every, config.densify_from, config.densify_until) == (24, 30, 180)
+    assert config.sh_increase_every == 30

@@ -17,10 +17,12 @@ from setdiff_bench.loaders.colmap import read_colmap_model
 from tests.gaussians.test_render import random_scene
 
 
-def write_model(folder: Path) -> None:
+def write_model(folder: Path, *, radial: float | None = None) -> None:
     rec = pycolmap.Reconstruction()
-    rec.add_camera_with_trivial_rig(pycolmap.Camera(camera_id=1, model="PINHOLE", width=40, height=30,
-                                                    params=[35.0, 35.0, 20.0, 15.0]))
+    camera = (pycolmap.Camera(camera_id=1, model="PINHOLE", width=40, height=30, params=[35.0, 35.0, 20.0, 15.0])
+              if radial is None else
+              pycolmap.Camera(camera_id=1, model="SIMPLE_RADIAL", width=40, height=30, params=[35.0, 20.0, 15.0, radial]))
+    rec.add_camera_with_trivial_rig(camera)
     for image_id, eye in enumerate([[0.0, 0.0, 0.0], [0.5, 0.2, 0.3]], start=1):
         w2c = look_at(eye, [0.0, 0.0, 6.0], up=(0.0, -1.0, 0.0))
         pose = pycolmap.Rigid3d(pycolmap.Rotation3d(matrix_to_quaternion(w2c[:3, :3], order="xyzw")), w2c[:3, 3])
@@ -64,3 +66,15 @@ def test_render_verb_bad_input_is_one_line_exit_2(tmp_path: Path, capsys: pytest
                  "--out", str(tmp_path / "out2")])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "broken.ply" in err[0]
+
+
+def test_distorted_camera_is_rendered_as_its_pinhole_and_said_so(tmp_path: Path,
+                                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """Regression: a SIMPLE_RADIAL camera was rendered as a pinhole image without a word."""
+    write_model(tmp_path / "sparse", radial=0.08)
+    write_ply(tmp_path / "scene.ply", random_scene(200, seed=1))
+    assert main(["render", "--ply", str(tmp_path / "scene.ply"), "--colmap", str(tmp_path / "sparse"),
+                 "--out", str(tmp_path / "out"), "--downscale", "2"]) == 0
+    assert "2 of 2 camera(s) have lens distortion" in capsys.readouterr().err
+    rgb = read_image_raw(tmp_path / "out" / "view_1" / "rgb.png", "uint8")
+    assert rgb.shape[:2] == (15, 20)  # --downscale 2 of 40x30

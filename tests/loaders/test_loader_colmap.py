@@ -85,8 +85,9 @@ def test_distortion_policies(tmp_path):
     # Ignoring distortion equals projecting with zero coefficients.
     view.dist = np.zeros(4)
     assert_projects(ignored.cameras["img_00.png"], view.points, view.expected_pixels())
-    with pytest.raises(DatasetError, match="non-zero distortion"):
+    with pytest.raises(DatasetError, match="non-zero distortion") as info:
         read_colmap_model(tmp_path, distortion="error")
+    assert "-o distortion=ignore" in str(info.value)  # the CLI's syntax, not only Python's
 
 
 def test_quaternion_norm_off_is_refused(tmp_path):

@@ -125,3 +125,22 @@ def test_missing_intrinsic(tmp_path):
     (tmp_path / "transforms.json").write_text(json.dumps(meta))
     with pytest.raises(DatasetError, match="missing intrinsic 'fl_x'"):
         read_transforms(tmp_path / "transforms.json")
+
+
+def test_frames_without_an_image_error_or_skip(tmp_path):
+    """Regression: an instant-ngp capture (fox: 67 frames, 50 photos) was refused at the first absent
+    image with no way to skip such frames."""
+    _scene(tmp_path, 31, applied=False, downscaled=False)
+    (tmp_path / "images" / "frame_00002.png").unlink()
+    transforms = tmp_path / "transforms.json"
+    with pytest.raises(DatasetError) as info:
+        read_transforms(transforms)
+    message = str(info.value)
+    assert message.startswith(f"{transforms}: 1 of 3 frames name an image that does not exist")
+    assert "frame_00002.png" in message and "-o missing=skip" in message
+    with pytest.warns(UserWarning, match="1 of 3 frames name an image that does not exist; skipped") as caught:
+        [scene] = load_scenes("nerfstudio", tmp_path, missing="skip")
+    assert len(caught) == 1
+    assert [f.name for f in scene.frames] == ["images/frame_00001.png", "images/frame_00003.png"]
+    with pytest.raises(DatasetError, match="unknown missing-image policy 'drop'"):
+        read_transforms(transforms, missing="drop")

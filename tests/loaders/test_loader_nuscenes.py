@@ -72,6 +72,32 @@ def test_dangling_token(nu):
     assert "'no-such-pose', which is not in ego_pose.json" in message
 
 
+def test_integral_float_timestamp_is_accepted(nu):
+    """Regression: nuScenes-format tables from other tools (Lyft via mmdetection3d, KAIST) store
+    ``timestamp`` as ``1556675185850000.0``; it was refused as "must be a JSON int"."""
+    record = nu.record("sample_data", "scene0_CAM_FRONT_LEFT_2")
+    expected = record["timestamp"]
+    record["timestamp"] = float(expected)
+    nu.write()
+    [scene] = load_scenes("nuscenes", nu.root, ["scene-0061"])
+    [frame] = [f for f in scene.frames if f.metadata["sample_data_token"] == "scene0_CAM_FRONT_LEFT_2"]
+    assert frame.timestamp_us == expected and isinstance(frame.timestamp_us, int)
+    record["timestamp"] = expected + 0.5
+    nu.write()
+    with pytest.raises(DatasetError, match="'timestamp' must be a JSON int"):
+        load_scenes("nuscenes", nu.root, ["scene-0061"])
+
+
+def test_missing_field_is_named(nu):
+    """Regression: an absent ``ego_pose_token`` was reported as "refers to token None"."""
+    del nu.record("sample_data", "scene0_CAM_FRONT_LEFT_2")["ego_pose_token"]
+    nu.write()
+    with pytest.raises(DatasetError) as info:
+        load_scenes("nuscenes", nu.root, ["scene-0061"])
+    assert str(info.value) == (f"{nu.root / 'v1.0-mini' / 'sample_data.json'}: sample_data "
+                               "'scene0_CAM_FRONT_LEFT_2': missing field 'ego_pose_token'")
+
+
 def test_quaternion_norm_off(nu):
     pose = nu.record("ego_pose", "ego_scene0_CAM_BACK_1")
     pose["rotation"] = [v * 1.0015 for v in pose["rotation"]]

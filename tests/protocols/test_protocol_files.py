@@ -25,7 +25,7 @@ def test_packaged_protocols_state_the_papers_settings():
         assert protocol.name == protocol.dataset == name
         assert (protocol.references.alpha, protocol.references.beta) == (0.8, 0.2)
         assert protocol.references.aggregate == "mean"
-        expected_resolution = None if name == "synthetic" else (576, 1024)
+        expected_resolution = None if name in ("synthetic", "colmap", "nerfstudio") else (576, 1024)
         assert protocol.images.resolution == expected_resolution
         if name == "nuscenes":
             assert dict(protocol.packets.views) == {"train": 12, "test": 24}
@@ -119,7 +119,7 @@ def test_invalid_protocol_files_name_the_file_and_key(tmp_path, base, old, new, 
 
 
 def test_unknown_protocol_lists_the_packaged_ones():
-    with pytest.raises(ProtocolError, match=r"unknown protocol 'waymo'.*dl3dv, euvs, nuscenes, "):
+    with pytest.raises(ProtocolError, match=r"unknown protocol 'waymo'.*colmap, dl3dv, euvs, nerfstudio, nuscenes, "):
         load_protocol("waymo")
     with pytest.raises(ProtocolError, match="protocol file not found"):
         load_protocol("/nonexistent/p.toml")

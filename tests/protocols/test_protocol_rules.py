@@ -105,3 +105,17 @@ def test_paralane_lane_shifts_sample_uniformly():
                                                           21, 22, 24, 25, 26, 28, 29, 30]  # 1.25·k, halves to even
     assert {f.traversal for f in double.targets} == {"clip_2"} and len(double.targets) == 20
     assert single.fit == double.fit and protocol.group("single").fit_key == "clip_0"
+
+
+def test_holdout_every_takes_every_8th_frame_as_target():
+    """Generic captures: indices 0, 8, 16, … are held out (Mip-NeRF 360 / 3DGS), the rest are fitted."""
+    from types import SimpleNamespace
+
+    from setdiff_bench.protocols.rules import RULES
+
+    frames = tuple(SimpleNamespace(name=f"{i:04d}.jpg") for i in range(20))
+    chosen = RULES["holdout_every"].select(SimpleNamespace(frames=frames), {"every": 8})
+    assert [f.name for f in chosen.targets] == ["0000.jpg", "0008.jpg", "0016.jpg"]
+    assert len(chosen.fit) == 17 and not {f.name for f in chosen.fit} & {f.name for f in chosen.targets}
+    group = load_protocol("nerfstudio").groups[0]
+    assert (group.name, group.rule, group.params) == ("holdout8", "holdout_every", {"every": 8})

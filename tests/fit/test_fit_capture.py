@@ -1,0 +1,70 @@
+"""``fit`` on a generic capture read through a dataset loader: an instant-ngp style ``transforms.json``
+with lens distortion, a frame without its image and ``--downscale``."""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from setdiff_bench.cli.main import main
+from setdiff_bench.gaussians.fit_data import load_fit_scene, load_fit_views
+from setdiff_bench.gaussians.ply import read_ply
+
+WIDTH, HEIGHT = 64, 48
+
+
+@pytest.fixture
+def capture(tmp_path):
+    """``capture/transforms.json`` in instant-ngp's form (global k1 k2 p1 p2, no camera_model); four
+    frames on a circle looking at the origin, the third without an image."""
+    folder = tmp_path / "capture"
+    (folder / "images").mkdir(parents=True)
+    rng = np.random.default_rng(3)
+    frames = []
+    for i in range(4):
+        angle = i * 0.3
+        center = np.array([4 * np.sin(angle), 0.0, 4 * np.cos(angle)])
+        back = center / np.linalg.norm(center)  # OpenGL camera z points away from the scene
+        right = np.cross([0.0, 1.0, 0.0], back)
+        right /= np.linalg.norm(right)
+        up = np.cross(back, right)
+        c2w = np.eye(4)
+        c2w[:3, :3] = np.stack([right, up, back], axis=1)
+        c2w[:3, 3] = center
+        frames.append({"file_path": f"images/{i:04d}.png", "transform_matrix": c2w.tolist()})
+        if i != 2:
+            image = (rng.random((HEIGHT, WIDTH, 3)) * 255).astype(np.uint8)
+            cv2.imwrite(str(folder / "images" / f"{i:04d}.png"), image)
+    meta = {"fl_x": 60.0, "fl_y": 60.0, "cx": 32.0, "cy": 24.0, "w": float(WIDTH), "h": float(HEIGHT),
+            "k1": 0.2, "k2": 0.05, "p1": 0.0, "p2": 0.0, "aabb_scale": 4, "frames": frames}
+    (folder / "transforms.json").write_text(json.dumps(meta))
+    return tmp_path
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")
+def test_views_are_undistorted_and_downscaled(capture):
+    scene = load_fit_scene(capture, dataset="nerfstudio", scene="capture", options={"missing": "skip"})
+    assert len(scene.frames) == 3 and scene.frames[0].camera.distortion is not None
+    [view] = load_fit_views(scene, [scene.frames[0].name], downscale=2)
+    assert view.camera.distortion is None  # drawn as the pinhole it now is
+    assert (view.camera.width, view.camera.height) == (WIDTH // 2, HEIGHT // 2)
+    assert view.image.shape == (3, HEIGHT // 2, WIDTH // 2)
+    assert np.allclose(view.camera.K[:2, :3], [[30.0, 0.0, 16.0], [0.0, 30.0, 12.0]])
+    # barrel distortion leaves the corners uncovered: they are out of the loss
+    assert view.mask is not None and not view.mask[0, 0, 0] and view.mask[0, HEIGHT // 4, WIDTH // 4]
+
+
+def test_fit_cli_reads_a_dataset_with_loader_options(capture, tmp_path, capsys):
+    out = tmp_path / "fit.ply"
+    args = ["fit", "--dataset", "nerfstudio", "--root", str(capture), "--scene", "capture", "--out", str(out),
+            "--downscale", "2", "--preset", "tiny", "--iterations", "2", "--device", "cpu", "--no-progress", "--init", "random"]
+    assert main(args) == 2  # the absent image is refused by default ...
+    assert "-o missing=skip" in capsys.readouterr().err
+    assert not out.exists()
+    with pytest.warns(UserWarning, match="1 of 4 frames"):
+        assert main([*args, "-o", "missing=skip"]) == 0  # ... and skipped on request
+    model = read_ply(out)
+    assert 1000 <= len(model) <= 1000 + 500  # sized random init (≥ 1000) + the tiny preset's 500 background
