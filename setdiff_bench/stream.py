@@ -27,6 +27,7 @@ import torch
 from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import UsageError
 from setdiff_bench.geometry import max_pairwise_distance, normalize_packet, select_references
+from setdiff_bench.io.images import uint8_to_float
 from setdiff_bench.types import Packet, ViewSet
 
 #: Most cameras one tick may carry (a rig of this many views is one set).
@@ -42,7 +43,8 @@ class Views:
     """Views given to a session: images, world cameras and (optionally) their C-maps and alphas.
 
     Attributes:
-        images: ``(V, 3, H, W)`` float32 in [0, 1].
+        images: ``(V, 3, H, W)`` uint8 (converted as an 8-bit PNG is read, so outputs match the batch
+            runner's) or float32 in [0, 1].
         cameras: ``V`` world-frame cameras.
         cmaps: ``(V, 3, H, W)`` world-frame C-maps, or ``None`` to render them from the session's PLY.
         alphas: ``(V, 1, H, W)`` accumulated opacities (default ones where C-maps are given).
@@ -56,6 +58,10 @@ class Views:
     names: Sequence[str] | None = None
 
 
+def _as_float(images: torch.Tensor) -> torch.Tensor:
+    return uint8_to_float(images) if images.dtype == torch.uint8 else images.float()
+
+
 def _check_views(views: Views, role: str, size: tuple[int, int] | None) -> tuple[int, int]:
     images = views.images
     if not isinstance(images, torch.Tensor) or images.ndim != 4 or images.shape[1] != 3:
@@ -67,7 +73,7 @@ def _check_views(views: Views, role: str, size: tuple[int, int] | None) -> tuple
         raise StreamInputError(f"{role} images are {width}x{height}, the session expects {size[1]}x{size[0]}", role)
     if height % 8 or width % 8:
         raise StreamInputError(f"{role} images are {width}x{height}; both sides must be divisible by 8", role)
-    if not torch.isfinite(images).all():
+    if images.is_floating_point() and not torch.isfinite(images).all():
         raise StreamInputError(f"{role} images contain NaN or infinite values", role)
     for i, camera in enumerate(views.cameras):
         if (camera.height, camera.width) != (height, width):
@@ -112,7 +118,7 @@ class StreamSession:
         cmaps, alphas = self._geometry(references)
         self.references = ViewSet(
             names=tuple(references.names or (f"ref{i}" for i in range(len(references.cameras)))),
-            images=references.images.float(), cmaps=cmaps, alphas=alphas, cameras=tuple(references.cameras))
+            images=_as_float(references.images), cmaps=cmaps, alphas=alphas, cameras=tuple(references.cameras))
         options = getattr(enhancer, "options", {})
         self.max_references = int(max_references if max_references is not None
                                   else options.get("max_references", len(self.references)))
@@ -158,7 +164,7 @@ class StreamSession:
             packet_id=f"tick{self.ticks:06d}", dataset="stream", protocol="stream", group="stream", split="test",
             scene="stream",
             references=ViewSet(refs.names, refs.images, normalised.cmaps[:n], refs.alphas, normalised.cameras[:n]),
-            targets=ViewSet(names, frames.images.float(), normalised.cmaps[n:], alphas, normalised.cameras[n:]),
+            targets=ViewSet(names, _as_float(frames.images), normalised.cmaps[n:], alphas, normalised.cameras[n:]),
             scale=normalised.scale)
 
     def enhance(self, frames: Views) -> torch.Tensor:

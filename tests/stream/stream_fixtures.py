@@ -41,16 +41,12 @@ def plane_points(camera: Camera, depth: float = 6.0) -> torch.Tensor:
     return torch.from_numpy(world.transpose(2, 0, 1).astype(np.float32))
 
 
-def on_8bit_grid(images: torch.Tensor) -> torch.Tensor:
-    return torch.round(images.clamp(0, 1) * 255) / 255
-
-
 def views(cameras: list[Camera], seed: int, names: list[str] | None = None) -> Views:
-    """Views of these cameras: smooth 8-bit random images and wall C-maps."""
+    """Views of these cameras: smooth random 8-bit images and wall C-maps."""
     generator = torch.Generator().manual_seed(seed)
     coarse = torch.rand(len(cameras), 3, HEIGHT // 8, WIDTH // 8, generator=generator)
     images = torch.nn.functional.interpolate(coarse, size=(HEIGHT, WIDTH), mode="bilinear", align_corners=False)
-    return Views(images=on_8bit_grid(images), cameras=cameras, cmaps=torch.stack([plane_points(c) for c in cameras]),
+    return Views(images=torch.round(images * 255).to(torch.uint8), cameras=cameras, cmaps=torch.stack([plane_points(c) for c in cameras]),
                  alphas=torch.ones(len(cameras), 1, HEIGHT, WIDTH), names=names)
 
 
