@@ -169,7 +169,10 @@ class StreamSession:
 
     def enhance(self, frames: Views) -> torch.Tensor:
         """Enhance one tick: ``(M, 3, H, W)`` float32 in [0, 1], in the order of ``frames``."""
-        packet = self.packet(frames)
+        return self.enhance_packet(self.packet(frames))
+
+    def enhance_packet(self, packet: Packet) -> torch.Tensor:
+        """Enhance a packet built by :meth:`packet` (the model call alone, so servers can lock just it)."""
         with torch.no_grad():
             out = self.enhancer.enhance(packet)
         self.ticks += 1
