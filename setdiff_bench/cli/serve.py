@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import argparse
 
-from setdiff_bench.serve.server import DEFAULT_HOST, ServeSettings
+from setdiff_bench.serve.settings import DEFAULT_HOST, ServeSettings
 
 VERB = "serve"
 HELP = "serve a SetDiff/DiFix checkpoint over gRPC (start_session / enhance / close_session, health)"

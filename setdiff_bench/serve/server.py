@@ -31,37 +31,14 @@ from setdiff_bench import __version__
 from setdiff_bench.errors import SetDiffBenchError
 from setdiff_bench.serve import enhancer_pb2 as pb
 from setdiff_bench.serve import enhancer_pb2_grpc as pb_grpc
+from setdiff_bench.serve.settings import ServeSettings
 from setdiff_bench.serve.wire import from_views, images_to_arrays
-from setdiff_bench.stream import MAX_CAMERAS_PER_TICK, StreamInputError, StreamSession
+from setdiff_bench.stream import StreamInputError, StreamSession
 
 #: The fully qualified service name (health checks may ask for it).
 SERVICE_NAME = pb.DESCRIPTOR.services_by_name["Enhancer"].full_name
 #: Largest message either way (bytes): a 3-camera 576×1024 tick with float32 C-maps is ≈ 23 MB.
 MAX_MESSAGE_BYTES = 256 * 1024 * 1024
-DEFAULT_HOST = "127.0.0.1"
-
-
-@dataclass(frozen=True)
-class ServeSettings:
-    """How the server runs.
-
-    Attributes:
-        host: interface to bind (localhost by default; anything else exposes the service).
-        port: TCP port; 0 = a free one (the bound port is returned by :func:`start_server`).
-        workers: threads handling RPCs.
-        max_queue: most RPCs in the server at once; more are refused with ``RESOURCE_EXHAUSTED``.
-        max_sessions: most open sessions.
-        max_cameras: most frames one ``enhance`` may carry.
-        grace: seconds in-flight RPCs get to finish on shutdown.
-    """
-
-    host: str = DEFAULT_HOST
-    port: int = 50051
-    workers: int = 4
-    max_queue: int = 8
-    max_sessions: int = 16
-    max_cameras: int = MAX_CAMERAS_PER_TICK
-    grace: float = 30.0
 
 
 @dataclass
@@ -158,12 +135,13 @@ class RunningServer:
         self.server.stop(grace).wait()
 
 
-def start_server(enhancer: Any, settings: ServeSettings = ServeSettings()) -> RunningServer:
+def start_server(enhancer: Any, settings: ServeSettings | None = None) -> RunningServer:
     """Bind and start the service (plus ``grpc.health.v1``) on ``settings.host:settings.port``.
 
     Raises:
         SetDiffBenchError: the address cannot be bound.
     """
+    settings = settings or ServeSettings()
     server = grpc.server(futures.ThreadPoolExecutor(max_workers=settings.workers, thread_name_prefix="enhance"),
                          maximum_concurrent_rpcs=settings.max_queue,
                          options=[("grpc.max_receive_message_length", MAX_MESSAGE_BYTES),
