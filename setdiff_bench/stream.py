@@ -15,9 +15,11 @@ Shapes: images ``(V, 3, H, W)`` float32 in [0, 1]; C-maps ``(V, 3, H, W)`` world
 
 from __future__ import annotations
 
+import hashlib
 import os
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -88,6 +90,65 @@ def _check_views(views: Views, role: str, size: tuple[int, int] | None) -> tuple
     return int(height), int(width)
 
 
+def _image_key(image: torch.Tensor) -> str:
+    """Content key of one ``(3, H, W)`` model input (exact bytes, so only identical inputs share latents)."""
+    data = image.detach().to("cpu", torch.float32).contiguous()
+    return f"{image.dtype}{tuple(data.shape)}" + hashlib.blake2b(data.numpy().tobytes(), digest_size=16).hexdigest()
+
+
+class ReferenceLatentCache:
+    """Latents of a session's reference images, encoded once and reused on every tick.
+
+    While :meth:`active` is entered, the model's ``encode`` looks each input view up by content: views
+    seen before as references (never views whose decoder skips are requested — the targets) take
+    their cached latents; the rest go through the model's own ``encode`` in one batch.  The VAE
+    encoder treats views independently, so this changes the work done, not the model: results differ
+    only by float rounding of a different batch size (at most one 8-bit level, measured in the tests).
+    """
+
+    def __init__(self) -> None:
+        self.latents: dict[str, torch.Tensor] = {}
+        self.hits = 0
+        self.misses = 0
+
+    @contextmanager
+    def active(self, model: Any) -> Iterator[None]:
+        encode = model.encode
+
+        def cached_encode(images: torch.Tensor, keep_skips: torch.Tensor | None = None) -> Any:
+            keep = set() if keep_skips is None else {int(i) for i in keep_skips.tolist()}
+            keys = [_image_key(image) for image in images]
+            cached = [i for i, key in enumerate(keys) if i not in keep and key in self.latents]
+            if not cached or len(cached) == len(images):
+                cached = []
+                encoded = encode(images, keep_skips)
+            else:
+                fresh = [i for i in range(len(images)) if i not in set(cached)]
+                position = {i: j for j, i in enumerate(fresh)}
+                fresh_keep = (None if keep_skips is None else
+                              torch.tensor([position[int(i)] for i in keep_skips.tolist()], device=keep_skips.device,
+                                           dtype=keep_skips.dtype))
+                encoded_fresh = encode(images[fresh], fresh_keep)
+                rows = [None] * len(images)
+                for i in cached:
+                    rows[i] = self.latents[keys[i]].to(images.device)
+                for i in fresh:
+                    rows[i] = encoded_fresh.latents[position[i]]
+                encoded = replace(encoded_fresh, latents=torch.stack(rows))
+            self.hits += len(cached)
+            self.misses += len(images) - len(cached)
+            for i, key in enumerate(keys):
+                if i not in keep:  # references: targets are the views whose skips are kept
+                    self.latents[key] = encoded.latents[i].detach()
+            return encoded
+
+        model.encode = cached_encode
+        try:
+            yield
+        finally:
+            del model.encode  # back to the class's method
+
+
 class StreamSession:
     """One scene's enhancement session (references fixed, frames streamed tick by tick).
 
@@ -97,6 +158,12 @@ class StreamSession:
         ply: the scene's 3DGS PLY, used to render C-maps wherever they are not given.
         max_references: references per tick (default: the enhancer's ``max_references`` option).
         max_cameras: most frames one tick may carry.
+        cache_reference_latents: encode each reference once per session (:class:`ReferenceLatentCache`).
+            Off by default: encoding a smaller batch changes float32 convolution rounding in the last
+            bits, so with the cache an output pixel can differ from ``run --method setdiff`` by one 8-bit
+            level; without it, outputs equal the batch runner's exactly.
+
+    One session must not be used from two threads at once (the cache patches the model during a call).
 
     Raises:
         StreamInputError: malformed references, or C-maps missing with no PLY to render them.
@@ -104,7 +171,7 @@ class StreamSession:
 
     def __init__(self, enhancer: Any, references: Views, *, ply: str | os.PathLike[str] | None = None,
                  max_references: int | None = None, max_cameras: int = MAX_CAMERAS_PER_TICK,
-                 device: str = "cpu") -> None:
+                 device: str = "cpu", cache_reference_latents: bool = False) -> None:
         self.enhancer = enhancer
         self.size = _check_views(references, "references", None)
         if len(references.cameras) == 0:
@@ -123,6 +190,7 @@ class StreamSession:
         self.max_references = int(max_references if max_references is not None
                                   else options.get("max_references", len(self.references)))
         self.max_cameras = max_cameras
+        self.latent_cache = ReferenceLatentCache() if cache_reference_latents else None
         self.ticks = 0
 
     def _geometry(self, views: Views) -> tuple[torch.Tensor, torch.Tensor]:
@@ -173,7 +241,12 @@ class StreamSession:
 
     def enhance_packet(self, packet: Packet) -> torch.Tensor:
         """Enhance a packet built by :meth:`packet` (the model call alone, so servers can lock just it)."""
+        model = getattr(self.enhancer, "model", None)
         with torch.no_grad():
-            out = self.enhancer.enhance(packet)
+            if self.latent_cache is not None and hasattr(model, "encode"):
+                with self.latent_cache.active(model):
+                    out = self.enhancer.enhance(packet)
+            else:
+                out = self.enhancer.enhance(packet)
         self.ticks += 1
         return out.float().clamp(0.0, 1.0)

@@ -30,6 +30,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="most frames per tick (default %(default)s)")
     parser.add_argument("--grace", type=float, default=defaults.grace,
                         help="seconds in-flight requests get on shutdown (default %(default)s)")
+    parser.add_argument("--cache-reference-latents", action="store_true",
+                        help="encode each session's references once (faster; outputs may differ from "
+                             "`run --method setdiff` by one 8-bit level)")
     parser.add_argument("--device", default=None, help="cuda / cpu (default: CUDA when available)")
     parser.add_argument("--dtype", default=None, help="float32 / bfloat16 / float16")
 
@@ -46,7 +49,8 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"must be 0..65535, got {args.port}", "--port")
     enhancer = load_enhancer(args.method, args.checkpoint, device=args.device, dtype=args.dtype)
     settings = ServeSettings(host=args.host, port=args.port, workers=args.workers, max_queue=args.max_queue,
-                             max_sessions=args.max_sessions, max_cameras=args.max_cameras, grace=args.grace)
+                             max_sessions=args.max_sessions, max_cameras=args.max_cameras, grace=args.grace,
+                             cache_reference_latents=args.cache_reference_latents)
     running = start_server(enhancer, settings)
     print(pid_line(running, args.host), flush=True)
     serve_until_signalled(running, args.grace)

@@ -82,7 +82,8 @@ class EnhancerService(pb_grpc.EnhancerServicer):
             references = from_views(request.references, "references")
             stream = StreamSession(self.enhancer, references, ply=ply,
                                    max_references=request.max_references or None,
-                                   max_cameras=self.settings.max_cameras)
+                                   max_cameras=self.settings.max_cameras,
+                                   cache_reference_latents=self.settings.cache_reference_latents)
         except SetDiffBenchError as error:
             self._refuse(context, grpc.StatusCode.INVALID_ARGUMENT, error.one_line())
         with self._sessions_lock:

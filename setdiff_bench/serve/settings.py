@@ -21,6 +21,8 @@ class ServeSettings:
         max_sessions: most open sessions.
         max_cameras: most frames one ``enhance`` may carry.
         grace: seconds in-flight RPCs get to finish on shutdown.
+        cache_reference_latents: encode each session's references once (faster; outputs may then
+            differ from the batch runner's by one 8-bit level, see :class:`~setdiff_bench.stream.StreamSession`).
     """
 
     host: str = DEFAULT_HOST
@@ -30,3 +32,4 @@ class ServeSettings:
     max_sessions: int = 16
     max_cameras: int = MAX_CAMERAS_PER_TICK
     grace: float = 30.0
+    cache_reference_latents: bool = False

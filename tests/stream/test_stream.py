@@ -99,3 +99,17 @@ def test_bytes_convert_as_a_png_is_read(tmp_path: Path) -> None:
     values = np.arange(256, dtype=np.uint8).reshape(16, 16, 1).repeat(3, axis=2)
     write_png(tmp_path / "ramp.png", values)
     assert np.array_equal(uint8_to_float(values).numpy(), read_rgb(tmp_path / "ramp.png"))
+
+
+def test_reference_latent_cache_reuses_latents_within_one_8bit_level(checkpoint: Path) -> None:
+    enhancer = load_enhancer("setdiff", str(checkpoint), device="cpu")
+    cached = StreamSession(enhancer, recorded_references(), cache_reference_latents=True)
+    uncached = StreamSession(enhancer, recorded_references())
+    for tick in range(4):
+        a, b = cached.enhance(tick_frames(tick)), uncached.enhance(tick_frames(tick))
+        assert (torch.round(a * 255) - torch.round(b * 255)).abs().max() <= 1, tick
+        assert (a - b).abs().max() < 1e-4
+    # tick 0 encodes its 3 references; ticks 1–3 reuse them (each tick uses 3 of the 6 recordings)
+    assert cached.latent_cache.misses == 3 * 4 + len(cached.latent_cache.latents)
+    assert cached.latent_cache.hits == 3 * 4 - len(cached.latent_cache.latents)
+    assert "encode" not in vars(enhancer.model)  # the model is left as it was
