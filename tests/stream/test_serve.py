@@ -207,3 +207,27 @@ def test_sigterm_finishes_in_flight_requests(checkpoint: Path) -> None:
 
 def test_server_binds_localhost_by_default() -> None:
     assert ServeSettings().host == "127.0.0.1"
+
+
+def test_example_replays_a_store_through_the_server(server: RunningServer, checkpoint: Path, tmp_path: Path) -> None:
+    """examples/drive_packets.py: world cameras and C-maps recovered from a store give the batch runner's images."""
+    references = recorded_references()
+    chooser = StreamSession(load_enhancer("setdiff", str(checkpoint), device="cpu"), references)
+    for tick in range(3):
+        frames = tick_frames(tick)
+        write_tick_store(tmp_path / "store", references, frames, chooser.select(frames.cameras), tick)
+    merge_index(tmp_path / "store")
+    run_method(tmp_path / "store", tmp_path / "run", RunSettings("setdiff", options={"checkpoint": str(checkpoint)},
+                                                                 metrics=("psnr",), warp="off"), progress=False)
+    root = Path(__file__).resolve().parents[2]
+    subprocess.run([sys.executable, str(root / "examples" / "drive_packets.py"), "--packets", str(tmp_path / "store"),
+                    "--out", str(tmp_path / "out"), "--address", f"127.0.0.1:{server.port}"], check=True,
+                   env={**os.environ, "PYTHONPATH": str(root), "OMP_NUM_THREADS": "1"}, capture_output=True)
+    replayed = sorted((tmp_path / "out").rglob("*.png"))
+    assert len(replayed) == 9
+    worst = 0
+    for path in replayed:
+        [batch] = (tmp_path / "run" / "images").rglob(f"{path.parent.name}/{path.name}")
+        difference = np.abs(np.rint(read_rgb(path) * 255) - np.rint(read_rgb(batch) * 255))
+        worst = max(worst, int(difference.max()))
+    assert worst <= 1  # C-maps pass a float64 round trip to the world frame and back (0 when last run)
