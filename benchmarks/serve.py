@@ -49,8 +49,8 @@ def percentiles(samples: list[float], frames_per_tick: int) -> dict[str, float]:
             "frames_per_s": float(frames_per_tick * len(ms) / (ms.sum() / 1000.0))}
 
 
-def in_process(checkpoint: Path, size: tuple[int, int], ticks: int, cache: bool) -> dict[str, float]:
-    session = StreamSession(load_enhancer("setdiff", str(checkpoint), device="cpu"), recorded_references(size),
+def in_process(checkpoint: Path, size: tuple[int, int], ticks: int, cache: bool, device: str) -> dict[str, float]:
+    session = StreamSession(load_enhancer("setdiff", str(checkpoint), device=device), recorded_references(size),
                             cache_reference_latents=cache)
     frames = [tick_frames(t, size) for t in range(ticks)]
     session.enhance(frames[0])  # warm-up
@@ -63,11 +63,11 @@ def in_process(checkpoint: Path, size: tuple[int, int], ticks: int, cache: bool)
     return percentiles(samples, 3)
 
 
-def start_served(checkpoint: Path, *extra: str) -> tuple[subprocess.Popen[str], int]:
+def start_served(checkpoint: Path, *extra: str, device: str = "cpu") -> tuple[subprocess.Popen[str], int]:
     env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(ROOT)}
     process = subprocess.Popen([sys.executable, "-c", "import torch, sys; torch.set_num_threads(1); "
                                 "from setdiff_bench.cli.main import main; sys.exit(main(sys.argv[1:]))",
-                                "serve", "--checkpoint", str(checkpoint), "--port", "0", "--device", "cpu", *extra],
+                                "serve", "--checkpoint", str(checkpoint), "--port", "0", "--device", device, *extra],
                                stdout=subprocess.PIPE, text=True, env=env)
     line = process.stdout.readline()
     return process, int(line.split(":")[1].split()[0])
@@ -78,8 +78,8 @@ def stop_served(process: subprocess.Popen[str]) -> None:
     process.wait(timeout=60)
 
 
-def over_grpc(checkpoint: Path, size: tuple[int, int], ticks: int) -> dict[str, float]:
-    process, port = start_served(checkpoint)
+def over_grpc(checkpoint: Path, size: tuple[int, int], ticks: int, device: str) -> dict[str, float]:
+    process, port = start_served(checkpoint, device=device)
     try:
         with EnhancerClient(f"127.0.0.1:{port}") as client:
             session = client.start_session(recorded_references(size))
@@ -131,6 +131,7 @@ def main() -> None:
     parser.add_argument("--width", type=int, default=256)
     parser.add_argument("--ticks", type=int, default=40)
     parser.add_argument("--checkpoint", type=Path, default=None)
+    parser.add_argument("--device", default="cpu", help="cpu, or cuda (e.g. --height 576 --width 1024 on a GPU)")
     parser.add_argument("--memory", type=int, default=0, help="instead: N requests, served process RSS sampled")
     args = parser.parse_args()
     torch.set_num_threads(1)
@@ -146,16 +147,16 @@ def main() -> None:
                   f"{[round(s['rss_mib'], 1) for s in result['samples']]} MiB; "
                   f"growth after first sample {result['growth_after_first_sample_mib']:.1f} MiB → {path}")
             return
-        runs = {"in_process": in_process(checkpoint, size, args.ticks, cache=False),
-                "grpc": over_grpc(checkpoint, size, args.ticks),
-                "in_process_cached": in_process(checkpoint, size, args.ticks, cache=True)}
-    payload = {"machine": machine(), "size": list(size), "cameras_per_tick": 3, "references_per_tick": 3,
+        runs = {"in_process": in_process(checkpoint, size, args.ticks, False, args.device),
+                "grpc": over_grpc(checkpoint, size, args.ticks, args.device),
+                "in_process_cached": in_process(checkpoint, size, args.ticks, True, args.device)}
+    payload = {"machine": machine(), "size": list(size), "device": args.device, "cameras_per_tick": 3, "references_per_tick": 3,
                "checkpoint": "tiny random" if args.checkpoint is None else str(args.checkpoint), "runs": runs,
                "overhead_ratio_p50": runs["grpc"]["p50_ms"] / runs["in_process"]["p50_ms"],
                "overhead_ratio_p99": runs["grpc"]["p99_ms"] / runs["in_process"]["p99_ms"],
                "cache_saving_p50": 1.0 - runs["in_process_cached"]["p50_ms"] / runs["in_process"]["p50_ms"],
                "goal": "grpc p50 <= 1.2 x in-process p50"}
-    path = write_result(f"serve_{args.height}x{args.width}", payload)
+    path = write_result(f"serve_{args.device}_{args.height}x{args.width}", payload)
     for name, run in runs.items():
         print(f"{name:18s} p50 {run['p50_ms']:7.1f} ms  p99 {run['p99_ms']:7.1f} ms  {run['frames_per_s']:6.2f} frames/s")
     print(f"overhead ratio (p50) {payload['overhead_ratio_p50']:.3f}; cache saves {payload['cache_saving_p50']:.1%} "
