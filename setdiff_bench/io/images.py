@@ -102,6 +102,16 @@ def read_exr(path: PathLike, channels: int | None = None) -> np.ndarray:
     return pixels
 
 
+def uint8_to_float(pixels: np.ndarray | torch.Tensor) -> torch.Tensor:
+    """8-bit pixels → float32 in [0, 1] exactly as :func:`read_rgb` gives them for an 8-bit file.
+
+    OpenImageIO converts by multiplying with ``float32(1 / 255)`` (not dividing by 255, which differs
+    in the last bit for some values); images streamed as bytes must match images read from PNG.
+    """
+    tensor = torch.as_tensor(pixels)
+    return tensor.to(torch.float32) * torch.tensor(1.0 / 255.0, dtype=torch.float32)
+
+
 def quantize_uint8(image: np.ndarray) -> np.ndarray:
     """Float [0, 1] ``(H, W, C)`` → uint8 by round-to-nearest after clipping."""
     return np.rint(np.clip(np.asarray(image, dtype=np.float32), 0.0, 1.0) * 255.0).astype(np.uint8)
