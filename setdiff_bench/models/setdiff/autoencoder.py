@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import random
 import sys
 import time
@@ -299,8 +300,6 @@ def train_autoencoder(packets: str | Path, out_dir: str | Path, settings: Autoen
 
 def cosine_factor(step: int, total: int, floor: float = 0.05) -> float:
     """Learning-rate multiplier: cosine from 1 to ``floor`` over ``total`` steps."""
-    import math
-
     progress = min(step / max(total, 1), 1.0)
     return floor + (1.0 - floor) * 0.5 * (1.0 + math.cos(math.pi * progress))
 
