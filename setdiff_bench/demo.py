@@ -1,6 +1,14 @@
-"""The embedded benchmark end to end: synthetic streets → 3DGS fits → packets → SetDiff and DiFix
-training → ``identity``, ``reproject``, ``difix``, ``setdiff`` on the test scenes → leaderboard, plots,
-grids (and, on request, the two ablations).
+"""The embedded benchmark end to end: synthetic test scenes → 3DGS fits → packets → ``identity``,
+``reproject``, ``difix``, ``setdiff`` → leaderboard, plots, grids.
+
+By default the demo evaluates the models shipped in the package (``tiny_setdiff``, ``tiny_difix``:
+:mod:`setdiff_bench.models.setdiff.packaged`), trained with the toolkit's own commands on synthetic
+scenes whose generator seeds are disjoint from the demo's test scenes (checked before any work).  It
+generates and fits only the preset's **test** scenes (the synthetic protocol's scene split over the
+preset's scene list), declares them the test split of the packet store (``prepare --test-scene``),
+runs the four methods and writes the leaderboard.  ``--train`` keeps the whole path instead: every
+scene, SetDiff and DiFix trained on the training scenes, then the same evaluation (and, on request,
+the two ablations, which need training).
 
 Every stage is an ordinary ``setdiff-bench`` command run in its own process
 (:mod:`setdiff_bench.stages`); the demo records each command and its wall time in
@@ -17,11 +25,12 @@ torch thread count, package versions) and the SHA-256 of every output.
 
 Presets (``--preset``):
 
-* ``tiny``: 3 tiny scenes (80×48), a few training steps — a smoke test that runs in about two
-  minutes on 2 CPU cores (used by CI).  Its numbers mean nothing.
-* ``default``: the ``default`` synthetic preset (6 scenes at 256×144: 4 train, 2 test) and short CPU
-  training; ≤ 15 minutes on 2 CPU cores (measured in README.md).
-* ``full``: the ``large`` synthetic preset (8 scenes at 512×288) and long training — for a GPU.
+* ``tiny``: tiny scenes (80×48) — a smoke test (CI runs it with and without ``--train``).  Its
+  numbers mean nothing.
+* ``default``: the ``default`` synthetic preset's 2 test scenes at 256×144 with the shipped models
+  (≤ 5 minutes on 2 CPU cores, measured in README.md); with ``--train``, all 6 scenes and short CPU
+  training.
+* ``full``: the ``large`` synthetic preset (8 scenes at 512×288); meant for ``--train`` on a GPU.
 """
 
 from __future__ import annotations
@@ -41,6 +50,8 @@ from setdiff_bench.stages import Pipeline, relative
 from setdiff_bench.threads import compute_threads
 
 METHODS = ("identity", "reproject", "difix", "setdiff")
+#: The learned methods and the shipped models the demo evaluates unless ``--train``.
+SHIPPED_MODELS = {"setdiff": "tiny_setdiff", "difix": "tiny_difix"}
 #: Where the demo writes unless told otherwise: a scratch folder, git-ignored, never the published results.
 DEFAULT_OUT = "runs/demo"
 #: The demo's summary in ``<out>``; written last, so a folder with it holds one complete run.
@@ -75,11 +86,12 @@ class DemoPreset:
 
 
 DEMO_PRESETS: dict[str, DemoPreset] = {
-    "tiny": DemoPreset("tiny", "smoke test: 3 tiny scenes, a few steps (about 2 minutes on 2 CPU cores)",
+    "tiny": DemoPreset("tiny", "smoke test: tiny 80x48 scenes (with --train: 3 scenes, a few steps)",
                        "tiny", 3, "tiny_setdiff", "tiny_difix", 20, 20, 2),
-    "default": DemoPreset("default", "6 scenes at 256x144, short CPU training (<= 15 minutes on 2 CPU cores)",
+    "default": DemoPreset("default", "the 2 test scenes at 256x144 with the shipped models (<= 5 minutes on "
+                          "2 CPU cores); with --train all 6 scenes and short CPU training",
                           "default", None, "tiny_setdiff", "tiny_difix", 230, 200, 6),
-    "full": DemoPreset("full", "8 scenes at 512x288, long training: for a GPU", "large", None,
+    "full": DemoPreset("full", "8 scenes at 512x288; with --train long training, for a GPU", "large", None,
                        "tiny_setdiff", "tiny_difix", 20000, 20000, 8),
 }
 
@@ -113,14 +125,65 @@ class DemoPaths:
         return self.work / "runs"
 
 
-def run_demo(preset: DemoPreset, paths: DemoPaths, *, seed: int = 0, jobs: int = 2, device: str | None = None,
-             setdiff_steps: int | None = None, difix_steps: int | None = None, ablations: bool = False,
-             progress: bool = True, invocation: str = "") -> dict[str, Any]:
-    """Run every stage of the demo; returns the summary also written to ``<out>/demo.json``.
+def test_scene_indices(preset: DemoPreset, seed: int) -> list[int]:
+    """The generator indices of the preset's test scenes: the synthetic protocol's scene split over the
+    scene names ``synth`` gives the preset's scenes (:func:`setdiff_bench.synthetic.generate.scene_name`)."""
+    from setdiff_bench.protocols import load_protocol
+    from setdiff_bench.synthetic.generate import scene_name
+    from setdiff_bench.synthetic.presets import get_preset
+
+    count = preset.scenes or get_preset(preset.synth_preset).num_scenes
+    names = [scene_name(seed, index) for index in range(count)]
+    assignment = load_protocol("synthetic").split.assign(names)
+    return [index for index, name in enumerate(names) if assignment[name] == "test"]
+
+
+def check_unseen(test_scenes: list[tuple[int, int]]) -> dict[str, dict[str, Any]]:
+    """The shipped models' manifests, after checking that none was trained on a demo test scene.
+
+    Args:
+        test_scenes: ``(seed, index)`` of each test scene.
 
     Raises:
+        UsageError: a shipped model is missing, or its training scenes include a test scene.
+    """
+    from setdiff_bench.models.setdiff.packaged import packaged_models
+
+    shipped = packaged_models()
+    manifests = {}
+    for method, name in SHIPPED_MODELS.items():
+        if name not in shipped:
+            raise UsageError(f"the shipped model {name!r} is not in this installation; run the demo with --train",
+                             "--train")
+        manifest = shipped[name].manifest
+        seen = {tuple(pair) for pair in manifest["data"]["synthetic_seeds"]} & set(test_scenes)
+        if seen:
+            raise UsageError(f"shipped model {name!r} was trained on scene (seed, index) {sorted(seen)[0]}, one of "
+                             "this demo's test scenes: pick another --seed or use --train", "--seed")
+        manifests[method] = manifest
+    return manifests
+
+
+def run_demo(preset: DemoPreset, paths: DemoPaths, *, seed: int = 0, jobs: int = 2, device: str | None = None,
+             train: bool = False, setdiff_steps: int | None = None, difix_steps: int | None = None,
+             ablations: bool = False, progress: bool = True, invocation: str = "") -> dict[str, Any]:
+    """Run every stage of the demo; returns the summary also written to ``<out>/demo.json``.
+
+    Args:
+        train: train SetDiff and DiFix on the preset's training scenes (else evaluate the shipped models
+            on its test scenes only).
+        setdiff_steps, difix_steps, ablations: with ``train`` only.
+
+    Raises:
+        UsageError: training options without ``train``; a shipped model trained on a test scene.
         StageFailed: a stage exited non-zero (it printed its own error line).
     """
+    if not train and (setdiff_steps or difix_steps or ablations):
+        raise UsageError("--setdiff-steps, --difix-steps and --ablations train models: add --train", "--train")
+    from setdiff_bench.synthetic.generate import scene_name
+
+    test_indices = test_scene_indices(preset, seed)
+    shipped = {} if train else check_unseen([(seed, index) for index in test_indices])
     base = Path.cwd()
     (paths.out / SUMMARY_FILE).unlink(missing_ok=True)  # until this run completes, the folder is not a run
     pipeline = Pipeline(cwd=base, quiet=not progress, ledger=paths.work / LEDGER_FILE)
@@ -130,21 +193,27 @@ def run_demo(preset: DemoPreset, paths: DemoPaths, *, seed: int = 0, jobs: int =
     configs = {"setdiff": preset.setdiff_config, "difix": preset.difix_config}
 
     synth = ["synth", "--out", rel(paths.scenes), "--preset", preset.synth_preset, "--seed", seed, "--jobs", jobs]
-    synth += ["--scenes", preset.scenes] if preset.scenes else []
+    if train:
+        synth += ["--scenes", preset.scenes] if preset.scenes else []
+    else:
+        synth += ["--indices", ",".join(str(i) for i in test_indices)]
     synth += ["--device", device] if device else []
     pipeline.run("synth", synth + quiet)
-    pipeline.run("prepare", ["prepare", "synthetic", "--root", rel(paths.scenes), "--fits", rel(paths.scenes),
-                             "--out", rel(paths.packets), "--split", "all", "--workers", jobs,
-                             *(["--quiet"] if not progress else [])])
-    for method in ("setdiff", "difix"):
-        train = ["train", "--config", configs[method], "--packets", rel(paths.packets),
-                 "--out", rel(paths.checkpoints(method)), "--steps", steps[method], "--seed", seed]
-        train += ["--cpu"] if device == "cpu" else []
-        pipeline.run(f"train {method}", train + quiet)
+    prepare = ["prepare", "synthetic", "--root", rel(paths.scenes), "--fits", rel(paths.scenes),
+               "--out", rel(paths.packets), "--split", "all" if train else "test", "--workers", jobs]
+    if not train:
+        prepare += [part for index in test_indices for part in ("--test-scene", scene_name(seed, index))]
+    pipeline.run("prepare", prepare + ([] if progress else ["--quiet"]))
+    checkpoints = {method: rel(paths.checkpoints(method)) for method in configs} if train else dict(SHIPPED_MODELS)
+    for method in configs if train else ():
+        command = ["train", "--config", configs[method], "--packets", rel(paths.packets),
+                   "--out", checkpoints[method], "--steps", steps[method], "--seed", seed]
+        command += ["--cpu"] if device == "cpu" else []
+        pipeline.run(f"train {method}", command + quiet)
     for method in METHODS:
         run = ["run", "--method", method, "--packets", rel(paths.packets), "--split", "test",
                "--out", rel(paths.runs / method)]
-        run += ["--checkpoint", rel(paths.checkpoints(method))] if method in ("setdiff", "difix") else []
+        run += ["--checkpoint", checkpoints[method]] if method in checkpoints else []
         run += ["--device", device] if device else []
         pipeline.run(f"run {method}", run + quiet)
     pipeline.run("leaderboard", ["leaderboard", "--dataset", "synthetic", "--runs", rel(paths.runs),
@@ -157,7 +226,12 @@ def run_demo(preset: DemoPreset, paths: DemoPaths, *, seed: int = 0, jobs: int =
                                          "--steps", steps["setdiff"], *ablate_common])
         pipeline.run("ablate setsize", ["ablate", "setsize", "--checkpoint", rel(paths.checkpoints("setdiff")),
                                         *ablate_common])
-    summary = summarize(paths, preset, steps, pipeline, invocation)
+    summary = summarize(paths, preset, steps if train else {}, pipeline, invocation)
+    summary["models"] = ({method: {"checkpoint": checkpoints[method]} for method in configs} if train else
+                         {method: {"shipped": SHIPPED_MODELS[method], "files": m["files"],
+                                   "trained_on": m["data"]["scenes"], "training_seeds": m["data"]["synthetic_seeds"]}
+                          for method, m in shipped.items()})
+    summary["test_scenes"] = [scene_name(seed, index) for index in test_indices]
     summary["provenance"] = run_provenance(seed)
     write_text_atomic(paths.out / REPORT_FILE, report_markdown(summary, paths))
     summary["files"] = {p.name: sha256_file(p) for p in sorted(paths.out.iterdir())
@@ -234,6 +308,16 @@ def report_markdown(summary: dict[str, Any], paths: DemoPaths) -> str:
         revision = (git["revision"] or "unknown")[:12] + (" with uncommitted changes" if git["dirty"] else "")
         lines += [f"Code revision {revision}; seed {provenance['seed']}; {provenance['torch_threads']} torch "
                   f"threads on {provenance['machine']['cpu']} (set `SETDIFF_THREADS` to repeat it elsewhere).", ""]
+    models = summary.get("models") or {}
+    for method, model in models.items():
+        if "shipped" in model:
+            lines.append(f"- `{method}`: the shipped model `{model['shipped']}`, trained on "
+                         f"{', '.join(model['trained_on'])} (none of them a test scene here).")
+        else:
+            lines.append(f"- `{method}`: trained by this demo ({summary['training_steps'][method]} steps).")
+    if models:
+        lines.append(f"- Test scenes: {', '.join(summary.get('test_scenes', []))}.")
+        lines.append("")
     board = paths.out / "synthetic.md"
     if board.is_file():
         lines += ["## Leaderboard (test scenes)", "", board.read_text(encoding="utf-8").strip(), ""]

@@ -300,6 +300,20 @@ def parse_shard(text: str) -> tuple[int, int]:
     return index, count
 
 
+def declared_split(assignment: Mapping[str, str], test_scenes: Sequence[str]) -> dict[str, str]:
+    """The scene split with ``test_scenes`` as the test scenes and every other scene train, in place of the
+    protocol's rule (``prepare --test-scene``: a single capture, or a demo that makes only its test scenes).
+
+    Raises:
+        UsageError: a named scene is not in the dataset root.
+    """
+    unknown = sorted(set(test_scenes) - set(assignment))
+    if unknown:
+        raise UsageError(f"no scene {unknown[0]!r} in the dataset root; scenes: {', '.join(sorted(assignment))}",
+                         "--test-scene")
+    return {name: "test" if name in test_scenes else "train" for name in assignment}
+
+
 def resolve_backend(backend: str, device: str) -> tuple[str, str]:
     """``auto`` → gsplat on CUDA when importable, else the torch backend (on CUDA if present)."""
     if device == "auto":
@@ -324,7 +338,7 @@ def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[s
             workers: int = 1, shard: tuple[int, int] = (0, 1), backend: str = "auto", device: str = "auto",
             loader_options: Mapping[str, Any] | None = None, fit_iterations: int = 30_000, threads: int = 1,
             cmap_precision: str = "float32", progress: bool = True,
-            groups: Sequence[str] | None = None) -> PrepareSummary:
+            groups: Sequence[str] | None = None, test_scenes: Sequence[str] | None = None) -> PrepareSummary:
     """Prepare the packets of ``dataset`` under ``protocol`` into the store ``out`` (module docstring).
 
     Args:
@@ -345,6 +359,8 @@ def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[s
         cmap_precision: ``"float32"`` (default) or ``"half"`` C-map EXRs (see :mod:`setdiff_bench.packets`).
         progress: show tqdm bars.
         groups: only these protocol groups (default all), e.g. ``["holdout8"]`` of a generic capture.
+        test_scenes: these scenes are the test scenes and every other one trains, in place of the
+            protocol's split rule (:func:`declared_split`).
 
     Raises:
         UsageError / ProtocolError / DatasetError: bad arguments, a protocol that does not fit the
@@ -361,14 +377,15 @@ def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[s
         return _prepare(dataset, root, out, protocol=protocol, fits=fits, fit=fit, split=split, scenes=scenes,
                         workers=workers, shard=shard, backend=backend, device=device, loader_options=loader_options,
                         fit_iterations=fit_iterations, threads=threads, cmap_half=cmap_precision == "half",
-                        progress=progress, groups=groups)
+                        progress=progress, groups=groups, test_scenes=test_scenes)
 
 
 def _prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[str], *,
              protocol: str | os.PathLike[str] | None, fits: str | os.PathLike[str] | None, fit: bool, split: str,
              scenes: Sequence[str] | None, workers: int, shard: tuple[int, int], backend: str, device: str,
              loader_options: Mapping[str, Any] | None, fit_iterations: int, threads: int, cmap_half: bool,
-             progress: bool, groups: Sequence[str] | None = None) -> PrepareSummary:
+             progress: bool, groups: Sequence[str] | None = None,
+             test_scenes: Sequence[str] | None = None) -> PrepareSummary:
     from setdiff_bench.loaders import list_scenes, load_scenes
     from setdiff_bench.loaders.common import select_scenes
 
@@ -395,6 +412,8 @@ def _prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[
                        fit_iterations=fit_iterations, progress=progress, downscale=spec.images.downscale)
 
     assignment = spec.split.assign(list_scenes(dataset, root, **options))
+    if test_scenes is not None:
+        assignment = declared_split(assignment, test_scenes)
     chosen = sorted(assignment) if scenes is None else select_scenes(sorted(assignment), scenes, Path(root), dataset)
     chosen = [name for name in chosen if split == "all" or assignment[name] == split]
     summary = PrepareSummary()

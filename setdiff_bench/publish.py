@@ -16,9 +16,6 @@
 
 from __future__ import annotations
 
-import contextlib
-import ctypes
-import ctypes.util
 import json
 import os
 import shutil
@@ -27,11 +24,10 @@ from typing import Any
 
 from setdiff_bench.demo import REPORT_FILE, SUMMARY_FILE
 from setdiff_bench.errors import UsageError
-from setdiff_bench.io.atomic import sha256_file, staging_dir, write_text_atomic
+from setdiff_bench.io.atomic import sha256_file, staged_folder, write_text_atomic
 
 #: The provenance manifest written into a published folder.
 PROVENANCE_FILE = "provenance.json"
-_RENAME_EXCHANGE = 2  # linux/fs.h
 
 
 def run_files(run: Path) -> list[Path]:
@@ -103,40 +99,9 @@ def publish(run: str | os.PathLike[str], destination: str | os.PathLike[str], *,
     files = run_files(run)
     if (run / REPORT_FILE) not in files:
         raise UsageError(f"the run has no {REPORT_FILE}", run)
-    destination.parent.mkdir(parents=True, exist_ok=True)
-    staging = staging_dir(destination.parent, prefix=f".{destination.name}.publish-", suffix=".tmp")
-    try:
+    with staged_folder(destination) as staging:
         for path in files:
             shutil.copyfile(path, staging / path.name)
         manifest = provenance_manifest(run, summary, files, command)
         write_text_atomic(staging / PROVENANCE_FILE, json.dumps(manifest, indent=2, sort_keys=True) + "\n")
-        _swap_in(staging, destination)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
     return manifest
-
-
-def _swap_in(staging: Path, destination: Path) -> None:
-    """Put ``staging`` at ``destination``; the previous ``destination`` (if any) is deleted afterwards."""
-    if not destination.exists():
-        os.rename(staging, destination)
-        return
-    if _exchange(staging, destination):  # destination now holds the new files, staging the old ones
-        shutil.rmtree(staging)
-        return
-    old = destination.with_name(f".{destination.name}.old")
-    shutil.rmtree(old, ignore_errors=True)
-    os.rename(destination, old)
-    os.rename(staging, destination)
-    shutil.rmtree(old)
-
-
-def _exchange(a: Path, b: Path) -> bool:
-    """Atomically swap two paths (Linux ``renameat2``); ``False`` where unavailable."""
-    with contextlib.suppress(OSError, AttributeError, TypeError):
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
-        at_fdcwd = -100
-        result = libc.renameat2(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), _RENAME_EXCHANGE)
-        return result == 0
-    return False

@@ -1,6 +1,6 @@
 """``setdiff-bench demo``: the embedded synthetic benchmark end to end (see :mod:`setdiff_bench.demo`).
 
-    setdiff-bench demo [--preset tiny|default|full] [--out runs/demo] [--ablations]
+    setdiff-bench demo [--preset tiny|default|full] [--out runs/demo] [--train [--ablations]]
 
 The outputs go to a scratch folder (default ``runs/demo``, git-ignored); ``setdiff-bench publish``
 copies a finished run over the published results on purpose.
@@ -14,10 +14,13 @@ from pathlib import Path
 
 VERB = "demo"
 HELP = "the embedded benchmark end to end: synthetic scenes, 3DGS fits, packets, SetDiff vs baselines, leaderboard"
-DESCRIPTION = ("Generate synthetic multi-lane street scenes, fit their 3DGS, build packets, train a small SetDiff "
-               "and DiFix, run identity, reproject, difix and setdiff on the test scenes, and write the "
-               "leaderboard, plots and grids into a scratch folder (default runs/demo, git-ignored; `setdiff-bench "
-               "publish` copies a finished run to results/). Every stage resumes.")
+DESCRIPTION = ("Generate the synthetic benchmark's test scenes, fit their 3DGS, build packets, run identity, "
+               "reproject and the shipped DiFix and SetDiff models (tiny_difix, tiny_setdiff; trained on other "
+               "scenes), and write the leaderboard, plots and grids into a scratch folder (default runs/demo, "
+               "git-ignored; `setdiff-bench publish` copies a finished run to results/). --train makes every scene "
+               "and trains SetDiff and DiFix first. Every stage resumes.\n\n"
+               "examples:\n  setdiff-bench demo\n  setdiff-bench demo --preset tiny --out runs/smoke\n"
+               "  setdiff-bench demo --train --setdiff-steps 1000 --difix-steps 1000 --ablations")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -31,10 +34,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="scene and training seed")
     parser.add_argument("--jobs", type=int, default=2, help="processes for scene generation and packet rendering")
     parser.add_argument("--device", default=None, help="cpu or cuda (default: cuda when available)")
+    parser.add_argument("--train", action="store_true",
+                        help="make every scene and train SetDiff and DiFix on the training scenes instead of "
+                             "evaluating the shipped models")
     parser.add_argument("--setdiff-steps", type=int, default=None, help="override the preset's SetDiff steps")
     parser.add_argument("--difix-steps", type=int, default=None, help="override the preset's DiFix steps")
     parser.add_argument("--ablations", action="store_true",
-                        help="also run the geometry and set-size ablations (four more trainings)")
+                        help="with --train: also run the geometry and set-size ablations (four more trainings)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
@@ -45,6 +51,7 @@ def invocation(args: argparse.Namespace) -> str:
                         ("--difix-steps", args.difix_steps)):
         if value is not None:
             parts += [flag, str(value)]
+    parts += ["--train"] if args.train else []
     if args.ablations:
         parts.append("--ablations")
     return "setdiff-bench " + shlex.join(parts)
@@ -60,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
     preset = get_demo_preset(args.preset)
     paths = DemoPaths(out=args.out, work=args.work or args.out / "work")
     try:
-        summary = run_demo(preset, paths, seed=args.seed, jobs=args.jobs, device=args.device,
+        summary = run_demo(preset, paths, seed=args.seed, jobs=args.jobs, device=args.device, train=args.train,
                            setdiff_steps=args.setdiff_steps, difix_steps=args.difix_steps, ablations=args.ablations,
                            progress=not args.no_progress, invocation=invocation(args))
     except StageFailed as failure:

@@ -14,6 +14,7 @@ import importlib
 import os
 import pkgutil
 import re
+import shlex
 import sys
 import textwrap
 from collections.abc import Sequence
@@ -87,6 +88,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Parse ``argv`` and run the verb; returns the process exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    #: the command as typed, for the records a verb writes (training manifests)
+    args.command_line = "setdiff-bench " + shlex.join(sys.argv[1:] if argv is None else list(argv))
     try:
         with verb_threads():  # one fixed thread count: same command, same machine, same bytes
             return int(args._run(args) or 0)

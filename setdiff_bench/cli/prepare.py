@@ -33,6 +33,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, type=Path, help="packet store folder")
     parser.add_argument("--split", choices=("train", "test", "all"), default="all",
                         help="which scenes of the protocol's scene split (default: all)")
+    parser.add_argument("--test-scene", action="append", dest="test_scenes", metavar="NAME",
+                        help="declare this scene a test scene (repeatable); every scene not named is then a "
+                             "train scene, in place of the protocol's scene split")
     parser.add_argument("--scene", action="append", dest="scenes", metavar="NAME",
                         help="only this scene (repeatable)")
     parser.add_argument("--group", action="append", dest="groups", metavar="NAME",
@@ -75,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
                       split=args.split, scenes=args.scenes, workers=args.workers, shard=parse_shard(args.shard),
                       backend=args.backend, device=args.device, threads=args.threads, cmap_precision=args.cmap_precision,
                       loader_options=parse_loader_options(args.loader_option), fit_iterations=args.fit_iterations,
-                      progress=not args.quiet, groups=args.groups)
+                      progress=not args.quiet, groups=args.groups,
+                      test_scenes=args.test_scenes)
     print(summary.line())
     return 0

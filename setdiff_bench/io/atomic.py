@@ -11,9 +11,12 @@ renamed into place from there are given the modes an ordinary ``open``/``mkdir``
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import ctypes.util
 import fcntl
 import hashlib
 import os
+import shutil
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -73,6 +76,53 @@ def staging_dir(parent: str | os.PathLike[str], prefix: str, suffix: str = "") -
     folder = Path(tempfile.mkdtemp(prefix=prefix, suffix=suffix, dir=parent))
     os.chmod(folder, new_dir_mode())
     return folder
+
+
+@contextlib.contextmanager
+def staged_folder(destination: str | os.PathLike[str]) -> Iterator[Path]:
+    """Build a folder that replaces ``destination`` whole: yields a staging folder beside it, which is swapped
+    in when the block ends normally (:func:`replace_folder`) and deleted when it raises."""
+    destination = Path(destination)
+    destination.parent.mkdir(parents=True, exist_ok=True)
+    staging = staging_dir(destination.parent, prefix=f".{destination.name}.", suffix=".tmp")
+    try:
+        yield staging
+        replace_folder(staging, destination)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+
+
+def replace_folder(staging: Path, destination: Path) -> None:
+    """Put the complete folder ``staging`` at ``destination`` and delete the previous ``destination``.
+
+    One ``renameat2(RENAME_EXCHANGE)`` where Linux offers it, so a reader sees the old folder or the new one,
+    never a mix; elsewhere two renames (the old folder is moved aside first).
+    """
+    if not destination.exists():
+        os.rename(staging, destination)
+        return
+    if _exchange(staging, destination):  # destination now holds the new files, staging the old ones
+        shutil.rmtree(staging)
+        return
+    old = destination.with_name(f".{destination.name}.old")
+    shutil.rmtree(old, ignore_errors=True)
+    os.rename(destination, old)
+    os.rename(staging, destination)
+    shutil.rmtree(old)
+
+
+_RENAME_EXCHANGE = 2  # linux/fs.h
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Atomically swap two paths (Linux ``renameat2``); ``False`` where unavailable."""
+    with contextlib.suppress(OSError, AttributeError, TypeError):
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        at_fdcwd = -100
+        result = libc.renameat2(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), _RENAME_EXCHANGE)
+        return result == 0
+    return False
 
 
 def write_bytes_atomic(destination: str | os.PathLike[str], data: bytes) -> None:

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import hashlib
+import json
 import sys
 import types
 from pathlib import Path
 from typing import ClassVar
 
+import pandas as pd
 import pytest
 from setdiff_fixtures import make_sample
 
@@ -41,6 +44,12 @@ class FakeStore:
     def __init__(self, root: Path) -> None:
         self.root = Path(root)
         self.samples = {"train-0": make_sample(2, 2, seed=0), "test-0": make_sample(1, 2, seed=1)}
+        # index rows as prepare writes them (only the columns the training manifest reads)
+        self.index = pd.DataFrame({
+            "packet_id": ["train-0", "train-0", "test-0"], "split": ["train", "train", "test"],
+            "scene": ["scene_0003_01", "scene_0003_01", "scene_0003_02"],
+            **{f"{c}_sha256": ["a" * 64, "b" * 64, "c" * 64] for c in ("image", "cmap", "gt")},
+            "mask_sha256": ["", "d" * 64, ""]})
 
     def training_dataset(self, split: str = "train", min_views: int = 8, max_views: int = 12, seed: int = 0) -> list:
         FakeStore.calls.append(("training_dataset", (split, min_views, max_views, seed)))
@@ -83,6 +92,15 @@ def test_train_verb(tmp_path: Path, fake_store: type[FakeStore], capsys: pytest.
     assert main(["train", "--config", str(config), "--packets", "p", "--out", str(out), "--no-progress",
                  "--steps", "3"]) == 0
     assert resolve_checkpoint(out).name == "step-00000003"
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert [(s["start_step"], s["end_step"]) for s in manifest["sessions"]] == [(0, 2), (2, 3)]
+    assert manifest["sessions"][1]["command"].startswith("setdiff-bench train --config")
+    assert manifest["steps"] == 3 and manifest["seed"] == 0 and manifest["method"] == "setdiff"
+    assert manifest["data"]["scenes"] == ["scene_0003_01"] and manifest["data"]["synthetic_seeds"] == [[3, 1]]
+    # the data hash: SHA-256 over the sorted distinct file hashes of the train rows, written out by hand
+    expected = hashlib.sha256("\n".join(["a" * 64, "b" * 64, "d" * 64]).encode()).hexdigest()
+    assert manifest["data"]["data_sha256"] == expected
+    assert manifest["validation"]["psnr"] > 0
 
 
 def test_train_verb_errors(tmp_path: Path, fake_store: type[FakeStore], capsys: pytest.CaptureFixture[str]) -> None:

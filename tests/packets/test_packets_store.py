@@ -159,3 +159,21 @@ def test_half_precision_cmaps_are_smaller_and_close(prepared, street, tmp_path):
     np.testing.assert_allclose(a.targets.cmaps, b.targets.cmaps, rtol=2 ** -10, atol=1e-6)
     assert half.rows(pid)["recipe"].iloc[0] != full.rows(pid)["recipe"].iloc[0]  # switching precision rewrites
     assert (out / half.rows(pid)["cmap"].iloc[0]).stat().st_size < (full.root / full.rows(pid)["cmap"].iloc[0]).stat().st_size
+
+
+def test_declared_test_scenes_replace_the_protocol_split(street, tmp_path, capsys):
+    """``prepare --test-scene`` makes the named scenes the test split and every other scene train (the fixture's
+    60/40 rule would make street_02 the test scene)."""
+    root, _ = street
+    out = tmp_path / "o"
+    assert main(["prepare", "synthetic", "--root", str(root), "--fits", str(root), "--out", str(out),
+                 "--split", "test", "--test-scene", "street_00", "--quiet"]) == 0
+    index = PacketStore(out).index
+    assert set(index["scene"]) == {"street_00"} and set(index["split"]) == {"test"}
+    capsys.readouterr()
+    code = main(["prepare", "synthetic", "--root", str(root), "--fits", str(root), "--out", str(tmp_path / "x"),
+                 "--test-scene", "street_09"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1
+    assert "no scene 'street_09'" in err and "street_00, street_01, street_02" in err
+    assert not (tmp_path / "x").exists()

@@ -28,7 +28,6 @@ import random
 import sys
 import time
 from dataclasses import asdict, dataclass
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -36,13 +35,13 @@ import torch
 
 from setdiff_bench.errors import UsageError, WeightsError
 from setdiff_bench.io.atomic import atomic_path, write_text_atomic
+from setdiff_bench.models.setdiff.packaged import file_table, packaged_folder, packaged_names
 
 CONFIG_FILE = "config.json"
 WEIGHTS_FILE = "weights.safetensors"
 MANIFEST_FILE = "manifest.json"
 STATE_FILE = "training_state.pt"
 AUTOENCODER_FILES = (CONFIG_FILE, WEIGHTS_FILE, MANIFEST_FILE)
-PACKAGED_FOLDER = "weights"
 
 
 @dataclass(frozen=True)
@@ -77,24 +76,16 @@ def tiny_vae_config(latent_channels: int) -> dict[str, Any]:
     return {**TINY_VAE, "latent_channels": int(latent_channels)}
 
 
-def packaged_autoencoders() -> dict[str, Path]:
-    """Autoencoders shipped in the package (``setdiff_bench/models/setdiff/weights/<name>/``), by name."""
-    folder = resources.files("setdiff_bench.models.setdiff") / PACKAGED_FOLDER
-    if not folder.is_dir():
-        return {}
-    return {Path(str(p)).name: Path(str(p)) for p in folder.iterdir() if (Path(str(p)) / CONFIG_FILE).is_file()}
-
-
 def resolve_autoencoder(source: str | Path) -> Path:
     """A folder path, or a packaged autoencoder's name → its folder (checked to hold every file)."""
     path = Path(source)
     if not path.is_dir():
-        packaged = packaged_autoencoders()
-        if str(source) not in packaged:
-            known = ", ".join(sorted(packaged)) or "none"
+        shipped = packaged_folder(str(source), "autoencoder")
+        if shipped is None:
+            known = ", ".join(packaged_names("autoencoder")) or "none"
             raise WeightsError(f"autoencoder folder not found (packaged autoencoders: {known}); "
                                "train one with `setdiff-bench train autoencoder`", source)
-        path = packaged[str(source)]
+        path = shipped
     for name in (CONFIG_FILE, WEIGHTS_FILE):
         if not (path / name).is_file():
             raise WeightsError(f"autoencoder folder has no {name}", path)
@@ -293,6 +284,7 @@ def train_autoencoder(packets: str | Path, out_dir: str | Path, settings: Autoen
     with atomic_path(out / WEIGHTS_FILE) as temporary:
         save_file(state, str(temporary))
     write_text_atomic(out / CONFIG_FILE, json.dumps(config, indent=2, sort_keys=True) + "\n")
+    manifest["files"] = file_table(out, [CONFIG_FILE, WEIGHTS_FILE])  # what `weights verify` re-hashes
     write_text_atomic(out / MANIFEST_FILE, json.dumps(manifest, indent=2, sort_keys=True) + "\n")
     (out / STATE_FILE).unlink(missing_ok=True)
     return manifest

@@ -23,9 +23,10 @@ from typing import Any
 import torch
 
 from setdiff_bench.errors import CheckpointError, UsageError
-from setdiff_bench.io.atomic import new_file_mode, staging_dir, write_text_atomic
+from setdiff_bench.io.atomic import new_file_mode, staged_folder, write_text_atomic
 from setdiff_bench.io.safetensors_header import sort_metadata
 from setdiff_bench.models.setdiff.config import Config, ModelConfig, config_from_dict
+from setdiff_bench.models.setdiff.packaged import packaged_folder, packaged_names
 
 WEIGHTS_FILE = "model.safetensors"
 CONFIG_FILE = "config.json"
@@ -36,8 +37,11 @@ CHECKPOINTS_DIR = "checkpoints"
 
 
 def resolve_checkpoint(path: str | os.PathLike[str]) -> Path:
-    """A checkpoint folder, or a training output folder's newest checkpoint (via ``OUT/latest``)."""
+    """A checkpoint folder, a training output folder's newest checkpoint (via ``OUT/latest``), or the name of
+    a shipped model (``tiny_setdiff``, ``tiny_difix``: :mod:`~setdiff_bench.models.setdiff.packaged`)."""
     path = Path(path)
+    if not path.exists() and (shipped := packaged_folder(str(path), "enhancer")) is not None:
+        return shipped
     if (path / WEIGHTS_FILE).is_file():
         return path
     latest = path / LATEST_FILE
@@ -47,7 +51,8 @@ def resolve_checkpoint(path: str | os.PathLike[str]) -> Path:
             return candidate
         raise CheckpointError(f"'latest' names {candidate.name!r}, which has no {WEIGHTS_FILE}", latest)
     if not path.exists():
-        raise CheckpointError("checkpoint not found", path)
+        known = ", ".join(packaged_names("enhancer")) or "none"
+        raise CheckpointError(f"checkpoint not found (shipped models: {known})", path)
     raise CheckpointError(f"not a checkpoint: no {WEIGHTS_FILE} and no '{LATEST_FILE}' file", path)
 
 
@@ -90,9 +95,7 @@ def save_checkpoint(folder: str | os.PathLike[str], model: torch.nn.Module, conf
     model_config = getattr(model, "config", None)
     if isinstance(model_config, ModelConfig):  # the model's resolved choices (e.g. learn_text_embedding)
         config = dataclasses.replace(config, model=model_config)
-    folder.parent.mkdir(parents=True, exist_ok=True)
-    tmp = staging_dir(folder.parent, prefix=f".{folder.name}.", suffix=".tmp")
-    try:
+    with staged_folder(folder) as tmp:
         state = {name: tensor.detach().cpu().contiguous() for name, tensor in model.state_dict().items()}
         save_file(state, str(tmp / WEIGHTS_FILE), metadata={"format": "setdiff-bench", "config": config.to_json()})
         sort_metadata(tmp / WEIGHTS_FILE)  # same run, same bytes
@@ -102,17 +105,6 @@ def save_checkpoint(folder: str | os.PathLike[str], model: torch.nn.Module, conf
             torch.save(optimizer.state_dict(), tmp / OPTIMIZER_FILE)
         if step is not None:
             (tmp / TRAINER_FILE).write_text(json.dumps({"step": int(step)}) + "\n", encoding="utf-8")
-        if folder.exists():
-            old = folder.with_name(f".{folder.name}.old")
-            shutil.rmtree(old, ignore_errors=True)
-            os.replace(folder, old)
-            os.replace(tmp, folder)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp, folder)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return folder
 
 
@@ -186,6 +178,19 @@ def load_training_state(checkpoint: Path, optimizer: torch.optim.Optimizer) -> i
     except (ValueError, KeyError) as error:
         raise CheckpointError(f"optimizer state does not match the model: {error}", optimizer_path) from error
     return step
+
+
+def saved_step(checkpoint: Path) -> int:
+    """The training step a checkpoint folder was saved at (its ``trainer.json``).
+
+    Raises:
+        CheckpointError: no readable ``trainer.json``.
+    """
+    path = checkpoint / TRAINER_FILE
+    try:
+        return int(json.loads(path.read_text(encoding="utf-8"))["step"])
+    except (OSError, KeyError, TypeError, ValueError, json.JSONDecodeError) as error:
+        raise CheckpointError(f"cannot read the checkpoint's step: {error}", path) from error
 
 
 def step_folder(out_dir: Path, step: int) -> Path:
