@@ -125,7 +125,7 @@ class DemoPaths:
         return self.work / "runs"
 
 
-def test_scene_indices(preset: DemoPreset, seed: int) -> list[int]:
+def evaluation_scene_indices(preset: DemoPreset, seed: int) -> list[int]:
     """The generator indices of the preset's test scenes: the synthetic protocol's scene split over the
     scene names ``synth`` gives the preset's scenes (:func:`setdiff_bench.synthetic.generate.scene_name`)."""
     from setdiff_bench.protocols import load_protocol
@@ -182,7 +182,7 @@ def run_demo(preset: DemoPreset, paths: DemoPaths, *, seed: int = 0, jobs: int =
         raise UsageError("--setdiff-steps, --difix-steps and --ablations train models: add --train", "--train")
     from setdiff_bench.synthetic.generate import scene_name
 
-    test_indices = test_scene_indices(preset, seed)
+    test_indices = evaluation_scene_indices(preset, seed)
     shipped = {} if train else check_unseen([(seed, index) for index in test_indices])
     base = Path.cwd()
     (paths.out / SUMMARY_FILE).unlink(missing_ok=True)  # until this run completes, the folder is not a run

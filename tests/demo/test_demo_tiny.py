@@ -1,5 +1,5 @@
-"""CI smoke test: ``setdiff-bench demo --preset tiny`` runs end to end, writes well-formed, shareable outputs, and
-gives byte-identical results when run again."""
+"""CI smoke test: ``setdiff-bench demo --preset tiny`` runs end to end with the shipped models and with ``--train``,
+writes well-formed, shareable outputs, and gives byte-identical results when run again."""
 
 from __future__ import annotations
 
@@ -17,15 +17,15 @@ from setdiff_bench.io.images import read_image_raw
 from setdiff_bench.threads import compute_threads
 
 
-def run_tiny_demo(folder: Path, omp_threads: str) -> Path:
-    """``setdiff-bench demo --preset tiny`` from ``folder`` (relative ``--out``, so that the recorded commands
+def run_tiny_demo(folder: Path, omp_threads: str, *extra: str) -> Path:
+    """``setdiff-bench demo --preset tiny [extra]`` from ``folder`` (relative ``--out``, so that the recorded commands
     match between folders), under umask 022 and the given ``OMP_NUM_THREADS`` (which must not matter)."""
     previous_cwd, previous_umask = Path.cwd(), os.umask(0o022)
     previous_omp = os.environ.get("OMP_NUM_THREADS")
     os.environ["OMP_NUM_THREADS"] = omp_threads
     try:
         os.chdir(folder)
-        assert main(["demo", "--preset", "tiny", "--out", "runs/demo", "--no-progress"]) == 0
+        assert main(["demo", "--preset", "tiny", "--out", "runs/demo", "--no-progress", *extra]) == 0
     finally:
         os.chdir(previous_cwd)
         os.umask(previous_umask)
@@ -38,12 +38,19 @@ def run_tiny_demo(folder: Path, omp_threads: str) -> Path:
 
 @pytest.fixture(scope="module")
 def demo_out(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return run_tiny_demo(tmp_path_factory.mktemp("demo"), omp_threads="1")
+    """The whole path: scenes, training, evaluation."""
+    return run_tiny_demo(tmp_path_factory.mktemp("demo"), "1", "--train")
 
 
 @pytest.fixture(scope="module")
 def second_demo_out(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return run_tiny_demo(tmp_path_factory.mktemp("demo_again"), omp_threads="2")
+    return run_tiny_demo(tmp_path_factory.mktemp("demo_again"), "2", "--train")
+
+
+@pytest.fixture(scope="module")
+def shipped_demo_out(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The default path: the preset's test scenes and the shipped models."""
+    return run_tiny_demo(tmp_path_factory.mktemp("demo_shipped"), "1")
 
 
 #: Files that record wall times or absolute paths, never results (compared without those fields below).
@@ -132,3 +139,27 @@ def test_demo_per_target_metrics_and_images(demo_out: Path) -> None:
     grid = read_image_raw(demo_out / "synthetic_grid.png", "uint8")
     assert grid.ndim == 3 and grid.shape[2] >= 3 and grid.shape[0] > 48
     assert (demo_out / "synthetic_lane_shift.png").is_file()
+
+
+def test_shipped_demo_evaluates_the_packaged_models_on_test_scenes_only(shipped_demo_out: Path) -> None:
+    summary = json.loads((shipped_demo_out / "demo.json").read_text())
+    names = [stage["name"] for stage in summary["stages"]]
+    assert names == ["synth", "prepare", *(f"run {m}" for m in METHODS), "leaderboard"]
+    commands = {stage["name"]: stage["command"] for stage in summary["stages"]}
+    assert "--indices 2" in commands["synth"] and "--test-scene scene_0000_02" in commands["prepare"]
+    assert "--checkpoint tiny_setdiff" in commands["run setdiff"] and "--checkpoint tiny_difix" in commands["run difix"]
+    assert summary["test_scenes"] == ["scene_0000_02"]
+    assert sorted(p.name for p in (shipped_demo_out / "work" / "scenes").iterdir()) == ["scene_0000_02"]
+    assert not (shipped_demo_out / "work" / "checkpoints").exists()
+    for method, model in summary["models"].items():
+        assert model["shipped"] == f"tiny_{method}" and "scene_0000_02" not in model["trained_on"]
+    board = pd.read_parquet(shipped_demo_out / "synthetic.parquet")
+    assert set(board["method"]) == set(METHODS) and board["value"].notna().all()
+    readme = (shipped_demo_out / "README.md").read_text()
+    assert "the shipped model `tiny_setdiff`" in readme and "Test scenes: scene_0000_02" in readme
+
+
+def test_training_options_need_train(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["demo", "--preset", "tiny", "--out", str(tmp_path / "d"), "--ablations"]) == 2
+    assert "add --train" in capsys.readouterr().err
+    assert not (tmp_path / "d").exists()
