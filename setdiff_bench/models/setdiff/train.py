@@ -9,16 +9,23 @@ loss on every target plus the reconstruction loss on ``decode_targets`` random d
 convs, a learned text embedding), gradient clipping, gradient accumulation.
 
 Runs under ``accelerate``: one process per GPU with DDP (``accelerate launch -m setdiff_bench.cli.main
-train ...``), bf16 autocast on CUDA and float32 on the CPU by default; total batch =
-processes × ``gradient_accumulation``.  Every random choice derives from ``seed``, the process rank and
-the step, so a resumed run draws the same sets as an uninterrupted one (for map-style datasets).
+train ...``; on CPUs ``accelerate launch --multi_gpu --num_processes N`` runs DDP over gloo), bf16 autocast
+on CUDA and float32 on the CPU by default; total batch = processes × ``gradient_accumulation``.  The
+samples form one global sequence (see :class:`SampleStream`); sample ``g`` goes to process ``g % world``
+and every random choice of its set derives from ``seed`` and ``g`` alone.  So N processes train exactly
+what one process with N-fold gradient accumulation trains (up to float summation order), and a resumed
+run, with any number of processes, draws what an uninterrupted one would (for map-style datasets).
+Validation samples are split across the processes and their scores reduced.  Only the main process
+writes files.
 
 Checkpoints are written every ``min(checkpoint_every, 500, steps // 4)`` steps, at the end, and, inside
 :func:`setdiff_bench.interrupts.stop_at_safe_point` (the ``train`` verb), at the step where SIGINT or
 SIGTERM arrived, before :class:`~setdiff_bench.interrupts.Interrupted` is raised.
 Outputs in ``OUT``: ``checkpoints/step-XXXXXXXX/`` (see :mod:`.checkpoint`), ``latest``,
-``train_log.jsonl`` (losses every ``log_every`` steps) and ``validation.jsonl`` (PSNR/SSIM[/LPIPS]
-of the enhanced targets of the validation samples every ``validate_every`` steps).
+``train_log.jsonl`` (losses every ``log_every`` steps), ``validation.jsonl`` (PSNR/SSIM[/LPIPS]
+of the enhanced targets of the validation samples every ``validate_every`` steps) and ``samples.jsonl``
+(per step, the ``[global position, packet id]`` of every sample drawn, all processes).  On resume, records
+after the checkpoint's step (left by a killed run) are dropped before they are written again.
 """
 
 from __future__ import annotations
@@ -38,6 +45,7 @@ import torch
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.interrupts import Interrupted, stop_requested
+from setdiff_bench.io.atomic import write_text_atomic
 from setdiff_bench.models.setdiff.checkpoint import (
     check_compatible,
     load_training_state,
@@ -57,6 +65,7 @@ from setdiff_bench.types import TrainingSample
 
 LOG_FILE = "train_log.jsonl"
 VALIDATION_FILE = "validation.jsonl"
+SAMPLES_FILE = "samples.jsonl"
 
 
 @dataclass
@@ -77,17 +86,27 @@ class TrainResult:
 
 
 class SampleStream:
-    """An endless, resumable stream of training samples for one process.
+    """An endless, resumable stream of training samples for one process of a (possibly distributed) run.
 
-    Map-style datasets (``__len__`` + ``__getitem__``) are shuffled per epoch with a seeded permutation
-    and sharded by rank (``perm[rank::world]``); position ``start`` skips what a previous run used.
-    Other iterables are cycled in their own order (and restart from the beginning on resume).
+    Map-style datasets (``__len__`` + ``__getitem__``): the *global* sample sequence is the concatenation
+    of seeded per-epoch permutations (epoch ``e`` shuffled with ``seed * 1_000_003 + e``); global position
+    ``g`` is consumed by rank ``g % world``.  So the ranks of one optimiser step draw disjoint samples, their
+    union is what a single process with ``world``-fold gradient accumulation draws, a dataset smaller than
+    the world still gives every rank a different sample, and ``start`` (a global position) resumes the
+    sequence where it stopped, even with another number of processes.  Other iterables are cycled in their
+    own order, element ``k`` going to rank ``k % world`` (and restart from the beginning on resume).
+
+    After each ``next()``, :attr:`last` holds ``(global position, dataset index)`` of the sample returned
+    (``None`` as the index for iterables).
     """
 
     def __init__(self, dataset: Sequence[TrainingSample] | Iterable[TrainingSample], *, seed: int, rank: int = 0,
                  world: int = 1, start: int = 0, num_workers: int = 0) -> None:
+        if not 0 <= rank < world:
+            raise ValueError(f"rank {rank} outside a world of {world}")
         self.dataset, self.seed, self.rank, self.world = dataset, seed, rank, world
-        self.position, self.num_workers = start, num_workers
+        self.start, self.num_workers = start, num_workers
+        self.last: tuple[int, int | None] | None = None
         self.map_style = hasattr(dataset, "__len__") and hasattr(dataset, "__getitem__")
         if self.map_style and len(dataset) == 0:  # type: ignore[arg-type]
             raise UsageError("the training dataset is empty", "--packets")
@@ -99,27 +118,32 @@ class SampleStream:
     def __next__(self) -> TrainingSample:
         return next(self._iterator)
 
-    def _epoch_indices(self, epoch: int) -> list[int]:
+    def epoch_permutation(self, epoch: int) -> list[int]:
+        """Dataset indices in the order the global sequence visits them during ``epoch``."""
         generator = torch.Generator().manual_seed(self.seed * 1_000_003 + epoch)
-        permutation = torch.randperm(len(self.dataset), generator=generator).tolist()  # type: ignore[arg-type]
-        shard = permutation[self.rank::self.world]
-        return shard or permutation[: 1]
+        return torch.randperm(len(self.dataset), generator=generator).tolist()  # type: ignore[arg-type]
 
     def _map_style(self) -> Iterator[TrainingSample]:
-        per_epoch = len(self._epoch_indices(0))
-        epoch, offset = divmod(self.position, per_epoch)
+        size = len(self.dataset)  # type: ignore[arg-type]
+        # the first global position at or after ``start`` that belongs to this rank
+        position = self.start + (self.rank - self.start) % self.world
         while True:
+            epoch = position // size
             if hasattr(self.dataset, "set_epoch"):  # e.g. the packet store's dataset: new draws per epoch
                 self.dataset.set_epoch(epoch)
-            indices = self._epoch_indices(epoch)[offset:]
+            permutation = self.epoch_permutation(epoch)
+            positions = range(position, (epoch + 1) * size, self.world)
+            indices = [permutation[g - epoch * size] for g in positions]
             if self.num_workers > 0:
                 loader = torch.utils.data.DataLoader(self.dataset, batch_size=None, sampler=indices,  # type: ignore[arg-type]
                                                      num_workers=self.num_workers, collate_fn=_identity)
-                yield from loader
+                samples: Iterable[TrainingSample] = loader
             else:
-                for index in indices:
-                    yield self.dataset[index]  # type: ignore[index]
-            epoch, offset = epoch + 1, 0
+                samples = (self.dataset[index] for index in indices)  # type: ignore[index]
+            for g, index, sample in zip(positions, indices, samples, strict=True):
+                self.last = (g, index)
+                yield sample
+            position = positions[-1] + self.world  # ``positions`` is never empty: position < (epoch + 1) * size
 
     def _cycle(self) -> Iterator[TrainingSample]:
         while True:
@@ -127,6 +151,7 @@ class SampleStream:
             for number, sample in enumerate(self.dataset):
                 if number % self.world == self.rank:
                     empty = False
+                    self.last = (number, None)
                     yield sample
             if empty:
                 raise UsageError("the training dataset yielded no samples for this process", "--packets")
@@ -191,9 +216,13 @@ def train(config: Config, dataset: Sequence[TrainingSample] | Iterable[TrainingS
     model, optimizer = accelerator.prepare(model, optimizer)
     core: SetDiffModel = accelerator.unwrap_model(model)
     rank, world = accelerator.process_index, accelerator.num_processes
-    stream = SampleStream(dataset, seed=tc.seed, rank=rank, world=world, start=start * tc.gradient_accumulation,
+    per_step = tc.gradient_accumulation * world  # samples per optimiser step, all processes together
+    stream = SampleStream(dataset, seed=tc.seed, rank=rank, world=world, start=start * per_step,
                           num_workers=tc.num_workers)
     main = accelerator.is_main_process
+    if main and start > 0:  # records of steps after the checkpoint (a killed run) are redone now
+        for name in (LOG_FILE, VALIDATION_FILE, SAMPLES_FILE):
+            _truncate_jsonl(out / name, start)
     bar = tqdm(total=tc.steps, initial=start, disable=not (progress and main), desc=f"train {config.model.method}",
                dynamic_ncols=True)
     result = TrainResult(step=start, checkpoint=previous or out)
@@ -202,13 +231,22 @@ def train(config: Config, dataset: Sequence[TrainingSample] | Iterable[TrainingS
     began = time.perf_counter()
 
     for step in range(start, tc.steps):
+        drawn: list[tuple[int, str]] = []
         for micro in range(tc.gradient_accumulation):
-            rng = random.Random(f"{tc.seed}/{rank}/{step}/{micro}")
+            # the sample's global position keys every random choice of its set: a run on N processes
+            # draws exactly what one process with N-fold gradient accumulation draws
+            position = (step * tc.gradient_accumulation + micro) * world + rank
+            sample = next(stream)
+            if stream.last is not None and stream.map_style and stream.last[0] != position:
+                raise RuntimeError(f"sample stream at position {stream.last[0]}, expected {position}")
+            drawn.append((position, _sample_name(sample)))
+            rng = random.Random(f"{tc.seed}/{position}")
             sync = micro == tc.gradient_accumulation - 1
             with contextlib.nullcontext() if sync else accelerator.no_sync(model):
-                terms = _micro_step(model, core, next(stream), rng, config, reconstruction, accelerator)
+                terms = _micro_step(model, core, sample, rng, config, reconstruction, accelerator)
             for key, value in terms.items():
                 running[key] = running.get(key, 0.0) + value / tc.gradient_accumulation
+        drawn = sorted(_gather_list(accelerator, drawn))
         if tc.grad_clip > 0:
             accelerator.clip_grad_norm_(model.parameters(), tc.grad_clip)
         optimizer.step()
@@ -216,6 +254,8 @@ def train(config: Config, dataset: Sequence[TrainingSample] | Iterable[TrainingS
         running_steps += 1
         done = step + 1
         result.step = done
+        if main:
+            _append_jsonl(out / SAMPLES_FILE, {"step": done, "samples": [list(entry) for entry in drawn]})
         if done % tc.log_every == 0 or done == tc.steps:
             logged = {k: _gather_mean(accelerator, v / running_steps) for k, v in running.items()}
             running, running_steps = {}, 0
@@ -226,14 +266,14 @@ def train(config: Config, dataset: Sequence[TrainingSample] | Iterable[TrainingS
                                                "seconds": round(time.perf_counter() - began, 3)})
         bar.update(1)
         if validation and (done % tc.validate_every == 0 or done == tc.steps):
+            # every process scores its share of the validation samples; the sums are reduced across them
+            with accelerator.autocast():
+                totals = validation_totals(core, validation[: tc.validation_packets][rank::world], reconstruction)
+            record = {"step": done, **_reduce_means(accelerator, totals)}
+            result.validation.append(record)
             if main:
-                with accelerator.autocast():
-                    scores = validate(core, validation[: tc.validation_packets], reconstruction)
-                record = {"step": done, **scores}
-                result.validation.append(record)
                 _append_jsonl(out / VALIDATION_FILE, record)
                 bar.write(f"step {done}: " + ", ".join(f"{k} {v:.4f}" for k, v in record.items() if k != "step"))
-            accelerator.wait_for_everyone()
         stopping = _any_process(accelerator, stop_requested())
         if done % checkpoint_interval(tc.checkpoint_every, tc.steps) == 0 or done == tc.steps or stopping:
             result.checkpoint = _save(accelerator, core, optimizer, config, out, done)
@@ -289,12 +329,23 @@ def _micro_step(model: Any, core: SetDiffModel, sample: TrainingSample, rng: ran
 def validate(model: SetDiffModel, samples: Sequence[TrainingSample],
              reconstruction: ReconstructionLoss | None = None) -> dict[str, float]:
     """Mean masked PSNR and SSIM (and LPIPS when the loss has it loaded) of enhanced vs ground-truth targets."""
+    totals = validation_totals(model, samples, reconstruction)
+    return {name: total / count for name, (total, count) in totals.items() if count > 0 and math.isfinite(total)}
+
+
+@torch.no_grad()
+def validation_totals(model: SetDiffModel, samples: Sequence[TrainingSample],
+                      reconstruction: ReconstructionLoss | None = None) -> dict[str, tuple[float, int]]:
+    """Per metric, the sum over every target of ``samples`` and the number of targets (for reduction across
+    processes): ``psnr`` and ``ssim`` (masked), ``lpips`` when the loss has LPIPS loaded."""
     from setdiff_bench.metrics.psnr import psnr
     from setdiff_bench.metrics.ssim import ssim
 
     was_training = model.training
     model.eval()
     scores: dict[str, list[float]] = {"psnr": [], "ssim": []}
+    if reconstruction is not None and reconstruction.lpips is not None:
+        scores["lpips"] = []
     try:
         for sample in samples:
             enhanced = enhance_packet(model, sample.packet)
@@ -302,14 +353,23 @@ def validate(model: SetDiffModel, samples: Sequence[TrainingSample],
             masks = sample.target_masks.bool()
             scores["psnr"] += psnr(enhanced, gt, masks).tolist()
             scores["ssim"] += ssim(enhanced, gt, mask=masks).tolist()
-            if reconstruction is not None and reconstruction.lpips is not None:
-                device = next(reconstruction.lpips.parameters()).device
+            if "lpips" in scores:
+                device = next(reconstruction.lpips.parameters()).device  # type: ignore[union-attr]
                 composite = torch.where(masks, enhanced, gt).to(device)
-                scores.setdefault("lpips", []).extend(
-                    reconstruction.lpips(composite, gt.to(device)).flatten().tolist())
+                scores["lpips"] += reconstruction.lpips(composite, gt.to(device)).flatten().tolist()  # type: ignore[union-attr]
     finally:
         model.train(was_training)
-    return {k: float(sum(v) / len(v)) for k, v in scores.items() if v and all(math.isfinite(x) for x in v)}
+    return {name: (float(sum(values)), len(values)) for name, values in scores.items()}
+
+
+def _reduce_means(accelerator: Any, totals: dict[str, tuple[float, int]]) -> dict[str, float]:
+    """Means over every process's targets from per-process ``(sum, count)`` pairs (same key order on all ranks)."""
+    names = sorted(totals)
+    sums = torch.tensor([[totals[n][0], float(totals[n][1])] for n in names], dtype=torch.float64)
+    if accelerator.num_processes > 1:
+        sums = accelerator.reduce(sums.to(accelerator.device), reduction="sum").cpu()
+    return {name: float(total / count) for name, (total, count) in zip(names, sums.tolist(), strict=True)
+            if count > 0 and math.isfinite(total)}
 
 
 def _save(accelerator: Any, core: SetDiffModel, optimizer: Any, config: Config, out: Path, step: int) -> Path:
@@ -336,6 +396,36 @@ def _any_process(accelerator: Any, flag: bool) -> bool:
     if accelerator.num_processes == 1:
         return flag
     return bool(accelerator.reduce(torch.tensor([float(flag)], device=accelerator.device), reduction="sum") > 0)
+
+
+def _gather_list(accelerator: Any, items: list[Any]) -> list[Any]:
+    """Every process's ``items``, concatenated (a collective: every rank must call it)."""
+    if accelerator.num_processes == 1:
+        return list(items)
+    from accelerate.utils import gather_object
+
+    return list(gather_object(items))
+
+
+def _sample_name(sample: TrainingSample) -> str:
+    """What identifies a training sample in ``samples.jsonl``: its packet id."""
+    packet = getattr(sample, "packet", None)
+    return str(getattr(packet, "packet_id", "?"))
+
+
+def _truncate_jsonl(path: Path, last_step: int) -> None:
+    """Keep the records of ``path`` up to ``last_step`` (and drop a line torn by a kill), atomically."""
+    if not path.is_file():
+        return
+    kept = []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        try:
+            record = json.loads(line)
+        except json.JSONDecodeError:
+            continue
+        if isinstance(record, dict) and int(record.get("step", 0)) <= last_step:
+            kept.append(line)
+    write_text_atomic(path, "".join(line + "\n" for line in kept))
 
 
 def _gather_mean(accelerator: Any, value: float) -> float:
