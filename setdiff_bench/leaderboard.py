@@ -41,6 +41,7 @@ from setdiff_bench.io.atomic import atomic_path, write_text_atomic
 from setdiff_bench.loaders import DATASETS
 from setdiff_bench.metrics.registry import METRICS
 from setdiff_bench.profiles import DEFAULT_PROFILE, PROFILE_COLUMN, get_profile
+from setdiff_bench.run import METRICS_FILE, RUN_FILE, SEQUENCES_FILE
 
 FORMATS = ("parquet", "latex", "md")
 ALL = ""  # block key of the pooled block (every group)
@@ -119,11 +120,20 @@ def natural_key(text: str) -> list[Any]:
 
 # ---------------------------------------------------------------------- inputs
 def find_runs(runs: str | Path) -> list[Path]:
-    """Every run folder (holding ``metrics.parquet``) under ``runs``, sorted."""
+    """Every run folder (holding ``metrics.parquet``) under ``runs``, sorted.
+
+    Raises:
+        LeaderboardError: a run folder (``run.json``) has no merged ``metrics.parquet`` yet, i.e. some of
+            its shards have not finished: a table without it would silently miss a method.
+    """
     root = Path(runs)
     if not root.is_dir():
         raise UsageError("runs folder not found", root)
-    return sorted(p.parent for p in root.rglob("metrics.parquet") if not p.name.startswith("."))
+    for claimed in sorted(root.rglob(RUN_FILE)):
+        if not (claimed.parent / METRICS_FILE).is_file():
+            raise LeaderboardError(f"run incomplete: no {METRICS_FILE} yet (shards unfinished or not merged); finish "
+                                   "them, or run the same `setdiff-bench run` command with --merge", claimed.parent)
+    return sorted(p.parent for p in root.rglob(METRICS_FILE) if not p.name.startswith("."))
 
 
 def load_runs(runs: str | Path | Sequence[Path]) -> tuple[pd.DataFrame, pd.DataFrame]:
@@ -132,9 +142,9 @@ def load_runs(runs: str | Path | Sequence[Path]) -> tuple[pd.DataFrame, pd.DataF
     images, sequences = [], []
     for folder in folders:
         try:
-            images.append(pd.read_parquet(folder / "metrics.parquet").assign(run=str(folder)))
-            if (folder / "sequences.parquet").is_file():
-                sequences.append(pd.read_parquet(folder / "sequences.parquet").assign(run=str(folder)))
+            images.append(pd.read_parquet(folder / METRICS_FILE).assign(run=str(folder)))
+            if (folder / SEQUENCES_FILE).is_file():
+                sequences.append(pd.read_parquet(folder / SEQUENCES_FILE).assign(run=str(folder)))
         except (OSError, pa.ArrowException) as error:
             raise LeaderboardError(f"unreadable run results ({type(error).__name__})", folder) from None
     image_frame = pd.concat(images, ignore_index=True) if images else pd.DataFrame()

@@ -19,10 +19,15 @@ Rows are sorted by packet id and target position, so the file depends only on th
 Resume and shards.  A packet is done when its fragment exists (fragments are written last, atomically),
 so a killed run restarted with the same command enhances only the rest.  Nothing is written before the
 first packet has been enhanced and scored (``run.json`` included), so a run that fails on bad input
-before that leaves no folder behind.  ``--shard i/n`` (0 ≤ i < n)
-takes every n-th packet of the sorted selection starting at i; shards may run at the same time into the
-same folder.  Whichever call finds every fragment present merges them (under a lock): the merged files
-depend only on the fragments, so one run and any sharding give the same ``metrics.parquet`` up to the
+before that leaves no folder behind.  ``--shard i/n`` (0 ≤ i < n) takes every n-th packet of the sorted
+selection starting at i; shards may run at the same time, on any machines, into the same folder on a
+shared filesystem.  Nothing needs a file lock (``flock`` is often missing on network filesystems):
+every file a shard writes is its own (images, its packets' fragments) or has one possible content
+(``run.json`` is created once with an atomic hard link; ``enhancer.json`` and the merged files are
+written by atomic rename and depend only on the settings and the fragments).  A shard that finds every
+fragment present merges them; on a network filesystem, whose directory listings may lag behind other
+machines, end with ``run --merge`` (the same command plus ``--merge``), which merges or refuses, in one
+line, while a fragment is missing.  One run and any sharding give the same ``metrics.parquet`` up to the
 timing column.  Everything written is deterministic except timing — ``ms_per_frame`` and the
 manifest's ``timing`` block — so an interrupted-and-resumed run matches an uninterrupted one byte for
 byte in ``images/`` and in every other column (compare with :func:`comparable_metrics`).
@@ -60,7 +65,7 @@ from setdiff_bench.enhancers.base import (
     create_enhancer,
 )
 from setdiff_bench.errors import PacketError, SetDiffBenchError, UsageError
-from setdiff_bench.io.atomic import atomic_path, file_lock, sha256_file, write_text_atomic
+from setdiff_bench.io.atomic import atomic_path, private_temporary, sha256_file, write_text_atomic
 from setdiff_bench.io.images import read_rgb, to_tensor_chw, write_png
 from setdiff_bench.metrics.registry import PRESETS, MetricSpec
 from setdiff_bench.run_paths import IMAGES_DIR, image_relative, safe_component
@@ -80,7 +85,9 @@ FRAGMENTS_DIR = "fragments"
 METRICS_FILE = "metrics.parquet"
 SEQUENCES_FILE = "sequences.parquet"
 MANIFEST_FILE = "manifest.json"
-LOCK_FILE = ".run.lock"
+#: Temporary files older than this (seconds) are left by killed writers and removed when merging; younger
+#: ones may belong to a shard writing right now.
+STALE_TEMPORARY_SECONDS = 3600.0
 #: Protocols whose targets are time-ordered camera sequences: warp error with ``warp="auto"``.
 SEQUENCE_PROTOCOLS = frozenset({"nuscenes"})
 #: Columns that are measurements of time, not results: excluded from byte-identity comparisons.
@@ -190,7 +197,7 @@ def fragment_path(out: Path, packet_id: str) -> Path:
 # ---------------------------------------------------------------------- the run
 def run_method(packets: str | os.PathLike[str] | Any, out: str | os.PathLike[str], settings: RunSettings, *,
                shard: Shard = Shard(), progress: bool | None = None, enhancer: Enhancer | None = None,
-               verify: bool = True) -> RunResult:
+               verify: bool = True, merge_only: bool = False) -> RunResult:
     """Enhance and score every packet of ``settings.split`` in this shard; merge when all are done.
 
     Args:
@@ -203,6 +210,8 @@ def run_method(packets: str | os.PathLike[str] | Any, out: str | os.PathLike[str
             notebooks); its ``name`` must equal ``settings.method``.
         verify: re-hash every file of the packets to enhance before starting (seconds for a store of
             thousands of files), so that a corrupt file stops the run at once.
+        merge_only: enhance nothing; merge every shard's fragments, or raise :class:`UsageError` naming
+            what is missing.
 
     Raises:
         SetDiffBenchError: bad store, unknown method or option, an output of the wrong shape, ...
@@ -225,6 +234,8 @@ def run_method(packets: str | os.PathLike[str] | Any, out: str | os.PathLike[str
     index_sha256 = sha256_file(Path(store.root) / "index.parquet")
     identity = settings.identity(index_sha256)
     _check_folder(out, identity)
+    if merge_only:
+        return _merge_finished(store, out, settings, specs, selection)
     mine = shard.select(selection)
     todo = [pid for pid in mine if not fragment_path(out, pid).is_file()]
     targets = _target_rows(store, selection)
@@ -270,6 +281,20 @@ def run_method(packets: str | os.PathLike[str] | Any, out: str | os.PathLike[str
     return RunResult(out, len(todo), len(mine) - len(todo), remaining, merged)
 
 
+def _merge_finished(store: Any, out: Path, settings: RunSettings, specs: Sequence[MetricSpec],
+                    selection: Sequence[str]) -> RunResult:
+    """``--merge``: merge a run whose shards have all finished; one line naming what is missing otherwise."""
+    if not (out / RUN_FILE).is_file():
+        raise UsageError("no run here to merge (no run.json): run the shards first", out)
+    missing = [pid for pid in selection if not fragment_path(out, pid).is_file()]
+    if missing:
+        shown = ", ".join(missing[:3]) + (", ..." if len(missing) > 3 else "")
+        raise UsageError(f"run incomplete: {len(missing)} of {len(selection)} packets have no fragment ({shown}); "
+                         "rerun the shards that hold them (the same command resumes), then merge again", out)
+    merge_run(store, out, settings, specs, selection)
+    return RunResult(out, 0, len(selection), 0, True)
+
+
 def _open_store(packets: Any) -> Any:
     if isinstance(packets, str | os.PathLike):
         from setdiff_bench.packets import PacketStore
@@ -293,18 +318,17 @@ def _check_folder(out: Path, identity: dict[str, Any]) -> None:
 def _claim_folder(out: Path, identity: dict[str, Any]) -> None:
     """Create ``out`` with ``run.json``, or check that the run already there has the same settings.
 
-    Runs under the folder's lock, so shards started together into a new folder agree on one ``run.json``.
+    Lock-free: ``run.json`` is written to a private temporary file and hard-linked into place, which
+    fails if the file exists (atomic on local and network filesystems), so shards started together into
+    a new folder agree on one ``run.json``, and a shard with other settings is refused.
     """
-    if out.exists() and not (out / RUN_FILE).is_file() and _has_visible_files(out):
-        raise UsageError("output folder is not empty and holds no run.json; choose another --out", out)
     out.mkdir(parents=True, exist_ok=True)
     run_file = out / RUN_FILE
-    with file_lock(out / LOCK_FILE):
-        if not run_file.is_file():
-            if _has_visible_files(out):
-                raise UsageError("output folder is not empty and holds no run.json; choose another --out", out)
-            write_text_atomic(run_file, json.dumps(identity, indent=2, sort_keys=True) + "\n")
-            return
+    if not run_file.is_file():
+        with private_temporary(run_file) as tmp:
+            tmp.write_text(json.dumps(identity, indent=2, sort_keys=True) + "\n")
+            with contextlib.suppress(FileExistsError):
+                os.link(tmp, run_file)
     _compare_settings(out, identity)
 
 
@@ -443,49 +467,52 @@ def merge_run(store: Any, out: Path, settings: RunSettings, specs: Sequence[Metr
               selection: Sequence[str]) -> None:
     """Merge every fragment into ``metrics.parquet`` (+ ``sequences.parquet``) and write ``manifest.json``.
 
-    Idempotent: nothing is rewritten when the manifest already records the same fragments.
+    Idempotent: nothing is rewritten when the manifest already records the same fragments.  Lock-free:
+    every output depends only on the fragments and is written by atomic rename, so two shards merging
+    at once write the same bytes.
     """
-    with file_lock(out / LOCK_FILE):
-        _remove_stale_temporaries(out)
-        paths = [fragment_path(out, pid) for pid in selection]
-        digest = hashlib.sha256()
-        for path in paths:
-            digest.update(f"{path.name}:{sha256_file(path)}\n".encode())
-        fragments_sha256 = digest.hexdigest()
-        manifest_path = out / MANIFEST_FILE
-        if manifest_path.is_file() and (out / METRICS_FILE).is_file():
-            with contextlib.suppress(OSError, json.JSONDecodeError):
-                if json.loads(manifest_path.read_text()).get("fragments_sha256") == fragments_sha256:
-                    return
-        names = [spec.name for spec in specs]
-        tables = []
-        for path in paths:
-            try:
-                tables.append(pq.read_table(path).cast(row_schema(names)))
-            except (OSError, pa.ArrowException) as error:
-                raise PacketError(f"unreadable run fragment ({type(error).__name__}); delete it to redo the packet",
-                                  path) from None
-        merged = pa.concat_tables(tables).sort_by([("packet_id", "ascending"), ("view", "ascending")])
-        with atomic_path(out / METRICS_FILE) as tmp:
-            pq.write_table(merged, tmp, compression="zstd")
-        frame = merged.to_pandas()
-        sequences = None
-        if warp_enabled(settings, sorted(frame["protocol"].unique())):
-            sequences = _sequence_table(store, out, frame, settings)
-            with atomic_path(out / SEQUENCES_FILE) as tmp:
-                pq.write_table(sequences, tmp, compression="zstd")
-        manifest = _manifest(store, out, settings, specs, frame, sequences, fragments_sha256)
-        write_text_atomic(manifest_path, json.dumps(manifest, indent=2, sort_keys=True) + "\n")
+    _remove_stale_temporaries(out)
+    paths = [fragment_path(out, pid) for pid in selection]
+    digest = hashlib.sha256()
+    for path in paths:
+        digest.update(f"{path.name}:{sha256_file(path)}\n".encode())
+    fragments_sha256 = digest.hexdigest()
+    manifest_path = out / MANIFEST_FILE
+    if manifest_path.is_file() and (out / METRICS_FILE).is_file():
+        with contextlib.suppress(OSError, json.JSONDecodeError):
+            if json.loads(manifest_path.read_text()).get("fragments_sha256") == fragments_sha256:
+                return
+    names = [spec.name for spec in specs]
+    tables = []
+    for path in paths:
+        try:
+            tables.append(pq.read_table(path).cast(row_schema(names)))
+        except (OSError, pa.ArrowException) as error:
+            raise PacketError(f"unreadable run fragment ({type(error).__name__}); delete it to redo the packet",
+                              path) from None
+    merged = pa.concat_tables(tables).sort_by([("packet_id", "ascending"), ("view", "ascending")])
+    with atomic_path(out / METRICS_FILE) as tmp:
+        pq.write_table(merged, tmp, compression="zstd")
+    frame = merged.to_pandas()
+    sequences = None
+    if warp_enabled(settings, sorted(frame["protocol"].unique())):
+        sequences = _sequence_table(store, out, frame, settings)
+        with atomic_path(out / SEQUENCES_FILE) as tmp:
+            pq.write_table(sequences, tmp, compression="zstd")
+    manifest = _manifest(store, out, settings, specs, frame, sequences, fragments_sha256)
+    write_text_atomic(manifest_path, json.dumps(manifest, indent=2, sort_keys=True) + "\n")
 
 
 def _remove_stale_temporaries(out: Path) -> None:
-    """Temporary files of writes killed mid-way (``.<name>.<random>.tmp<ext>``)."""
+    """Temporary files of writes killed mid-way (``.<name>.<random>.tmp<ext>``) older than
+    :data:`STALE_TEMPORARY_SECONDS` (younger ones may be another shard's write in progress)."""
+    now = time.time()
     for folder in (out / IMAGES_DIR, out / FRAGMENTS_DIR, out):
         if folder.is_dir():
             pattern = "**/.*.tmp*" if folder.name == IMAGES_DIR else ".*.tmp*"
             for stale in folder.glob(pattern):
-                if stale.is_file():
-                    with contextlib.suppress(FileNotFoundError):
+                with contextlib.suppress(FileNotFoundError):
+                    if stale.is_file() and now - stale.stat().st_mtime > STALE_TEMPORARY_SECONDS:
                         stale.unlink()
 
 

@@ -6,6 +6,11 @@ See :mod:`setdiff_bench.run` for the output layout, resume and shard semantics. 
     setdiff-bench run --method reproject --packets P --out results/runs/synthetic/reproject -o tolerance=0.05
     setdiff-bench run --method precomputed --from my_outputs/ --packets P --out results/runs/synthetic/mine
     setdiff-bench run --method setdiff --checkpoint ckpt/ --packets P --device cuda --shard 0/2
+    setdiff-bench run --method setdiff --checkpoint ckpt/ --packets P --merge
+
+Shards (``--shard i/n``) may run at the same time on any machines into one folder on a shared
+filesystem; no file lock is used.  The shard that finds every fragment present merges them; on a
+network filesystem end with the same command plus ``--merge`` (it refuses while a fragment is missing).
 """
 
 from __future__ import annotations
@@ -40,6 +45,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--warp-cache", default="auto", metavar="DIR",
                         help="cache of ground-truth flows for warp error, shared by methods (auto: the user cache; "
                              "none: off)")
+    parser.add_argument("--merge", action="store_true",
+                        help="enhance nothing: merge the fragments every shard wrote (refused while one is missing)")
     parser.add_argument("--no-verify", action="store_true",
                         help="skip the up-front SHA-256 check of the packets' files (each file is still checked "
                              "when it is read)")
@@ -74,11 +81,12 @@ def run(args: argparse.Namespace) -> int:
                            warp_cache=None if args.warp_cache == "none" else args.warp_cache)
     out = args.out or Path("results") / "runs" / Path(args.packets).resolve().name / args.method
     result = run_method(args.packets, out, settings, shard=shard, progress=False if args.no_progress else None,
-                        verify=not args.no_verify)
-    print(f"{args.method} [{shard}]: enhanced {result.enhanced} packets, {result.skipped} already done → {out}")
+                        verify=not args.no_verify, merge_only=args.merge)
+    if not args.merge:
+        print(f"{args.method} [{shard}]: enhanced {result.enhanced} packets, {result.skipped} already done → {out}")
     if result.merged:
         print(f"complete: {out / 'metrics.parquet'}, {out / 'manifest.json'}")
     else:
         print(f"{result.remaining} packets of the selection remain for other shards; "
-              "the last shard to finish merges the results", file=sys.stderr)
+              "the last shard to finish merges the results (or run the same command with --merge)", file=sys.stderr)
     return 0

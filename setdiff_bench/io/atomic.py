@@ -47,6 +47,24 @@ def atomic_path(destination: str | os.PathLike[str], suffix: str | None = None) 
         raise
 
 
+@contextlib.contextmanager
+def private_temporary(destination: str | os.PathLike[str]) -> Iterator[Path]:
+    """Yield a fresh, uniquely named temporary file beside ``destination`` (created with the umask's mode),
+    removed when the block ends; for writers that publish it themselves, e.g. with a hard link."""
+    destination = Path(destination)
+    destination.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{destination.stem}.", suffix=f".tmp{destination.suffix}",
+                                    dir=destination.parent)
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        os.chmod(tmp, new_file_mode())
+        yield tmp
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+
+
 def current_umask() -> int:
     """The process umask, read without changing it (Linux ``/proc``); elsewhere set and restored at once."""
     with contextlib.suppress(OSError, ValueError):
