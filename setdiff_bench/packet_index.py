@@ -14,8 +14,7 @@ Store layout::
 A packet folder appears only complete: it is written under ``packets/.tmp-<packet_id>-*`` and
 renamed into place.  The top-level index is the concatenation of all fragments, sorted by packet id
 then role (references first) then position — so it depends only on which packets exist, not on the
-order, shard or worker that wrote them.  Merges run under an exclusive ``flock`` on
-``<store>/.index.lock``, so concurrent shards never publish a stale index last.
+order, shard or worker that wrote them.  Merges need no file lock (see :func:`merge_index`).
 
 Columns (:data:`SCHEMA`): ``packet_id, role ("ref" | "target"), view`` (position within the role),
 ``dataset, protocol, group, split, scene, fit_key, frame, sensor, traversal, timestamp_us`` (null when
@@ -40,11 +39,10 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from setdiff_bench.errors import PacketError
-from setdiff_bench.io.atomic import atomic_path, file_lock
+from setdiff_bench.io.atomic import atomic_path, is_stale_temporary
 
 INDEX_FILE = "index.parquet"
 PACKETS_DIR = "packets"
-LOCK_FILE = ".index.lock"
 TEMP_PREFIX = ".tmp-"
 ROLES = ("ref", "target")
 FILE_COLUMNS = ("image", "cmap", "gt", "mask")
@@ -117,33 +115,48 @@ def fragment_paths(root: Path) -> list[Path]:
                   if p.is_dir() and not p.name.startswith(".") and (p / INDEX_FILE).is_file())
 
 
-def index_lock(root: Path) -> contextlib.AbstractContextManager[None]:
-    """Exclusive advisory lock on ``root/.index.lock`` for the duration of the block."""
-    return file_lock(root / LOCK_FILE)
-
-
 def merge_index(root: Path) -> bool:
-    """Rebuild ``root/index.parquet`` from the packet fragments.
+    """Rebuild ``root/index.parquet`` from the packet fragments, without a file lock.
 
     Nothing is written when the merged bytes would equal the existing file (a resumed run with
-    nothing to do leaves the store untouched).  Stale temporary index files of killed runs are
-    removed under the lock.
+    nothing to do leaves the store untouched).  The index is written by atomic rename and depends only
+    on the fragments; after writing, the fragments are listed again and the merge is redone if they
+    changed, so of shards merging at once the last to publish has seen every fragment written before
+    its own merge.  (On a network filesystem whose listings may lag, run the same ``prepare`` command
+    once more without ``--shard`` after all shards: it skips every finished packet and merges.)
+    Temporary index files left by killed writers are removed
+    (:func:`~setdiff_bench.io.atomic.is_stale_temporary`).
 
     Returns:
         whether the index file was (re)written.
     """
-    with index_lock(root):
-        for stale in root.glob(f".{Path(INDEX_FILE).stem}.*.tmp*"):
-            with contextlib.suppress(FileNotFoundError):
+    for stale in root.glob(f".{Path(INDEX_FILE).stem}.*.tmp*"):
+        with contextlib.suppress(FileNotFoundError):
+            if is_stale_temporary(stale):
                 stale.unlink()
-        tables = [read_rows(p) for p in fragment_paths(root)]
+    written = False
+    while True:
+        paths = fragment_paths(root)
+        seen = _signature(paths)
+        tables = [read_rows(p) for p in paths]
         merged = sort_rows(pa.concat_tables(tables)) if tables else SCHEMA.empty_table()
         target = root / INDEX_FILE
+        unchanged = False
         if target.is_file():
-            try:
-                if read_rows(target).equals(merged):
-                    return False
-            except PacketError:
-                pass
-        write_rows(target, merged.to_pylist())
-        return True
+            with contextlib.suppress(PacketError):
+                unchanged = read_rows(target).equals(merged)
+        if not unchanged:
+            write_rows(target, merged.to_pylist())
+            written = True
+        if _signature(fragment_paths(root)) == seen:
+            return written
+
+
+def _signature(paths: Sequence[Path]) -> list[tuple[str, int, int]]:
+    """(path, size, mtime ns) of every fragment: changes when one is added, removed or rewritten."""
+    signature = []
+    for path in paths:
+        with contextlib.suppress(FileNotFoundError):
+            stat = path.stat()
+            signature.append((str(path), stat.st_size, stat.st_mtime_ns))
+    return signature

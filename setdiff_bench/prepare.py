@@ -22,8 +22,10 @@ Resume, shards, workers
 A packet is skipped when its folder holds a fragment with the same recipe and every file matches its
 SHA-256.  Work is split into units (scene, fit key), sorted; shard ``i/n`` takes units ``i, i+n, …``,
 so shards write disjoint packets and never fit the same model twice.  Each shard merges the fragments
-of the whole store into ``index.parquet`` under a file lock when it ends; the last shard to finish
-publishes the complete index.  ``workers`` > 1 renders packets in that many spawned processes.
+of the whole store into ``index.parquet`` when it ends, without a file lock (see
+:func:`~setdiff_bench.packet_index.merge_index`); the last shard to finish publishes the complete index.
+On a network filesystem, end with the same command without ``--shard``: it skips every finished packet
+and merges.  ``workers`` > 1 renders packets in that many spawned processes.
 Packets are byte-identical for identical inputs and render backend, whichever run, shard or worker
 wrote them.
 """

@@ -65,7 +65,13 @@ from setdiff_bench.enhancers.base import (
     create_enhancer,
 )
 from setdiff_bench.errors import PacketError, SetDiffBenchError, UsageError
-from setdiff_bench.io.atomic import atomic_path, private_temporary, sha256_file, write_text_atomic
+from setdiff_bench.io.atomic import (
+    atomic_path,
+    is_stale_temporary,
+    private_temporary,
+    sha256_file,
+    write_text_atomic,
+)
 from setdiff_bench.io.images import read_rgb, to_tensor_chw, write_png
 from setdiff_bench.metrics.registry import PRESETS, MetricSpec
 from setdiff_bench.run_paths import IMAGES_DIR, image_relative, safe_component
@@ -85,9 +91,6 @@ FRAGMENTS_DIR = "fragments"
 METRICS_FILE = "metrics.parquet"
 SEQUENCES_FILE = "sequences.parquet"
 MANIFEST_FILE = "manifest.json"
-#: Temporary files older than this (seconds) are left by killed writers and removed when merging; younger
-#: ones may belong to a shard writing right now.
-STALE_TEMPORARY_SECONDS = 3600.0
 #: Protocols whose targets are time-ordered camera sequences: warp error with ``warp="auto"``.
 SEQUENCE_PROTOCOLS = frozenset({"nuscenes"})
 #: Columns that are measurements of time, not results: excluded from byte-identity comparisons.
@@ -504,15 +507,14 @@ def merge_run(store: Any, out: Path, settings: RunSettings, specs: Sequence[Metr
 
 
 def _remove_stale_temporaries(out: Path) -> None:
-    """Temporary files of writes killed mid-way (``.<name>.<random>.tmp<ext>``) older than
-    :data:`STALE_TEMPORARY_SECONDS` (younger ones may be another shard's write in progress)."""
-    now = time.time()
+    """Temporary files of writes killed mid-way (``.<name>.<writer>.<random>.tmp<ext>``), not those of
+    another shard's write in progress (:func:`~setdiff_bench.io.atomic.is_stale_temporary`)."""
     for folder in (out / IMAGES_DIR, out / FRAGMENTS_DIR, out):
         if folder.is_dir():
             pattern = "**/.*.tmp*" if folder.name == IMAGES_DIR else ".*.tmp*"
             for stale in folder.glob(pattern):
                 with contextlib.suppress(FileNotFoundError):
-                    if stale.is_file() and now - stale.stat().st_mtime > STALE_TEMPORARY_SECONDS:
+                    if stale.is_file() and is_stale_temporary(stale):
                         stale.unlink()
 
 

@@ -13,13 +13,53 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import ctypes.util
-import fcntl
 import hashlib
 import os
+import re
 import shutil
+import socket
 import tempfile
+import time
 from collections.abc import Iterator
 from pathlib import Path
+
+#: A temporary file written by a process on another machine is taken as left by a killed writer once it
+#: is this old (seconds); on this machine the writer's process id (in the name) tells at once.
+STALE_TEMPORARY_SECONDS = 3600.0
+_WRITER = re.compile(r"\.w([A-Za-z0-9_-]+)-(\d+)\.[^/]*\.tmp[^/]*$")
+
+
+def _host() -> str:
+    return re.sub(r"[^A-Za-z0-9_-]", "_", socket.gethostname().split(".")[0]) or "host"
+
+
+def writer_tag() -> str:
+    """``w<host>-<pid>``: put in temporary file names so that a cleaner can tell whose write it is."""
+    return f"w{_host()}-{os.getpid()}"
+
+
+def is_stale_temporary(path: str | os.PathLike[str]) -> bool:
+    """Whether a temporary file (named by :func:`atomic_path`) was left by a writer that is gone: a dead
+    process on this machine, or, for another machine's (or an untagged) file, older than
+    :data:`STALE_TEMPORARY_SECONDS`.  Lets processes that share a folder without a lock clean up after
+    killed writers without deleting each other's writes in progress."""
+    path = Path(path)
+    match = _WRITER.search(path.name)
+    if match and match.group(1) == _host():
+        pid = int(match.group(2))
+        if pid == os.getpid():
+            return False
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return True
+        except PermissionError:
+            return False
+        return False
+    try:
+        return time.time() - path.stat().st_mtime > STALE_TEMPORARY_SECONDS
+    except FileNotFoundError:
+        return False
 
 
 @contextlib.contextmanager
@@ -32,7 +72,8 @@ def atomic_path(destination: str | os.PathLike[str], suffix: str | None = None) 
     destination = Path(destination)
     destination.parent.mkdir(parents=True, exist_ok=True)
     ext = destination.suffix if suffix is None else suffix
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{destination.stem}.", suffix=f".tmp{ext}", dir=destination.parent)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{destination.stem}.{writer_tag()}.", suffix=f".tmp{ext}",
+                                    dir=destination.parent)
     os.close(fd)
     tmp = Path(tmp_name)
     try:
@@ -53,7 +94,7 @@ def private_temporary(destination: str | os.PathLike[str]) -> Iterator[Path]:
     removed when the block ends; for writers that publish it themselves, e.g. with a hard link."""
     destination = Path(destination)
     destination.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{destination.stem}.", suffix=f".tmp{destination.suffix}",
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{destination.stem}.{writer_tag()}.", suffix=f".tmp{destination.suffix}",
                                     dir=destination.parent)
     os.close(fd)
     tmp = Path(tmp_name)
@@ -175,21 +216,3 @@ def _fsync_dir(path: Path) -> None:
             os.fsync(fd)
         finally:
             os.close(fd)
-
-
-@contextlib.contextmanager
-def file_lock(path: str | os.PathLike[str]) -> Iterator[None]:
-    """Hold an exclusive advisory lock (``flock``) on ``path`` for the duration of the block.
-
-    Used to serialise index merges between concurrent shard processes; the lock file is created if
-    needed and left in place (an empty hidden file).
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
-        yield
-    finally:
-        fcntl.flock(fd, fcntl.LOCK_UN)
-        os.close(fd)

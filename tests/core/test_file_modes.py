@@ -55,3 +55,26 @@ def test_staging_dir_gets_the_umask_folder_mode(tmp_path: Path, umask: int) -> N
     folder = staging_dir(tmp_path, prefix=".x.", suffix=".tmp")
     assert folder.parent == tmp_path and folder.name.startswith(".x.") and folder.name.endswith(".tmp")
     assert mode(folder) == 0o777 & ~umask
+
+
+def test_stale_temporaries_are_those_of_dead_writers_or_old_foreign_ones(tmp_path: Path) -> None:
+    import os
+    import subprocess
+    import sys
+
+    from setdiff_bench.io.atomic import STALE_TEMPORARY_SECONDS, atomic_path, is_stale_temporary, writer_tag
+
+    with atomic_path(tmp_path / "metrics.parquet") as tmp:  # this process's write in progress
+        assert writer_tag() in tmp.name and not is_stale_temporary(tmp)
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True,
+                          check=True)
+    host = writer_tag().rsplit("-", 1)[0]
+    dead = tmp_path / f".metrics.{host}-{gone.stdout.strip()}.abc123.tmp.parquet"  # a killed writer here
+    dead.write_bytes(b"")
+    assert is_stale_temporary(dead)
+    foreign = tmp_path / ".metrics.wsomewhere-else-7.abc123.tmp.parquet"  # another machine's writer
+    foreign.write_bytes(b"")
+    assert not is_stale_temporary(foreign)
+    old = foreign.stat().st_mtime - STALE_TEMPORARY_SECONDS - 10
+    os.utime(foreign, (old, old))
+    assert is_stale_temporary(foreign)
