@@ -46,6 +46,7 @@ import pandas as pd
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.atomic import sha256_file, write_text_atomic
+from setdiff_bench.run_paths import METRICS_FILE
 from setdiff_bench.stages import Pipeline, relative
 from setdiff_bench.threads import compute_threads
 
@@ -279,8 +280,8 @@ def lane_shift_verdict(metrics: pd.DataFrame, group: str = "lane+2") -> dict[str
 def summarize(paths: DemoPaths, preset: DemoPreset, steps: dict[str, int], pipeline: Pipeline,
               invocation: str) -> dict[str, Any]:
     """The demo's machine-readable summary: preset, stage commands and times, the +2-lane verdict."""
-    frames = [pd.read_parquet(paths.runs / m / "metrics.parquet") for m in METHODS
-              if (paths.runs / m / "metrics.parquet").is_file()]
+    frames = [pd.read_parquet(paths.runs / m / METRICS_FILE) for m in METHODS
+              if (paths.runs / m / METRICS_FILE).is_file()]
     metrics = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
     return {
         "invocation": invocation,

@@ -22,6 +22,7 @@ import pandas as pd
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.images import quantize_uint8, read_rgb, write_png
 from setdiff_bench.leaderboard import natural_key
+from setdiff_bench.run_paths import METRICS_FILE
 
 FONT = cv2.FONT_HERSHEY_SIMPLEX
 BAND = 22
@@ -159,7 +160,7 @@ def qualitative_grid(store: object, runs: Mapping[str, str | Path], frames: Sequ
 
 
 def _run_table(folder: Path) -> tuple[Path, pd.DataFrame]:
-    path = folder / "metrics.parquet"
+    path = folder / METRICS_FILE
     if not path.is_file():
         raise UsageError("not a finished run (no metrics.parquet)", folder)
     return folder, pd.read_parquet(path).set_index(["packet_id", "view"])

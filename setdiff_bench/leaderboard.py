@@ -41,7 +41,7 @@ from setdiff_bench.io.atomic import atomic_path, write_text_atomic
 from setdiff_bench.loaders import DATASETS
 from setdiff_bench.metrics.registry import METRICS
 from setdiff_bench.profiles import DEFAULT_PROFILE, PROFILE_COLUMN, get_profile
-from setdiff_bench.run import METRICS_FILE, RUN_FILE, SEQUENCES_FILE
+from setdiff_bench.run_paths import METRICS_FILE, RUN_FILE, SEQUENCES_FILE
 
 FORMATS = ("parquet", "latex", "md")
 ALL = ""  # block key of the pooled block (every group)

@@ -43,6 +43,7 @@ from setdiff_bench.profiles import (
     pil_resize,
     render_size,
 )
+from setdiff_bench.run_paths import METRICS_FILE
 
 PROFILES_DIR = "profiles"
 KEY_COLUMNS = ("dataset", "protocol", "group", "split", "scene", "frame", "sensor", "timestamp_us", "packet_id",
@@ -135,7 +136,7 @@ def score_run(run: str | Path, profile: EvaluationProfile, *, packets: str | Pat
     from setdiff_bench.packets import PacketStore
 
     run = Path(run)
-    metrics_path = run / "metrics.parquet"
+    metrics_path = run / METRICS_FILE
     if not metrics_path.is_file():
         raise UsageError("not a finished run (no metrics.parquet)", run)
     rows = pd.read_parquet(metrics_path).drop_duplicates(["method", "group", "scene", "frame"], keep="first")

@@ -74,7 +74,17 @@ from setdiff_bench.io.atomic import (
 )
 from setdiff_bench.io.images import read_rgb, to_tensor_chw, write_png
 from setdiff_bench.metrics.registry import PRESETS, MetricSpec
-from setdiff_bench.run_paths import IMAGES_DIR, image_relative, safe_component
+from setdiff_bench.run_paths import (
+    ENHANCER_FILE,
+    FRAGMENTS_DIR,
+    IMAGES_DIR,
+    MANIFEST_FILE,
+    METRICS_FILE,
+    RUN_FILE,
+    SEQUENCES_FILE,
+    image_relative,
+    safe_component,
+)
 from setdiff_bench.scoring import (
     default_warp_cache,
     quantize,
@@ -85,12 +95,6 @@ from setdiff_bench.scoring import (
 )
 
 RUN_FORMAT = "setdiff-run/1"
-RUN_FILE = "run.json"
-ENHANCER_FILE = "enhancer.json"
-FRAGMENTS_DIR = "fragments"
-METRICS_FILE = "metrics.parquet"
-SEQUENCES_FILE = "sequences.parquet"
-MANIFEST_FILE = "manifest.json"
 #: Protocols whose targets are time-ordered camera sequences: warp error with ``warp="auto"``.
 SEQUENCE_PROTOCOLS = frozenset({"nuscenes"})
 #: Columns that are measurements of time, not results: excluded from byte-identity comparisons.

@@ -1,7 +1,9 @@
-"""Where a run puts each enhanced target: ``images/<protocol>/<group>/<scene>/<frame stem>.png``.
+"""A run folder's file names, and where a run puts each enhanced target:
+``images/<protocol>/<group>/<scene>/<frame stem>.png``.
 
-Shared by :mod:`setdiff_bench.run` (which writes there) and the ``precomputed`` enhancer (which reads a
-run's ``images/`` folder, or any folder in the same layout).
+Declared once here for :mod:`setdiff_bench.run` (which writes them) and every reader: the leaderboard,
+grids, the demo, ablations, evaluation profiles and the ``precomputed`` enhancer (which reads a run's
+``images/`` folder, or any folder in the same layout).
 """
 
 from __future__ import annotations
@@ -12,6 +14,12 @@ from setdiff_bench.enhancers.base import TargetRef
 from setdiff_bench.errors import PacketError
 
 IMAGES_DIR = "images"
+RUN_FILE = "run.json"
+ENHANCER_FILE = "enhancer.json"
+FRAGMENTS_DIR = "fragments"
+METRICS_FILE = "metrics.parquet"
+SEQUENCES_FILE = "sequences.parquet"
+MANIFEST_FILE = "manifest.json"
 
 
 def safe_component(text: str) -> str:

@@ -83,6 +83,7 @@ def _run_args(args: argparse.Namespace) -> list[str]:
 def _geometry(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocation: str) -> dict[str, Path]:
     from setdiff_bench import ablation
     from setdiff_bench.models.setdiff.config import config_toml_data, write_config_toml
+    from setdiff_bench.run_paths import METRICS_FILE
 
     base = config_toml_data(args.config)
     if base["model"].get("method", "setdiff") != "setdiff":
@@ -109,7 +110,7 @@ def _geometry(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocati
         pipeline.run(f"run {variant.key}", ["run", "--method", "setdiff", "--checkpoint", checkpoints,
                                            "--packets", args.packets, "--split", "test", "--out", runs,
                                            *_run_args(args)])
-        results[variant.key] = ablation.pooled_means(runs / "metrics.parquet")
+        results[variant.key] = ablation.pooled_means(runs / METRICS_FILE)
     frame = ablation.geometry_frame(results)
     caption = "Geometric grounding ablation on the synthetic streets (paper Table 5 shape)"
     commands = f"`{invocation}`, which ran:\n\n" + pipeline.commands_markdown()
@@ -119,6 +120,7 @@ def _geometry(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocati
 
 def _setsize(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocation: str) -> dict[str, Path]:
     from setdiff_bench import ablation
+    from setdiff_bench.run_paths import METRICS_FILE
 
     sizes = ablation.parse_sizes(args.sizes)
     results = {}
@@ -128,7 +130,7 @@ def _setsize(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocatio
                                                "--packets", args.packets, "--split", "test", "--out", runs,
                                                "-o", f"max_references={refs}", "-o", f"targets_per_set={targets}",
                                                *_run_args(args)])
-        results[(refs, targets)] = ablation.pooled_means(runs / "metrics.parquet")
+        results[(refs, targets)] = ablation.pooled_means(runs / METRICS_FILE)
     frame = ablation.setsize_frame(results)
     caption = "Set-size ablation on the synthetic streets (paper Table 6 shape)"
     commands = f"`{invocation}`, which ran:\n\n" + pipeline.commands_markdown()

@@ -32,7 +32,7 @@ import torch
 from setdiff_bench.enhancers.base import TargetRef
 from setdiff_bench.errors import ImageError, UsageError
 from setdiff_bench.io.images import read_rgb
-from setdiff_bench.run_paths import frame_relative, safe_component
+from setdiff_bench.run_paths import IMAGES_DIR, MANIFEST_FILE, frame_relative, safe_component
 from setdiff_bench.types import Packet
 
 EXTENSIONS = (".png", ".jpg", ".jpeg")
@@ -58,7 +58,7 @@ class PrecomputedEnhancer:
         root = Path(source).expanduser()
         if not root.is_dir():
             raise UsageError("precomputed images folder not found", root)
-        if (root / "manifest.json").is_file() and (root / "images").is_dir():
+        if (root / MANIFEST_FILE).is_file() and (root / IMAGES_DIR).is_dir():
             root = root / "images"
         self.root = root.resolve()
         self.options = {"from": str(self.root)}
