@@ -22,7 +22,7 @@ Undistortion policy (explicit, per call, parameter ``distortion``):
   draw ideal pinhole images, so a caller that renders a distorted camera must undistort the images
   first (``colmap image_undistorter``) or choose ``"ignore"``.
 * ``"ignore"``: drop the coefficients and treat the camera as a pinhole with the same ``K`` — what
-  3DGS-Enhancer does on DL3DV (datasets.md §4.1).
+  3DGS-Enhancer does on DL3DV (docs/datasets.md, "DL3DV and the 3DGS-Enhancer protocol").
 * ``"error"``: refuse any camera with non-zero distortion.
 
 Frame order of the ``colmap`` dataset: natural order of the COLMAP image name.

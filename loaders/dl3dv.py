@@ -1,4 +1,6 @@
-"""DL3DV-10K scenes (datasets.md §4.1): ``<batch>/<hash>/`` with a downscaled image folder and poses.
+"""DL3DV-10K scenes: ``<batch>/<hash>/`` with a downscaled image folder and poses.
+
+Dataset facts: docs/datasets.md, "DL3DV and the 3DGS-Enhancer protocol".
 
 Layouts accepted for a scene folder ``<hash>`` (the first data folder that has the image folder and
 poses wins, in this order):

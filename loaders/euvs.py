@@ -1,4 +1,5 @@
-"""EUVS (Extrapolated Urban View Synthesis) scenes in their released layout (datasets.md §1.3–1.5).
+"""EUVS (Extrapolated Urban View Synthesis) scenes in their released layout (docs/datasets.md, "EUVS scene layout"
+to "EUVS masks").
 
 A scene folder holds ``test_set.txt``, ``train_set.txt`` (or ``training_set.txt``), ``images/``,
 ``sparse/0`` (COLMAP, PINHOLE, world-to-camera), optionally ``dynamic_masks/``, ``sky_masks/`` and
@@ -11,9 +12,10 @@ Rules implemented here:
   not in ``test_set.txt``, not on ``train_set.txt``).  ``Frame.split`` = ``"test"`` for names in
   ``test_set.txt``, else ``"train"``.  Every test name must have a pose in the model; a name in both
   set files, an empty ``test_set.txt`` and a name listed twice are errors.
-* Names are opaque keys shared by ``images/``, the set files, COLMAP and the masks (§1.3, §6.13).
-  Only the MARS pattern ``trav_<t>_channel_<c>_img_<i>`` is parsed, into traversal ``trav_<t>`` and
-  sensor (channel map of EUVS-data-process: 1 CAM_FRONT_CENTER … 6 CAM_SIDE_RIGHT).
+* Names are opaque keys shared by ``images/``, the set files, COLMAP and the masks (docs/datasets.md,
+  "EUVS scene layout").  Only the MARS pattern ``trav_<t>_channel_<c>_img_<i>`` is parsed, into
+  traversal ``trav_<t>`` and sensor (channel map of EUVS-data-process: 1 CAM_FRONT_CENTER …
+  6 CAM_SIDE_RIGHT).
 * Masks are paired **by name**: ``dynamic_masks/<image name with .png>``; 255 = keep, 0 = dynamic.
   Policy ``masks``: ``"require_test"`` (default; every test frame needs its mask, others optional),
   ``"optional"``, ``"none"`` (ignore the folder).  Masks must have the image's size.
@@ -24,8 +26,8 @@ Rules implemented here:
 * Level: the ``level`` option when given; else inferred: (1) the nearest folder from the scene's
   parent up to the root (inclusive; the parent alone when the root is the scene) named ``Level N`` /
   ``level_N`` / ``LevelN_small`` (case-insensitive) gives N; (2)
-  a scene name starting with ``MARS_`` is level 3 (only Level 3 uses MARS, §1.1); (3) otherwise
-  unknown (``None``).  ``Scene.metadata["level_source"]`` records which rule applied.
+  a scene name starting with ``MARS_`` is level 3 (only Level 3 uses MARS, docs/datasets.md, "EUVS levels");
+  (3) otherwise unknown (``None``).  ``Scene.metadata["level_source"]`` records which rule applied.
 * Image sizes are read from the headers and must equal the camera size.
 
 Frame order: natural order of the image name (for MARS names: traversal, channel, index).

@@ -1,10 +1,10 @@
 """nerfstudio ``transforms.json`` scenes, and the reader DL3DV uses.
 
-File convention (nerfstudio docs; datasets.md §4.1): ``transform_matrix`` is camera-to-world in
-OpenGL camera axes (x right, y up, z back); intrinsics ``fl_x fl_y cx cy`` refer to the stated
-``w × h``, globally or per frame; distortion ``k1 k2 p1 p2`` (``camera_model`` OPENCV).  A file
-written by nerfstudio's ``colmap_to_json`` also permutes the world (``c2w = A @ c2w_colmap``) and
-records the permutation ``A`` as a 3×4 ``applied_transform``.
+File convention (nerfstudio docs; docs/datasets.md, "DL3DV and the 3DGS-Enhancer protocol"):
+``transform_matrix`` is camera-to-world in OpenGL camera axes (x right, y up, z back); intrinsics
+``fl_x fl_y cx cy`` refer to the stated ``w × h``, globally or per frame; distortion ``k1 k2 p1 p2``
+(``camera_model`` OPENCV).  A file written by nerfstudio's ``colmap_to_json`` also permutes the world
+(``c2w = A @ c2w_colmap``) and records the permutation ``A`` as a 3×4 ``applied_transform``.
 
 Conversion at this boundary:
 

@@ -1,4 +1,6 @@
-"""nuScenes camera frames read straight from the JSON tables (no devkit; datasets.md §3).
+"""nuScenes camera frames read straight from the JSON tables (no devkit).
+
+Dataset facts: docs/datasets.md, "nuScenes tables and frame order".
 
 Layout: ``<dataroot>/v1.0-{mini,trainval,test}/*.json`` (one list of records per table, keyed by
 ``token``) and the images at ``<dataroot>/<sample_data.filename>`` (``samples/`` keyframes,

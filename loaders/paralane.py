@@ -1,4 +1,4 @@
-"""Para-Lane scenes: three parallel-lane clips per scene (datasets.md §2).
+"""Para-Lane scenes: three parallel-lane clips per scene (docs/datasets.md, "Para-Lane protocol").
 
 Layout read::
 
@@ -15,12 +15,13 @@ models are assumed to share one world frame, as cross-lane evaluation requires (
 Image names: a COLMAP ``NAME`` is looked up as ``images/<NAME>``, then as
 ``images/<stem of NAME>/CAMERA_FRONT.png``; only if no name of a clip resolves, and the model has as
 many images as there are timestamp folders, are they paired by order (names naturally sorted against
-sorted folders) with a warning (§6.12).  ``timestamp_us`` is the integer folder name.
+sorted folders) with a warning (docs/datasets.md, "Loader pitfalls").  ``timestamp_us`` is the
+integer folder name.
 
 Foreground masks: the folder's name says it marks foreground (moving) objects, so by default
 (``mask_polarity="foreground"``) the path goes to ``metadata["foreground_mask_path"]`` and
 ``Frame.mask_path`` (255 = keep) stays ``None``; pass ``mask_polarity="keep"`` if your masks are
-255 = static.  The encoding is UNCONFIRMED (§2.2).
+255 = static.  The encoding is UNCONFIRMED (docs/datasets.md, "Para-Lane protocol").
 
 ``lidar_poses.txt`` quaternions are **scalar-last** (x, y, z, w), unlike ``images.txt``.  A pose whose
 ``.ply`` stem equals a frame's timestamp folder is attached as ``metadata["lidar_to_world"]``; all

@@ -10,7 +10,7 @@ Rules
 -----
 ``test_set`` (EUVS)
     targets = frames the dataset marks ``split == "test"`` (``test_set.txt``); fit = every other
-    frame of the model (datasets.md §1.4: the baseline trains on all non-test model images).
+    frame of the model (docs/datasets.md, "EUVS train/test split": the baseline trains on all non-test model images).
 ``lanes`` (Para-Lane)
     fit = ``fit_frames`` frames of lane ``train_lane``, targets = ``target_frames`` frames of lane
     ``target_lane`` (lane = ``Frame.metadata["lane"]``), both sampled uniformly by

@@ -5,7 +5,7 @@ Inputs are finished runs (``metrics.parquet`` of :mod:`setdiff_bench.run`, found
 ``protocols/reported/*.csv`` — always marked: a ``source`` column (``measured`` / ``reported``), a
 "(paper)" suffix in Markdown and a dagger in LaTeX.
 
-Aggregation (the nerfbaselines convention, shared/reference/metrics.md §6.4): a cell is the **mean of
+Aggregation (the nerfbaselines convention, docs/metrics.md, "Evaluation and aggregation"): a cell is the **mean of
 per-image values** over the block's targets (not a metric of pooled errors, not a mean of scene means);
 the pooled "All" block averages every image of every group.  Warp error is a per-sequence value; its
 cell is the mean over sequences.  A method whose rows in a block miss targets that another method has

@@ -3,7 +3,7 @@
 What is scored is what is written: an enhancer's output is quantised to 8 bits exactly as the PNG
 writer does (``rint(clip(x, 0, 1) · 255) / 255``) before any metric sees it, so scoring the PNGs
 later (``--method precomputed`` on a run's own ``images/``) gives identical numbers — the
-nerfbaselines convention of evaluating saved 8-bit predictions (shared/reference/metrics.md §6.4).
+nerfbaselines convention of evaluating saved 8-bit predictions (docs/metrics.md, "Evaluation and aggregation").
 
 Image metrics come from :mod:`setdiff_bench.metrics` specs and see the protocol's masks
 (True = evaluate).  Warp error (Lai et al. 2018) is a sequence metric: one value per time-ordered

@@ -184,6 +184,6 @@ def lpips_euvs(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> 
         mask: ``(V, 1, H, W)`` mask, 1 = static (evaluated).
 
     Returns:
-        ``(V,)`` distances as the EUVS script computes them (shared/reference/datasets.md §1.6).
+        ``(V,)`` distances as the EUVS script computes them (docs/datasets.md, "EUVS official metric script").
     """
     return lpips(pred, target, net="alex", mask=mask, rescale_input=False)

@@ -2,8 +2,8 @@
 
 Shared by :mod:`.lpips` (which builds the torch modules) and :mod:`.weights` (which validates every
 tensor's name and shape before anything is loaded).  Layouts follow torchvision's ``features`` and
-lpips' slices (shared/reference/metrics.md §3): AlexNet taps relu1–relu5, VGG16 taps relu1_2, relu2_2,
-relu3_3, relu4_3, relu5_3.
+lpips' slices (docs/metrics.md, "LPIPS"): AlexNet taps relu1–relu5, VGG16 taps relu1_2, relu2_2, relu3_3,
+relu4_3, relu5_3.
 """
 
 from __future__ import annotations

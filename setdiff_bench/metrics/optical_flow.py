@@ -1,7 +1,7 @@
 """Dense optical flow for the warp-error metric (OpenCV contrib), and the known-flow check that chose it.
 
-Lai et al. (2018) use FlowNet2, whose CUDA ops do not build on current PyTorch (shared/reference/
-metrics.md §4); we use OpenCV's classical estimators instead, run once per ground-truth sequence.  Two
+Lai et al. (2018) use FlowNet2, whose CUDA ops do not build on current PyTorch (docs/metrics.md,
+"Warp error"); we use OpenCV's classical estimators instead, run once per ground-truth sequence.  Two
 were compared on synthetic pairs with exactly known flow (:func:`synthetic_scene_pair`: a photograph
 under camera zoom/rotation/translation plus a 64×96 photographed object moving 4–15 px, 288×512, four
 cases, end-point error over pixels visible in both frames), on the 2-core development machine while

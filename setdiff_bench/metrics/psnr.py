@@ -4,7 +4,7 @@
 the mean over its channels and pixels; a dataset score is the **mean of per-image PSNRs** (as NeRF, 3DGS
 and nerfbaselines report), never the PSNR of a pooled MSE (torchmetrics' default, which is lower by
 Jensen's inequality).  A hand-written function because it is three lines and every library pools or
-clamps differently (shared/reference/metrics.md §1).
+clamps differently (docs/metrics.md, "PSNR").
 """
 
 from __future__ import annotations

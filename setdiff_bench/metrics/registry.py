@@ -5,7 +5,7 @@ Specs reference their function as ``"module:attr"`` so that listing metrics impo
 ``(V, 3, H, W)`` batches and return ``(V,)``; the sequence metric (warp error) is called as
 ``fn(frames, reference, mask, **kwargs)`` per sequence and returns a 0-dim tensor.
 
-Presets (the metric sets papers report; shared/reference/metrics.md §5):
+Presets (the metric sets papers report; docs/metrics.md, "Presets"):
 
 - ``standard``: per-image PSNR, SSIM with ``valid`` border (tf / dm_pix / skimage), LPIPS-alex on [-1, 1].
 - ``gaussian_splatting``: the 3DGS repo's ``metrics.py``: PSNR, SSIM ``same`` zero-padded border, LPIPS-vgg

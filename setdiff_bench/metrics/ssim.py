@@ -2,7 +2,7 @@
 
 ``SSIM = ((2μxμy + C1)(2σxy + C2)) / ((μx² + μy² + C1)(σx² + σy² + C2))``, ``C1 = (K1·L)²``,
 ``C2 = (K2·L)²``; local statistics under a separable Gaussian window (11 taps, σ 1.5) with population
-covariance; per channel, then averaged over channels and pixels.  Choices (shared/reference/metrics.md §2):
+covariance; per channel, then averaged over channels and pixels.  Choices (docs/metrics.md, "SSIM"):
 
 - ``border="valid"`` (default): only pixels whose window lies inside the image, ``(H-10)×(W-10)``; equal
   to tf.image.ssim / dm_pix / skimage(gaussian_weights=True, sigma=1.5,
@@ -12,7 +12,7 @@ covariance; per channel, then averaged over channels and pixels.  Choices (share
   ``utils/loss_utils.py:ssim`` (also its training loss, ``1 - ssim``).
 - ``border="reflect"``: mirror-padded ``H×W`` map averaged whole, which is what torchmetrics 1.9
   ``structural_similarity_index_measure(data_range=1)`` does (it reflect-pads by 5 and, unlike the older
-  release read for metrics.md §2.3, no longer crops the padded border before the mean; it also clamps
+  release described in docs/metrics.md, no longer crops the padded border before the mean; it also clamps
   variances at 0, which only matters for float-rounding negatives).
 - ``grayscale=True``: SSIM of BT.601 luma ``0.299R + 0.587G + 0.114B`` (MATLAB ``rgb2gray``, the Y of
   YIQ that pyiqa uses) instead of the RGB channel mean.
@@ -191,7 +191,7 @@ def ssim_euvs(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor) -> t
     """EUVS-official ``ssim_mask``: 3DGS SSIM (``same`` border) of ``pred·mask`` vs ``target·mask``.
 
     The mean runs over the whole map, masked-out area included (so it is not a true masked SSIM);
-    reproduced on purpose to match published EUVS numbers (shared/reference/datasets.md §1.6).
+    reproduced on purpose to match published EUVS numbers (docs/datasets.md, "EUVS official metric script").
 
     Args:
         pred, target: ``(V, 3, H, W)`` images in [0, 1].

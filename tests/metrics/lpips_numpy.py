@@ -1,6 +1,6 @@
 """An independent LPIPS v0.1 forward pass in numpy (NHWC, Flax-layout kernels), for tests only.
 
-Written from the definition (shared/reference/metrics.md §3.1) and the torchvision layer lists, not
+Written from the definition (docs/metrics.md, "LPIPS") and the torchvision layer lists, not
 from the module under test: convolutions via sliding windows + tensordot, float64 throughout.
 """
 

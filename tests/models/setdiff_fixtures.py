@@ -81,7 +81,7 @@ def tiny_config(**model_overrides: object) -> Config:
     return Config(model=model, train=train)
 
 
-# The scheduler_config.json of stabilityai/sd-turbo (shared/reference/model.md §4.3).
+# The scheduler_config.json of stabilityai/sd-turbo (docs/model.md, "SD-Turbo scheduler config").
 SD_TURBO_SCHEDULER_JSON = {
     "_class_name": "EulerDiscreteScheduler", "beta_start": 0.00085, "beta_end": 0.012,
     "beta_schedule": "scaled_linear", "clip_sample": False, "interpolation_type": "linear",

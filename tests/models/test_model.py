@@ -15,7 +15,7 @@ from setdiff_bench.models.setdiff.inference import enhance_packet, set_packets
 from setdiff_bench.models.setdiff.inputs import SetBatch, renormalize, view_tensors
 from setdiff_bench.models.setdiff.model import SetDiffModel
 
-# shared/reference/model.md §1.1: SD-Turbo scaled_linear schedule at t = 199.
+# docs/model.md, "SD-Turbo schedule at t = 199": SD-Turbo scaled_linear schedule at t = 199.
 ALPHA_BAR_199 = 0.7552384
 SQRT_ALPHA_BAR_199 = 0.8690445
 SQRT_ONE_MINUS_ALPHA_BAR_199 = 0.4947339
@@ -59,7 +59,7 @@ def test_x0_formulas(prediction: str) -> None:
     else:
         expected = (z - SQRT_ONE_MINUS_ALPHA_BAR_199 * out) / SQRT_ALPHA_BAR_199
     torch.testing.assert_close(model.to_x0(z, out), expected, atol=1e-6, rtol=0)
-    # v and ε parameterise the same x0: ε = √(1−ᾱ)·z + √ᾱ·v (model.md §1.2)
+    # v and ε parameterise the same x0: ε = √(1−ᾱ)·z + √ᾱ·v (docs/model.md, "One-step formulation")
     if prediction == "epsilon":
         v = out
         eps = math.sqrt(1 - ALPHA_BAR_199) * z + math.sqrt(ALPHA_BAR_199) * v

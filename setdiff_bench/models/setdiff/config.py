@@ -2,7 +2,7 @@
 
 Architectures (``preset``):
 
-* ``sd-turbo`` — stabilityai/sd-turbo's UNet and VAE configs (shared/reference/model.md §4), i.e. the
+* ``sd-turbo`` — stabilityai/sd-turbo's UNet and VAE configs (docs/model.md, "SD-Turbo UNet config"), i.e. the
   SD 2.1-base UNet (865.9 M parameters).  Note the diffusers quirk: ``attention_head_dim=(5, 10, 20, 20)``
   is really the *number of heads* per level (head dim 64).
 * ``tiny`` — the same classes (``UNet2DConditionModel``, ``AutoencoderKL``) with two UNet levels of
@@ -14,7 +14,7 @@ live in ``setdiff_bench/models/setdiff/configs/`` and can be named without a pat
 (``tiny_setdiff``, ``sd_turbo_setdiff``, ...).  TOML has no null: a key left out means "default".
 
 Scheduler constants are the SD-Turbo ``scaled_linear`` schedule; ᾱ_t is computed analytically in
-float64 (:func:`alphas_cumprod`), never through ``DDPMScheduler`` (see model.md §1.3 for its pitfalls).
+float64 (:func:`alphas_cumprod`), never through ``DDPMScheduler`` (see docs/model.md, "Scheduler pitfalls").
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ AttentionBias = Literal["none", "cmap_distance"]
 CONFIG_FORMAT = 1
 DEFAULT_PROMPT = "remove degradation"
 
-#: stabilityai/sd-turbo ``unet/config.json`` (model.md §4.1).
+#: stabilityai/sd-turbo ``unet/config.json`` (docs/model.md, "SD-Turbo UNet config").
 SD_TURBO_UNET: dict[str, Any] = {
     "sample_size": 64,
     "in_channels": 4,
@@ -83,7 +83,7 @@ SD_TURBO_UNET: dict[str, Any] = {
     "addition_embed_type_num_heads": 64,
 }
 
-#: stabilityai/sd-turbo ``vae/config.json`` (model.md §4.2).
+#: stabilityai/sd-turbo ``vae/config.json`` (docs/model.md, "SD-Turbo VAE config").
 SD_TURBO_VAE: dict[str, Any] = {
     "in_channels": 3,
     "out_channels": 3,
@@ -99,7 +99,8 @@ SD_TURBO_VAE: dict[str, Any] = {
     "force_upcast": True,
 }
 
-#: stabilityai/sd-turbo ``scheduler/scheduler_config.json``, the keys that define ᾱ_t (model.md §4.3).
+#: stabilityai/sd-turbo ``scheduler/scheduler_config.json``, the keys that define ᾱ_t
+#: (docs/model.md, "SD-Turbo scheduler config").
 SD_TURBO_SCHEDULE: dict[str, Any] = {
     "beta_start": 0.00085,
     "beta_end": 0.012,

@@ -4,7 +4,7 @@ Paper §3.1 "Geometry encoding": five convolutional blocks with GroupNorm and Si
 as many output channels as the VAE latent, combined with the image latent by element-wise addition.
 Here: block 1 keeps the resolution, blocks 2–4 halve it (stride-2 3×3 convs → 8×), block 5 keeps it,
 then a 3×3 output conv to the latent channels that is **zero-initialised**, so an untrained Ψ adds
-exactly nothing and the model starts as the image-only one (model.md §9).
+exactly nothing and the model starts as the image-only one (docs/model.md, "Geometry encoder and guidance").
 """
 
 from __future__ import annotations

@@ -3,9 +3,9 @@
 Latent loss (Eq. 3 read with v-prediction): the UNet's output v̂ is turned into x̂0 analytically
 (``x̂0 = √ᾱ·z − √(1−ᾱ)·v̂``) and regressed onto the ground truth's latent, i.e. the frozen VAE
 encoder's scaled posterior mean ``E(y)``: ``‖x̂0 − E(y)‖²``.  This equals a v-loss
-``(1−ᾱ)·‖v̂ − v*‖²`` with the implied target ``v* = (√ᾱ·z − E(y))/√(1−ᾱ)`` (model.md §1.2), so the paper's
-"predict the clean target y" and "v-prediction objective" agree.  Pixels outside the evaluation mask
-are down-weighted in the latent grid by the valid fraction of each 8×8 cell.
+``(1−ᾱ)·‖v̂ − v*‖²`` with the implied target ``v* = (√ᾱ·z − E(y))/√(1−ᾱ)`` (docs/model.md,
+"One-step formulation"), so the paper's "predict the clean target y" and "v-prediction objective"
+agree.  Pixels outside the evaluation mask are down-weighted in the latent grid by the valid fraction of each 8×8 cell.
 
 Reconstruction loss on decoded targets, in [0, 1]: masked-mean L2; SSIM as ``1 − SSIM`` and LPIPS,
 both on the prediction composited with the ground truth outside the mask (masked pixels then agree

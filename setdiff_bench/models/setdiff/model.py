@@ -1,6 +1,7 @@
 """The SetDiff model (and DiFix on the same code): one-step set diffusion on SD-Turbo latents.
 
-Forward pass for B sets of N references + M targets (paper §3.1–3.3, model.md §1 and §9):
+Forward pass for B sets of N references + M targets (paper §3.1–3.3; docs/model.md, "One-step formulation"
+and "Geometry encoder and guidance"):
 
 1. every view is encoded by the frozen VAE encoder: ``z = mean(E(x)) · 0.18215``;
 2. Ψ(C-map, Plücker) is added: the UNet input is ``z + g`` (``g = 0`` when geometry is dropped);

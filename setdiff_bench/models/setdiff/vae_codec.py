@@ -6,7 +6,8 @@
   without gradients), optionally keeping the input of every encoder down block for the skips.
 * ``decode``: scaled latents → images in [0, 1] (``clamp(-1, 1)`` as DiFix3D), adding
   ``skip_conv_i(γ · skip)`` before each decoder up block when skip connections are on — the DiFix3D /
-  img2img-turbo design (1×1 convs without bias, weights initialised to 1e-5, model.md §2.1).
+  img2img-turbo design (1×1 convs without bias, weights initialised to 1e-5; docs/model.md,
+  "DiFix VAE skip connections").
 
 The encoder and decoder are walked block by block here instead of patching diffusers' ``forward``
 methods (what DiFix3D does globally); the walk mirrors diffusers' ``Encoder.forward`` /
