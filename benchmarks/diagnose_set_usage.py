@@ -1,0 +1,181 @@
+"""How much does a trained SetDiff use the other views of its set?  (Diagnosis behind diagnosis.md.)
+
+Loads a checkpoint and the test packets of a store and measures, per packet, the mean absolute
+change of the enhanced targets (``(M, 3, H, W)`` in [0, 1]) when
+
+* the set shrinks to 0, 1 or 3 references and one target per set (the set-size ablation's knobs);
+* every set-mixer self-attention output is zeroed (the UNet keeps its convolutions);
+* the UNet's correction is dropped (the render's own latents are decoded),
+
+and, per set-mixer layer (one pass without guidance, the whole packet as one set):
+
+* ``own_view``: the share of attention mass a token puts on its own view (1/V = no preference);
+* ``entropy``: the attention's normalised entropy (1 = uniform over all V·L tokens);
+* ``reference_mass``: the mass a target token puts on reference tokens, over the references' share of
+  the tokens (1 = no preference for references);
+* ``correspondence_lift``: the mass a target token puts on the reference tokens that see the same
+  surface (token surface points, from the C-maps, closer than one token footprint), over those
+  tokens' share of all tokens (1 = attention ignores geometry; the paper's mechanism needs ≫ 1).
+
+Usage (on the demo's packets and the shipped model)::
+
+    python benchmarks/diagnose_set_usage.py --packets runs/demo/work/packets --checkpoint tiny_setdiff \
+        --group lane+2 --packets-max 2 --out benchmarks/results/set_usage_tiny_setdiff.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import torch
+import torch.nn.functional as F
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from setdiff_bench.models.setdiff import set_mixer
+from setdiff_bench.models.setdiff.checkpoint import load_model
+from setdiff_bench.models.setdiff.inference import enhance_packet
+from setdiff_bench.models.setdiff.inputs import surface_points
+from setdiff_bench.packets import PacketStore
+
+ProcessorCall = Callable[..., torch.Tensor]
+
+
+@contextmanager
+def patched_set_attention(wrapper: Callable[[ProcessorCall], ProcessorCall]) -> Iterator[None]:
+    """Temporarily replace :class:`SetSelfAttnProcessor.__call__` by ``wrapper(original)``."""
+    original = set_mixer.SetSelfAttnProcessor.__call__
+    set_mixer.SetSelfAttnProcessor.__call__ = wrapper(original)
+    try:
+        yield
+    finally:
+        set_mixer.SetSelfAttnProcessor.__call__ = original
+
+
+def zeroed(original: ProcessorCall) -> ProcessorCall:
+    """A processor whose output is zero (diffusers passes ``num_views`` only to a named parameter)."""
+    def call(self: Any, attn: Any, hidden_states: torch.Tensor, encoder_hidden_states: Any = None,
+             attention_mask: Any = None, temb: Any = None, num_views: int | None = None, **kwargs: Any) -> torch.Tensor:
+        return 0.0 * original(self, attn, hidden_states, num_views=num_views)
+    return call
+
+
+def token_points(points: torch.Tensor, tokens: int) -> tuple[torch.Tensor, torch.Tensor, float]:
+    """Pixel surface points ``(V, 4, H, W)`` (xyz·valid, valid) → per-token points ``(V·L, 3)``, validity
+    ``(V·L,)`` and the median distance between horizontally adjacent valid tokens (one footprint)."""
+    height, width = points.shape[-2:]
+    # the token grid: the divisor pair of ``tokens`` closest to the image's aspect ratio
+    h = min((d for d in range(1, tokens + 1) if tokens % d == 0),
+            key=lambda d: abs(math.log((d / (tokens // d)) / (height / width))))
+    w = tokens // h
+    pooled = F.adaptive_avg_pool2d(points, (h, w))
+    coverage = pooled[:, 3:]
+    xyz = pooled[:, :3] / coverage.clamp_min(1e-6)
+    valid = coverage[:, 0] > 0.5
+    step = (xyz[:, :, :, 1:] - xyz[:, :, :, :-1]).norm(dim=1)[valid[:, :, 1:] & valid[:, :, :-1]]
+    footprint = float(step.median()) if step.numel() else float("nan")
+    return xyz.flatten(2).transpose(1, 2).reshape(-1, 3), valid.reshape(-1), footprint
+
+
+def attention_stats(record: list[dict[str, float]], points: torch.Tensor,
+                    references: int) -> Callable[[ProcessorCall], ProcessorCall]:
+    """A processor that appends, per layer, the statistics listed in the module docstring."""
+    def wrap(original: ProcessorCall) -> ProcessorCall:
+        def call(self: Any, attn: Any, hidden_states: torch.Tensor, encoder_hidden_states: Any = None,
+                 attention_mask: Any = None, temb: Any = None, num_views: int | None = None,
+                 **kwargs: Any) -> torch.Tensor:
+            assert num_views is not None
+            views, tokens = num_views, hidden_states.shape[1]
+            sets, heads = hidden_states.shape[0] // views, attn.heads
+            query, key = attn.to_q(hidden_states), attn.to_k(hidden_states)
+            dim = query.shape[-1] // heads
+            query = query.reshape(sets, views * tokens, heads, dim).transpose(1, 2)
+            key = key.reshape(sets, views * tokens, heads, dim).transpose(1, 2)
+            logits = query @ key.transpose(-1, -2) / dim ** 0.5
+            log_scale = getattr(attn, set_mixer.BIAS_PARAMETER, None)
+            if kwargs.get("token_points") is not None and log_scale is not None:  # the C-map distance bias
+                bias_points, bias_valid = set_mixer.pool_token_points(kwargs["token_points"], tokens)
+                logits = logits + set_mixer.distance_bias(bias_points.reshape(sets, views * tokens, 3),
+                                                          bias_valid.reshape(sets, -1), log_scale.exp())
+            weights = torch.softmax(logits.float(), dim=-1).mean(dim=(0, 1))  # (T, T), over sets and heads
+            total = views * tokens
+            view_of = torch.arange(total) // tokens
+            own = (view_of[:, None] == view_of[None, :]).float()
+            entropy = -(weights * torch.log(weights.clamp_min(1e-30))).sum(-1).mean()
+            stats = {"tokens_per_view": float(tokens), "own_view": float((weights * own).sum(-1).mean()),
+                     "entropy": float(entropy / math.log(total))}
+            is_ref = view_of < references
+            target_rows = weights[~is_ref]
+            if references > 0 and target_rows.numel():
+                share = references / views
+                stats["reference_mass"] = float(target_rows[:, is_ref].sum(-1).mean() / share)
+                xyz, valid, footprint = token_points(points, tokens)
+                if views * tokens == xyz.shape[0] and math.isfinite(footprint):
+                    near = torch.cdist(xyz[~is_ref], xyz[is_ref]) < footprint
+                    near &= valid[~is_ref][:, None] & valid[is_ref][None, :]
+                    rows = near.any(-1)
+                    if rows.any():
+                        mass = (target_rows[:, is_ref] * near).sum(-1)[rows]
+                        chance = near.sum(-1)[rows].float() / total
+                        stats["correspondence_lift"] = float(mass.sum() / chance.sum())
+                        stats["corresponding_tokens"] = float(near.sum(-1)[rows].float().mean())
+            record.append(stats)
+            return original(self, attn, hidden_states, num_views=num_views, **kwargs)
+        return call
+    return wrap
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--packets", required=True, help="packet store")
+    parser.add_argument("--checkpoint", required=True, help="checkpoint folder or shipped name (tiny_setdiff)")
+    parser.add_argument("--group", default="lane+2")
+    parser.add_argument("--packets-max", type=int, default=2)
+    parser.add_argument("--out", type=Path, help="also write the JSON here")
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    store = PacketStore(args.packets)
+    model = load_model(args.checkpoint)[0].eval()
+    ids = [pid for pid in store.packet_ids("test") if f"__{args.group}__" in pid][: args.packets_max]
+    rows = []
+    with torch.no_grad():
+        for packet_id in ids:
+            packet = store.load_packet(packet_id)
+            full = enhance_packet(model, packet)
+            row: dict[str, Any] = {"packet": packet_id, "references": len(packet.references),
+                                   "targets": len(packet.targets)}
+            for refs in (0, 1, 3):
+                smaller = enhance_packet(model, packet, max_references=refs, targets_per_set=1)
+                row[f"mean_abs_change_{refs}+1"] = float((smaller - full).abs().mean())
+            with patched_set_attention(zeroed):
+                row["mean_abs_change_no_self_attention"] = float((enhance_packet(model, packet) - full).abs().mean())
+            original_to_x0 = model.to_x0
+            model.to_x0 = lambda latents, prediction: latents  # type: ignore[method-assign]
+            try:
+                row["mean_abs_change_no_unet"] = float((enhance_packet(model, packet) - full).abs().mean())
+            finally:
+                model.to_x0 = original_to_x0  # type: ignore[method-assign]
+            stats: list[dict[str, float]] = []
+            points = surface_points(packet)
+            with patched_set_attention(attention_stats(stats, points, len(packet.references))):
+                enhance_packet(model, packet, guidance_scale=1.0,
+                               targets_per_set=len(packet.targets), max_references=len(packet.references))
+            row["layers"] = [{k: round(v, 4) for k, v in layer.items()} for layer in stats]
+            row["uniform_over_views"] = round(1.0 / (len(packet.references) + len(packet.targets)), 4)
+            rows.append(row)
+    text = json.dumps({"checkpoint": args.checkpoint, "packets": str(args.packets), "group": args.group,
+                       "rows": rows}, indent=1)
+    print(text)
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(text + "\n")
+
+
+if __name__ == "__main__":
+    main()
