@@ -61,6 +61,7 @@ from setdiff_bench.packets import (
 )
 from setdiff_bench.prepare_plan import Crop, GroupPlan, PacketJob, ViewJob, applicable_groups, plan_scene
 from setdiff_bench.protocols import Protocol, load_protocol
+from setdiff_bench.shards import Shard
 from setdiff_bench.threads import torch_threads
 from setdiff_bench.types import Frame, Scene
 from setdiff_bench.undistort import is_distorted, undistort_image, undistortion_maps
@@ -291,17 +292,6 @@ def _init_worker(threads: int) -> None:
 
 
 # ---------------------------------------------------------------------- orchestration
-def parse_shard(text: str) -> tuple[int, int]:
-    """``"i/n"`` → ``(i, n)`` with ``0 <= i < n``."""
-    try:
-        index, count = (int(part) for part in text.split("/"))
-    except ValueError as exc:
-        raise UsageError(f"shard must look like i/n (e.g. 0/4), got {text!r}", "--shard") from exc
-    if not 0 <= index < count:
-        raise UsageError(f"shard i/n needs 0 <= i < n, got {text!r}", "--shard")
-    return index, count
-
-
 def declared_split(assignment: Mapping[str, str], test_scenes: Sequence[str]) -> dict[str, str]:
     """The scene split with ``test_scenes`` as the test scenes and every other scene train, in place of the
     protocol's rule (``prepare --test-scene``: a single capture, or a demo that makes only its test scenes).
@@ -337,7 +327,7 @@ def resolve_backend(backend: str, device: str) -> tuple[str, str]:
 def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[str], *,
             protocol: str | os.PathLike[str] | None = None, fits: str | os.PathLike[str] | None = None,
             fit: bool = False, split: str = "all", scenes: Sequence[str] | None = None,
-            workers: int = 1, shard: tuple[int, int] = (0, 1), backend: str = "auto", device: str = "auto",
+            workers: int = 1, shard: Shard | tuple[int, int] = Shard(), backend: str = "auto", device: str = "auto",
             loader_options: Mapping[str, Any] | None = None, fit_iterations: int = 30_000, threads: int = 1,
             cmap_precision: str = "float32", progress: bool = True,
             groups: Sequence[str] | None = None, test_scenes: Sequence[str] | None = None) -> PrepareSummary:
@@ -351,7 +341,7 @@ def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[s
         fits, fit: user PLYs folder, or fit here (exactly one).
         split: ``train``, ``test`` or ``all`` scenes (the protocol's scene split).
         scenes: restrict to these scene names (the split is still computed over all scenes).
-        workers: render processes.  shard: ``(i, n)``.
+        workers: render processes.  shard: a :class:`Shard` (or ``(i, n)``).
         threads: torch intra-op threads per render process (default 1: the tile rasteriser's ops are
             small, and on a busy machine extra threads slowed a 48×32 render 50× (measured); use
             ``workers`` for parallelism, or more threads for large CPU renders).
@@ -384,7 +374,7 @@ def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[s
 
 def _prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[str], *,
              protocol: str | os.PathLike[str] | None, fits: str | os.PathLike[str] | None, fit: bool, split: str,
-             scenes: Sequence[str] | None, workers: int, shard: tuple[int, int], backend: str, device: str,
+             scenes: Sequence[str] | None, workers: int, shard: Shard | tuple[int, int], backend: str, device: str,
              loader_options: Mapping[str, Any] | None, fit_iterations: int, threads: int, cmap_half: bool,
              progress: bool, groups: Sequence[str] | None = None,
              test_scenes: Sequence[str] | None = None) -> PrepareSummary:
@@ -406,7 +396,8 @@ def _prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[
         raise UsageError(f"split must be one of {', '.join(SPLIT_CHOICES)}, got {split!r}", "--split")
     if workers < 1:
         raise UsageError(f"workers must be >= 1, got {workers}", "--workers")
-    shard_index, shard_count = shard
+    if not isinstance(shard, Shard):
+        shard = Shard(*shard)
     backend, device = resolve_backend(backend, device)
     out = Path(out)
     options = {**spec.loader_options, **(loader_options or {})}
@@ -424,7 +415,7 @@ def _prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[
     summary.scenes = len(loaded)
 
     units = _units(spec, loaded)
-    mine = units[shard_index::shard_count]
+    mine = shard.select(units)
     jobs: list[PacketJob] = []
     by_name = {s.name: s for s in loaded}
     for scene_name, fit_key in mine:

@@ -93,6 +93,7 @@ from setdiff_bench.scoring import (
     sequence_warp_error,
     to_uint8_hwc,
 )
+from setdiff_bench.shards import Shard
 
 RUN_FORMAT = "setdiff-run/1"
 #: Protocols whose targets are time-ordered camera sequences: warp error with ``warp="auto"``.
@@ -107,32 +108,6 @@ WarpMode = Literal["auto", "on", "off"]
 
 class EnhancerOutputError(SetDiffBenchError):
     """An enhancer returned something other than ``(M, 3, H, W)`` finite images."""
-
-
-@dataclass(frozen=True)
-class Shard:
-    """``--shard i/n``: packets ``i, i+n, i+2n, ...`` of the sorted selection (0 ≤ i < n)."""
-
-    index: int = 0
-    count: int = 1
-
-    @classmethod
-    def parse(cls, text: str) -> Shard:
-        """``"1/4"`` → ``Shard(1, 4)``; a one-line :class:`UsageError` otherwise."""
-        head, sep, tail = text.partition("/")
-        try:
-            index, count = int(head), int(tail)
-        except ValueError:
-            index, count = -1, 0
-        if not sep or count < 1 or not 0 <= index < count:
-            raise UsageError(f"shard must be i/n with 0 <= i < n, got {text!r}", "--shard")
-        return cls(index, count)
-
-    def select(self, packet_ids: Sequence[str]) -> list[str]:
-        return list(packet_ids[self.index::self.count])
-
-    def __str__(self) -> str:
-        return f"{self.index}/{self.count}"
 
 
 @dataclass(frozen=True)

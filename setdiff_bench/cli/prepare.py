@@ -72,10 +72,11 @@ def parse_loader_options(items: list[str]) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from setdiff_bench.prepare import parse_shard, prepare
+    from setdiff_bench.prepare import prepare
+    from setdiff_bench.shards import Shard
 
     summary = prepare(args.dataset, args.root, args.out, protocol=args.protocol, fits=args.fits, fit=args.fit,
-                      split=args.split, scenes=args.scenes, workers=args.workers, shard=parse_shard(args.shard),
+                      split=args.split, scenes=args.scenes, workers=args.workers, shard=Shard.parse(args.shard),
                       backend=args.backend, device=args.device, threads=args.threads, cmap_precision=args.cmap_precision,
                       loader_options=parse_loader_options(args.loader_option), fit_iterations=args.fit_iterations,
                       progress=not args.quiet, groups=args.groups,

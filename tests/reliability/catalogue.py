@@ -703,7 +703,7 @@ def _(tmp: Path, world: World) -> Call:
     return Call(run_argv(world.store, tmp / "out", "--shard", "1-2"), "--shard")
 
 
-@case("prepare-shard-range", "cli", "`prepare --shard 3/2`", "UsageError", "needs 0 <= i < n")
+@case("prepare-shard-range", "cli", "`prepare --shard 3/2`", "UsageError", "shard must be i/n")
 def _(tmp: Path, world: World) -> Call:
     return Call(prepare_argv(world.street, tmp / "out", "--shard", "3/2"), "--shard")
 
