@@ -78,14 +78,16 @@ def _methods_run(args: argparse.Namespace) -> int:
 
 
 # ---------------------------------------------------------------------- list scenes
-def parse_option(text: str) -> tuple[str, Any]:
+def parse_option(text: str, flag: str = "-o/--option") -> tuple[str, Any]:
     """``KEY=VALUE`` → ``(key, value)``; the value is parsed as JSON when it is valid JSON, else kept as text.
 
     ``level=1`` → 1, ``sweeps=false`` → False, ``channels=["CAM_FRONT"]`` → list, ``version=v1.0-mini`` → str.
+    The one parser of every ``KEY=VALUE`` flag (``-o/--option``, ``prepare --loader-option``); ``flag`` is
+    the argument a malformed ``text`` is reported against.
     """
     key, sep, raw = text.partition("=")
     if not sep or not key.strip():
-        raise UsageError(f"option {text!r} must look like KEY=VALUE", "-o/--option")
+        raise UsageError(f"option {text!r} must look like KEY=VALUE", flag)
     try:
         value = json.loads(raw)
     except json.JSONDecodeError:

@@ -14,9 +14,7 @@ fit keys per protocol: see ``setdiff_bench.prepare`` (EUVS ``level1..3``, Para-L
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
-from typing import Any
 
 VERB = "prepare"
 HELP = "turn a dataset and 3DGS fits into render/ground-truth packets for a protocol"
@@ -55,30 +53,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
-def parse_loader_options(items: list[str]) -> dict[str, Any]:
-    """``KEY=VALUE`` strings → options; values that parse as JSON become numbers/booleans/lists."""
-    from setdiff_bench.errors import UsageError
-
-    options: dict[str, Any] = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or not key:
-            raise UsageError(f"expected KEY=VALUE, got {item!r}", "--loader-option")
-        try:
-            options[key] = json.loads(value)
-        except json.JSONDecodeError:
-            options[key] = value
-    return options
-
-
 def run(args: argparse.Namespace) -> int:
+    from setdiff_bench.cli.list import parse_option
     from setdiff_bench.prepare import prepare
     from setdiff_bench.shards import Shard
 
+    loader_options = dict(parse_option(text, "--loader-option") for text in args.loader_option)
     summary = prepare(args.dataset, args.root, args.out, protocol=args.protocol, fits=args.fits, fit=args.fit,
                       split=args.split, scenes=args.scenes, workers=args.workers, shard=Shard.parse(args.shard),
                       backend=args.backend, device=args.device, threads=args.threads, cmap_precision=args.cmap_precision,
-                      loader_options=parse_loader_options(args.loader_option), fit_iterations=args.fit_iterations,
+                      loader_options=loader_options, fit_iterations=args.fit_iterations,
                       progress=not args.quiet, groups=args.groups,
                       test_scenes=args.test_scenes)
     print(summary.line())
