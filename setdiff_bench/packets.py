@@ -330,7 +330,7 @@ class PacketStore:
         return ViewSet(names=tuple(rows["frame"]), images=torch.stack(images) if images else empty,
                        cmaps=torch.stack(cmaps) if cmaps else empty,
                        alphas=torch.stack(alphas) if alphas else torch.zeros(0, 1, height, width),
-                       cameras=tuple(cameras), timestamps_us=tuple(_timestamp(t) for t in rows["timestamp_us"]))
+                       cameras=tuple(cameras), timestamps_us=tuple(timestamp_or_none(t) for t in rows["timestamp_us"]))
 
 
 def row_camera(row: pd.Series | dict[str, Any], source: str = "", world: bool = False) -> Camera:
@@ -353,7 +353,8 @@ def _pick(rows: pd.DataFrame, positions: Sequence[int] | None) -> pd.DataFrame:
     return rows.iloc[[int(p) for p in positions]]
 
 
-def _timestamp(value: Any) -> int | None:
+def timestamp_or_none(value: Any) -> int | None:
+    """A ``timestamp_us`` cell as an ``int``, or ``None`` when missing (``None``/NaN/NA)."""
     return None if value is None or pd.isna(value) else int(value)
 
 

@@ -74,6 +74,7 @@ from setdiff_bench.io.atomic import (
 )
 from setdiff_bench.io.images import read_rgb, to_tensor_chw, write_png
 from setdiff_bench.metrics.registry import PRESETS, MetricSpec
+from setdiff_bench.packets import timestamp_or_none
 from setdiff_bench.run_paths import (
     ENHANCER_FILE,
     FRAGMENTS_DIR,
@@ -379,8 +380,9 @@ def _run_packet(store: Any, out: Path, packet_id: str, enhancer: Enhancer, specs
         relative = image_relative(ref)
         write_png(out / relative, to_uint8_hwc(enhanced[position]))
         records.append({**{key: row[key] for key in KEY_COLUMNS if key in row}, "method": settings.method,
-                        "timestamp_us": _timestamp(row.get("timestamp_us")), "sensor": str(row.get("sensor") or ""),
-                        "image": relative, "image_sha256": sha256_file(out / relative)})
+                        "timestamp_us": timestamp_or_none(row.get("timestamp_us")),
+                        "sensor": str(row.get("sensor") or ""), "image": relative,
+                        "image_sha256": sha256_file(out / relative)})
     per_frame = elapsed_ms / max(1, len(targets))
     for position, record in enumerate(records):
         for spec in specs:
@@ -426,10 +428,6 @@ def _write_rows(path: Path, records: Sequence[Mapping[str, Any]], metric_names: 
 def _plain(value: Any) -> Any:
     """numpy scalars → Python scalars (Arrow takes those); NaN floats stay NaN."""
     return value.item() if isinstance(value, np.generic) else value
-
-
-def _timestamp(value: Any) -> int | None:
-    return None if value is None or pd.isna(value) else int(value)
 
 
 def comparable_metrics(path: str | os.PathLike[str]) -> pd.DataFrame:
