@@ -21,7 +21,7 @@ import pandas as pd
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.images import quantize_uint8, read_rgb, write_png
-from setdiff_bench.leaderboard import natural_key
+from setdiff_bench.loaders.common import natural_key
 from setdiff_bench.run_paths import METRICS_FILE
 
 FONT = cv2.FONT_HERSHEY_SIMPLEX

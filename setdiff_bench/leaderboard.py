@@ -24,12 +24,10 @@ Table shapes follow the paper: EUVS Settings 1–3 (Table 1), Para-Lane single/d
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -39,6 +37,7 @@ import pyarrow.parquet as pq
 from setdiff_bench.errors import SetDiffBenchError, UsageError
 from setdiff_bench.io.atomic import atomic_path, write_text_atomic
 from setdiff_bench.loaders import DATASETS
+from setdiff_bench.loaders.common import natural_key
 from setdiff_bench.metrics.registry import METRICS
 from setdiff_bench.profiles import DEFAULT_PROFILE, PROFILE_COLUMN, get_profile
 from setdiff_bench.run_paths import METRICS_FILE, RUN_FILE, SEQUENCES_FILE
@@ -111,11 +110,6 @@ def higher_is_better(name: str) -> bool:
     if name in METRICS:
         return METRICS[name].higher_is_better
     return name.split("_")[0] in {"psnr", "ssim", "cos", "final"}
-
-
-def natural_key(text: str) -> list[Any]:
-    """Sort key that orders ``n3 < n6 < n12`` and ``10-11s < 11-12s``."""
-    return [int(part) if part.isdigit() else part for part in re.split(r"(\d+)", text)]
 
 
 # ---------------------------------------------------------------------- inputs
