@@ -48,6 +48,7 @@ import cv2
 import numpy as np
 import torch
 
+from setdiff_bench.devices import resolve_device
 from setdiff_bench.errors import DatasetError, ProtocolError, UsageError
 from setdiff_bench.io.atomic import sha256_file
 from setdiff_bench.io.images import read_mask, read_rgb, to_numpy_hwc
@@ -139,9 +140,7 @@ class FitSource:
             config = FitConfig()
         else:
             config = FitConfig.schedule(self.fit_iterations, densify_every=min(100, max(1, self.fit_iterations // 50)))
-        device = self.fit_device
-        if device == "auto":
-            device = "cuda" if torch.cuda.is_available() else "cpu"
+        device = resolve_device(self.fit_device)
         views = load_fit_views(scene, [f.name for f in fit_frames], downscale=self.downscale)
         from setdiff_bench.gaussians.triangulate import initial_points
 
@@ -308,8 +307,7 @@ def declared_split(assignment: Mapping[str, str], test_scenes: Sequence[str]) ->
 
 def resolve_backend(backend: str, device: str) -> tuple[str, str]:
     """``auto`` → gsplat on CUDA when importable, else the torch backend (on CUDA if present)."""
-    if device == "auto":
-        device = "cuda" if torch.cuda.is_available() else "cpu"
+    device = resolve_device(device)
     if backend == "auto":
         backend = "torch"
         if device.startswith("cuda"):

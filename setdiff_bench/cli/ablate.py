@@ -44,8 +44,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from setdiff_bench.devices import resolve_device
     from setdiff_bench.stages import Pipeline, StageFailed
 
+    if args.device:  # checked here; passed on as given, so the stages resolve "auto" themselves
+        resolve_device(args.device)
     work = (args.work or args.out / "work") / f"ablation_{args.study}"
     pipeline = Pipeline(quiet=args.no_progress, ledger=work / "stages.json")  # reruns keep the original times
     invocation = _invocation(args)

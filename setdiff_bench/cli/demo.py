@@ -59,11 +59,14 @@ def invocation(args: argparse.Namespace) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from setdiff_bench.demo import DemoPaths, get_demo_preset, run_demo
+    from setdiff_bench.devices import resolve_device
     from setdiff_bench.errors import UsageError
     from setdiff_bench.stages import StageFailed
 
     if args.jobs < 1:
         raise UsageError(f"--jobs must be >= 1, got {args.jobs}", "--jobs")
+    if args.device:  # checked here; passed on as given, so the stages resolve "auto" themselves
+        resolve_device(args.device)
     preset = get_demo_preset(args.preset)
     paths = DemoPaths(out=args.out, work=args.work or args.out / "work")
     try:

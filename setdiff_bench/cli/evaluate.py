@@ -39,10 +39,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from setdiff_bench.devices import resolve_device
     from setdiff_bench.errors import UsageError
     from setdiff_bench.profile_scoring import score_run
     from setdiff_bench.profiles import get_profile
 
+    device = resolve_device(args.device)
     profile = get_profile(args.profile)
     dinov2 = None
     if args.dinov2 is not None:
@@ -50,10 +52,10 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError(f"profile {profile.name} has no DINOv2 score", "--dinov2")
         from setdiff_bench.metrics.dinov2 import load_dinov2
 
-        dinov2 = load_dinov2(args.dinov2, args.device)
+        dinov2 = load_dinov2(args.dinov2, device)
     if args.euvs_compat_report and not profile.name.startswith("euvs"):
         raise UsageError("--euvs-compat-report applies to EUVS profiles (euvs_official)", "--euvs-compat-report")
-    out = score_run(args.run, profile, packets=args.packets, data=args.data, dinov2=dinov2, device=args.device)
+    out = score_run(args.run, profile, packets=args.packets, data=args.data, dinov2=dinov2, device=device)
     print(f"{profile.caption()}")
     print(f"tables: {out}")
     if profile.dinov2 and dinov2 is None:

@@ -87,11 +87,10 @@ def rescale_schedule(base, iterations: int):  # (FitConfig, int) -> FitConfig
 def run(args: argparse.Namespace) -> int:
     import time
 
-    import torch
-
+    from setdiff_bench.devices import resolve_device
     from setdiff_bench.gaussians.fit import fit_scene
 
-    device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
+    device = resolve_device(args.device)
     config = fit_config(args.preset, args.iterations, args.seed)
     frames = None
     if args.frames is not None:

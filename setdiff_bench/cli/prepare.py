@@ -55,13 +55,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from setdiff_bench.cli.list import parse_option
+    from setdiff_bench.devices import resolve_device
     from setdiff_bench.prepare import prepare
     from setdiff_bench.shards import Shard
 
     loader_options = dict(parse_option(text, "--loader-option") for text in args.loader_option)
     summary = prepare(args.dataset, args.root, args.out, protocol=args.protocol, fits=args.fits, fit=args.fit,
                       split=args.split, scenes=args.scenes, workers=args.workers, shard=Shard.parse(args.shard),
-                      backend=args.backend, device=args.device, threads=args.threads, cmap_precision=args.cmap_precision,
+                      backend=args.backend, device=resolve_device(args.device), threads=args.threads,
+                      cmap_precision=args.cmap_precision,
                       loader_options=loader_options, fit_iterations=args.fit_iterations,
                       progress=not args.quiet, groups=args.groups,
                       test_scenes=args.test_scenes)

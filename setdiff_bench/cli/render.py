@@ -39,6 +39,7 @@ def run(args: argparse.Namespace) -> int:
     import torch
     from tqdm import tqdm
 
+    from setdiff_bench.devices import resolve_device
     from setdiff_bench.errors import UsageError
     from setdiff_bench.gaussians.ply import read_ply
     from setdiff_bench.gaussians.render import render
@@ -46,6 +47,7 @@ def run(args: argparse.Namespace) -> int:
     from setdiff_bench.loaders.colmap import read_colmap_model
     from setdiff_bench.undistort import is_distorted, pinhole_camera
 
+    device = resolve_device(args.device) if args.backend == "torch" else "cuda"
     model = read_colmap_model(args.colmap)
     names = list(model.cameras) if not args.images else list(args.images)
     missing = [n for n in names if n not in model.cameras]
@@ -65,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"note: {len(distorted)} of {len(names)} camera(s) have lens distortion (first {distorted[0]!r}); "
               "rendered as the undistorted pinhole camera with the same K (fit and prepare undistort the "
               "captures to match)", file=sys.stderr)
-    gaussians = read_ply(args.ply).to(args.device if args.backend == "torch" else "cuda")
+    gaussians = read_ply(args.ply).to(device)
     args.out.mkdir(parents=True, exist_ok=True)
     todo = [n for n in names if not all((args.out / view_folder_name(n) / f).is_file() for f in OUTPUT_FILES)]
     for name in tqdm(todo, desc="render", unit="view", disable=None):

@@ -54,19 +54,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import torch
 
     from setdiff_bench.cli.list import parse_option
+    from setdiff_bench.devices import resolve_device
     from setdiff_bench.errors import UsageError
     from setdiff_bench.run import RunSettings, Shard, run_method
     from setdiff_bench.scoring import resolve_metrics
 
     shard = Shard.parse(args.shard)
-    device = args.device
-    if device == "auto":
-        device = "cuda" if torch.cuda.is_available() else "cpu"
-    elif device.startswith("cuda") and not torch.cuda.is_available():
-        raise UsageError(f"device {device!r} requested but CUDA is not available", "--device")
+    device = resolve_device(args.device)
     options = dict(parse_option(text) for text in args.option)
     for key, value in (("checkpoint", args.checkpoint), ("source", args.source)):
         if value is not None:

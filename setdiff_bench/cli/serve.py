@@ -38,6 +38,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from setdiff_bench.devices import resolve_device
     from setdiff_bench.enhancers.setdiff import load_enhancer
     from setdiff_bench.errors import UsageError
     from setdiff_bench.serve.server import pid_line, serve_until_signalled, start_server
@@ -47,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError(f"must be >= 1, got {getattr(args, name)}", f"--{name.replace('_', '-')}")
     if not 0 <= args.port <= 65535:
         raise UsageError(f"must be 0..65535, got {args.port}", "--port")
-    enhancer = load_enhancer(args.method, args.checkpoint, device=args.device, dtype=args.dtype)
+    enhancer = load_enhancer(args.method, args.checkpoint, device=resolve_device(args.device), dtype=args.dtype)
     settings = ServeSettings(host=args.host, port=args.port, workers=args.workers, max_queue=args.max_queue,
                              max_sessions=args.max_sessions, max_cameras=args.max_cameras, grace=args.grace,
                              cache_reference_latents=args.cache_reference_latents)

@@ -169,8 +169,7 @@ def run(args: argparse.Namespace) -> int:
     import time
     from concurrent.futures import ProcessPoolExecutor
 
-    import torch
-
+    from setdiff_bench.devices import resolve_device
     from setdiff_bench.errors import UsageError
     from setdiff_bench.synthetic.presets import get_preset
     from setdiff_bench.threads import compute_threads
@@ -182,7 +181,7 @@ def run(args: argparse.Namespace) -> int:
     indices = list(range(count)) if args.indices is None else parse_indices(args.indices)
     if args.seed < 0:
         raise UsageError(f"--seed must be ≥ 0, got {args.seed}", "--seed")
-    device = args.device or ("cuda" if torch.cuda.is_available() else "cpu")
+    device = resolve_device(args.device)
     cores = compute_threads()  # the machine's CPU count unless SETDIFF_THREADS says otherwise
     jobs = args.jobs or (1 if device.startswith("cuda") else min(len(indices), cores))
     if jobs < 1:

@@ -12,6 +12,7 @@ from typing import Any
 
 import torch
 
+from setdiff_bench.devices import resolve_device
 from setdiff_bench.errors import UsageError
 from setdiff_bench.types import Packet
 
@@ -75,7 +76,7 @@ def load_enhancer(method: str, checkpoint: str | None, *, device: str | None = N
     if not checkpoint:
         raise UsageError(f"method {method!r} needs a trained model: pass --checkpoint CKPT "
                          "(train one with `setdiff-bench train`)", "--checkpoint")
-    device = device or ("cuda" if torch.cuda.is_available() else "cpu")
+    device = resolve_device(None if device is None else str(device))
     dtype = dtype or ("bfloat16" if str(device).startswith("cuda") else "float32")
     for name, value in (("max_references", max_references), ("targets_per_set", targets_per_set)):
         if value is not None and (not isinstance(value, int) or value < (0 if name == "max_references" else 1)):

@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from setdiff_bench.devices import resolve_device
 from setdiff_bench.errors import CheckpointError, UsageError
 from setdiff_bench.gaussians.densify import DensityStats, densify_and_prune, reset_opacity
 from setdiff_bench.gaussians.fit_data import FitView
@@ -355,9 +356,7 @@ def fit_gaussians(views: Sequence[FitView], config: FitConfig, *, points: np.nda
         raise UsageError("a fit needs at least one training view")
     if config.iterations < 1:
         raise UsageError(f"iterations must be ≥ 1, got {config.iterations}", "--iterations")
-    device = torch.device(device)
-    if device.type == "cuda" and not torch.cuda.is_available():
-        raise UsageError("CUDA was requested but is not available", "--device")
+    device = torch.device(resolve_device(str(device)))
     init = initial_model(views, points, colors, config)
     trainer = _Trainer(views, init, config, device)
     names = [v.name for v in views]
