@@ -19,6 +19,13 @@ A protocol file (``protocols/<name>.toml``, format ``setdiff-protocol/1``) decla
   0 = no clipping);
 * ``[evaluation]`` — ``profiles``: the evaluation profiles that apply to this protocol's runs
   (:data:`setdiff_bench.profiles.PROFILES`; default ``["paper"]``, the first is the default);
+* ``[leaderboard]`` — the table shape of the dataset's leaderboard (:class:`Layout`), read from the
+  dataset's default protocol (``protocols/<dataset>.toml``) by :mod:`setdiff_bench.leaderboard`:
+  ``title`` (caption), ``blocks`` (column blocks in order: ``{ group = "<group name>", label = "..." }``
+  or ``{ pooled = true, label = "All" }`` for every group pooled; absent = one block per group found),
+  ``metrics`` (image metrics per block, default ``["psnr", "ssim", "lpips"]``), ``sequence_metrics``
+  (per-sequence metrics shown in the pooled block) and ``reported_tables`` (``table`` ids of
+  ``protocols/reported/*.csv`` of this dataset that ``--with-reported`` mixes in); optional;
 * ``[[groups]]`` — evaluation groups: a name, a rule (:mod:`.rules`) with its parameters, the
   ``fit_key`` naming the 3DGS fit (``<fits>/<scene>/<fit_key>.ply``) and an optional ``scenes``
   filter on ``Scene.metadata`` (EUVS ``level``).
@@ -57,6 +64,7 @@ FORMAT = "setdiff-protocol/1"
 PROTOCOL_NAMES = ("euvs", "paralane", "nuscenes", "dl3dv", "synthetic", "colmap", "nerfstudio")
 SPLITS = ("train", "test")
 MaskSource = Literal["dataset", "foreground", "none"]
+POOLED = ""  # block key of a leaderboard's pooled block (every group)
 
 
 @dataclass(frozen=True)
@@ -107,6 +115,33 @@ class PacketSpec:
 
 
 @dataclass(frozen=True)
+class Block:
+    """A leaderboard column block: one group (or every group pooled, ``key == POOLED``) with a display label."""
+
+    key: str
+    label: str
+
+
+@dataclass(frozen=True)
+class Layout:
+    """The leaderboard table shape of one dataset (a protocol's ``[leaderboard]`` table).
+
+    Attributes:
+        blocks: column blocks in order; ``None`` = one block per group found (natural order).
+        metrics: image metrics per block.
+        sequence_metrics: per-sequence metrics shown in the pooled block when runs have them.
+        reported_tables: ``table`` ids of ``protocols/reported`` mixed in by ``with_reported``.
+        title: caption text.
+    """
+
+    blocks: tuple[Block, ...] | None
+    metrics: tuple[str, ...] = ("psnr", "ssim", "lpips")
+    sequence_metrics: tuple[str, ...] = ()
+    reported_tables: tuple[str, ...] = ()
+    title: str = ""
+
+
+@dataclass(frozen=True)
 class GroupSpec:
     """One evaluation group.
 
@@ -149,6 +184,7 @@ class Protocol:
     cmap_clip: float
     groups: tuple[GroupSpec, ...]
     evaluation: tuple[str, ...] = ("paper",)
+    leaderboard: Layout | None = None
 
     def group(self, name: str) -> GroupSpec:
         for group in self.groups:
@@ -209,7 +245,7 @@ def parse_protocol(data: Mapping[str, Any], path: Path) -> Protocol:
     """Validate parsed TOML ``data`` (read from ``path``, named in errors) into a :class:`Protocol`."""
     root = Table(data, path)
     root.check_keys(("format", "name", "dataset", "description", "loader", "split", "images", "references",
-                     "packets", "render", "groups", "evaluation"))
+                     "packets", "render", "groups", "evaluation", "leaderboard"))
     if root.raw("format") != FORMAT:
         raise root.error("format", f"expected {FORMAT!r}, got {root.raw('format')!r}")
     loader = root.table("loader", {})
@@ -226,12 +262,14 @@ def parse_protocol(data: Mapping[str, Any], path: Path) -> Protocol:
     duplicate = next((n for n in names if names.count(n) > 1), None)
     if duplicate:
         raise root.error("groups", f"group name {duplicate!r} appears twice")
+    dataset = root.string("dataset")
+    leaderboard = _leaderboard(root.table("leaderboard"), names, dataset) if root.has("leaderboard") else None
     return Protocol(
-        name=root.string("name"), dataset=root.string("dataset"), description=root.string("description", "-"),
+        name=root.string("name"), dataset=dataset, description=root.string("description", "-"),
         path=path, loader_options=dict(loader.data), split=_split(root.table("split")),
         images=_images(root.table("images")), references=references, packets=packets,
         cmap_clip=render.number("cmap_clip", 0.0, minimum=0.0), groups=groups,
-        evaluation=_evaluation(root.table("evaluation", {})))
+        evaluation=_evaluation(root.table("evaluation", {})), leaderboard=leaderboard)
 
 
 # ---------------------------------------------------------------------- sections
@@ -285,6 +323,76 @@ def _evaluation(table: Table) -> tuple[str, ...]:
     return names
 
 
+def _leaderboard(table: Table, groups: list[str], dataset: str) -> Layout:
+    table.check_keys(("title", "blocks", "metrics", "sequence_metrics", "reported_tables"))
+    blocks: tuple[Block, ...] | None = None
+    if table.has("blocks"):
+        value = table.raw("blocks")
+        if not isinstance(value, list) or not value or not all(isinstance(v, Mapping) for v in value):
+            raise table.error("blocks", f"expected a non-empty list of tables ({{ group = ..., label = ... }}), "
+                              f"got {value!r}")
+        blocks = tuple(_block(Table(v, table.path, f"{table.key('blocks')}[{i}]"), groups)
+                       for i, v in enumerate(value))
+        keys = [b.key for b in blocks]
+        duplicate = next((k for k in keys if keys.count(k) > 1), None)
+        if duplicate is not None:
+            raise table.error("blocks", "the pooled block appears twice" if duplicate == POOLED
+                              else f"group {duplicate!r} appears twice")
+    metrics = table.strings("metrics", list(Layout.metrics))
+    sequence_metrics = table.strings("sequence_metrics") if table.has("sequence_metrics") else ()
+    _check_metrics(table, "metrics", metrics, "image")
+    _check_metrics(table, "sequence_metrics", sequence_metrics, "sequence")
+    reported = table.strings("reported_tables") if table.has("reported_tables") else ()
+    if reported:
+        known = _reported_tables(table, dataset)
+        unknown = [name for name in reported if name not in known]
+        if unknown:
+            raise table.error("reported_tables", f"no reported table {unknown[0]!r} of dataset {dataset!r} in "
+                              f"protocols/reported/*.csv; known: {', '.join(sorted(known)) or 'none'}")
+    return Layout(blocks=blocks, metrics=metrics, sequence_metrics=sequence_metrics, reported_tables=reported,
+                  title=table.string("title") if table.has("title") else "")
+
+
+def _block(table: Table, groups: list[str]) -> Block:
+    table.check_keys(("group", "pooled", "label"))
+    label = table.string("label")
+    if table.has("pooled"):
+        if table.has("group"):
+            raise table.error("pooled", "a block has either group or pooled = true, not both")
+        if not table.boolean("pooled"):
+            raise table.error("pooled", "expected true (leave the key out otherwise)")
+        return Block(POOLED, label)
+    if not table.has("group"):
+        raise table.error("group", "missing required key (or pooled = true)")
+    group = table.string("group")
+    if group not in groups:
+        raise table.error("group", f"no group {group!r} in this protocol; groups: {', '.join(groups)}")
+    return Block(group, label)
+
+
+def _check_metrics(table: Table, key: str, names: tuple[str, ...], scope: str) -> None:
+    from setdiff_bench.metrics.registry import METRICS
+
+    for name in names:
+        if name not in METRICS or METRICS[name].scope != scope:
+            known = ", ".join(n for n, spec in METRICS.items() if spec.scope == scope)
+            raise table.error(key, f"unknown {scope} metric {name!r}; known: {known}")
+
+
+def _reported_tables(table: Table, dataset: str) -> set[str]:
+    """``table`` ids of the packaged ``reported/*.csv`` rows of ``dataset``."""
+    import csv
+
+    known: set[str] = set()
+    for file in sorted((protocol_dir() / "reported").glob("*.csv")):
+        try:
+            with file.open(encoding="utf-8", newline="") as handle:
+                known.update(row.get("table", "") for row in csv.DictReader(handle) if row.get("dataset") == dataset)
+        except (OSError, UnicodeDecodeError, csv.Error) as exc:
+            raise table.error("reported_tables", f"cannot read {file.name} ({exc.__class__.__name__})") from exc
+    return known
+
+
 def _references(table: Table) -> ReferenceSpec:
     table.check_keys(("alpha", "beta", "aggregate", "train", "test"))
     return ReferenceSpec(alpha=table.number("alpha", minimum=0.0), beta=table.number("beta", minimum=0.0),
@@ -319,5 +427,6 @@ def _group(table: Table) -> GroupSpec:
                      scenes=scenes)
 
 
-__all__ = ["FORMAT", "PROTOCOL_NAMES", "GroupFrames", "GroupSpec", "ImageSpec", "PacketSpec", "Protocol",
-           "ReferenceSpec", "SceneSplit", "list_protocols", "load_protocol", "parse_protocol", "protocol_path"]
+__all__ = ["FORMAT", "POOLED", "PROTOCOL_NAMES", "Block", "GroupFrames", "GroupSpec", "ImageSpec", "Layout",
+           "PacketSpec", "Protocol", "ReferenceSpec", "SceneSplit", "list_protocols", "load_protocol", "parse_protocol",
+           "protocol_path"]

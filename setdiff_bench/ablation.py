@@ -26,11 +26,16 @@ import pyarrow.parquet as pq
 
 from setdiff_bench.errors import SetDiffBenchError, UsageError
 from setdiff_bench.io.atomic import atomic_path, write_text_atomic
+from setdiff_bench.metrics.registry import METRICS as METRIC_SPECS
 
 METRICS = ("psnr", "ssim", "lpips")
-HIGHER_IS_BETTER = {"psnr": True, "ssim": True, "lpips": False}
 HEADERS = {"psnr": "PSNR", "ssim": "SSIM", "lpips": "LPIPS"}
 DECIMALS = {"psnr": 2, "ssim": 3, "lpips": 3}
+
+
+def _higher(metric: str) -> bool:
+    """Ranking direction of ``metric``, from the metric registry (``MetricSpec.higher_is_better``)."""
+    return METRIC_SPECS[metric].higher_is_better
 
 
 @dataclass(frozen=True)
@@ -99,8 +104,8 @@ def ordering_geometry(frame: pd.DataFrame) -> list[str]:
     by = frame.set_index("variant")
     for metric in METRICS:
         values = by[metric]
-        better = values.idxmax() if HIGHER_IS_BETTER[metric] else values.idxmin()
-        worse = values.idxmin() if HIGHER_IS_BETTER[metric] else values.idxmax()
+        better = values.idxmax() if _higher(metric) else values.idxmin()
+        worse = values.idxmin() if _higher(metric) else values.idxmax()
         notes.append(f"{HEADERS[metric]}: best {by.loc[better, 'grounding']}, worst {by.loc[worse, 'grounding']} "
                      f"(paper: best Both, worst None)")
     return notes
@@ -110,7 +115,7 @@ def ordering_setsize(results: Mapping[tuple[int, int], Mapping[str, float]]) -> 
     """Whether more references / more targets help, as in the paper's Table 6."""
     notes = []
     for metric in METRICS:
-        sign = 1.0 if HIGHER_IS_BETTER[metric] else -1.0
+        sign = 1.0 if _higher(metric) else -1.0
         one, three = results.get((1, 1)), results.get((3, 1))
         if one and three:
             gain = sign * (three[metric] - one[metric])
@@ -141,7 +146,7 @@ def format_cell(value: float, metric: str) -> str:
 def best_index(values: Sequence[float], metric: str) -> set[int]:
     """Positions of the best value at display precision (ties share it)."""
     rounded = [round(v, DECIMALS[metric]) for v in values]
-    target = max(rounded) if HIGHER_IS_BETTER[metric] else min(rounded)
+    target = max(rounded) if _higher(metric) else min(rounded)
     return {i for i, v in enumerate(rounded) if v == target}
 
 
@@ -179,7 +184,7 @@ def setsize_markdown(frame: pd.DataFrame, notes: Sequence[str], commands: str, c
         values = [row[s] for s in sizes]
         best = best_index(values, metric)
         cells = [f"**{format_cell(v, metric)}**" if i in best else format_cell(v, metric) for i, v in enumerate(values)]
-        lines.append(f"| {HEADERS[metric]} {'↑' if HIGHER_IS_BETTER[metric] else '↓'} | " + " | ".join(cells) + " |")
+        lines.append(f"| {HEADERS[metric]} {'↑' if _higher(metric) else '↓'} | " + " | ".join(cells) + " |")
     lines += ["", f"Each column scores the same {targets} test targets.", ""]
     lines += ["Ordering against the paper:", *[f"- {n}" for n in notes], ""]
     paper = reported_frame("table6_setsize_ablation")
