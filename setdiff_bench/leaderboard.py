@@ -18,7 +18,8 @@ metric registry (``higher_is_better``).
 
 Table shapes follow the paper: EUVS Settings 1–3 (Table 1), Para-Lane single/double lane shift
 (Table 2), nuScenes one pooled block with warp error (Table 3 + supplement), DL3DV 3/6/9 views
-(Table 4); other datasets get one block per group found.
+(Table 4); they are declared once, in the ``[leaderboard]`` table of the dataset's default protocol
+(``protocols/<dataset>.toml``, :func:`dataset_layout`); other datasets get one block per group found.
 """
 
 from __future__ import annotations
@@ -40,61 +41,33 @@ from setdiff_bench.loaders import DATASETS
 from setdiff_bench.loaders.common import natural_key
 from setdiff_bench.metrics.registry import METRICS
 from setdiff_bench.profiles import DEFAULT_PROFILE, PROFILE_COLUMN, get_profile
+from setdiff_bench.protocols import POOLED, Block, Layout, list_protocols, load_protocol
 from setdiff_bench.run_paths import METRICS_FILE, RUN_FILE, SEQUENCES_FILE
 
 FORMATS = ("parquet", "latex", "md")
-ALL = ""  # block key of the pooled block (every group)
+ALL = POOLED  # block key of the pooled block (every group)
 
 
 class LeaderboardError(SetDiffBenchError):
     """Runs that cannot be put in one table (missing rows, duplicates, no data)."""
 
 
-@dataclass(frozen=True)
-class Block:
-    """A column block: one group (or every group pooled, ``key == ""``) with a display label."""
-
-    key: str
-    label: str
-
-
-@dataclass(frozen=True)
-class Layout:
-    """The table shape of one dataset.
-
-    Attributes:
-        blocks: column blocks in order; ``None`` = one block per group found (natural order).
-        metrics: image metrics per block.
-        sequence_metrics: per-sequence metrics shown in the pooled block when runs have them.
-        reported_tables: ``table`` ids of ``protocols/reported`` mixed in by ``with_reported``.
-        title: caption text.
-    """
-
-    blocks: tuple[Block, ...] | None
-    metrics: tuple[str, ...] = ("psnr", "ssim", "lpips")
-    sequence_metrics: tuple[str, ...] = ()
-    reported_tables: tuple[str, ...] = ()
-    title: str = ""
-
-
-LAYOUTS: dict[str, Layout] = {
-    "euvs": Layout((Block("level1", "Setting 1"), Block("level2", "Setting 2"), Block("level3", "Setting 3")),
-                   reported_tables=("table1_euvs",), title="EUVS novel-view settings (paper Table 1)"),
-    "paralane": Layout((Block("single", "Single-lane shift"), Block("double", "Double-lane shift")),
-                       reported_tables=("table2_paralane",), title="Para-Lane lane shifts (paper Table 2)"),
-    "nuscenes": Layout((Block(ALL, "All"),), sequence_metrics=("warp",),
-                       reported_tables=("table3_nuscenes", "supp_consistency"),
-                       title="nuScenes temporal extrapolation, 10-15 s (paper Table 3 and consistency table)"),
-    "dl3dv": Layout((Block("n3", "3 views"), Block("n6", "6 views"), Block("n9", "9 views")),
-                    reported_tables=("table4_dl3dv",), title="DL3DV sparse views (paper Table 4)"),
-    "synthetic": Layout((Block("lane+1", "Lane +1"), Block("lane+2", "Lane +2"), Block("side", "Side cameras"),
-                         Block("turn", "Turn"), Block("interp", "Held-out")),
-                        title="Synthetic streets (fit on lane 0, front camera)"),
-}
-
 HEADERS = {"psnr": "PSNR", "ssim": "SSIM", "lpips": "LPIPS", "warp": "Warp", "cos": "Cos", "final": "Final"}
 DECIMALS = {"psnr": 2, "ssim": 3, "lpips": 3, "warp": 1}
 SECTIONS = ("reconstruction", "enhancer", "ablation", "measured")
+
+
+def dataset_layout(dataset: str) -> Layout:
+    """The table shape of ``dataset``: the ``[leaderboard]`` table of its default protocol
+    (``protocols/<dataset>.toml``); one block per group found when it has none (or no packaged protocol).
+
+    Raises:
+        ProtocolError: the default protocol file is invalid.
+    """
+    if dataset not in list_protocols():
+        return Layout(None)
+    layout = load_protocol(dataset).leaderboard
+    return layout if layout is not None else Layout(None)
 
 
 def metric_header(name: str) -> str:
@@ -250,7 +223,7 @@ def build_leaderboard(dataset: str, images: pd.DataFrame, sequences: pd.DataFram
     Raises:
         LeaderboardError: no rows, a metric column missing, duplicate rows, or a method missing rows.
     """
-    layout = layout or LAYOUTS.get(dataset, Layout(None))
+    layout = layout or dataset_layout(dataset)
     metric_names = tuple(metrics or layout.metrics)
     frame = images if len(images) else pd.DataFrame(columns=["dataset"])
     present = sorted(set(frame["dataset"]))
@@ -570,7 +543,7 @@ def write_leaderboard(board: Leaderboard, out: str | Path, formats: Sequence[str
 
 def reported_for(dataset: str, layout: Layout | None = None) -> pd.DataFrame:
     """The reported rows the dataset's layout mixes in (empty when the paper has none)."""
-    layout = layout or LAYOUTS.get(dataset, Layout(None))
+    layout = layout or dataset_layout(dataset)
     if not layout.reported_tables:
         return load_reported(dataset).iloc[0:0]
     return load_reported(dataset, layout.reported_tables)
