@@ -14,7 +14,6 @@ Usage::
 
 from __future__ import annotations
 
-import importlib
 import inspect
 import os
 from collections.abc import Callable, Iterable
@@ -22,6 +21,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from setdiff_bench.errors import UsageError
+from setdiff_bench.lazy import load_attribute
 
 if TYPE_CHECKING:  # types imports torch; the registry stays light
     from setdiff_bench.types import Scene
@@ -37,10 +37,10 @@ class DatasetSpec:
     description: str
 
     def load_lister(self) -> Callable[..., list[str]]:
-        return _resolve(self.lister)
+        return load_attribute(self.lister, f"dataset {self.key!r} lister")
 
     def load_loader(self) -> Callable[..., list[Scene]]:
-        return _resolve(self.loader)
+        return load_attribute(self.loader, f"dataset {self.key!r} loader")
 
 
 def _spec(key: str, description: str) -> DatasetSpec:
@@ -57,11 +57,6 @@ DATASETS: dict[str, DatasetSpec] = {spec.key: spec for spec in (
     _spec("colmap", "any COLMAP scene: <scene>/sparse/0 + <scene>/images"),
     _spec("nerfstudio", "any nerfstudio scene: <scene>/transforms.json"),
 )}
-
-
-def _resolve(spec: str) -> Callable[..., Any]:
-    module_name, attr = spec.split(":")
-    return getattr(importlib.import_module(module_name), attr)
 
 
 def dataset_spec(dataset: str) -> DatasetSpec:

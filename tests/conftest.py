@@ -1,11 +1,14 @@
-"""Shared pytest configuration: deterministic torch, few threads, GPU marker handling."""
+"""Shared pytest configuration: deterministic torch, one intra-op thread per test, GPU marker handling."""
 
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 
 import pytest
 import torch
+
+from setdiff_bench.threads import torch_threads
 
 # Verbs called by the tests (in-process or as subprocesses) run single-threaded unless told otherwise:
 # the test data is tiny, and oversubscribed threads on a shared machine only slow it down.  Results do not
@@ -25,3 +28,12 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 @pytest.fixture(autouse=True)
 def _seed() -> None:
     torch.manual_seed(0)
+
+
+@pytest.fixture(autouse=True)
+def _single_torch_thread() -> Iterator[None]:
+    """Every test runs with one torch intra-op thread (restored after): the tensors are tiny, and on a shared
+    2-core machine oversubscribed threads made the tiny networks and the tile rasteriser up to 25x slower
+    (measured).  Session fixtures that compute pin their own count with :func:`torch_threads`."""
+    with torch_threads(1):
+        yield

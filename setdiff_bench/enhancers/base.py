@@ -21,7 +21,6 @@ duplicate is reported with a :class:`RegistryWarning`.
 
 from __future__ import annotations
 
-import importlib
 import inspect
 import warnings
 from collections.abc import Callable, Mapping, Sequence
@@ -33,6 +32,7 @@ from typing import Any, Protocol, runtime_checkable
 import torch
 
 from setdiff_bench.errors import UsageError
+from setdiff_bench.lazy import load_attribute
 from setdiff_bench.types import Packet
 
 ENTRY_POINT_GROUP = "setdiff_bench.enhancers"
@@ -106,17 +106,7 @@ class MethodSpec:
 
     def load_factory(self) -> Callable[..., Enhancer]:
         """Import the factory (this is where a method's heavy imports happen)."""
-        module_name, sep, attr = self.factory.partition(":")
-        if not sep or not module_name or not attr:
-            raise UsageError(f"method {self.name!r}: factory {self.factory!r} is not 'module:attr'", self.source)
-        try:
-            module = importlib.import_module(module_name)
-        except ImportError as error:
-            raise UsageError(f"method {self.name!r}: cannot import {module_name} ({error})", self.source) from None
-        try:
-            return getattr(module, attr)
-        except AttributeError:
-            raise UsageError(f"method {self.name!r}: {module_name} has no {attr!r}", self.source) from None
+        return load_attribute(self.factory, f"method {self.name!r} factory", error=UsageError, path=self.source)
 
 
 def _builtin(name: str, module: str, description: str, **flags: bool) -> MethodSpec:

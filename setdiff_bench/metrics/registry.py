@@ -16,7 +16,6 @@ Presets (the metric sets papers report; docs/metrics.md, "Presets"):
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -25,6 +24,7 @@ from typing import Any, Literal
 import torch
 
 from setdiff_bench.errors import UsageError
+from setdiff_bench.lazy import load_attribute
 
 
 @dataclass(frozen=True)
@@ -53,8 +53,7 @@ class MetricSpec:
 
     def load(self) -> Callable[..., torch.Tensor]:
         """Import and return the implementation."""
-        module_name, _, attr = self.function.partition(":")
-        return getattr(importlib.import_module(module_name), attr)
+        return load_attribute(self.function, f"metric {self.name!r}")
 
     def compute(self, pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
         """Image metric on ``(V, 3, H, W)`` batches with an optional ``(V, 1, H, W)`` mask → ``(V,)``."""

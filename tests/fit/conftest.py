@@ -2,20 +2,12 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-
 import pytest
 
 from setdiff_bench.gaussians.fit_data import load_fit_scene, load_fit_views, select_fit_frames
 from setdiff_bench.synthetic.generate import generate_scene
 from setdiff_bench.synthetic.presets import get_preset
 from setdiff_bench.threads import torch_threads
-
-
-@pytest.fixture(autouse=True)
-def _single_torch_thread() -> Iterator[None]:
-    with torch_threads(1):
-        yield
 
 
 @pytest.fixture(scope="session")

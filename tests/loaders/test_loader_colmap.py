@@ -4,7 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from loader_fixtures import (
+
+from setdiff_bench.errors import CameraError, DatasetError, ImageError
+from setdiff_bench.loaders import load_scenes
+from setdiff_bench.loaders.colmap import read_colmap_model
+from tests.loaders.loader_fixtures import (
     assert_projects,
     intrinsics,
     random_view,
@@ -12,10 +16,6 @@ from loader_fixtures import (
     write_colmap_text_by_hand,
     write_image,
 )
-
-from setdiff_bench.errors import CameraError, DatasetError, ImageError
-from setdiff_bench.loaders import load_scenes
-from setdiff_bench.loaders.colmap import read_colmap_model
 
 DIST = np.array([0.05, -0.02, 0.001, -0.0015])
 

@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from loader_fixtures import (
+
+from setdiff_bench.errors import DatasetError
+from setdiff_bench.loaders import list_scenes, load_scenes
+from tests.loaders.loader_fixtures import (
     assert_projects,
     intrinsics,
     random_view,
@@ -12,9 +15,6 @@ from loader_fixtures import (
     write_image,
     write_transforms,
 )
-
-from setdiff_bench.errors import DatasetError
-from setdiff_bench.loaders import list_scenes, load_scenes
 
 HASH_A = "0a78c25f77c1ba1d1a3f07c18c9735ae1254a9a71290734b8836eefbefaadbc7"
 HASH_B = "03f5c560f5725ad6ca55fd7e6c0af4c4c7a7ca94c444a584f2a9f316d3b35ea2"

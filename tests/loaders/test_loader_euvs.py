@@ -6,10 +6,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from loader_fixtures import MARS_NAMES, assert_projects, write_euvs_scene, write_image
 
 from setdiff_bench.errors import CameraError, DatasetError, ImageError, SetDiffBenchError
 from setdiff_bench.loaders import list_scenes, load_scenes
+from tests.loaders.loader_fixtures import MARS_NAMES, assert_projects, write_euvs_scene, write_image
 
 
 @pytest.fixture

@@ -6,7 +6,11 @@ import json
 
 import numpy as np
 import pytest
-from loader_fixtures import (
+
+from setdiff_bench.errors import DatasetError, ImageError
+from setdiff_bench.loaders import load_scenes
+from setdiff_bench.loaders.nerfstudio import read_transforms
+from tests.loaders.loader_fixtures import (
     NERFSTUDIO_APPLIED,
     assert_projects,
     intrinsics,
@@ -14,10 +18,6 @@ from loader_fixtures import (
     write_image,
     write_transforms,
 )
-
-from setdiff_bench.errors import DatasetError, ImageError
-from setdiff_bench.loaders import load_scenes
-from setdiff_bench.loaders.nerfstudio import read_transforms
 
 FULL = (128, 96)
 QUARTER = np.diag([0.25, 0.25, 1.0])

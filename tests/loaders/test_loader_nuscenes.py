@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from loader_fixtures import NU_CAMERAS, assert_projects, build_nuscenes, write_json
 
 from setdiff_bench.errors import CameraError, DatasetError, ImageError
 from setdiff_bench.loaders import list_scenes, load_scenes
+from tests.loaders.loader_fixtures import NU_CAMERAS, assert_projects, build_nuscenes, write_json
 
 
 @pytest.fixture

@@ -4,7 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from loader_fixtures import (
+from scipy.spatial.transform import Rotation
+
+from setdiff_bench.errors import CameraError
+from setdiff_bench.loaders import list_scenes, load_scenes
+from tests.loaders.loader_fixtures import (
     assert_projects,
     intrinsics,
     random_view,
@@ -12,10 +16,6 @@ from loader_fixtures import (
     write_image,
     write_mask,
 )
-from scipy.spatial.transform import Rotation
-
-from setdiff_bench.errors import CameraError
-from setdiff_bench.loaders import list_scenes, load_scenes
 
 T0 = 1718346704099615
 LANE_WIDTH = 3.5

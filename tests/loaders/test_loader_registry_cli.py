@@ -8,11 +8,11 @@ import sys
 
 import numpy as np
 import pytest
-from loader_fixtures import write_euvs_scene
 
 from setdiff_bench.cli.main import main
 from setdiff_bench.errors import UsageError
 from setdiff_bench.loaders import DATASETS, list_scenes, load_scenes, loader_options
+from tests.loaders.loader_fixtures import write_euvs_scene
 
 
 @pytest.fixture

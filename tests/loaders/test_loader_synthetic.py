@@ -6,10 +6,10 @@ import json
 
 import numpy as np
 import pytest
-from loader_fixtures import SYN_CAMERAS, SYN_TRAVERSALS, assert_projects, write_synthetic_scene
 
 from setdiff_bench.errors import DatasetError
 from setdiff_bench.loaders import list_scenes, load_scenes
+from tests.loaders.loader_fixtures import SYN_CAMERAS, SYN_TRAVERSALS, assert_projects, write_synthetic_scene
 
 
 @pytest.fixture

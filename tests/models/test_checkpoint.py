@@ -7,12 +7,12 @@ from pathlib import Path
 
 import pytest
 import torch
-from setdiff_fixtures import make_packet, tiny_config
 
 from setdiff_bench.errors import CheckpointError
 from setdiff_bench.models.setdiff.checkpoint import load_model, mark_latest, save_checkpoint, step_folder
 from setdiff_bench.models.setdiff.inference import enhance_packet
 from setdiff_bench.models.setdiff.model import SetDiffModel
+from tests.models.setdiff_fixtures import make_packet, tiny_config
 
 
 def perturbed_model(config_overrides: dict[str, object] | None = None) -> tuple[SetDiffModel, object]:

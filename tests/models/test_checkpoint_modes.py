@@ -6,10 +6,9 @@ import os
 import stat
 from pathlib import Path
 
-from setdiff_fixtures import tiny_config
-
 from setdiff_bench.models.setdiff.checkpoint import save_checkpoint
 from setdiff_bench.models.setdiff.model import SetDiffModel
+from tests.models.setdiff_fixtures import tiny_config
 
 
 def test_checkpoint_files_follow_the_umask(tmp_path: Path) -> None:

@@ -11,10 +11,10 @@ from typing import ClassVar
 
 import pandas as pd
 import pytest
-from setdiff_fixtures import make_sample
 
 from setdiff_bench.cli.main import main
 from setdiff_bench.models.setdiff.checkpoint import read_config, resolve_checkpoint
+from tests.models.setdiff_fixtures import make_sample
 
 CONFIG = """
 [model]

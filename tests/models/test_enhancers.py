@@ -7,13 +7,13 @@ from pathlib import Path
 
 import pytest
 import torch
-from setdiff_fixtures import make_packet, tiny_config
 
 from setdiff_bench.enhancers.base import Enhancer, available_methods, create_enhancer
 from setdiff_bench.errors import CheckpointError, UsageError
 from setdiff_bench.models.setdiff.checkpoint import save_checkpoint
 from setdiff_bench.models.setdiff.inference import enhance_packet
 from setdiff_bench.models.setdiff.model import SetDiffModel
+from tests.models.setdiff_fixtures import make_packet, tiny_config
 
 DIFIX = {"method": "difix", "prediction": "epsilon", "use_geometry": False, "max_references": 1,
          "targets_per_set": 1, "skip_connections": True}

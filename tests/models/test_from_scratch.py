@@ -10,8 +10,6 @@ from pathlib import Path
 
 import pytest
 import torch
-from setdiff_fixtures import make_packet, make_sample
-from test_store_training import write_store
 
 from setdiff_bench.cli.main import main
 from setdiff_bench.models.setdiff.autoencoder import (
@@ -25,6 +23,8 @@ from setdiff_bench.models.setdiff.inference import enhance_packet
 from setdiff_bench.models.setdiff.inputs import surface_points, training_set
 from setdiff_bench.models.setdiff.model import SetDiffModel
 from setdiff_bench.models.setdiff.set_mixer import BIAS_DISTANCE_CAP, distance_bias, token_grid
+from tests.models.setdiff_fixtures import make_packet, make_sample
+from tests.models.test_store_training import write_store
 
 
 def residual_model(**overrides: object) -> SetDiffModel:

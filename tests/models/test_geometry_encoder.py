@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-from setdiff_fixtures import look_camera
 from torch import nn
 
 from setdiff_bench.models.setdiff.geometry_encoder import GeometryEncoder, geometry_input
+from tests.models.setdiff_fixtures import look_camera
 
 
 def test_structure_and_zero_init() -> None:

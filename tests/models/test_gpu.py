@@ -7,12 +7,12 @@ from pathlib import Path
 
 import pytest
 import torch
-from setdiff_fixtures import make_packet, make_sample, tiny_config
 
 from setdiff_bench.models.setdiff.checkpoint import load_model, save_checkpoint
 from setdiff_bench.models.setdiff.inference import enhance_packet
 from setdiff_bench.models.setdiff.model import SetDiffModel
 from setdiff_bench.models.setdiff.train import train
+from tests.models.setdiff_fixtures import make_packet, make_sample, tiny_config
 
 pytestmark = [pytest.mark.gpu, pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")]
 

@@ -7,13 +7,13 @@ import math
 import numpy as np
 import pytest
 import torch
-from setdiff_fixtures import make_packet
 
 from setdiff_bench.errors import PacketError
 from setdiff_bench.models.setdiff.config import model_config_from_dict
 from setdiff_bench.models.setdiff.inference import enhance_packet, set_packets
 from setdiff_bench.models.setdiff.inputs import SetBatch, renormalize, view_tensors
 from setdiff_bench.models.setdiff.model import SetDiffModel
+from tests.models.setdiff_fixtures import make_packet
 
 # docs/model.md, "SD-Turbo schedule at t = 199": SD-Turbo scaled_linear schedule at t = 199.
 ALPHA_BAR_199 = 0.7552384

@@ -10,8 +10,6 @@ from pathlib import Path
 import pandas as pd
 import pytest
 import torch
-from setdiff_fixtures import make_packet
-from test_checkpoint import perturbed_model
 
 from setdiff_bench.cli.main import main
 from setdiff_bench.demo import DEMO_PRESETS, SHIPPED_MODELS, check_unseen, evaluation_scene_indices
@@ -26,6 +24,8 @@ from setdiff_bench.models.setdiff.checkpoint import (
 from setdiff_bench.models.setdiff.inference import enhance_packet
 from setdiff_bench.models.setdiff.manifest import record_training_session, synthetic_scene_seeds
 from setdiff_bench.models.setdiff.packaged import packaged_models, packaged_root, verify
+from tests.models.setdiff_fixtures import make_packet
+from tests.models.test_checkpoint import perturbed_model
 
 SHIPPED = packaged_models()
 

@@ -7,11 +7,11 @@ from pathlib import Path
 
 import pytest
 import torch
-from setdiff_fixtures import SD_TURBO_SCHEDULER_JSON, write_diffusers_folder
 
 from setdiff_bench.errors import WeightsError
 from setdiff_bench.models.setdiff.config import SD_TURBO_SCHEDULE, model_config_from_dict
 from setdiff_bench.models.setdiff.model import SetDiffModel
+from tests.models.setdiff_fixtures import SD_TURBO_SCHEDULER_JSON, write_diffusers_folder
 
 
 def test_loads_unet_vae_and_learned_null_text(tmp_path: Path) -> None:
@@ -61,10 +61,9 @@ def test_training_from_pretrained_resumes_with_frozen_prompt(tmp_path: Path) -> 
     """The resolved text-embedding choice is saved, so a resumed run has the same trainable parameters."""
     import dataclasses
 
-    from setdiff_fixtures import make_sample, tiny_config
-
     from setdiff_bench.models.setdiff.checkpoint import load_model, read_config
     from setdiff_bench.models.setdiff.train import train
+    from tests.models.setdiff_fixtures import make_sample, tiny_config
 
     write_diffusers_folder(tmp_path / "sd", text=True)
     config = tiny_config(pretrained=str(tmp_path / "sd"))

@@ -6,11 +6,11 @@ import gc
 
 import pytest
 import torch
-from setdiff_fixtures import make_packet
 
 from setdiff_bench.models.setdiff.config import load_config
 from setdiff_bench.models.setdiff.inference import enhance_packet
 from setdiff_bench.models.setdiff.model import SetDiffModel
+from tests.models.setdiff_fixtures import make_packet
 
 # Published size of the SD 2.x UNet (stabilityai/stable-diffusion-2-1-base, sd-turbo): 865,910,724 parameters.
 SD2_UNET_PARAMETERS = 865_910_724

@@ -6,7 +6,6 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from setdiff_fixtures import make_sample
 
 from setdiff_bench.cli.main import main
 from setdiff_bench.enhancers.base import create_enhancer
@@ -15,6 +14,7 @@ from setdiff_bench.models.setdiff.inputs import training_set
 from setdiff_bench.packet_index import merge_index
 from setdiff_bench.packets import PacketHeader, PacketStore, ViewContent, write_packet
 from setdiff_bench.types import ViewSet
+from tests.models.setdiff_fixtures import make_sample
 
 CONFIG = """
 [model]

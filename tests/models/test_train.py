@@ -14,7 +14,6 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from safetensors.torch import load_file
-from setdiff_fixtures import make_sample, tiny_config
 
 from setdiff_bench.errors import CheckpointError, WeightsError
 from setdiff_bench.metrics.psnr import psnr
@@ -24,6 +23,7 @@ from setdiff_bench.models.setdiff.inference import enhance_packet
 from setdiff_bench.models.setdiff.inputs import choose_views, training_set
 from setdiff_bench.models.setdiff.model import SetDiffModel
 from setdiff_bench.models.setdiff.train import train
+from tests.models.setdiff_fixtures import make_sample, tiny_config
 
 
 def with_train(config: Config, **changes: object) -> Config:

@@ -11,10 +11,9 @@ import sys
 import time
 from pathlib import Path
 
-from test_store_training import write_store
-
 from setdiff_bench.models.setdiff.checkpoint import resolve_checkpoint
 from setdiff_bench.models.setdiff.train import checkpoint_interval
+from tests.models.test_store_training import write_store
 
 STEPS = 40
 CONFIG = f"""

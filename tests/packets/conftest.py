@@ -2,22 +2,14 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from packet_fixtures import StreetScene, write_dataset
 
 from setdiff_bench.packets import PacketStore
 from setdiff_bench.prepare import PrepareSummary, prepare
 from setdiff_bench.threads import torch_threads
-
-
-@pytest.fixture(autouse=True)
-def _one_thread() -> Iterator[None]:
-    """The tile rasteriser's ops are tiny: one thread is fastest, and much faster on a busy machine."""
-    with torch_threads(1):
-        yield
+from tests.packets.packet_fixtures import StreetScene, write_dataset
 
 
 @pytest.fixture(scope="session")

@@ -10,10 +10,10 @@ import cv2
 import numpy as np
 import pytest
 import torch
-from packet_fixtures import HOLDOUT, STEPS
 from scipy.spatial.distance import pdist
 
 from setdiff_bench.gaussians.render import render
+from tests.packets.packet_fixtures import HOLDOUT, STEPS
 
 ALPHA, BETA = 0.8, 0.2
 

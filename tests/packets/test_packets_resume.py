@@ -12,10 +12,10 @@ import time
 from pathlib import Path
 
 import pytest
-from packet_fixtures import tree_bytes
 
 from setdiff_bench.packet_index import PACKETS_DIR
 from setdiff_bench.prepare import prepare
+from tests.packets.packet_fixtures import tree_bytes
 
 
 def snapshot(root: Path) -> dict[str, tuple[int, int, bytes]]:

@@ -4,7 +4,6 @@ a DL3DV scene with N frames, EUVS scenes (through the loader tests' writer), in-
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import cv2
@@ -14,9 +13,7 @@ from scipy.spatial.transform import Rotation
 
 from setdiff_bench.cameras import Camera
 from setdiff_bench.types import Frame, Scene
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "loaders"))
-import loader_fixtures  # the loader tests' official-layout writers
+from tests.loaders import loader_fixtures  # the loader tests' official-layout writers
 
 T0_US = 1_532_402_927_000_000
 EGO_FROM_CAMERA = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])  # camera z → ego x (forward)

@@ -4,19 +4,19 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from protocol_fixtures import (
-    T0_US,
-    paralane_scene,
-    write_dl3dv_scene,
-    write_euvs_scene,
-    write_nuscenes,
-)
 
 from setdiff_bench.errors import ProtocolError
 from setdiff_bench.loaders import load_scenes
 from setdiff_bench.prepare_plan import applicable_groups
 from setdiff_bench.protocols import load_protocol
 from setdiff_bench.protocols.rules import sparse_view_indices, uniform_indices
+from tests.protocols.protocol_fixtures import (
+    T0_US,
+    paralane_scene,
+    write_dl3dv_scene,
+    write_euvs_scene,
+    write_nuscenes,
+)
 
 KEYFRAMES_S = [0.0, 5.0, 9.999999, 10.0, 10.5, 11.0, 11.999999, 12.0, 13.0, 14.0, 14.999999, 15.0, 16.0]
 SWEEPS_S = [9.5, 10.2]

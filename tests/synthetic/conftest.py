@@ -2,19 +2,11 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-
 import pytest
-from synthetic_fixtures import SEED, small_preset
 
 from setdiff_bench.synthetic.generate import generate_scene
 from setdiff_bench.threads import torch_threads
-
-
-@pytest.fixture(autouse=True)
-def _single_torch_thread() -> Iterator[None]:
-    with torch_threads(1):
-        yield
+from tests.synthetic.synthetic_fixtures import SEED, small_preset
 
 
 @pytest.fixture(scope="session")

@@ -7,11 +7,11 @@ import json
 
 import numpy as np
 import pycolmap
-from synthetic_fixtures import SEED, small_preset
 
 from setdiff_bench.io.images import read_rgb
 from setdiff_bench.synthetic.generate import build_scene
 from setdiff_bench.synthetic.rig import RIG, rig_camera
+from tests.synthetic.synthetic_fixtures import SEED, small_preset
 
 
 def test_pycolmap_reads_the_legacy_three_file_model(scene_dir):

@@ -7,7 +7,6 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from synthetic_fixtures import SEED, small_preset
 
 from setdiff_bench.gaussians.render import render
 from setdiff_bench.io.atomic import sha256_file
@@ -15,6 +14,7 @@ from setdiff_bench.io.images import read_image_raw, read_rgb
 from setdiff_bench.loaders import load_scenes
 from setdiff_bench.synthetic.generate import build_scene, generate_scene
 from setdiff_bench.synthetic.rig import RIG, rig_camera
+from tests.synthetic.synthetic_fixtures import SEED, small_preset
 
 
 def file_hashes(folder: Path) -> dict[str, str]:

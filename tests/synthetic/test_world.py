@@ -7,7 +7,6 @@ import math
 import numpy as np
 import pytest
 import torch
-from synthetic_fixtures import SEED, small_preset
 
 from setdiff_bench.gaussians.render import render
 from setdiff_bench.io.images import read_mask, read_rgb
@@ -17,6 +16,7 @@ from setdiff_bench.synthetic.layout import LANE_WIDTH_M, random_layout
 from setdiff_bench.synthetic.presets import get_preset
 from setdiff_bench.synthetic.rig import RIG, rig_camera
 from setdiff_bench.synthetic.world import CATEGORIES, _road_texture
+from tests.synthetic.synthetic_fixtures import SEED, small_preset
 
 
 @pytest.mark.parametrize("seed", range(6))
