@@ -20,7 +20,7 @@ bench="python3 -m setdiff_bench"
 steps=1500
 
 $bench synth --out "$work/scenes" --preset default --seed 0 --jobs 2 --no-progress
-$bench prepare synthetic --root "$work/scenes" --fits "$work/scenes" --out "$work/packets" --split all --workers 2 --quiet
+$bench prepare synthetic --root "$work/scenes" --fits "$work/scenes" --out "$work/packets" --split all --workers 2 --no-progress
 $bench train --config tiny_setdiff --packets "$work/packets" --out "$work/ckpt/setdiff" --steps $steps --no-progress &
 setdiff=$!
 $bench train --config tiny_difix --packets "$work/packets" --out "$work/ckpt/difix" --steps $steps --no-progress &

@@ -204,7 +204,7 @@ def run_demo(preset: DemoPreset, paths: DemoPaths, *, seed: int = 0, jobs: int =
                "--out", rel(paths.packets), "--split", "all" if train else "test", "--workers", jobs]
     if not train:
         prepare += [part for index in test_indices for part in ("--test-scene", scene_name(seed, index))]
-    pipeline.run("prepare", prepare + ([] if progress else ["--quiet"]))
+    pipeline.run("prepare", prepare + quiet)
     checkpoints = {method: rel(paths.checkpoints(method)) for method in configs} if train else dict(SHIPPED_MODELS)
     for method in configs if train else ():
         command = ["train", "--config", configs[method], "--packets", rel(paths.packets),

@@ -50,7 +50,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cmap-precision", choices=("float32", "half"), default="float32",
                         help="C-map EXR precision (float32: exact geometry; half: ~3.5x smaller files)")
     parser.add_argument("--fit-iterations", type=int, default=30_000, help="3DGS iterations with --fit")
-    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    parser.add_argument("--no-progress", "--quiet", dest="no_progress", action="store_true",
+                        help="no progress bars (--quiet is the older name)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -65,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
                       backend=args.backend, device=resolve_device(args.device), threads=args.threads,
                       cmap_precision=args.cmap_precision,
                       loader_options=loader_options, fit_iterations=args.fit_iterations,
-                      progress=not args.quiet, groups=args.groups,
+                      progress=not args.no_progress, groups=args.groups,
                       test_scenes=args.test_scenes)
     print(summary.line())
     return 0
