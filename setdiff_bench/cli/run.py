@@ -68,8 +68,10 @@ def run(args: argparse.Namespace) -> int:
         if value is not None:
             if key in options:
                 raise UsageError(f"{key} given twice (flag and -o)", "--option")
-            # absolute, so that a resumed run matches run.json whatever the working folder
-            options[key] = str(Path(value).expanduser().resolve())
+            # an existing path made absolute, so that a resumed run matches run.json whatever the working
+            # folder; anything else as given (a shipped model's name such as tiny_setdiff)
+            path = Path(value).expanduser()
+            options[key] = str(path.resolve()) if path.exists() else value
     metrics = tuple(spec.name for spec in resolve_metrics(args.metrics))
     settings = RunSettings(method=args.method, options=options, split=None if args.split == "all" else args.split,
                            metrics=metrics, warp=args.warp, flow_method=args.flow, device=device,

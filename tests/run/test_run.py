@@ -323,3 +323,16 @@ def test_warp_error_per_camera_sequence_across_groups(tmp_path: Path) -> None:
         expected = float(warp_error(frames, reference, torch.cat(masks)))
         assert sequence.warp == pytest.approx(expected, rel=1e-6)
     assert json.loads((out / "manifest.json").read_text())["metrics"]["warp"]["sequences"] == 2
+
+
+def test_run_verb_takes_a_shipped_model_by_name(store: Path, tmp_path: Path) -> None:
+    """``--checkpoint tiny_difix`` is a name, not a path under the working folder; run.json keeps the name."""
+    import json
+
+    from setdiff_bench.cli.main import main
+
+    out = tmp_path / "difix"
+    assert main(["run", "--method", "difix", "--checkpoint", "tiny_difix", "--packets", str(store), "--out", str(out),
+                 "--metrics", "psnr", "--no-progress"]) == 0
+    assert json.loads((out / "run.json").read_text())["options"] == {"checkpoint": "tiny_difix"}
+    assert len(pd.read_parquet(out / "metrics.parquet")) > 0
