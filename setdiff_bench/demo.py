@@ -28,7 +28,7 @@ Presets (``--preset``):
 * ``tiny``: tiny scenes (80×48) — a smoke test (CI runs it with and without ``--train``).  Its
   numbers mean nothing.
 * ``default``: the ``default`` synthetic preset's 2 test scenes at 256×144 with the shipped models
-  (≤ 5 minutes on 2 CPU cores, measured in README.md); with ``--train``, all 6 scenes and short CPU
+  (about 8 minutes on 2 CPU cores, measured in README.md); with ``--train``, all 6 scenes and short CPU
   training.
 * ``full``: the ``large`` synthetic preset (8 scenes at 512×288); meant for ``--train`` on a GPU.
 """
@@ -89,8 +89,8 @@ class DemoPreset:
 DEMO_PRESETS: dict[str, DemoPreset] = {
     "tiny": DemoPreset("tiny", "smoke test: tiny 80x48 scenes (with --train: 3 scenes, a few steps)",
                        "tiny", 3, "tiny_setdiff", "tiny_difix", 20, 20, 2),
-    "default": DemoPreset("default", "the 2 test scenes at 256x144 with the shipped models (<= 5 minutes on "
-                          "2 CPU cores); with --train all 6 scenes and short CPU training",
+    "default": DemoPreset("default", "the 2 test scenes at 256x144 with the shipped models (about 8 minutes "
+                          "on 2 CPU cores); with --train all 6 scenes and short CPU training",
                           "default", None, "tiny_setdiff", "tiny_difix", 230, 200, 6),
     "full": DemoPreset("full", "8 scenes at 512x288; with --train long training, for a GPU", "large", None,
                        "tiny_setdiff", "tiny_difix", 20000, 20000, 8),

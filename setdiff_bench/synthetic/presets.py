@@ -2,7 +2,7 @@
 
 ``tiny``     1 scene, 48×80, 6 timesteps: seconds, for tests.
 ``default``  6 scenes, 144×256, 16 timesteps (192 frames per scene), 250-iteration fits: generates and fits
-             everything in under 10 minutes on 2 CPU cores with ``--jobs 2`` (results/synthetic/fit_quality.md).
+             everything in under 10 minutes on 2 CPU cores with ``--jobs 2`` (benchmarks/results/fit_quality.md).
 ``large``    8 scenes, 288×512, 40 timesteps, 7000-iteration fits: for a GPU (``--device cuda``).
 """
 
