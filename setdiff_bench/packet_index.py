@@ -121,8 +121,8 @@ def merge_index(root: Path) -> bool:
     Nothing is written when the merged bytes would equal the existing file (a resumed run with
     nothing to do leaves the store untouched).  The index is written by atomic rename and depends only
     on the fragments; after writing, the fragments are listed again and the merge is redone if they
-    changed, so of shards merging at once the last to publish has seen every fragment written before
-    its own merge.  (On a network filesystem whose listings may lag, run the same ``prepare`` command
+    changed (reading only new or rewritten fragments), so of shards merging at once the last to publish
+    has seen every fragment written before its own merge.  (On a network filesystem whose listings may lag, run the same ``prepare`` command
     once more without ``--shard`` after all shards: it skips every finished packet and merges.)
     Temporary index files left by killed writers are removed
     (:func:`~setdiff_bench.io.atomic.is_stale_temporary`).
@@ -135,10 +135,13 @@ def merge_index(root: Path) -> bool:
             if is_stale_temporary(stale):
                 stale.unlink()
     written = False
+    read: dict[tuple[str, int, int], pa.Table] = {}  # fragments already read, by (path, size, mtime)
     while True:
-        paths = fragment_paths(root)
-        seen = _signature(paths)
-        tables = [read_rows(p) for p in paths]
+        seen = _signature(fragment_paths(root))
+        for entry in seen:
+            if entry not in read:
+                read[entry] = read_rows(Path(entry[0]))
+        tables = [read[entry] for entry in seen]
         merged = sort_rows(pa.concat_tables(tables)) if tables else SCHEMA.empty_table()
         target = root / INDEX_FILE
         unchanged = False

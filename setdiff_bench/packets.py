@@ -121,7 +121,7 @@ def write_packet(root: Path, header: PacketHeader, references: Sequence[ViewCont
                  targets: Sequence[ViewContent]) -> list[dict[str, Any]]:
     """Write one packet folder atomically; returns its index rows.
 
-    The folder is built under ``packets/.tmp-<id>-XXXX`` (files, then the fragment ``index.parquet``)
+    The folder is built under ``packets/.tmp-<id>-<random>`` (files, then the fragment ``index.parquet``)
     and renamed to ``packets/<id>`` (replacing an incomplete or outdated one).
     """
     base = root / PACKETS_DIR

@@ -325,7 +325,7 @@ def resolve_backend(backend: str, device: str) -> tuple[str, str]:
 def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[str], *,
             protocol: str | os.PathLike[str] | None = None, fits: str | os.PathLike[str] | None = None,
             fit: bool = False, split: str = "all", scenes: Sequence[str] | None = None,
-            workers: int = 1, shard: Shard | tuple[int, int] = Shard(), backend: str = "auto", device: str = "auto",
+            workers: int = 1, shard: Shard = Shard(), backend: str = "auto", device: str = "auto",
             loader_options: Mapping[str, Any] | None = None, fit_iterations: int = 30_000, threads: int = 1,
             cmap_precision: str = "float32", progress: bool = True,
             groups: Sequence[str] | None = None, test_scenes: Sequence[str] | None = None) -> PrepareSummary:
@@ -339,7 +339,7 @@ def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[s
         fits, fit: user PLYs folder, or fit here (exactly one).
         split: ``train``, ``test`` or ``all`` scenes (the protocol's scene split).
         scenes: restrict to these scene names (the split is still computed over all scenes).
-        workers: render processes.  shard: a :class:`Shard` (or ``(i, n)``).
+        workers: render processes.  shard: which units this call prepares.
         threads: torch intra-op threads per render process (default 1: the tile rasteriser's ops are
             small, and on a busy machine extra threads slowed a 48×32 render 50× (measured); use
             ``workers`` for parallelism, or more threads for large CPU renders).
@@ -372,7 +372,7 @@ def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[s
 
 def _prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[str], *,
              protocol: str | os.PathLike[str] | None, fits: str | os.PathLike[str] | None, fit: bool, split: str,
-             scenes: Sequence[str] | None, workers: int, shard: Shard | tuple[int, int], backend: str, device: str,
+             scenes: Sequence[str] | None, workers: int, shard: Shard, backend: str, device: str,
              loader_options: Mapping[str, Any] | None, fit_iterations: int, threads: int, cmap_half: bool,
              progress: bool, groups: Sequence[str] | None = None,
              test_scenes: Sequence[str] | None = None) -> PrepareSummary:
@@ -394,8 +394,6 @@ def _prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[
         raise UsageError(f"split must be one of {', '.join(SPLIT_CHOICES)}, got {split!r}", "--split")
     if workers < 1:
         raise UsageError(f"workers must be >= 1, got {workers}", "--workers")
-    if not isinstance(shard, Shard):
-        shard = Shard(*shard)
     backend, device = resolve_backend(backend, device)
     out = Path(out)
     options = {**spec.loader_options, **(loader_options or {})}

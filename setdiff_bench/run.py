@@ -74,7 +74,7 @@ from setdiff_bench.io.atomic import (
 )
 from setdiff_bench.io.images import read_rgb, to_tensor_chw, write_png
 from setdiff_bench.metrics.registry import PRESETS, MetricSpec
-from setdiff_bench.packets import timestamp_or_none
+from setdiff_bench.packets import PacketStore, timestamp_or_none
 from setdiff_bench.run_paths import (
     ENHANCER_FILE,
     FRAGMENTS_DIR,
@@ -280,8 +280,6 @@ def _merge_finished(store: Any, out: Path, settings: RunSettings, specs: Sequenc
 
 def _open_store(packets: Any) -> Any:
     if isinstance(packets, str | os.PathLike):
-        from setdiff_bench.packets import PacketStore
-
         return PacketStore(packets)
     return packets
 

@@ -62,6 +62,17 @@ def is_stale_temporary(path: str | os.PathLike[str]) -> bool:
         return False
 
 
+def _temporary_beside(destination: Path, ext: str) -> Path:
+    """A new empty file ``.<stem>.<writer>.<random>.tmp<ext>`` in ``destination``'s folder (created if needed);
+    the name keeps the extension (libraries such as OpenImageIO pick the format from it) and the writer's
+    tag (:func:`is_stale_temporary`)."""
+    destination.parent.mkdir(parents=True, exist_ok=True)
+    fd, name = tempfile.mkstemp(prefix=f".{destination.stem}.{writer_tag()}.", suffix=f".tmp{ext}",
+                                dir=destination.parent)
+    os.close(fd)
+    return Path(name)
+
+
 @contextlib.contextmanager
 def atomic_path(destination: str | os.PathLike[str], suffix: str | None = None) -> Iterator[Path]:
     """Yield a temporary path next to ``destination``; rename it onto ``destination`` on success.
@@ -70,12 +81,7 @@ def atomic_path(destination: str | os.PathLike[str], suffix: str | None = None) 
     format from it).  On any exception the temporary file is removed and the destination untouched.
     """
     destination = Path(destination)
-    destination.parent.mkdir(parents=True, exist_ok=True)
-    ext = destination.suffix if suffix is None else suffix
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{destination.stem}.{writer_tag()}.", suffix=f".tmp{ext}",
-                                    dir=destination.parent)
-    os.close(fd)
-    tmp = Path(tmp_name)
+    tmp = _temporary_beside(destination, destination.suffix if suffix is None else suffix)
     try:
         yield tmp
         os.chmod(tmp, new_file_mode())
@@ -93,11 +99,7 @@ def private_temporary(destination: str | os.PathLike[str]) -> Iterator[Path]:
     """Yield a fresh, uniquely named temporary file beside ``destination`` (created with the umask's mode),
     removed when the block ends; for writers that publish it themselves, e.g. with a hard link."""
     destination = Path(destination)
-    destination.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{destination.stem}.{writer_tag()}.", suffix=f".tmp{destination.suffix}",
-                                    dir=destination.parent)
-    os.close(fd)
-    tmp = Path(tmp_name)
+    tmp = _temporary_beside(destination, destination.suffix)
     try:
         os.chmod(tmp, new_file_mode())
         yield tmp

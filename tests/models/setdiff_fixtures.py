@@ -120,3 +120,12 @@ def write_diffusers_folder(root: Path, *, text: bool) -> tuple[Any, Any]:
                                                bos_token_id=0, eos_token_id=1, pad_token_id=1))
         encoder.save_pretrained(root / "text_encoder")
     return unet, vae
+
+
+#: The ``[model]`` table of a TOML config for the tiny SetDiff trained through the ``train`` verb in tests.
+TINY_SETDIFF_MODEL_TOML = """[model]
+preset = "tiny"
+method = "setdiff"
+vae_decoder = "full"
+skip_connections = true
+"""

@@ -14,15 +14,9 @@ import pytest
 
 from setdiff_bench.cli.main import main
 from setdiff_bench.models.setdiff.checkpoint import read_config, resolve_checkpoint
-from tests.models.setdiff_fixtures import make_sample
+from tests.models.setdiff_fixtures import TINY_SETDIFF_MODEL_TOML, make_sample
 
-CONFIG = """
-[model]
-preset = "tiny"
-method = "setdiff"
-vae_decoder = "full"
-skip_connections = true
-
+CONFIG = TINY_SETDIFF_MODEL_TOML + """
 [train]
 steps = 2
 learning_rate = 1e-3

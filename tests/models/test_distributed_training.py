@@ -25,16 +25,11 @@ from safetensors.torch import load_file
 
 from setdiff_bench.models.setdiff.checkpoint import WEIGHTS_FILE, resolve_checkpoint
 from setdiff_bench.models.setdiff.train import LOG_FILE, SAMPLES_FILE, VALIDATION_FILE
+from tests.models.setdiff_fixtures import TINY_SETDIFF_MODEL_TOML
 from tests.run.store_fixtures import StoreSpec, build_store
 
 STEPS = 8
-CONFIG = """
-[model]
-preset = "tiny"
-method = "setdiff"
-vae_decoder = "full"
-skip_connections = true
-
+CONFIG = TINY_SETDIFF_MODEL_TOML + """
 [train]
 steps = {steps}
 learning_rate = 1e-3

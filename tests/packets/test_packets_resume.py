@@ -15,6 +15,7 @@ import pytest
 
 from setdiff_bench.packet_index import PACKETS_DIR
 from setdiff_bench.prepare import prepare
+from setdiff_bench.shards import Shard
 from tests.packets.packet_fixtures import tree_bytes
 
 
@@ -81,8 +82,8 @@ def test_shards_write_disjoint_packets_and_merge_one_index(prepared, street, tmp
     root, _ = street
     reference, _, _ = prepared
     out = tmp_path / "sharded"
-    second = prepare("synthetic", root, out, fits=root, shard=(1, 2), progress=False)
-    first = prepare("synthetic", root, out, fits=root, shard=(0, 2), progress=False)
+    second = prepare("synthetic", root, out, fits=root, shard=Shard(1, 2), progress=False)
+    first = prepare("synthetic", root, out, fits=root, shard=Shard(0, 2), progress=False)
     assert first.written + second.written == 17 and first.written > 0 and second.written > 0
     assert first.index_written and second.index_written
     assert tree_bytes(out) == tree_bytes(reference)

@@ -21,7 +21,7 @@ writes files.
 Checkpoints are written every ``min(checkpoint_every, 500, steps // 4)`` steps, at the end, and, inside
 :func:`setdiff_bench.interrupts.stop_at_safe_point` (the ``train`` verb), at the step where SIGINT or
 SIGTERM arrived, before :class:`~setdiff_bench.interrupts.Interrupted` is raised.
-Outputs in ``OUT``: ``checkpoints/step-XXXXXXXX/`` (see :mod:`.checkpoint`), ``latest``,
+Outputs in ``OUT``: ``checkpoints/step-<8-digit step>/`` (see :mod:`.checkpoint`), ``latest``,
 ``train_log.jsonl`` (losses every ``log_every`` steps), ``validation.jsonl`` (PSNR/SSIM[/LPIPS]
 of the enhanced targets of the validation samples every ``validate_every`` steps) and ``samples.jsonl``
 (per step, the ``[global position, packet id]`` of every sample drawn, all processes).  On resume, records
@@ -36,7 +36,7 @@ import json
 import math
 import random
 import time
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -239,7 +239,7 @@ def train(config: Config, dataset: Sequence[TrainingSample] | Iterable[TrainingS
             sample = next(stream)
             if stream.last is not None and stream.map_style and stream.last[0] != position:
                 raise RuntimeError(f"sample stream at position {stream.last[0]}, expected {position}")
-            drawn.append((position, _sample_name(sample)))
+            drawn.append((position, sample.packet.packet_id))
             rng = random.Random(f"{tc.seed}/{position}")
             sync = micro == tc.gradient_accumulation - 1
             with contextlib.nullcontext() if sync else accelerator.no_sync(model):
@@ -329,8 +329,7 @@ def _micro_step(model: Any, core: SetDiffModel, sample: TrainingSample, rng: ran
 def validate(model: SetDiffModel, samples: Sequence[TrainingSample],
              reconstruction: ReconstructionLoss | None = None) -> dict[str, float]:
     """Mean masked PSNR and SSIM (and LPIPS when the loss has it loaded) of enhanced vs ground-truth targets."""
-    totals = validation_totals(model, samples, reconstruction)
-    return {name: total / count for name, (total, count) in totals.items() if count > 0 and math.isfinite(total)}
+    return _means(validation_totals(model, samples, reconstruction))
 
 
 @torch.no_grad()
@@ -362,14 +361,19 @@ def validation_totals(model: SetDiffModel, samples: Sequence[TrainingSample],
     return {name: (float(sum(values)), len(values)) for name, values in scores.items()}
 
 
+def _means(totals: Mapping[str, tuple[float, float]]) -> dict[str, float]:
+    """``{metric: (sum, count)}`` → ``{metric: mean}``, leaving out metrics with no or non-finite values."""
+    return {name: float(total / count) for name, (total, count) in totals.items() if count > 0 and math.isfinite(total)}
+
+
 def _reduce_means(accelerator: Any, totals: dict[str, tuple[float, int]]) -> dict[str, float]:
-    """Means over every process's targets from per-process ``(sum, count)`` pairs (same key order on all ranks)."""
+    """Means over every process's targets from per-process ``(sum, count)`` pairs (same keys on all ranks)."""
+    if accelerator.num_processes == 1:
+        return _means(totals)
     names = sorted(totals)
     sums = torch.tensor([[totals[n][0], float(totals[n][1])] for n in names], dtype=torch.float64)
-    if accelerator.num_processes > 1:
-        sums = accelerator.reduce(sums.to(accelerator.device), reduction="sum").cpu()
-    return {name: float(total / count) for name, (total, count) in zip(names, sums.tolist(), strict=True)
-            if count > 0 and math.isfinite(total)}
+    sums = accelerator.reduce(sums.to(accelerator.device), reduction="sum").cpu()
+    return _means({name: (total, count) for name, (total, count) in zip(names, sums.tolist(), strict=True)})
 
 
 def _save(accelerator: Any, core: SetDiffModel, optimizer: Any, config: Config, out: Path, step: int) -> Path:
@@ -405,12 +409,6 @@ def _gather_list(accelerator: Any, items: list[Any]) -> list[Any]:
     from accelerate.utils import gather_object
 
     return list(gather_object(items))
-
-
-def _sample_name(sample: TrainingSample) -> str:
-    """What identifies a training sample in ``samples.jsonl``: its packet id."""
-    packet = getattr(sample, "packet", None)
-    return str(getattr(packet, "packet_id", "?"))
 
 
 def _truncate_jsonl(path: Path, last_step: int) -> None:
