@@ -61,27 +61,8 @@ def fit_config(preset: str, iterations: int | None, seed: int):  # -> FitConfig
 
         base = get_preset(preset).fit
     if iterations is not None and iterations != base.iterations:
-        base = rescale_schedule(base, iterations)
+        base = base.rescaled(iterations)  # the schedule scales; every other setting stays the preset's
     return dataclasses.replace(base, seed=seed)
-
-
-#: FitConfig fields counted in iterations: the only ones ``--iterations`` changes.
-SCHEDULE_FIELDS = ("densify_from", "densify_until", "densify_every", "opacity_reset_every", "sh_increase_every")
-
-
-def rescale_schedule(base, iterations: int):  # (FitConfig, int) -> FitConfig
-    """``base`` run for ``iterations`` instead of ``base.iterations``: every schedule field scales by the
-    same ratio (at least 1); an event ``base`` never reaches (e.g. an opacity reset after the last
-    iteration, i.e. disabled) stays unreached; every other setting (learning rates, background points,
-    Gaussian cap, …) is kept as the preset has it."""
-    import dataclasses
-
-    ratio = iterations / base.iterations
-    values: dict[str, int] = {}
-    for name in SCHEDULE_FIELDS:
-        value = getattr(base, name)
-        values[name] = iterations + 1 if value > base.iterations else max(1, round(value * ratio))
-    return dataclasses.replace(base, iterations=iterations, **values)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -16,7 +16,8 @@ every side (colour grey), each as an isotropic Gaussian (nearest-neighbour scale
 Checkpoints (``checkpoint_dir``): parameters, Adam moments, density statistics and the random state in
 ``fit_state.safetensors``; iteration, schedule position, config and view names in ``fit_state.json``
 (written last, with the tensor file's SHA-256, so a torn pair is detected).  Resuming restores all
-of it, so an interrupted fit ends with exactly the model an uninterrupted one would.
+of it, so an interrupted fit ends with exactly the model an uninterrupted one would.  A checkpoint
+written before the densification settings moved into ``FitConfig.strategy`` (flat keys) still resumes.
 """
 
 from __future__ import annotations
@@ -24,8 +25,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -34,7 +34,7 @@ import torch
 
 from setdiff_bench.devices import resolve_device
 from setdiff_bench.errors import CheckpointError, UsageError
-from setdiff_bench.gaussians.densify import DensityStats, densify_and_prune, reset_opacity
+from setdiff_bench.gaussians.densify import DensificationStrategy, DensityStats
 from setdiff_bench.gaussians.fit_data import FitView
 from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.gaussians.optim import GaussianParameters, exponential_lr
@@ -53,7 +53,9 @@ class FitConfig:
     Learning rates (Adam): ``lr_means`` (× scene extent, decayed to ``lr_means_final`` × extent over
     ``iterations``), ``lr_sh_dc``, ``lr_sh_rest`` (= dc / 20), ``lr_opacity`` (0.05, the original 3DGS
     release and gsplat's default; later Inria versions use 0.025), ``lr_scales``, ``lr_quats``.
-    Density control: see :mod:`setdiff_bench.gaussians.densify`; iterations are 1-based as in Inria.
+    Density control: ``strategy``, a :class:`~setdiff_bench.gaussians.densify.DensificationStrategy`
+    that holds its thresholds and schedule (iterations are 1-based as in Inria); it also caps the
+    random initialisation at half its ``max_gaussians``.
 
     ``background_points`` (0 = off, the Inria behaviour) adds that many points on a sphere of
     ``background_radius`` × extent around the cameras, coloured from the training images: SfM leaves
@@ -73,45 +75,91 @@ class FitConfig:
     lr_scales: float = 5e-3
     lr_quats: float = 1e-3
     lambda_dssim: float = 0.2
-    densify_from: int = 500
-    densify_until: int = 15_000
-    densify_every: int = 100
-    grad_threshold: float = 2e-4
-    percent_dense: float = 0.01
-    opacity_reset_every: int = 3000
-    min_opacity: float = 0.005
-    max_screen_size: float = 20.0
-    max_world_fraction: float = 0.1
+    strategy: DensificationStrategy = field(default_factory=DensificationStrategy)
     initial_opacity: float = 0.1
     random_init_points: int = 100_000
     background_points: int = 0
     background_radius: float = 30.0
-    max_gaussians: int | None = None
     background: tuple[float, float, float] = (0.0, 0.0, 0.0)
     tile_size: int = 8
     seed: int = 0
 
     @classmethod
     def schedule(cls, iterations: int, *, densify_every: int, **overrides: object) -> FitConfig:
-        """The standard schedule compressed to ``iterations``: densify from 10 % to 60 % of the run every
-        ``densify_every`` iterations, reset opacities every 30 %, raise the SH degree every 10 %."""
-        values: dict[str, object] = {
-            "iterations": iterations, "densify_every": densify_every,
-            "densify_from": max(1, round(0.1 * iterations)), "densify_until": round(0.6 * iterations),
-            "opacity_reset_every": max(densify_every, round(0.3 * iterations)),
-            "sh_increase_every": max(1, round(0.1 * iterations)),
-        }
-        values.update(overrides)
+        """The standard schedule compressed to ``iterations``: raise the SH degree every 10 % of the run,
+        and the strategy's (:meth:`DensificationStrategy.schedule`): densify from 10 % to 60 % every
+        ``densify_every`` iterations, reset opacities every 30 %.  ``overrides`` name fields of the
+        configuration or of its strategy (e.g. ``opacity_reset_every``, ``max_gaussians``)."""
+        values, density = split_settings(overrides)
+        values = {"iterations": iterations, "sh_increase_every": max(1, round(0.1 * iterations)), **values,
+                  "strategy": DensificationStrategy.schedule(iterations, densify_every=densify_every, **density)}
         return cls(**values)  # type: ignore[arg-type]
+
+    def rescaled(self, iterations: int) -> FitConfig:
+        """This configuration run for ``iterations``: every field counted in iterations
+        (``sh_increase_every`` and the strategy's :attr:`~DensificationStrategy.SCHEDULE_FIELDS`) scales
+        by the same ratio (at least 1); an event this run never reaches (e.g. an opacity reset after the
+        last iteration, i.e. disabled) stays unreached; every other setting is kept."""
+        ratio = iterations / self.iterations
+
+        def scale(value: int) -> int:
+            return iterations + 1 if value > self.iterations else max(1, round(value * ratio))
+
+        names = DensificationStrategy.SCHEDULE_FIELDS
+        strategy = dataclasses.replace(self.strategy, **{n: scale(getattr(self.strategy, n)) for n in names})
+        return dataclasses.replace(self, iterations=iterations, sh_increase_every=scale(self.sh_increase_every),
+                                   strategy=strategy)
 
     def learning_rates(self, extent: float) -> dict[str, float]:
         return {"means": self.lr_means * extent, "sh_dc": self.lr_sh_dc, "sh_rest": self.lr_sh_rest,
                 "opacity_logits": self.lr_opacity, "log_scales": self.lr_scales, "quats": self.lr_quats}
 
     def to_json(self) -> dict[str, object]:
+        """The configuration as JSON values; the strategy's settings nested under ``"strategy"``."""
         data = dataclasses.asdict(self)
         data["background"] = list(self.background)
         return data
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, object]) -> FitConfig:
+        """The inverse of :meth:`to_json`; also reads the flat shape written before the strategy object
+        (densification settings at the top level).  Missing keys take their defaults.
+
+        Raises:
+            UsageError: a key that names no setting, or a ``"strategy"`` that is not an object.
+        """
+        nested = data.get("strategy", {})
+        if not isinstance(nested, Mapping):
+            raise UsageError(f"fit configuration: 'strategy' must be an object, got {type(nested).__name__}")
+        unknown = sorted(set(nested) - _STRATEGY_FIELDS)
+        if unknown:
+            raise UsageError(f"fit configuration: the strategy has no setting {unknown[0]!r}")
+        values, density = split_settings({k: v for k, v in data.items() if k != "strategy"})
+        if "background" in values:
+            values["background"] = tuple(values["background"])  # type: ignore[call-overload]
+        return cls(**values, strategy=DensificationStrategy(**{**nested, **density}))  # type: ignore[arg-type]
+
+
+_STRATEGY_FIELDS = frozenset(f.name for f in dataclasses.fields(DensificationStrategy))
+_CONFIG_FIELDS = frozenset(f.name for f in dataclasses.fields(FitConfig)) - {"strategy"}
+
+
+def split_settings(settings: Mapping[str, object]) -> tuple[dict[str, object], dict[str, object]]:
+    """``(configuration settings, strategy settings)`` of flat ``settings``, each named by its field.
+
+    Raises:
+        UsageError: a name that is a field of neither (one line naming it).
+    """
+    config: dict[str, object] = {}
+    density: dict[str, object] = {}
+    for name, value in settings.items():
+        if name in _STRATEGY_FIELDS:
+            density[name] = value
+        elif name in _CONFIG_FIELDS:
+            config[name] = value
+        else:
+            raise UsageError(f"fit configuration has no setting {name!r}")
+    return config, density
 
 
 @dataclass
@@ -160,13 +208,15 @@ def initial_model(views: Sequence[FitView], points: np.ndarray | None, colors: n
 
 def random_init_count(views: Sequence[FitView], config: FitConfig) -> int:
     """Random Gaussians for a scene without sparse points, sized to it: one per 4×4-pixel block of an
-    average training view (≥ 1000), at most ``config.random_init_points`` and half the Gaussian cap.
+    average training view (≥ 1000), at most ``config.random_init_points`` and half the strategy's
+    Gaussian cap.
     A 270×480 view gets 8100 instead of the fixed 100 000 that made every step of a short CPU fit
     cost seconds."""
     pixels = float(np.mean([v.camera.width * v.camera.height for v in views]))
     count = min(config.random_init_points, max(1000, round(pixels / 16)))
-    if config.max_gaussians is not None:
-        count = min(count, max(1, config.max_gaussians // 2))
+    cap = config.strategy.max_gaussians
+    if cap is not None:
+        count = min(count, max(1, cap // 2))
     return count
 
 
@@ -224,13 +274,13 @@ class _Trainer:
         self.backend = "gsplat" if device.type == "cuda" else "torch"
         _, self.extent = scene_extent(views)
         self.params = GaussianParameters(init.to(device, torch.float32), config.learning_rates(self.extent))
-        self.stats = DensityStats.zeros(len(self.params), device)
         self.generator = torch.Generator().manual_seed(config.seed)
+        self.density = config.strategy.initialize_state(len(self.params), extent=self.extent,
+                                                        generator=self.generator, device=device)
         self.order = torch.randperm(len(self.views), generator=self.generator)
         self.position = 0
         self.iteration = 0  # iterations completed
         self.active_sh = 0
-        self.warned_no_grad = False
         self.images = [v.image.to(device)[None] for v in self.views]
         self.masks = [None if v.mask is None else v.mask.to(device)[None] for v in self.views]
 
@@ -258,29 +308,12 @@ class _Trainer:
         loss, l1 = photometric_loss(out.rgb, self.images[index], self.masks[index], c.lambda_dssim)
         if loss.requires_grad:  # False only when no Gaussian is visible in the view
             loss.backward()
-        event = None
         with torch.no_grad():
-            if it < c.densify_until:
-                self.stats.accumulate(out.meta[0], view.camera.width, view.camera.height)
             self.params.optimizer.step()
-            self.params.optimizer.zero_grad(set_to_none=True)
-            if it < c.densify_until:
-                if it > c.densify_from and it % c.densify_every == 0:
-                    if not bool((self.stats.count > 0).any()) and not self.warned_no_grad:
-                        warnings.warn("densification found no view-space gradient statistics (the render "
-                                      "backend's meta['means2d'] had no .grad); no Gaussians were added",
-                                      stacklevel=2)
-                        self.warned_no_grad = True
-                    size_limit = c.max_screen_size if it > c.opacity_reset_every else None
-                    result = densify_and_prune(
-                        self.params, self.stats, grad_threshold=c.grad_threshold, percent_dense=c.percent_dense,
-                        extent=self.extent, min_opacity=c.min_opacity, max_screen_size=size_limit,
-                        max_world_fraction=c.max_world_fraction, generator=self.generator,
-                        max_gaussians=c.max_gaussians)
-                    self.stats = DensityStats.zeros(len(self.params), self.device)
-                    event = {"iteration": it, **dataclasses.asdict(result)}
-                if it % c.opacity_reset_every == 0:
-                    reset_opacity(self.params)
+            self.params.optimizer.zero_grad(set_to_none=True)  # parameters only: means2d keeps its .grad
+            result = c.strategy.step_post_backward(self.params, self.density, it, out.meta[0],
+                                                   view.camera.width, view.camera.height)
+        event = None if result is None else {"iteration": it, **dataclasses.asdict(result)}
         self.iteration = it
         return float(loss.detach()), float(l1.detach()), event
 
@@ -290,7 +323,8 @@ class _Trainer:
 
         folder.mkdir(parents=True, exist_ok=True)
         tensors = {k: v.detach().cpu().contiguous() for k, v in self.params.state_tensors().items()}
-        tensors.update({f"stats/{k}": v.detach().cpu().contiguous() for k, v in self.stats.tensors().items()})
+        tensors.update({f"stats/{k}": v.detach().cpu().contiguous()
+                        for k, v in self.density.stats.tensors().items()})
         tensors["rng/generator"] = self.generator.get_state().clone()
         tensors["rng/order"] = self.order.clone()
         with atomic_path(folder / STATE_TENSORS) as tmp:
@@ -311,7 +345,7 @@ class _Trainer:
             raise CheckpointError(f"cannot read checkpoint state ({exc.__class__.__name__})", json_path) from exc
         if state.get("format") != CHECKPOINT_FORMAT:
             raise CheckpointError(f"format is {state.get('format')!r}, expected {CHECKPOINT_FORMAT!r}", json_path)
-        if state.get("config") != self.config.to_json():
+        if saved_config(state, json_path) != self.config:
             raise CheckpointError("checkpoint was written with a different fit configuration", json_path)
         if state.get("views") != list(view_names):
             raise CheckpointError("checkpoint was written for different training frames", json_path)
@@ -323,12 +357,24 @@ class _Trainer:
             raise CheckpointError(f"cannot read tensors ({exc})", tensor_path) from exc
         self.params.load_state_tensors({k: v.to(self.device) for k, v in tensors.items()
                                         if k.startswith(("param/", "adam/"))})
-        self.stats = DensityStats(*(tensors[f"stats/{k}"].to(self.device) for k in ("grad_sum", "count", "max_radius")))
+        self.density.stats = DensityStats(*(tensors[f"stats/{k}"].to(self.device)
+                                            for k in ("grad_sum", "count", "max_radius")))
         self.generator.set_state(tensors["rng/generator"])
         self.order = tensors["rng/order"]
         self.iteration = int(state["iteration"])
         self.position = int(state["position"])
         self.active_sh = int(state["active_sh"])
+
+
+def saved_config(state: Mapping[str, object], json_path: Path) -> FitConfig:
+    """The configuration a checkpoint's ``fit_state.json`` was written with (either JSON shape)."""
+    data = state.get("config")
+    if not isinstance(data, Mapping):
+        raise CheckpointError("checkpoint holds no fit configuration", json_path)
+    try:
+        return FitConfig.from_json(data)
+    except (UsageError, TypeError, ValueError) as exc:
+        raise CheckpointError(f"cannot read the checkpoint's fit configuration ({exc})", json_path) from None
 
 
 def fit_gaussians(views: Sequence[FitView], config: FitConfig, *, points: np.ndarray | None = None,

@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from setdiff_bench.cameras import Camera, intrinsics_matrix, look_at
-from setdiff_bench.gaussians.densify import DensityStats, densify_and_prune, reset_opacity
+from setdiff_bench.gaussians.densify import DensificationStrategy, reset_opacity
 from setdiff_bench.gaussians.fit import photometric_loss
 from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.gaussians.optim import GaussianParameters, exponential_lr
@@ -33,13 +33,13 @@ def test_clone_small_split_large_and_prune_transparent():
     model.log_scales[2:] = math.log(1.0)          # rows 2, 3 are large (> percent_dense · extent = 0.1)
     model.opacity_logits[3] = math.log(0.001 / 0.999)  # row 3 is nearly transparent → pruned
     params = GaussianParameters(model, RATES)
-    stats = DensityStats.zeros(4)
-    stats.grad_sum[:] = torch.tensor([5e-4, 1e-5, 5e-4, 1e-5])
-    stats.count[:] = 1
-    result = densify_and_prune(params, stats, grad_threshold=2e-4, percent_dense=0.01, extent=10.0,
-                               min_opacity=0.005, max_screen_size=None, max_world_fraction=0.1,
-                               generator=torch.Generator().manual_seed(0))
+    strategy = DensificationStrategy(grad_threshold=2e-4, percent_dense=0.01, min_opacity=0.005)
+    state = strategy.initialize_state(4, extent=10.0, generator=torch.Generator().manual_seed(0))
+    state.stats.grad_sum[:] = torch.tensor([5e-4, 1e-5, 5e-4, 1e-5])
+    state.stats.count[:] = 1
+    result = strategy.densify_and_prune(params, state, prune_large=False)
     assert (result.cloned, result.split, result.pruned) == (1, 1, 1)
+    assert torch.equal(state.stats.count, torch.zeros(5))  # the statistics restart for the new rows
     out = params.model().detach()
     assert len(out) == 5 == result.total  # 0, 1, clone of 0, two samples of 2 (2 and 3 removed)
     assert torch.equal(out.means[:2], model.means[:2]) and torch.equal(out.means[2], model.means[0])
@@ -86,6 +86,13 @@ def test_exponential_learning_rate_matches_inria():
     assert exponential_lr(0, 1e-2, 1e-4, 100, delay_steps=10, delay_mult=0.1) == pytest.approx(1e-3)
 
 
+def meta_grads(meta, width: int, height: int) -> torch.Tensor:
+    """``(N,)`` mean view-space gradient norms of one render's ``meta`` (the strategy's statistics)."""
+    state = DensificationStrategy().initialize_state(len(meta["visible"]), extent=1.0, generator=torch.Generator())
+    state.stats.accumulate(meta, width, height)
+    return state.stats.mean_grad()
+
+
 def test_densification_adds_gaussians_where_the_gradient_is_large():
     """A plane of grey Gaussians in front of a camera; the target is its render plus a bright square on the right.
     Only Gaussians covering the square get large view-space gradients, and only there are Gaussians added."""
@@ -99,21 +106,82 @@ def test_densification_adds_gaussians_where_the_gradient_is_large():
     with torch.no_grad():
         target = render(model, [camera], with_geometry=False).rgb  # the model's own image …
     target[..., 8:24, 30:44] = 1.0  # … plus a bright square it cannot yet explain
-    stats = DensityStats.zeros(len(params))
     out = render(params.model(), [camera], with_geometry=False)
     loss, _ = photometric_loss(out.rgb, target, None, 0.2)
     loss.backward()
-    stats.accumulate(out.meta[0], width, height)
-    grads = stats.mean_grad()
+    grads = meta_grads(out.meta[0], width, height)
     uv, _ = camera.project(means)
     near_square = uv[:, 0] > 20  # the square spans u 30–44; SSIM's 11-px window reaches ~6 px beyond
     threshold = float(grads.max()) * 0.2
     assert near_square[(grads > threshold).numpy()].all()
     assert not near_square.all() and (grads[torch.from_numpy(~near_square)] < threshold).all()
-    result = densify_and_prune(params, stats, grad_threshold=threshold, percent_dense=0.1, extent=1.0,
-                               min_opacity=0.005, max_screen_size=None, max_world_fraction=10.0,
-                               generator=torch.Generator().manual_seed(0))
+    strategy = DensificationStrategy(grad_threshold=threshold, percent_dense=0.1, max_world_fraction=10.0)
+    state = strategy.initialize_state(len(params), extent=1.0, generator=torch.Generator().manual_seed(0))
+    state.stats.accumulate(out.meta[0], width, height)
+    result = strategy.densify_and_prune(params, state, prune_large=False)
     added = params.model().means.detach()[len(means):].numpy()
     assert result.cloned + result.split > 0 and len(added) == result.cloned + result.split
     new_uv, _ = camera.project(added)
     assert (new_uv[:, 0] > 18).all()  # all new Gaussians sit on the bright square's side
+
+
+def hand_meta(pixel_grads, radius: float = 1.0, big: int | None = None) -> dict[str, torch.Tensor]:
+    """A render's per-camera ``meta`` built by hand: every Gaussian visible, ``means2d.grad`` = ``pixel_grads``,
+    screen radius ``radius`` (30 px for row ``big``)."""
+    grads = torch.tensor(pixel_grads, dtype=torch.float32)
+    means2d = torch.zeros_like(grads, requires_grad=True)
+    means2d.grad = grads
+    radii = torch.full((len(grads), 2), radius)
+    if big is not None:
+        radii[big] = 30.0
+    return {"means2d": means2d, "radii": radii, "visible": torch.ones(len(grads), dtype=torch.bool)}
+
+
+def test_strategy_state_evolves_on_its_schedule():
+    """Four Gaussians through ``step_post_backward`` on a 2×2-pixel view (so NDC gradients equal pixel
+    gradients), thresholds chosen so that every count below follows by hand from the module docstring."""
+    model = model_of([[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]], math.log(0.05))
+    model.log_scales[1] = math.log(1.0)                  # row 1 is large: 1.0 > percent_dense · extent = 0.1
+    model.opacity_logits[3] = math.log(0.001 / 0.999)    # row 3 is below min_opacity 0.005
+    params = GaussianParameters(model, RATES)
+    strategy = DensificationStrategy(densify_from=1, densify_until=10, densify_every=2, opacity_reset_every=4,
+                                     grad_threshold=1e-3, percent_dense=0.01, min_opacity=0.005)
+    state = strategy.initialize_state(4, extent=10.0, generator=torch.Generator().manual_seed(0))
+    strong = [[2e-3, 0.0], [0.0, 3e-3], [1e-4, 0.0], [0.0, 0.0]]  # norms 2e-3, 3e-3 (≥ 1e-3), 1e-4, 0
+
+    # step 1 ≤ densify_from: statistics only
+    assert strategy.step_post_backward(params, state, 1, hand_meta(strong), 2, 2) is None
+    assert torch.equal(state.stats.count, torch.ones(4))
+    assert torch.allclose(state.stats.grad_sum, torch.tensor([2e-3, 3e-3, 1e-4, 0.0]))
+    # step 2: the mean gradient over both views selects rows 0 (small: cloned) and 1 (large: split in two);
+    # row 3 is pruned for its opacity, row 1 replaced by its samples: 4 + 1 + 2 − 1 − 1 = 5 Gaussians
+    result = strategy.step_post_backward(params, state, 2, hand_meta(strong), 2, 2)
+    assert (result.cloned, result.split, result.pruned, result.total) == (1, 1, 1, 5)
+    assert len(params) == 5 and torch.equal(state.stats.count, torch.zeros(5))
+    opacity = torch.sigmoid(params.params["opacity_logits"].detach())
+    assert torch.allclose(opacity, torch.full((5,), 0.8))  # row 3 is gone
+    quiet = [[0.0, 0.0]] * 5
+    # step 3 is no densification step; step 4 densifies nothing (no gradient), prunes nothing (row 0's
+    # 30-px screen radius counts only after the first reset, i.e. from step 5), then resets every opacity
+    # to 0.01
+    assert strategy.step_post_backward(params, state, 3, hand_meta(quiet), 2, 2) is None
+    result = strategy.step_post_backward(params, state, 4, hand_meta(quiet, big=0), 2, 2)
+    assert (result.cloned, result.split, result.pruned, result.total) == (0, 0, 0, 5)
+    assert torch.allclose(torch.sigmoid(params.params["opacity_logits"].detach()), torch.full((5,), 0.01))
+    # step 6 (> the first reset): row 2's screen radius of 30 px exceeds max_screen_size 20 → pruned;
+    # the split samples' scale 1 / 1.6 stays below max_world_fraction · extent = 1
+    strategy.step_post_backward(params, state, 5, hand_meta(quiet), 2, 2)
+    result = strategy.step_post_backward(params, state, 6, hand_meta(quiet, big=2), 2, 2)
+    assert (result.cloned, result.split, result.pruned, result.total) == (0, 0, 1, 4)
+    # from densify_until on, the strategy does nothing
+    before = {k: v.detach().clone() for k, v in params.params.items()}
+    assert strategy.step_post_backward(params, state, 10, hand_meta(strong[:4]), 2, 2) is None
+    assert torch.equal(state.stats.count, torch.zeros(4))
+    assert all(torch.equal(before[k], v.detach()) for k, v in params.params.items())
+
+
+def test_strategy_schedule_compresses_the_standard_one():
+    strategy = DensificationStrategy.schedule(1000, densify_every=50, max_gaussians=9)
+    assert (strategy.densify_from, strategy.densify_until, strategy.densify_every) == (100, 600, 50)
+    assert strategy.opacity_reset_every == 300 and strategy.max_gaussians == 9
+    assert strategy.grad_threshold == DensificationStrategy().grad_threshold == 2e-4

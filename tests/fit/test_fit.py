@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
 import torch
 
-from setdiff_bench.errors import CheckpointError
+from setdiff_bench.errors import CheckpointError, UsageError
 from setdiff_bench.gaussians.fit import (
     FitConfig,
     fit_gaussians,
@@ -119,6 +120,43 @@ def test_checkpoint_of_another_configuration_is_refused(tiny_scene, tiny_views, 
     with pytest.raises(CheckpointError, match="does not match"):
         fit_gaussians(tiny_views[:2], config, points=tiny_scene.points3d, colors=tiny_scene.points_rgb,
                       progress=False, checkpoint_dir=tmp_path)
+
+
+def flat_json(config: FitConfig) -> dict[str, object]:
+    """``config`` in the JSON shape of fits written before the strategy object: every setting top level."""
+    data = config.to_json()
+    return {**{k: v for k, v in data.items() if k != "strategy"}, **data["strategy"]}
+
+
+def test_fit_config_json_round_trips_in_both_shapes():
+    config = FitConfig.schedule(120, densify_every=6, max_gaussians=500, min_opacity=0.01, tile_size=16, seed=4)
+    assert config.strategy.max_gaussians == 500 and config.strategy.min_opacity == 0.01  # flat overrides
+    assert config.strategy.densify_from == 12 and config.sh_increase_every == 12 and config.tile_size == 16
+    assert FitConfig.from_json(json.loads(json.dumps(config.to_json()))) == config
+    assert FitConfig.from_json(flat_json(config)) == config
+    for bad in ({"densify_evry": 3}, {"strategy": {"lr_means": 1.0}}, {"strategy": 3}):
+        with pytest.raises(UsageError) as error:
+            FitConfig.from_json(bad)
+        assert len(str(error.value).splitlines()) == 1
+    with pytest.raises(UsageError, match="densify_evry"):
+        FitConfig.schedule(10, densify_every=1, densify_evry=3)
+
+
+def test_checkpoint_with_the_old_flat_configuration_resumes(tiny_scene, tiny_views, tmp_path):
+    config = _short_config()
+    points, colors = tiny_scene.points3d, tiny_scene.points_rgb
+    straight = fit_gaussians(tiny_views[:3], config, points=points, colors=colors, progress=False)
+    fit_gaussians(tiny_views[:3], config, points=points, colors=colors, progress=False,
+                  checkpoint_dir=tmp_path, stop_after=5)
+    state_path = tmp_path / "fit_state.json"
+    state = json.loads(state_path.read_text())
+    state["config"] = flat_json(config)
+    state_path.write_text(json.dumps(state))
+    resumed = fit_gaussians(tiny_views[:3], config, points=points, colors=colors, progress=False,
+                            checkpoint_dir=tmp_path)
+    assert resumed.start_iteration == 6
+    for name, value in straight.model.tensors().items():
+        assert torch.equal(value, resumed.model.tensors()[name]), name
 
 
 def test_views_without_any_visible_gaussian_do_not_crash(tiny_views):

@@ -51,10 +51,11 @@ def test_iterations_keeps_the_preset_settings():
     preset = get_preset("default").fit
     config = fit_config("default", 300, seed=0)
     assert config.iterations == 300
-    assert config.opacity_reset_every > 300  # still never reached
+    assert config.strategy.opacity_reset_every > 300  # still never reached
     assert config.background_points == preset.background_points == 3000
-    assert config.max_gaussians == preset.max_gaussians
+    assert config.strategy.max_gaussians == preset.strategy.max_gaussians == 16_000
     assert config.lr_means == preset.lr_means
     # schedule fields scale by 300 / 250 = 1.2: densify every 20 -> 24, from 25 -> 30, until 150 -> 180
-    assert (config.densify_every, config.densify_from, config.densify_until) == (24, 30, 180)
+    strategy = config.strategy
+    assert (strategy.densify_every, strategy.densify_from, strategy.densify_until) == (24, 30, 180)
     assert config.sh_increase_every == 30
