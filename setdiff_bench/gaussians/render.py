@@ -9,7 +9,6 @@ depth.  RGB, C-map and depth are 7 feature channels composited with one set of w
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
@@ -17,30 +16,13 @@ import torch
 
 from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import UsageError
-from setdiff_bench.gaussians.backends import torch_ref
+from setdiff_bench.gaussians.backends import gsplat_backend, torch_ref
+from setdiff_bench.gaussians.backends.common import RenderOutput, clip_centres
 from setdiff_bench.gaussians.model import GaussianModel
 
 Backend = Literal["torch", "gsplat"]
 
-
-@dataclass
-class RenderOutput:
-    """Rendered views of V cameras of equal size.
-
-    Attributes:
-        rgb: ``(V, 3, H, W)`` colour (composited over ``background``).
-        cmap: ``(V, 3, H, W)`` C-map, world coordinates weighted by the compositing weights, or ``None``
-            when geometry was not requested.
-        depth: ``(V, 1, H, W)`` accumulated camera-space z, or ``None``.
-        alpha: ``(V, 1, H, W)`` accumulated opacity ``Σ wᵢ``.
-        meta: per-camera projection data (``means2d``, ``radii``, ``visible``) for densification.
-    """
-
-    rgb: torch.Tensor
-    cmap: torch.Tensor | None
-    depth: torch.Tensor | None
-    alpha: torch.Tensor
-    meta: list[dict[str, torch.Tensor]] = field(default_factory=list)
+__all__ = ["Backend", "RenderOutput", "camera_tensors", "clip_centres", "render"]
 
 
 def render(gaussians: GaussianModel, cameras: Sequence[Camera] | Camera, backend: Backend = "torch", *,
@@ -70,8 +52,6 @@ def render(gaussians: GaussianModel, cameras: Sequence[Camera] | Camera, backend
     if len(sizes) != 1:
         raise UsageError(f"all cameras of one render call must share a size, got {sorted(sizes)}")
     if backend == "gsplat":
-        from setdiff_bench.gaussians.backends import gsplat_backend
-
         return gsplat_backend.render(gaussians, cams, with_geometry=with_geometry, sh_degree=sh_degree,
                                      background=background, cmap_bound=cmap_bound, cmap_center=cmap_center,
                                      near=near, far=far, eps2d=eps2d, tile_size=tile_size)
@@ -85,14 +65,6 @@ def camera_tensors(camera: Camera, device: torch.device, dtype: torch.dtype) -> 
     """``(w2c (4, 4), K (3, 3))`` of a camera as tensors (pinhole; distortion is not rendered)."""
     return (torch.tensor(np.array(camera.w2c), device=device, dtype=dtype),
             torch.tensor(np.array(camera.K), device=device, dtype=dtype))
-
-
-def clip_centres(means: torch.Tensor, bound: float | None, center: Sequence[float]) -> torch.Tensor:
-    """Gaussian centres ``(N, 3)`` clipped to ``center ± bound`` (no-op when ``bound`` is None)."""
-    if bound is None:
-        return means
-    c = torch.as_tensor(np.asarray(center, dtype=np.float64), device=means.device, dtype=means.dtype)
-    return torch.minimum(torch.maximum(means, c - bound), c + bound)
 
 
 def _render_torch(g: GaussianModel, cams: list[Camera], with_geometry: bool, sh_degree: int | None,

@@ -15,15 +15,14 @@ import torch
 
 from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import UsageError
+from setdiff_bench.gaussians.backends.common import RenderOutput, clip_centres
 from setdiff_bench.gaussians.model import GaussianModel
 
 
 def render(gaussians: GaussianModel, cameras: list[Camera], *, with_geometry: bool, sh_degree: int | None,
            background: Sequence[float] | None, cmap_bound: float | None, cmap_center: Sequence[float],
-           near: float, far: float, eps2d: float, tile_size: int):
+           near: float, far: float, eps2d: float, tile_size: int) -> RenderOutput:
     """Render with gsplat; see :func:`setdiff_bench.gaussians.render.render` for the arguments."""
-    from setdiff_bench.gaussians.render import RenderOutput, clip_centres
-
     try:
         import gsplat
     except ImportError as exc:
