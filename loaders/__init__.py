@@ -6,6 +6,9 @@ loader.  Every loader module provides::
     list_scenes(root, **options) -> list[str]                     # cheap: folder scan / one small table
     load_scenes(root, scenes=None, **options) -> list[Scene]      # full load, validated
 
+A dataset whose single scene folder is recognised by its files also names a ``folder -> bool`` test in
+:data:`SCENE_DETECTORS`; :func:`detect_dataset` asks them (``setdiff-bench fit --scene FOLDER``).
+
 Usage::
 
     from setdiff_bench.loaders import load_scenes
@@ -18,6 +21,7 @@ import inspect
 import os
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from setdiff_bench.errors import UsageError
@@ -57,6 +61,26 @@ DATASETS: dict[str, DatasetSpec] = {spec.key: spec for spec in (
     _spec("colmap", "any COLMAP scene: <scene>/sparse/0 + <scene>/images"),
     _spec("nerfstudio", "any nerfstudio scene: <scene>/transforms.json"),
 )}
+
+
+#: The datasets a single scene folder is recognised as by its own files, most specific layout first (a
+#: synthetic scene is also an EUVS-layout folder; any folder with a COLMAP model is a colmap scene), each
+#: with the ``"module:attr"`` of its loader module's ``folder -> bool`` test.
+SCENE_DETECTORS: tuple[tuple[str, str], ...] = (
+    ("synthetic", "setdiff_bench.loaders.synthetic:is_synthetic_scene"),
+    ("euvs", "setdiff_bench.loaders.euvs:is_euvs_scene"),
+    ("colmap", "setdiff_bench.loaders.colmap:is_colmap_scene"),
+    ("nerfstudio", "setdiff_bench.loaders.nerfstudio:is_nerfstudio_scene"),
+)
+
+
+def detect_dataset(folder: str | os.PathLike[str]) -> str | None:
+    """The first dataset of :data:`SCENE_DETECTORS` whose scene layout ``folder`` itself has, or ``None``."""
+    path = Path(folder)
+    for key, reference in SCENE_DETECTORS:
+        if load_attribute(reference, f"dataset {key!r} scene test")(path):
+            return key
+    return None
 
 
 def dataset_spec(dataset: str) -> DatasetSpec:
@@ -115,4 +139,5 @@ def load_scenes(dataset: str, root: str | os.PathLike[str], scenes: Iterable[str
     return loader(root, scenes, **options)
 
 
-__all__ = ["DATASETS", "DatasetSpec", "dataset_spec", "list_scenes", "load_scenes", "loader_options"]
+__all__ = ["DATASETS", "SCENE_DETECTORS", "DatasetSpec", "dataset_spec", "detect_dataset", "list_scenes",
+           "load_scenes", "loader_options"]

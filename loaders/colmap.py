@@ -244,12 +244,13 @@ def _count_text_image_records(images_txt: Path) -> int:
 
 
 # ---------------------------------------------------------------------- the generic "colmap" dataset
-def _is_colmap_scene(folder: Path) -> bool:
+def is_colmap_scene(folder: Path) -> bool:
+    """A folder holding a COLMAP model in ``sparse/0`` or ``sparse``."""
     return find_sparse_dir(folder) is not None
 
 
 def _scene_dirs(base: Path) -> dict[str, Path]:
-    found = discover_scenes(base, _is_colmap_scene)
+    found = discover_scenes(base, is_colmap_scene)
     if not found:
         raise DatasetError("no COLMAP scenes found (expected <scene>/sparse/0/{cameras,images}.{bin,txt})", base)
     return found

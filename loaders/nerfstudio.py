@@ -265,8 +265,13 @@ def _undo_applied_transform(meta: Mapping[str, Any], transforms: Path):
 
 
 # ---------------------------------------------------------------------- the "nerfstudio" dataset
+def is_nerfstudio_scene(folder: Path) -> bool:
+    """A folder with ``transforms.json``."""
+    return (folder / "transforms.json").is_file()
+
+
 def _scene_dirs(base: Path) -> dict[str, Path]:
-    found = discover_scenes(base, lambda folder: (folder / "transforms.json").is_file())
+    found = discover_scenes(base, is_nerfstudio_scene)
     if not found:
         raise DatasetError("no nerfstudio scenes found (expected <scene>/transforms.json)", base)
     return found

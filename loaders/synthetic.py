@@ -33,9 +33,13 @@ FORMAT = "setdiff-synthetic/1"
 INTRINSICS_TOLERANCE = 1e-6
 
 
+def is_synthetic_scene(folder: Path) -> bool:
+    """A folder with ``scene.json`` and ``test_set.txt``."""
+    return (folder / "scene.json").is_file() and (folder / "test_set.txt").is_file()
+
+
 def _scene_dirs(base: Path) -> dict[str, Path]:
-    found = discover_scenes(base, lambda folder: (folder / "scene.json").is_file()
-                            and (folder / "test_set.txt").is_file())
+    found = discover_scenes(base, is_synthetic_scene)
     if not found:
         raise DatasetError("no synthetic scenes found (expected <scene>/scene.json and <scene>/test_set.txt)", base)
     return found

@@ -1,10 +1,10 @@
 """The training views of a 3DGS fit, read through the dataset loaders.
 
-A scene folder is recognised by what it holds: ``scene.json`` → the synthetic loader, ``test_set.txt``
-→ the EUVS loader (both with optional masks), otherwise a generic COLMAP scene.  The fit frames are
-the scene's training split (EUVS rule: every posed image not listed in ``test_set.txt``) unless a
-list of frame names is given.  Any registered dataset is read with ``dataset=``/``root=``/``scene=``
-and the loader's own options.
+A scene folder is read by the loader the registry recognises it as
+(:func:`setdiff_bench.loaders.detect_dataset`: synthetic, EUVS, COLMAP or nerfstudio layout), with
+masks optional where the loader has masks.  The fit frames are the scene's training split (EUVS
+rule: every posed image not listed in ``test_set.txt``) unless a list of frame names is given.  Any
+registered dataset is read with ``dataset=``/``root=``/``scene=`` and the loader's own options.
 
 Images reach the fit as pinhole images: a camera with lens distortion is undistorted first
 (:mod:`setdiff_bench.undistort`; the border its lens does not cover leaves the loss through the
@@ -48,9 +48,13 @@ class FitView:
 
 def load_fit_scene(scene_dir: str | os.PathLike[str], *, dataset: str | None = None, scene: str | None = None,
                    options: Mapping[str, Any] | None = None) -> Scene:
-    """Load the scene folder with the loader its files call for (see the module docstring); with
-    ``dataset``, ``scene_dir`` is that dataset's root and ``scene`` picks one of its scenes."""
-    from setdiff_bench.loaders import load_scenes
+    """Load the scene folder with the loader the registry recognises it as (see the module docstring);
+    with ``dataset``, ``scene_dir`` is that dataset's root and ``scene`` picks one of its scenes.
+
+    Raises:
+        DatasetError: the folder is missing, no loader recognises it, or it holds more than one scene.
+    """
+    from setdiff_bench.loaders import SCENE_DETECTORS, detect_dataset, load_scenes, loader_options
 
     if dataset is not None:
         scenes = load_scenes(dataset, scene_dir, None if scene is None else [scene], **dict(options or {}))
@@ -60,12 +64,12 @@ def load_fit_scene(scene_dir: str | os.PathLike[str], *, dataset: str | None = N
     folder = Path(scene_dir)
     if not folder.is_dir():
         raise DatasetError("scene folder not found", folder)
-    if (folder / "scene.json").is_file():
-        scenes = load_scenes("synthetic", folder, masks="optional")
-    elif (folder / "test_set.txt").is_file():
-        scenes = load_scenes("euvs", folder, masks="optional")
-    else:
-        scenes = load_scenes("colmap", folder)
+    key = detect_dataset(folder)
+    if key is None:
+        layouts = ", ".join(name for name, _ in SCENE_DETECTORS)
+        raise DatasetError(f"no loader recognises this folder as a scene (layouts: {layouts}); "
+                           "for a dataset root pass --dataset and --root", folder)
+    scenes = load_scenes(key, folder, **({"masks": "optional"} if "masks" in loader_options(key) else {}))
     if len(scenes) != 1:
         raise DatasetError(f"expected one scene in the folder, found {len(scenes)}", folder)
     return scenes[0]

@@ -11,7 +11,14 @@ import pytest
 
 from setdiff_bench.cli.main import main
 from setdiff_bench.errors import UsageError
-from setdiff_bench.loaders import DATASETS, list_scenes, load_scenes, loader_options
+from setdiff_bench.loaders import (
+    DATASETS,
+    SCENE_DETECTORS,
+    detect_dataset,
+    list_scenes,
+    load_scenes,
+    loader_options,
+)
 from tests.loaders.loader_fixtures import write_euvs_scene
 
 
@@ -32,6 +39,28 @@ def test_registry_is_lazy_and_complete():
     assert out[1] == "False" and out[2] == "False"
     for spec in DATASETS.values():
         assert callable(spec.load_lister()) and callable(spec.load_loader())
+
+
+def touch(folder, *names):
+    for name in names:
+        (folder / name).parent.mkdir(parents=True, exist_ok=True)
+        (folder / name).write_text("")
+    return folder
+
+
+def test_a_scene_folder_is_recognised_by_its_files_most_specific_layout_first(tmp_path):
+    assert {key for key, _ in SCENE_DETECTORS} <= set(DATASETS)
+    colmap = ("sparse/0/cameras.bin", "sparse/0/images.bin")
+    folders = {
+        "synthetic": touch(tmp_path / "s", "scene.json", "test_set.txt", *colmap),  # also an EUVS layout
+        "euvs": touch(tmp_path / "e", "test_set.txt", *colmap),                     # also a COLMAP scene
+        "colmap": touch(tmp_path / "c", "sparse/cameras.txt", "sparse/images.txt", "transforms.json"),
+        "nerfstudio": touch(tmp_path / "n", "transforms.json"),
+    }
+    for key, folder in folders.items():
+        assert detect_dataset(folder) == key
+    assert detect_dataset(touch(tmp_path / "x", "scene.json", "images/a.png")) is None
+    assert detect_dataset(tmp_path / "missing") is None
 
 
 def test_options_are_checked(euvs_root):
