@@ -135,7 +135,7 @@ def _setsize(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocatio
                                                *_run_args(args)])
         results[(refs, targets)] = ablation.pooled_means(runs / METRICS_FILE)
     frame = ablation.setsize_frame(results)
-    caption = "Set-size ablation on the synthetic streets (paper Table 6 shape)"
+    caption = "Set-size ablation on the synthetic streets (paper Table 6, one row per set size)"
     commands = f"`{invocation}`, which ran:\n\n" + pipeline.commands_markdown()
     targets = int(next(iter(results.values()))["targets"])
     markdown = ablation.setsize_markdown(frame, ablation.ordering_setsize(results), commands, caption, targets)
