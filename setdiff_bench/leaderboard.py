@@ -507,8 +507,9 @@ def render_latex(board: Leaderboard, command: str | None = None) -> str:
             start += len(metrics)
         lines.append(" & ".join(heads) + r" \\")
         lines.append(" ".join(rules))
-    header = [rf"\textbf{{{latex_escape(board.row_header)}}}"] + [rf"\textbf{{{latex_escape(metric_header(m))}}}{_arrow(m, True)}"
-                                     for _, metrics in board.columns for m in metrics]
+    header = [rf"\textbf{{{latex_escape(board.row_header)}}}"]
+    header += [rf"\textbf{{{latex_escape(metric_header(m))}}}{_arrow(m, True)}"
+               for _, metrics in board.columns for m in metrics]
     lines += [" & ".join(header) + r" \\", r"\midrule"]
     previous = None
     for index, row in enumerate(board.rows):
@@ -539,7 +540,7 @@ def render_markdown(board: Leaderboard, command: str | None = None) -> str:
     """A GitHub Markdown table: one column per (block, metric), best in bold, paper rows suffixed."""
     multi = len(board.columns) > 1 or board.columns[0][0].key != ALL
     header = [board.row_header] + [(f"{block.label} " if multi else "") + metric_header(m) + _arrow(m, False)
-                           for block, metrics in board.columns for m in metrics]
+                                   for block, metrics in board.columns for m in metrics]
     lines = [f"**{_md_escape(board.title)}**", "", "| " + " | ".join(_md_escape(h) for h in header) + " |",
              "|" + "---|" + "---:|" * (len(header) - 1)]
     for index, row in enumerate(board.rows):

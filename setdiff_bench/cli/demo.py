@@ -71,9 +71,9 @@ def run(args: argparse.Namespace) -> int:
     resolve_device(args.device)  # checked here; passed on as given (auto: not at all), so the stages resolve it
     preset = get_demo_preset(args.preset)
     paths = DemoPaths(out=args.out, work=args.work or args.out / "work")
+    device = None if args.device == "auto" else args.device   # the stages' own default is auto
     try:
-        summary = run_demo(preset, paths, seed=args.seed, jobs=args.jobs, device=None if args.device == "auto" else args.device,
-                           train=args.train,
+        summary = run_demo(preset, paths, seed=args.seed, jobs=args.jobs, device=device, train=args.train,
                            setdiff_steps=args.setdiff_steps, difix_steps=args.difix_steps, ablations=args.ablations,
                            progress=not args.no_progress, invocation=invocation(args))
     except StageFailed as failure:
