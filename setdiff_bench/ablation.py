@@ -8,14 +8,16 @@
   targets are scored at every size, so columns differ only in how much each target sees.
 
 Each cell is the mean of per-target values over the whole test split (all groups pooled), like
-the paper's tables.  The tables are written as Markdown, LaTeX (booktabs) and Parquet, with the
-paper's numbers (DL3DV) printed below for orientation — never mixed into our rows — and the exact
-commands that produced them.
+the paper's tables.  The Markdown and LaTeX (booktabs) tables are written by the leaderboard's writers
+(:func:`setdiff_bench.leaderboard.pooled_table`), so cells, bold and headers follow the metric specs
+exactly as in the leaderboards; the Markdown adds the paper's numbers (DL3DV) below for orientation —
+never mixed into our rows — and the exact commands that produced them.  The set-size table has one row
+per set size (the paper prints Table 6 transposed, one row per metric); its Parquet keeps the paper's
+shape.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,16 +28,19 @@ import pyarrow.parquet as pq
 
 from setdiff_bench.errors import SetDiffBenchError, UsageError
 from setdiff_bench.io.atomic import atomic_path, write_text_atomic
-from setdiff_bench.metrics.registry import METRICS as METRIC_SPECS
+from setdiff_bench.leaderboard import (
+    Leaderboard,
+    load_reported,
+    pooled_row,
+    pooled_table,
+    render_latex,
+    render_markdown,
+)
+from setdiff_bench.metrics.registry import get_metric
 
 METRICS = ("psnr", "ssim", "lpips")
-HEADERS = {"psnr": "PSNR", "ssim": "SSIM", "lpips": "LPIPS"}
-DECIMALS = {"psnr": 2, "ssim": 3, "lpips": 3}
-
-
-def _higher(metric: str) -> bool:
-    """Ranking direction of ``metric``, from the metric registry (``MetricSpec.higher_is_better``)."""
-    return METRIC_SPECS[metric].higher_is_better
+GEOMETRY_HEADER = "Geometric grounding"
+SETSIZE_HEADER = "References + targets"
 
 
 @dataclass(frozen=True)
@@ -94,7 +99,7 @@ def setsize_frame(results: Mapping[tuple[int, int], Mapping[str, float]]) -> pd.
     """Table 6 shape: one row per metric, one column per set size ``N + M``."""
     rows = []
     for metric in METRICS:
-        rows.append({"metric": HEADERS[metric], **{size_label(size): results[size][metric] for size in results}})
+        rows.append({"metric": get_metric(metric).label, **{size_label(size): results[size][metric] for size in results}})
     return pd.DataFrame(rows)
 
 
@@ -103,10 +108,10 @@ def ordering_geometry(frame: pd.DataFrame) -> list[str]:
     notes = []
     by = frame.set_index("variant")
     for metric in METRICS:
-        values = by[metric]
-        better = values.idxmax() if _higher(metric) else values.idxmin()
-        worse = values.idxmin() if _higher(metric) else values.idxmax()
-        notes.append(f"{HEADERS[metric]}: best {by.loc[better, 'grounding']}, worst {by.loc[worse, 'grounding']} "
+        values, spec = by[metric], get_metric(metric)
+        better = values.idxmax() if spec.higher_is_better else values.idxmin()
+        worse = values.idxmin() if spec.higher_is_better else values.idxmax()
+        notes.append(f"{spec.label}: best {by.loc[better, 'grounding']}, worst {by.loc[worse, 'grounding']} "
                      f"(paper: best Both, worst None)")
     return notes
 
@@ -115,99 +120,77 @@ def ordering_setsize(results: Mapping[tuple[int, int], Mapping[str, float]]) -> 
     """Whether more references / more targets help, as in the paper's Table 6."""
     notes = []
     for metric in METRICS:
-        sign = 1.0 if _higher(metric) else -1.0
+        label = get_metric(metric).label
+        sign = 1.0 if get_metric(metric).higher_is_better else -1.0
         one, three = results.get((1, 1)), results.get((3, 1))
         if one and three:
             gain = sign * (three[metric] - one[metric])
-            notes.append(f"{HEADERS[metric]}: 3+1 vs 1+1 {'better' if gain > 0 else 'not better'} "
+            notes.append(f"{label}: 3+1 vs 1+1 {'better' if gain > 0 else 'not better'} "
                          f"({three[metric]:.4f} vs {one[metric]:.4f}; paper: better)")
         small, large = results.get((3, 1)), results.get((3, 6))
         if small and large:
             gain = sign * (large[metric] - small[metric])
-            notes.append(f"{HEADERS[metric]}: 3+6 vs 3+1 {'better' if gain > 0 else 'not better'} "
+            notes.append(f"{label}: 3+6 vs 3+1 {'better' if gain > 0 else 'not better'} "
                          f"({large[metric]:.4f} vs {small[metric]:.4f}; paper: better for PSNR/SSIM, "
                          f"LPIPS within 0.001)")
     return notes
 
 
-def reported_frame(table: str) -> pd.DataFrame:
-    """The paper's numbers for ``table`` (``table5_geometry_ablation`` or ``table6_setsize_ablation``)."""
-    from setdiff_bench.leaderboard import load_reported
+def paper_board(table: str, title: str) -> Leaderboard:
+    """The paper's numbers for ``table`` (``table5_geometry_ablation`` or ``table6_setsize_ablation``) as a
+    table for the writers: one row per variant or set size at the printed precision, the paper's bold."""
+    records = load_reported(None, [table])
+    key = "setting" if table.startswith("table6") else "method"
+    rows, best = [], {}
+    for index, (label, own) in enumerate(records.groupby(key, sort=False)):
+        rows.append(pooled_row(str(label), dict(zip(own["metric"], own["value"])), source="reported",
+                               decimals=dict(zip(own["metric"], own["decimals"]))))
+        for cell in rows[-1].values:
+            if own.loc[own["metric"] == cell[1], "bold"].any():
+                best.setdefault(cell, set()).add(index)
+    header = SETSIZE_HEADER if key == "setting" else GEOMETRY_HEADER
+    return pooled_table(title, rows, METRICS, row_header=header, best=best)
 
-    rows = load_reported(None, [table])
-    return rows.pivot_table(index="setting" if table.startswith("table6") else "method", columns="metric",
-                            values="value", sort=False).reset_index()
+
+def geometry_board(frame: pd.DataFrame, caption: str) -> Leaderboard:
+    """Table 5 for the writers: one row per variant, best per column in bold."""
+    rows = [pooled_row(row["grounding"], {m: row[m] for m in METRICS}) for _, row in frame.iterrows()]
+    notes = [f"Pooled over {int(frame['targets'].iloc[0])} test targets per variant."]
+    return pooled_table(caption, rows, METRICS, row_header=GEOMETRY_HEADER, notes=notes)
 
 
-def format_cell(value: float, metric: str) -> str:
-    return "–" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{value:.{DECIMALS[metric]}f}"
+def setsize_board(frame: pd.DataFrame, caption: str, notes: Sequence[str] = ()) -> Leaderboard:
+    """Table 6 for the writers, from :func:`setsize_frame`: one row per set size, one column per metric."""
+    sizes = [c for c in frame.columns if c != "metric"]
+    values = {size: {metric: row[size] for metric, (_, row) in zip(METRICS, frame.iterrows())} for size in sizes}
+    rows = [pooled_row(size, values[size]) for size in sizes]
+    return pooled_table(caption, rows, METRICS, row_header=SETSIZE_HEADER, notes=notes)
 
 
-def best_index(values: Sequence[float], metric: str) -> set[int]:
-    """Positions of the best value at display precision (ties share it)."""
-    rounded = [round(v, DECIMALS[metric]) for v in values]
-    target = max(rounded) if _higher(metric) else min(rounded)
-    return {i for i, v in enumerate(rounded) if v == target}
+def _document(board: Leaderboard, ordering: Sequence[str], paper: Leaderboard, commands: str) -> str:
+    """Our table, the ordering against the paper, the paper's table and the commands, as Markdown."""
+    lines = [render_markdown(board), "Ordering against the paper:", *[f"- {n}" for n in ordering], "",
+             render_markdown(paper).rstrip("\n"), "", "Produced by:", "", commands]
+    return "\n".join(lines)
 
 
 def geometry_markdown(frame: pd.DataFrame, notes: Sequence[str], commands: str, caption: str) -> str:
-    best = {m: best_index(list(frame[m]), m) for m in METRICS}
-    lines = [f"# {caption}", "", "| Geometric grounding | PSNR ↑ | SSIM ↑ | LPIPS ↓ |", "|---|---:|---:|---:|"]
-    for i, row in frame.iterrows():
-        cells = [f"**{format_cell(row[m], m)}**" if i in best[m] else format_cell(row[m], m) for m in METRICS]
-        lines.append(f"| {row['grounding']} | " + " | ".join(cells) + " |")
-    lines += ["", f"Pooled over {int(frame['targets'].iloc[0])} test targets per variant.", ""]
-    lines += ["Ordering against the paper:", *[f"- {n}" for n in notes], ""]
-    paper = reported_frame("table5_geometry_ablation")
-    lines += ["Paper, Table 5 (DL3DV; for orientation, not comparable numbers):", "",
-              "| Geometric grounding | PSNR | SSIM | LPIPS |", "|---|---:|---:|---:|"]
-    lines += [f"| {r['method']} | {r['psnr']:.2f} | {r['ssim']:.3f} | {r['lpips']:.3f} |" for _, r in paper.iterrows()]
-    lines += ["", "Produced by:", "", commands]
-    return "\n".join(lines)
+    paper = paper_board("table5_geometry_ablation", "Paper, Table 5 (DL3DV; for orientation, not comparable numbers)")
+    return _document(geometry_board(frame, caption), notes, paper, commands)
 
 
 def geometry_latex(frame: pd.DataFrame, caption: str) -> str:
-    best = {m: best_index(list(frame[m]), m) for m in METRICS}
-    lines = ["\\begin{table}[t]", "\\centering", f"\\caption{{{caption}}}", "\\begin{tabular}{lccc}", "\\toprule",
-             "\\textbf{Geometric Grounding} & \\textbf{PSNR} & \\textbf{SSIM} & \\textbf{LPIPS} \\\\", "\\midrule"]
-    for i, row in frame.iterrows():
-        cells = [f"\\textbf{{{format_cell(row[m], m)}}}" if i in best[m] else format_cell(row[m], m) for m in METRICS]
-        lines.append(f"{row['grounding']} & " + " & ".join(cells) + " \\\\")
-    lines += ["\\bottomrule", "\\end{tabular}", "\\end{table}", ""]
-    return "\n".join(lines)
+    return render_latex(geometry_board(frame, caption))
 
 
 def setsize_markdown(frame: pd.DataFrame, notes: Sequence[str], commands: str, caption: str, targets: int) -> str:
-    sizes = [c for c in frame.columns if c != "metric"]
-    lines = [f"# {caption}", "", "| I^r + I^t | " + " | ".join(sizes) + " |", "|---|" + "---:|" * len(sizes)]
-    for metric, (_, row) in zip(METRICS, frame.iterrows()):
-        values = [row[s] for s in sizes]
-        best = best_index(values, metric)
-        cells = [f"**{format_cell(v, metric)}**" if i in best else format_cell(v, metric) for i, v in enumerate(values)]
-        lines.append(f"| {HEADERS[metric]} {'↑' if _higher(metric) else '↓'} | " + " | ".join(cells) + " |")
-    lines += ["", f"Each column scores the same {targets} test targets.", ""]
-    lines += ["Ordering against the paper:", *[f"- {n}" for n in notes], ""]
-    paper = reported_frame("table6_setsize_ablation")
-    lines += ["Paper, Table 6 (DL3DV; for orientation, not comparable numbers):", "",
-              "| I^r + I^t | PSNR | SSIM | LPIPS |", "|---|---:|---:|---:|"]
-    lines += [f"| {r['setting']} | {r['psnr']:.2f} | {r['ssim']:.3f} | {r['lpips']:.3f} |" for _, r in paper.iterrows()]
-    lines += ["", "Produced by:", "", commands]
-    return "\n".join(lines)
+    paper = paper_board("table6_setsize_ablation", "Paper, Table 6 (DL3DV; for orientation, not comparable numbers)")
+    board = setsize_board(frame, caption, [f"Every set size scores the same {targets} test targets."])
+    return _document(board, notes, paper, commands)
 
 
 def setsize_latex(frame: pd.DataFrame, caption: str) -> str:
-    sizes = [c for c in frame.columns if c != "metric"]
-    lines = ["\\begin{table}[t]", "\\centering", f"\\caption{{{caption}}}", "\\begin{tabular}{l" + "c" * len(sizes) + "}",
-             "\\toprule", "$\\mathcal{I}^r + \\mathcal{I}^t$ & " + " & ".join(f"\\textbf{{{s}}}" for s in sizes) + " \\\\",
-             "\\midrule"]
-    for metric, (_, row) in zip(METRICS, frame.iterrows()):
-        values = [row[s] for s in sizes]
-        best = best_index(values, metric)
-        cells = [f"\\textbf{{{format_cell(v, metric)}}}" if i in best else format_cell(v, metric)
-                 for i, v in enumerate(values)]
-        lines.append(f"\\textbf{{{HEADERS[metric]}}} & " + " & ".join(cells) + " \\\\")
-    lines += ["\\bottomrule", "\\end{tabular}", "\\end{table}", ""]
-    return "\n".join(lines)
+    return render_latex(setsize_board(frame, caption))
 
 
 def write_tables(out: Path, stem: str, frame: pd.DataFrame, markdown: str, latex: str) -> dict[str, Path]:

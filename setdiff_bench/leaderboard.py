@@ -12,9 +12,14 @@ cell is the mean over sequences.  A method whose rows in a block miss targets th
 is refused with an error naming the method, the block and the missing frames — a mean over a subset
 is never shown.  A method with no rows at all in a block shows "–".
 
-Best per column: bold, decided on the values as displayed (PSNR 2 decimals, SSIM/LPIPS 3, warp 1;
-reported numbers at their printed precision), so ties share the bold.  Direction comes from the
-metric registry (``higher_is_better``).
+Best per column: bold, decided on the values as displayed (measured values at their metric's
+``decimals``, e.g. PSNR 2, SSIM/LPIPS 3, warp 1; reported numbers at their printed precision), so ties
+share the bold.  Column headers, decimals and direction (``higher_is_better``, shown as ↑/↓) are read
+from the metric's :class:`~setdiff_bench.metrics.registry.MetricSpec`; nothing here repeats them.
+
+The writers (:func:`render_markdown`, :func:`render_latex`, :func:`to_frame`) take any
+:class:`Leaderboard`; :func:`pooled_table` builds a one-block table of labelled rows, which is how the
+ablation tables (:mod:`setdiff_bench.ablation`) are written.
 
 Table shapes follow the paper: EUVS Settings 1–3 (Table 1), Para-Lane single/double lane shift
 (Table 2), nuScenes one pooled block with warp error (Table 3 + supplement), DL3DV 3/6/9 views
@@ -25,7 +30,7 @@ Table shapes follow the paper: EUVS Settings 1–3 (Table 1), Para-Lane single/d
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -39,7 +44,7 @@ from setdiff_bench.errors import SetDiffBenchError, UsageError
 from setdiff_bench.io.atomic import atomic_path, write_text_atomic
 from setdiff_bench.loaders import DATASETS
 from setdiff_bench.loaders.common import natural_key
-from setdiff_bench.metrics.registry import METRICS
+from setdiff_bench.metrics.registry import METRICS, get_metric
 from setdiff_bench.profiles import DEFAULT_PROFILE, PROFILE_COLUMN, get_profile
 from setdiff_bench.protocols import POOLED, Block, Layout, list_protocols, load_protocol
 from setdiff_bench.run_paths import METRICS_FILE, RUN_FILE, SEQUENCES_FILE
@@ -52,8 +57,6 @@ class LeaderboardError(SetDiffBenchError):
     """Runs that cannot be put in one table (missing rows, duplicates, no data)."""
 
 
-HEADERS = {"psnr": "PSNR", "ssim": "SSIM", "lpips": "LPIPS", "warp": "Warp", "cos": "Cos", "final": "Final"}
-DECIMALS = {"psnr": 2, "ssim": 3, "lpips": 3, "warp": 1}
 SECTIONS = ("reconstruction", "enhancer", "ablation", "measured")
 
 
@@ -71,18 +74,18 @@ def dataset_layout(dataset: str) -> Layout:
 
 
 def metric_header(name: str) -> str:
-    """``psnr_euvs`` → ``PSNR``; unknown names upper-cased."""
-    return HEADERS.get(name.split("_")[0], name.upper())
+    """The column header of metric ``name`` (``MetricSpec.label``: ``psnr_euvs`` → ``PSNR``)."""
+    return get_metric(name).label
 
 
 def metric_decimals(name: str) -> int:
-    return DECIMALS.get(name.split("_")[0], 3)
+    """Digits after the point that tables print for metric ``name`` (``MetricSpec.decimals``)."""
+    return get_metric(name).decimals
 
 
 def higher_is_better(name: str) -> bool:
-    if name in METRICS:
-        return METRICS[name].higher_is_better
-    return name.split("_")[0] in {"psnr", "ssim", "cos", "final"}
+    """Ranking direction of metric ``name`` (``MetricSpec.higher_is_better``)."""
+    return get_metric(name).higher_is_better
 
 
 # ---------------------------------------------------------------------- inputs
@@ -170,6 +173,8 @@ class Leaderboard:
         best: ``(block key, metric)`` → row indices holding the best displayed value.
         title: caption text.
         notes: footnotes (aggregation, marks).
+        profile: the evaluation profile tabulated.
+        row_header: header of the label column.
     """
 
     dataset: str
@@ -179,6 +184,7 @@ class Leaderboard:
     title: str
     notes: list[str]
     profile: str = DEFAULT_PROFILE
+    row_header: str = "Method"
 
     @property
     def stem(self) -> str:
@@ -235,8 +241,11 @@ def build_leaderboard(dataset: str, images: pd.DataFrame, sequences: pd.DataFram
     spec = get_profile(profile)
     frame = profile_rows(frame, profile)
     if metrics is None and profile != DEFAULT_PROFILE:   # the profile's metrics (+ the DINOv2 columns when scored)
-        metric_names = spec.metrics + tuple(m for m in ("cos_dinov2", "final_score") if m in frame.columns
-                                            and frame[m].notna().any())
+        metric_names = spec.metrics + tuple(m for m, s in METRICS.items() if s.scope == "profile"
+                                            and m in frame.columns and frame[m].notna().any())
+    unknown_metrics = [m for m in metric_names if m not in METRICS]
+    if unknown_metrics:
+        raise UsageError(f"unknown metric(s) {', '.join(unknown_metrics)}; known: {', '.join(METRICS)}", "--metrics")
     if profile != DEFAULT_PROFILE and reported is not None and len(reported):
         raise LeaderboardError(f"the paper's reported numbers use the {DEFAULT_PROFILE} profile; they cannot share "
                                f"a table with profile {profile} (drop --with-reported)")
@@ -389,6 +398,35 @@ def _reported_rows(reported: pd.DataFrame, blocks: Sequence[Block], tables: Sequ
     return ordered
 
 
+def pooled_table(title: str, rows: Sequence[Row], metrics: Sequence[str], *, row_header: str = "Method",
+                 notes: Sequence[str] = (), best: dict[tuple[str, str], set[int]] | None = None) -> Leaderboard:
+    """A one-block table for the writers: ``rows`` hold their values under ``(ALL, metric)``, one column per
+    metric, no block header.
+
+    Args:
+        title: caption.
+        rows: rows in display order (:func:`pooled_row`).
+        metrics: metric names, in column order.
+        row_header: header of the label column.
+        notes: lines printed under the table (LaTeX: comments).
+        best: ``(ALL, metric)`` → bold row indices; default: the best displayed value per column.
+    """
+    board = Leaderboard("", [(Block(ALL, "All"), tuple(metrics))], list(rows), {}, title, list(notes),
+                        row_header=row_header)
+    board.best = _best(board) if best is None else best
+    return board
+
+
+def pooled_row(label: str, values: Mapping[str, float], *, source: str = "measured",
+               decimals: Mapping[str, int] | None = None) -> Row:
+    """A row of :func:`pooled_table`: metric → value; decimals are the metric's unless given (the printed
+    precision of reported numbers); ``source="reported"`` marks it as the paper's."""
+    decimals = decimals or {}
+    return Row(label=label, method=label, source=source, section=source,
+               values={(ALL, metric): float(value) for metric, value in values.items()},
+               decimals={(ALL, metric): decimals.get(metric, metric_decimals(metric)) for metric in values})
+
+
 def _best(board: Leaderboard) -> dict[tuple[str, str], set[int]]:
     best: dict[tuple[str, str], set[int]] = {}
     for cell in board.cells():
@@ -446,10 +484,11 @@ def latex_escape(text: str) -> str:
 
 
 def _arrow(metric: str, latex: bool) -> str:
-    up = higher_is_better(metric)
+    """The metric's direction arrow (``MetricSpec.arrow``), in LaTeX math where asked."""
+    spec = get_metric(metric)
     if latex:
-        return r"$\uparrow$" if up else r"$\downarrow$"
-    return "↑" if up else "↓"
+        return r"$\uparrow$" if spec.higher_is_better else r"$\downarrow$"
+    return spec.arrow
 
 
 def render_latex(board: Leaderboard, command: str | None = None) -> str:
@@ -468,8 +507,9 @@ def render_latex(board: Leaderboard, command: str | None = None) -> str:
             start += len(metrics)
         lines.append(" & ".join(heads) + r" \\")
         lines.append(" ".join(rules))
-    header = [r"\textbf{Method}"] + [rf"\textbf{{{latex_escape(metric_header(m))}}}{_arrow(m, True)}"
-                                     for _, metrics in board.columns for m in metrics]
+    header = [rf"\textbf{{{latex_escape(board.row_header)}}}"]
+    header += [rf"\textbf{{{latex_escape(metric_header(m))}}}{_arrow(m, True)}"
+               for _, metrics in board.columns for m in metrics]
     lines += [" & ".join(header) + r" \\", r"\midrule"]
     previous = None
     for index, row in enumerate(board.rows):
@@ -499,8 +539,8 @@ def _md_escape(text: str) -> str:
 def render_markdown(board: Leaderboard, command: str | None = None) -> str:
     """A GitHub Markdown table: one column per (block, metric), best in bold, paper rows suffixed."""
     multi = len(board.columns) > 1 or board.columns[0][0].key != ALL
-    header = ["Method"] + [(f"{block.label} " if multi else "") + metric_header(m) + _arrow(m, False)
-                           for block, metrics in board.columns for m in metrics]
+    header = [board.row_header] + [(f"{block.label} " if multi else "") + metric_header(m) + _arrow(m, False)
+                                   for block, metrics in board.columns for m in metrics]
     lines = [f"**{_md_escape(board.title)}**", "", "| " + " | ".join(_md_escape(h) for h in header) + " |",
              "|" + "---|" + "---:|" * (len(header) - 1)]
     for index, row in enumerate(board.rows):

@@ -39,7 +39,8 @@ def resolve_metrics(names: str | Sequence[str]) -> tuple[MetricSpec, ...]:
     """Image-metric specs from a preset name (``standard``), or a comma list / sequence of metric names.
 
     Raises:
-        UsageError: an unknown name, or a sequence metric (warp error is chosen with ``warp=``).
+        UsageError: an unknown name, a sequence metric (warp error is chosen with ``warp=``) or a profile
+            metric (``setdiff-bench evaluate`` computes it).
     """
     if isinstance(names, str):
         names = list(PRESETS[names]) if names in PRESETS else [n.strip() for n in names.split(",") if n.strip()]
@@ -49,8 +50,11 @@ def resolve_metrics(names: str | Sequence[str]) -> tuple[MetricSpec, ...]:
             raise UsageError(f"unknown metric {name!r}; presets: {', '.join(PRESETS)}; metrics: {', '.join(METRICS)}",
                              "--metrics")
         spec = METRICS[name]
-        if spec.scope != "image":
+        if spec.scope == "sequence":
             raise UsageError(f"{name} is a sequence metric; it is enabled with --warp, not --metrics", "--metrics")
+        if spec.scope != "image":
+            raise UsageError(f"{name} is a {spec.scope} metric; `setdiff-bench evaluate` computes it, not --metrics",
+                             "--metrics")
         specs.append(spec)
     if not specs:
         raise UsageError("no metrics selected", "--metrics")

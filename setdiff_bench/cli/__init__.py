@@ -2,4 +2,28 @@
 
 A verb module defines ``VERB`` (its name), ``HELP`` (one line), ``add_arguments(parser)`` and
 ``run(args) -> int``.  Verb modules import nothing heavy at module level, so ``--help`` is fast.
+
+Options that several verbs share are declared here, once, so that they are spelled, defaulted and
+explained alike: :func:`add_device_argument` (``--device``, default ``auto``) and
+:func:`add_progress_argument` (``--no-progress``).  Older spellings stay accepted, hidden from
+``--help``, for one release.
 """
+
+from __future__ import annotations
+
+import argparse
+
+DEVICES = "auto (cuda when available, else cpu), cpu, cuda or cuda:N"
+
+
+def add_device_argument(parser: argparse.ArgumentParser, what: str, devices: str = DEVICES) -> None:
+    """``--device``, default ``"auto"``: the verb resolves it with :func:`setdiff_bench.devices.resolve_device`
+    (CUDA when available, else the CPU).  ``what`` says what runs on it; ``devices`` lists the accepted names."""
+    parser.add_argument("--device", default="auto", help=f"{devices}; {what}; default auto")
+
+
+def add_progress_argument(parser: argparse.ArgumentParser, *old_names: str) -> None:
+    """``--no-progress`` (``args.no_progress``); ``old_names`` (e.g. ``--quiet``) are hidden aliases."""
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+    for name in old_names:
+        parser.add_argument(name, dest="no_progress", action="store_true", help=argparse.SUPPRESS)

@@ -18,6 +18,8 @@ import shlex
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from setdiff_bench.cli import add_device_argument, add_progress_argument
+
 if TYPE_CHECKING:
     from setdiff_bench.stages import Pipeline
 
@@ -39,16 +41,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         study.add_argument("--packets", required=True, type=Path, help="packet store (setdiff-bench prepare)")
         study.add_argument("--out", required=True, type=Path, help="folder for the ablation tables")
         study.add_argument("--work", type=Path, default=None, help="checkpoints and runs (default: <out>/work)")
-        study.add_argument("--device", default=None, help="device for training and inference (default: auto)")
-        study.add_argument("--no-progress", action="store_true", help="no progress bars")
+        add_device_argument(study, "where training and inference run")
+        add_progress_argument(study)
 
 
 def run(args: argparse.Namespace) -> int:
     from setdiff_bench.devices import resolve_device
     from setdiff_bench.stages import Pipeline, StageFailed
 
-    if args.device:  # checked here; passed on as given, so the stages resolve "auto" themselves
-        resolve_device(args.device)
+    resolve_device(args.device)  # checked here; passed on as given (auto: not at all), so the stages resolve it
     work = (args.work or args.out / "work") / f"ablation_{args.study}"
     pipeline = Pipeline(quiet=args.no_progress, ledger=work / "stages.json")  # reruns keep the original times
     invocation = _invocation(args)
@@ -74,12 +75,12 @@ def _invocation(args: argparse.Namespace) -> str:
     else:
         parts += ["--checkpoint", args.checkpoint, "--sizes", args.sizes]
     parts += ["--work", args.work] if args.work else []
-    parts += ["--device", args.device] if args.device else []
+    parts += ["--device", args.device] if args.device != "auto" else []
     return "setdiff-bench " + shlex.join(str(p) for p in parts)
 
 
 def _run_args(args: argparse.Namespace) -> list[str]:
-    extra = ["--device", args.device] if args.device else []
+    extra = ["--device", args.device] if args.device != "auto" else []
     return [*extra, "--no-progress"] if args.no_progress else extra
 
 
@@ -104,8 +105,8 @@ def _geometry(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocati
                                    f"Geometry ablation variant '{variant.label}' of {args.config}")
         checkpoints = work / "checkpoints" / variant.key
         train = ["train", "--config", config, "--packets", args.packets, "--out", checkpoints]
-        if args.device == "cpu":
-            train.append("--cpu")
+        if args.device == "cpu":  # train runs where accelerate puts it: CUDA when available unless told cpu
+            train += ["--device", "cpu"]
         if args.no_progress:
             train.append("--no-progress")
         pipeline.run(f"train {variant.key}", train)
@@ -135,7 +136,7 @@ def _setsize(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocatio
                                                *_run_args(args)])
         results[(refs, targets)] = ablation.pooled_means(runs / METRICS_FILE)
     frame = ablation.setsize_frame(results)
-    caption = "Set-size ablation on the synthetic streets (paper Table 6 shape)"
+    caption = "Set-size ablation on the synthetic streets (paper Table 6, one row per set size)"
     commands = f"`{invocation}`, which ran:\n\n" + pipeline.commands_markdown()
     targets = int(next(iter(results.values()))["targets"])
     markdown = ablation.setsize_markdown(frame, ablation.ordering_setsize(results), commands, caption, targets)

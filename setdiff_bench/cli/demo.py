@@ -12,6 +12,8 @@ import argparse
 import shlex
 from pathlib import Path
 
+from setdiff_bench.cli import add_device_argument, add_progress_argument
+
 VERB = "demo"
 HELP = "the embedded benchmark end to end: synthetic scenes, 3DGS fits, packets, SetDiff vs baselines, leaderboard"
 DESCRIPTION = ("Generate the synthetic benchmark's test scenes, fit their 3DGS, build packets, run identity, "
@@ -33,7 +35,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--work", type=Path, default=None, help="intermediate data (default: <out>/work)")
     parser.add_argument("--seed", type=int, default=0, help="scene and training seed")
     parser.add_argument("--jobs", type=int, default=2, help="processes for scene generation and packet rendering")
-    parser.add_argument("--device", default=None, help="cpu or cuda (default: cuda when available)")
+    add_device_argument(parser, "device of every stage")
     parser.add_argument("--train", action="store_true",
                         help="make every scene and train SetDiff and DiFix on the training scenes instead of "
                              "evaluating the shipped models")
@@ -41,13 +43,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--difix-steps", type=int, default=None, help="override the preset's DiFix steps")
     parser.add_argument("--ablations", action="store_true",
                         help="with --train: also run the geometry and set-size ablations (four more trainings)")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+    add_progress_argument(parser)
 
 
 def invocation(args: argparse.Namespace) -> str:
     """The command line that reproduces this demo, from the parsed arguments."""
     parts = ["demo", "--preset", args.preset, "--out", str(args.out), "--seed", str(args.seed)]
-    for flag, value in (("--work", args.work), ("--device", args.device), ("--setdiff-steps", args.setdiff_steps),
+    device = None if args.device == "auto" else args.device   # auto is the default: not repeated
+    for flag, value in (("--work", args.work), ("--device", device), ("--setdiff-steps", args.setdiff_steps),
                         ("--difix-steps", args.difix_steps)):
         if value is not None:
             parts += [flag, str(value)]
@@ -65,12 +68,12 @@ def run(args: argparse.Namespace) -> int:
 
     if args.jobs < 1:
         raise UsageError(f"--jobs must be >= 1, got {args.jobs}", "--jobs")
-    if args.device:  # checked here; passed on as given, so the stages resolve "auto" themselves
-        resolve_device(args.device)
+    resolve_device(args.device)  # checked here; passed on as given (auto: not at all), so the stages resolve it
     preset = get_demo_preset(args.preset)
     paths = DemoPaths(out=args.out, work=args.work or args.out / "work")
+    device = None if args.device == "auto" else args.device   # the stages' own default is auto
     try:
-        summary = run_demo(preset, paths, seed=args.seed, jobs=args.jobs, device=args.device, train=args.train,
+        summary = run_demo(preset, paths, seed=args.seed, jobs=args.jobs, device=device, train=args.train,
                            setdiff_steps=args.setdiff_steps, difix_steps=args.difix_steps, ablations=args.ablations,
                            progress=not args.no_progress, invocation=invocation(args))
     except StageFailed as failure:

@@ -17,6 +17,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from setdiff_bench.cli import add_device_argument, add_progress_argument
+
 VERB = "evaluate"
 HELP = "score a finished run under an evaluation profile (the official EUVS / 3DGS-Enhancer scoring)"
 DESCRIPTION = ("Rescore a finished run's enhanced images under an evaluation profile: scoring size and filters, "
@@ -35,7 +37,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "cosine and Final_Score; nothing is downloaded")
     parser.add_argument("--euvs-compat-report", action="store_true",
                         help="print the frames where EUVS's positional mask pairing differs from ours")
-    parser.add_argument("--device", default="cpu", help="where metrics run (cpu, cuda)")
+    add_device_argument(parser, "where metrics (and DINOv2) run")
+    add_progress_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -55,7 +58,8 @@ def run(args: argparse.Namespace) -> int:
         dinov2 = load_dinov2(args.dinov2, device)
     if args.euvs_compat_report and not profile.name.startswith("euvs"):
         raise UsageError("--euvs-compat-report applies to EUVS profiles (euvs_official)", "--euvs-compat-report")
-    out = score_run(args.run, profile, packets=args.packets, data=args.data, dinov2=dinov2, device=device)
+    out = score_run(args.run, profile, packets=args.packets, data=args.data, dinov2=dinov2, device=device,
+                    progress=False if args.no_progress else None)
     print(f"{profile.caption()}")
     print(f"tables: {out}")
     if profile.dinov2 and dinov2 is None:

@@ -10,6 +10,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from setdiff_bench.cli import add_device_argument, add_progress_argument
+
 VERB = "fit"
 HELP = "fit 3D Gaussian Splatting to a scene's training frames and write the standard PLY"
 
@@ -37,12 +39,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="schedule: a synthetic preset's fit, or 'standard' (Inria 30k iterations)")
     parser.add_argument("--iterations", type=int, default=None,
                         help="override the number of iterations (the schedule is rescaled to it)")
-    parser.add_argument("--device", default=None, help="cpu (torch rasteriser) or cuda (gsplat); default: cuda if "
-                                                       "available")
+    add_device_argument(parser, "cpu fits with the torch rasteriser, cuda with gsplat")
     parser.add_argument("--seed", type=int, default=0, help="random seed (view order, splits)")
     parser.add_argument("--checkpoint", type=Path, default=None, help="checkpoint folder (resumed if present)")
     parser.add_argument("--checkpoint-every", type=int, default=100, help="iterations between checkpoints")
-    parser.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    add_progress_argument(parser)
 
 
 def fit_config(preset: str, iterations: int | None, seed: int):  # -> FitConfig

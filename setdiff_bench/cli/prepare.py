@@ -16,6 +16,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from setdiff_bench.cli import add_device_argument, add_progress_argument
+
 VERB = "prepare"
 HELP = "turn a dataset and 3DGS fits into render/ground-truth packets for a protocol"
 DESCRIPTION = __doc__
@@ -43,15 +45,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--threads", type=int, default=1, help="torch threads per render process (default 1)")
     parser.add_argument("--backend", choices=("auto", "torch", "gsplat"), default="auto",
                         help="renderer (auto: gsplat on CUDA when installed, else torch)")
-    parser.add_argument("--device", default="auto", help="torch device for the torch backend (auto, cpu, cuda)")
+    add_device_argument(parser, "the torch backend's device")
     parser.add_argument("--loader-option", action="append", default=[], metavar="KEY=VALUE",
                         help="override a loader option of the protocol (value parsed as JSON when it parses, "
                              "e.g. level=1, version=\"v1.0-mini\")")
     parser.add_argument("--cmap-precision", choices=("float32", "half"), default="float32",
                         help="C-map EXR precision (float32: exact geometry; half: ~3.5x smaller files)")
     parser.add_argument("--fit-iterations", type=int, default=30_000, help="3DGS iterations with --fit")
-    parser.add_argument("--no-progress", "--quiet", dest="no_progress", action="store_true",
-                        help="no progress bars (--quiet is the older name)")
+    add_progress_argument(parser, "--quiet")  # --quiet: the older name, hidden, kept for one release
 
 
 def run(args: argparse.Namespace) -> int:

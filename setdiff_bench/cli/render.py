@@ -11,6 +11,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from setdiff_bench.cli import add_device_argument, add_progress_argument
+
 VERB = "render"
 HELP = "render a 3DGS PLY at COLMAP cameras: RGB, C-map, depth and alpha per view"
 OUTPUT_FILES = ("rgb.png", "cmap.exr", "depth.exr", "alpha.png")
@@ -22,11 +24,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, type=Path, help="output folder")
     parser.add_argument("--images", nargs="+", metavar="NAME", help="only these COLMAP image names (default: all)")
     parser.add_argument("--backend", choices=("torch", "gsplat"), default="torch")
-    parser.add_argument("--device", default="cpu", help="torch device for the torch backend (cpu, cuda)")
+    add_device_argument(parser, "the torch backend's device (gsplat renders on cuda)")
     parser.add_argument("--downscale", type=int, default=1,
                         help="render at the image size divided by this integer (as fit --downscale)")
     parser.add_argument("--cmap-bound", type=float, default=None,
                         help="clip Gaussian centres to ±BOUND around the origin in the C-map")
+    add_progress_argument(parser)
 
 
 def view_folder_name(image_name: str) -> str:
@@ -70,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     gaussians = read_ply(args.ply).to(device)
     args.out.mkdir(parents=True, exist_ok=True)
     todo = [n for n in names if not all((args.out / view_folder_name(n) / f).is_file() for f in OUTPUT_FILES)]
-    for name in tqdm(todo, desc="render", unit="view", disable=None):
+    for name in tqdm(todo, desc="render", unit="view", disable=True if args.no_progress else None):
         folder = args.out / view_folder_name(name)
         with torch.no_grad():
             out = render(gaussians, [cameras[name]], backend=args.backend, cmap_bound=args.cmap_bound)

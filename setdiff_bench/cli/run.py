@@ -19,6 +19,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from setdiff_bench.cli import add_device_argument, add_progress_argument
+
 VERB = "run"
 HELP = "enhance every packet of a store with one method and score it (PSNR, SSIM, LPIPS; warp error)"
 DESCRIPTION = __doc__
@@ -31,7 +33,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=None,
                         help="run folder (default results/runs/<store name>/<method>)")
     parser.add_argument("--shard", default="0/1", help="i/n: enhance packets i, i+n, ... (0 <= i < n); default 0/1")
-    parser.add_argument("--device", default="auto", help="cpu, cuda, cuda:1 ... or auto (cuda when available)")
+    add_device_argument(parser, "where the method and the metrics run")
     parser.add_argument("--batch-size", type=int, default=8, help="images per metric call (memory bound)")
     parser.add_argument("--checkpoint", default=None, help="trained model for learned methods (setdiff, difix)")
     parser.add_argument("--from", dest="source", default=None, help="folder of images for --method precomputed")
@@ -50,7 +52,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-verify", action="store_true",
                         help="skip the up-front SHA-256 check of the packets' files (each file is still checked "
                              "when it is read)")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_progress_argument(parser)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 
+from setdiff_bench.cli import add_device_argument
 from setdiff_bench.serve.settings import DEFAULT_HOST, ServeSettings
 
 VERB = "serve"
@@ -33,7 +34,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cache-reference-latents", action="store_true",
                         help="encode each session's references once (faster; outputs may differ from "
                              "`run --method setdiff` by one 8-bit level)")
-    parser.add_argument("--device", default=None, help="cuda / cpu (default: CUDA when available)")
+    add_device_argument(parser, "where the enhancer runs")
     parser.add_argument("--dtype", default=None, help="float32 / bfloat16 / float16")
 
 

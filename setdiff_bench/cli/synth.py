@@ -13,6 +13,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from setdiff_bench.cli import add_device_argument, add_progress_argument
+
 VERB = "synth"
 HELP = "generate synthetic multi-lane street scenes (EUVS layout) and fit their 3DGS"
 FIT_NAME = "lane0"
@@ -28,13 +30,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="generate only these scene indices (0-based, comma-separated; scene i is the same "
                              "whichever others are made), e.g. a preset's test scenes")
     parser.add_argument("--no-fit", action="store_true", help="only generate the scenes")
-    parser.add_argument("--device", default=None,
-                        help="cpu or cuda for rendering and fitting (default: cuda if available)")
+    add_device_argument(parser, "rendering and fitting")
     parser.add_argument("--overwrite", action="store_true", help="regenerate and refit existing scenes")
     parser.add_argument("--jobs", type=int, default=0,
                         help="scenes processed in parallel, one torch thread each (default: one per CPU core, "
                              "1 on CUDA); the CPU rasteriser's many small ops scale better across processes")
-    parser.add_argument("--no-progress", action="store_true", help="hide progress bars")
+    add_progress_argument(parser)
 
 
 def fit_path(scene_dir: Path) -> Path:

@@ -21,6 +21,8 @@ import os
 import time
 from pathlib import Path
 
+from setdiff_bench.cli import add_device_argument, add_progress_argument
+
 VERB = "train"
 HELP = "train a SetDiff or DiFix enhancer on a packet store"
 DESCRIPTION = __doc__.split("\n\n", 1)[1] if __doc__ else HELP
@@ -39,8 +41,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--pretrained", metavar="DIR", help="local diffusers SD-Turbo folder (overrides [model])")
     parser.add_argument("--validation-split", default="test", help="packet split scored during training")
     parser.add_argument("--no-resume", action="store_true", help="refuse to continue an existing run in CKPT_DIR")
-    parser.add_argument("--cpu", action="store_true", help="train on the CPU even when CUDA is available")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_device_argument(parser, "where the enhancer trains (several GPUs: accelerate launch; the tiny "
+                                "autoencoder trains on the CPU)", "auto (cuda when available, else cpu), cpu or cuda")
+    parser.add_argument("--cpu", dest="device", action="store_const", const="cpu",
+                        help=argparse.SUPPRESS)  # the older spelling of --device cpu, kept for one release
+    add_progress_argument(parser)
     autoencoder = parser.add_argument_group("autoencoder options")
     defaults = _autoencoder_defaults()
     for name, value in defaults.items():
@@ -101,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         with stop_at_safe_point():  # Ctrl-C / SIGTERM: checkpoint at the current step, then exit 130
             result = train(config, dataset, args.out, validation=validation, resume=not args.no_resume,
-                           cpu=True if args.cpu else None, progress=not args.no_progress)
+                           cpu=_on_cpu(args.device), progress=not args.no_progress)
     except Interrupted:
         _record_session(args, config, store, start_step, _latest_step(args.out), time.perf_counter() - began, None)
         raise
@@ -113,6 +118,22 @@ def run(args: argparse.Namespace) -> int:
         last = result.validation[-1]
         print("validation: " + ", ".join(f"{k} {v:.4f}" for k, v in last.items() if k != "step"))
     return 0
+
+
+def _on_cpu(device: str) -> bool:
+    """Whether ``--device`` puts training on the CPU; accelerate places the processes on GPUs itself.
+
+    Raises:
+        UsageError: a numbered GPU (``cuda:N``); choose GPUs with ``CUDA_VISIBLE_DEVICES`` or accelerate.
+    """
+    from setdiff_bench.devices import resolve_device
+    from setdiff_bench.errors import UsageError
+
+    resolved = resolve_device(device)
+    if resolved not in ("cpu", "cuda"):
+        raise UsageError(f"train runs where accelerate puts it: pick GPUs with CUDA_VISIBLE_DEVICES or "
+                         f"`accelerate launch`, not --device {device}", "--device")
+    return resolved == "cpu"
 
 
 def _latest_step(out: Path) -> int:

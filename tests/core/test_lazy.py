@@ -57,6 +57,6 @@ def test_registries_report_a_broken_reference_in_one_line() -> None:
         dataset.load_lister()
     with pytest.raises(UsageError, match=r"^dataset 'd' loader: os has no 'nope'"):
         dataset.load_loader()
-    metric = MetricSpec("m", True, "setdiff_bench.metrics.nope:psnr")
+    metric = MetricSpec("m", True, "setdiff_bench.metrics.nope:psnr", label="M", decimals=3)
     with pytest.raises(UsageError, match=r"^metric 'm': cannot import setdiff_bench.metrics.nope for "):
         metric.load()

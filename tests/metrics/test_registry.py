@@ -20,9 +20,28 @@ from .photos import add_noise, photo_batch
 
 def test_directions() -> None:
     higher = {name for name, spec in METRICS.items() if spec.higher_is_better}
-    assert higher == {"psnr", "ssim", "ssim_same", "psnr_euvs", "ssim_euvs"}
+    assert higher == {"psnr", "ssim", "ssim_same", "psnr_euvs", "ssim_euvs", "cos_dinov2", "final_score"}
     assert get_metric("warp").scope == "sequence"
     assert get_metric("warp").kwargs["scale"] == PAPER_SCALE
+    assert {name for name, spec in METRICS.items() if spec.scope == "profile"} == {"cos_dinov2", "final_score"}
+
+
+# The tables' label, decimals and arrow of every metric, written out by hand (the leaderboards' format).
+DISPLAY = {
+    "psnr": ("PSNR", 2, "↑"), "psnr_euvs": ("PSNR", 2, "↑"),
+    "ssim": ("SSIM", 3, "↑"), "ssim_same": ("SSIM", 3, "↑"), "ssim_euvs": ("SSIM", 3, "↑"),
+    "lpips": ("LPIPS", 3, "↓"), "lpips_vgg": ("LPIPS", 3, "↓"), "lpips_vgg_unscaled": ("LPIPS", 3, "↓"),
+    "lpips_euvs": ("LPIPS", 3, "↓"),
+    "warp": ("Warp", 1, "↓"),
+    "cos_dinov2": ("Cos", 3, "↑"), "final_score": ("Final", 3, "↑"),
+}
+
+
+def test_every_metric_declares_its_display() -> None:
+    for name, spec in METRICS.items():
+        assert spec.label and isinstance(spec.decimals, int) and spec.decimals >= 0, name
+        assert isinstance(spec.higher_is_better, bool), name
+    assert {name: (s.label, s.decimals, s.arrow) for name, s in METRICS.items()} == DISPLAY
 
 
 def test_listing_imports_nothing_heavy() -> None:
@@ -57,3 +76,5 @@ def test_unknown_names_and_misuse() -> None:
         preset("nope")
     with pytest.raises(UsageError, match="sequence"):
         get_metric("warp").compute(torch.zeros(1, 3, 16, 16), torch.zeros(1, 3, 16, 16))
+    with pytest.raises(UsageError, match="profile metric"):
+        get_metric("final_score").compute(torch.zeros(1, 3, 16, 16), torch.zeros(1, 3, 16, 16))

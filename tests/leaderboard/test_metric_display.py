@@ -1,0 +1,92 @@
+"""Tables read each metric's display from its spec: ablation tables are written by the leaderboard's writers
+(the same numbers print as the same cells), and a column without a spec is refused."""
+
+from __future__ import annotations
+
+import pandas as pd
+import pytest
+
+from setdiff_bench import ablation
+from setdiff_bench.errors import UsageError
+from setdiff_bench.leaderboard import build_leaderboard, render_latex, render_markdown
+
+# Pooled means per geometry variant: PSNR of "Camera poses" and "Both" tie at two decimals, LPIPS at three.
+GEOMETRY = {
+    "none": {"psnr": 18.004, "ssim": 0.5504, "lpips": 0.3004, "targets": 12.0},
+    "cmap": {"psnr": 18.5, "ssim": 0.56, "lpips": 0.29, "targets": 12.0},
+    "pose": {"psnr": 19.004, "ssim": 0.57, "lpips": 0.2704, "targets": 12.0},
+    "both": {"psnr": 18.996, "ssim": 0.58, "lpips": 0.27, "targets": 12.0},
+}
+LABELS = {"none": "None", "cmap": "Coordinate maps", "pose": "Camera poses", "both": "Both"}
+
+# Written by hand: two decimals for PSNR, three for SSIM/LPIPS, bold on the best displayed value, ties share it.
+MARKDOWN_ROWS = [
+    "| None | 18.00 | 0.550 | 0.300 |",
+    "| Coordinate maps | 18.50 | 0.560 | 0.290 |",
+    "| Camera poses | **19.00** | 0.570 | **0.270** |",
+    "| Both | **19.00** | **0.580** | **0.270** |",
+]
+LATEX_ROWS = [
+    r"None & 18.00 & 0.550 & 0.300 \\",
+    r"Coordinate maps & 18.50 & 0.560 & 0.290 \\",
+    r"Camera poses & \textbf{19.00} & 0.570 & \textbf{0.270} \\",
+    r"Both & \textbf{19.00} & \textbf{0.580} & \textbf{0.270} \\",
+]
+
+
+def leaderboard_of_the_same_numbers() -> pd.DataFrame:
+    """One nuScenes target per method (the pooled block only), valued as the geometry variants."""
+    return pd.DataFrame([{"dataset": "nuscenes", "protocol": "nuscenes", "group": "10-11s", "split": "test",
+                          "scene": "s", "frame": "f0", "method": LABELS[key], "run": f"r/{key}",
+                          **{m: GEOMETRY[key][m] for m in ("psnr", "ssim", "lpips")}} for key in GEOMETRY])
+
+
+def table_lines(text: str) -> list[str]:
+    return [line for line in text.splitlines() if line.startswith("|")]
+
+
+def test_ablation_and_leaderboard_cells_are_formatted_identically() -> None:
+    frame = ablation.geometry_frame(GEOMETRY)
+    markdown = ablation.geometry_markdown(frame, ablation.ordering_geometry(frame), "`cmd`", "Geometry")
+    ours = table_lines(markdown)[:6]
+    assert ours == ["| Geometric grounding | PSNR↑ | SSIM↑ | LPIPS↓ |", "|---|---:|---:|---:|", *MARKDOWN_ROWS]
+    board = build_leaderboard("nuscenes", leaderboard_of_the_same_numbers(), methods=list(LABELS.values()))
+    assert table_lines(render_markdown(board)) == ["| Method | PSNR↑ | SSIM↑ | LPIPS↓ |", "|---|---:|---:|---:|",
+                                                   *MARKDOWN_ROWS]
+    latex = ablation.geometry_latex(frame, "Geometry")
+    assert r"\textbf{Geometric grounding} & \textbf{PSNR}$\uparrow$ & \textbf{SSIM}$\uparrow$ & " \
+           r"\textbf{LPIPS}$\downarrow$ \\" in latex.splitlines()
+    for row in LATEX_ROWS:
+        assert row in latex.splitlines() and row in render_latex(board).splitlines()
+
+
+def test_ablation_markdown_document() -> None:
+    frame = ablation.geometry_frame(GEOMETRY)
+    markdown = ablation.geometry_markdown(frame, ["PSNR: fine"], "`cmd`", "Geometry")
+    assert markdown.startswith("**Geometry**\n\n| Geometric grounding |")
+    assert "\n\nPooled over 12 test targets per variant.\n\nOrdering against the paper:\n- PSNR: fine\n\n" in markdown
+    assert "**Paper, Table 5 (DL3DV; for orientation, not comparable numbers)**" in markdown
+    assert "| Both (paper) | **18.74** | **0.587** | **0.265** |" in markdown
+    assert markdown.endswith("\n\nProduced by:\n\n`cmd`")
+
+
+def test_setsize_table_has_one_row_per_size_and_the_papers_bold() -> None:
+    results = {(1, 1): {"psnr": 18.0, "ssim": 0.5, "lpips": 0.3, "targets": 8.0},
+               (3, 6): {"psnr": 18.254, "ssim": 0.52, "lpips": 0.3001, "targets": 8.0}}
+    frame = ablation.setsize_frame(results)
+    assert list(frame["metric"]) == ["PSNR", "SSIM", "LPIPS"]   # the Parquet keeps the paper's shape
+    markdown = ablation.setsize_markdown(frame, ablation.ordering_setsize(results), "`cmd`", "Sizes", 8)
+    assert table_lines(markdown)[:4] == ["| References + targets | PSNR↑ | SSIM↑ | LPIPS↓ |", "|---|---:|---:|---:|",
+                                         "| 1 + 1 | 18.00 | 0.500 | **0.300** |",
+                                         "| 3 + 6 | **18.25** | **0.520** | **0.300** |"]
+    assert "Every set size scores the same 8 test targets." in markdown
+    assert "| 3 + 1 (paper) | 18.67 | 0.581 | **0.255** |" in markdown   # the paper's own bold, not a tie rule
+    assert "| 3 + 2 (paper) | 18.69 | 0.582 | 0.255 |" in markdown
+    latex = ablation.setsize_latex(frame, "Sizes")
+    assert r"3 + 6 & \textbf{18.25} & \textbf{0.520} & \textbf{0.300} \\" in latex.splitlines()
+
+
+def test_a_metric_column_without_a_spec_is_refused() -> None:
+    frame = leaderboard_of_the_same_numbers().assign(psnr_mine=1.0)
+    with pytest.raises(UsageError, match="unknown metric"):   # no spec: no header, decimals or direction
+        build_leaderboard("nuscenes", frame, metrics=["psnr_mine"])
