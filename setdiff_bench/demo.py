@@ -46,11 +46,13 @@ import pandas as pd
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.atomic import sha256_file, write_text_atomic
+from setdiff_bench.metrics.registry import get_metric
 from setdiff_bench.run_paths import METRICS_FILE
 from setdiff_bench.stages import Pipeline, relative
 from setdiff_bench.threads import compute_threads
 
 METHODS = ("identity", "reproject", "difix", "setdiff")
+VERDICT_METRICS = ("psnr", "ssim", "lpips")  # the +2-lane verdict's metrics, in table order
 #: The learned methods and the shipped models the demo evaluates unless ``--train``.
 SHIPPED_MODELS = {"setdiff": "tiny_setdiff", "difix": "tiny_difix"}
 #: Where the demo writes unless told otherwise: a scratch folder, git-ignored, never the published results.
@@ -209,7 +211,7 @@ def run_demo(preset: DemoPreset, paths: DemoPaths, *, seed: int = 0, jobs: int =
     for method in configs if train else ():
         command = ["train", "--config", configs[method], "--packets", rel(paths.packets),
                    "--out", checkpoints[method], "--steps", steps[method], "--seed", seed]
-        command += ["--cpu"] if device == "cpu" else []
+        command += ["--device", "cpu"] if device == "cpu" else []
         pipeline.run(f"train {method}", command + quiet)
     for method in METHODS:
         run = ["run", "--method", method, "--packets", rel(paths.packets), "--split", "test",
@@ -256,6 +258,11 @@ def run_provenance(seed: int) -> dict[str, Any]:
             "versions": package_versions()}
 
 
+def better(metric: str, value: float, other: float) -> bool:
+    """Whether ``value`` is strictly better than ``other`` in ``metric``'s direction (``MetricSpec``)."""
+    return value > other if get_metric(metric).higher_is_better else value < other
+
+
 def lane_shift_verdict(metrics: pd.DataFrame, group: str = "lane+2") -> dict[str, Any]:
     """SetDiff against ``identity`` and ``difix`` on one group: means and who wins each metric.
 
@@ -263,17 +270,15 @@ def lane_shift_verdict(metrics: pd.DataFrame, group: str = "lane+2") -> dict[str
         metrics: per-target rows of the four runs (``metrics.parquet`` concatenated).
     """
     rows = metrics[metrics["group"] == group]
-    means = rows.groupby("method")[["psnr", "ssim", "lpips"]].mean()
+    means = rows.groupby("method")[list(VERDICT_METRICS)].mean()
     verdict: dict[str, Any] = {"group": group, "targets": int((rows["method"] == "setdiff").sum()),
                                "means": {m: {k: float(v) for k, v in means.loc[m].items()} for m in means.index}}
     if "setdiff" in means.index:
         for other in ("identity", "difix"):
             if other in means.index:
-                verdict[f"setdiff_beats_{other}"] = {
-                    "psnr": bool(means.loc["setdiff", "psnr"] > means.loc[other, "psnr"]),
-                    "ssim": bool(means.loc["setdiff", "ssim"] > means.loc[other, "ssim"]),
-                    "lpips": bool(means.loc["setdiff", "lpips"] < means.loc[other, "lpips"]),
-                }
+                verdict[f"setdiff_beats_{other}"] = {name: bool(better(name, means.loc["setdiff", name],
+                                                                       means.loc[other, name]))
+                                                     for name in VERDICT_METRICS}
     return verdict
 
 
@@ -324,12 +329,14 @@ def report_markdown(summary: dict[str, Any], paths: DemoPaths) -> str:
         lines += ["## Leaderboard (test scenes)", "", board.read_text(encoding="utf-8").strip(), ""]
     verdict = summary.get("lane_plus_2") or {}
     if verdict.get("means"):
-        lines += [f"## At +2 lanes ({verdict['targets']} targets)", "", "| method | PSNR ↑ | SSIM ↑ | LPIPS ↓ |",
-                  "|---|---:|---:|---:|"]
+        specs = [get_metric(name) for name in VERDICT_METRICS]
+        lines += [f"## At +2 lanes ({verdict['targets']} targets)", "",
+                  "| method | " + " | ".join(f"{spec.label} {spec.arrow}" for spec in specs) + " |",
+                  "|---|" + "---:|" * len(specs)]
         for method in METHODS:
             if method in verdict["means"]:
                 m = verdict["means"][method]
-                lines.append(f"| {method} | {m['psnr']:.2f} | {m['ssim']:.3f} | {m['lpips']:.3f} |")
+                lines.append(f"| {method} | " + " | ".join(f"{m[spec.name]:.{spec.decimals}f}" for spec in specs) + " |")
         for other in ("identity", "difix"):
             wins = verdict.get(f"setdiff_beats_{other}")
             if wins:
