@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from setdiff_bench.evaluation.stream import Views
 from setdiff_bench.io.images import write_png
-from setdiff_bench.packets import PacketStore, row_camera
+from setdiff_bench.packets.store import PacketStore, row_camera
 from setdiff_bench.serve.client import EnhancerClient
-from setdiff_bench.stream import Views
 from setdiff_bench.types import ViewSet
 
 

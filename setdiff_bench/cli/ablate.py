@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from setdiff_bench.stages import Pipeline
+    from setdiff_bench.pipeline.stages import Pipeline
 
 VERB = "ablate"
 HELP = "the paper's ablations: geometric grounding (Table 5) and set size (Table 6)"
@@ -44,8 +44,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from setdiff_bench.devices import resolve_device
-    from setdiff_bench.stages import Pipeline, StageFailed
+    from setdiff_bench.pipeline.stages import Pipeline, StageFailed
+    from setdiff_bench.runtime.devices import resolve_device
 
     if args.device:  # checked here; passed on as given, so the stages resolve "auto" themselves
         resolve_device(args.device)
@@ -84,9 +84,9 @@ def _run_args(args: argparse.Namespace) -> list[str]:
 
 
 def _geometry(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocation: str) -> dict[str, Path]:
-    from setdiff_bench import ablation
+    from setdiff_bench.evaluation.paths import METRICS_FILE
     from setdiff_bench.models.setdiff.config import config_toml_data, write_config_toml
-    from setdiff_bench.run_paths import METRICS_FILE
+    from setdiff_bench.reporting import ablation
 
     base = config_toml_data(args.config)
     if base["model"].get("method", "setdiff") != "setdiff":
@@ -122,8 +122,8 @@ def _geometry(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocati
 
 
 def _setsize(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocation: str) -> dict[str, Path]:
-    from setdiff_bench import ablation
-    from setdiff_bench.run_paths import METRICS_FILE
+    from setdiff_bench.evaluation.paths import METRICS_FILE
+    from setdiff_bench.reporting import ablation
 
     sizes = ablation.parse_sizes(args.sizes)
     results = {}

@@ -39,10 +39,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from setdiff_bench.devices import resolve_device
     from setdiff_bench.errors import UsageError
-    from setdiff_bench.profile_scoring import score_run
-    from setdiff_bench.profiles import get_profile
+    from setdiff_bench.evaluation.profile_scoring import score_run
+    from setdiff_bench.evaluation.profiles import get_profile
+    from setdiff_bench.runtime.devices import resolve_device
 
     device = resolve_device(args.device)
     profile = get_profile(args.profile)

@@ -87,8 +87,8 @@ def rescale_schedule(base, iterations: int):  # (FitConfig, int) -> FitConfig
 def run(args: argparse.Namespace) -> int:
     import time
 
-    from setdiff_bench.devices import resolve_device
     from setdiff_bench.gaussians.fit import fit_scene
+    from setdiff_bench.runtime.devices import resolve_device
 
     device = resolve_device(args.device)
     config = fit_config(args.preset, args.iterations, args.seed)

@@ -39,12 +39,12 @@ def run(args: argparse.Namespace) -> int:
     import torch
     from tqdm import tqdm
 
-    from setdiff_bench.devices import resolve_device
     from setdiff_bench.errors import UsageError
     from setdiff_bench.gaussians.ply import read_ply
     from setdiff_bench.gaussians.render import render
     from setdiff_bench.io.images import to_numpy_hwc, write_exr, write_png
     from setdiff_bench.loaders.colmap import read_colmap_model
+    from setdiff_bench.runtime.devices import resolve_device
     from setdiff_bench.undistort import is_distorted, pinhole_camera
 
     device = resolve_device(args.device) if args.backend == "torch" else "cuda"

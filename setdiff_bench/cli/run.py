@@ -1,6 +1,6 @@
 """``setdiff-bench run``: one enhancer over a packet store → enhanced PNGs, metrics.parquet, manifest.json.
 
-See :mod:`setdiff_bench.run` for the output layout, resume and shard semantics.  Examples::
+See :mod:`setdiff_bench.evaluation.run` for the output layout, resume and shard semantics.  Examples::
 
     setdiff-bench run --method identity --packets packets/synthetic
     setdiff-bench run --method reproject --packets P --out results/runs/synthetic/reproject -o tolerance=0.05
@@ -56,10 +56,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
 
     from setdiff_bench.cli.list import parse_option
-    from setdiff_bench.devices import resolve_device
     from setdiff_bench.errors import UsageError
-    from setdiff_bench.run import RunSettings, Shard, run_method
-    from setdiff_bench.scoring import resolve_metrics
+    from setdiff_bench.evaluation.run import RunSettings, Shard, run_method
+    from setdiff_bench.evaluation.scoring import resolve_metrics
+    from setdiff_bench.runtime.devices import resolve_device
 
     shard = Shard.parse(args.shard)
     device = resolve_device(args.device)

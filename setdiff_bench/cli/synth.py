@@ -169,10 +169,10 @@ def run(args: argparse.Namespace) -> int:
     import time
     from concurrent.futures import ProcessPoolExecutor
 
-    from setdiff_bench.devices import resolve_device
     from setdiff_bench.errors import UsageError
+    from setdiff_bench.runtime.devices import resolve_device
+    from setdiff_bench.runtime.threads import compute_threads
     from setdiff_bench.synthetic.presets import get_preset
-    from setdiff_bench.threads import compute_threads
 
     preset = get_preset(args.preset)
     count = preset.num_scenes if args.scenes is None else args.scenes

@@ -74,10 +74,10 @@ def run_autoencoder(args: argparse.Namespace) -> int:
 
 def run(args: argparse.Namespace) -> int:
     from setdiff_bench.errors import UsageError
-    from setdiff_bench.interrupts import Interrupted, stop_at_safe_point
     from setdiff_bench.models.setdiff.config import load_config, with_overrides
     from setdiff_bench.models.setdiff.train import train
-    from setdiff_bench.packets import PacketStore
+    from setdiff_bench.packets.store import PacketStore
+    from setdiff_bench.runtime.interrupts import Interrupted, stop_at_safe_point
     from setdiff_bench.types import TrainingSample
 
     if args.model == "autoencoder":

@@ -32,7 +32,7 @@ from typing import Any, Protocol, runtime_checkable
 import torch
 
 from setdiff_bench.errors import UsageError
-from setdiff_bench.lazy import load_attribute
+from setdiff_bench.runtime.lazy import load_attribute
 from setdiff_bench.types import Packet
 
 ENTRY_POINT_GROUP = "setdiff_bench.enhancers"

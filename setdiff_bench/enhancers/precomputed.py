@@ -9,7 +9,7 @@ specific first, at::
     DIR/<scene>/S.<ext>
     DIR/S.<ext>
 
-(``<protocol>``, ``<group>``, ``<scene>`` as :func:`setdiff_bench.run_paths.safe_component` spells them:
+(``<protocol>``, ``<group>``, ``<scene>`` as :func:`setdiff_bench.evaluation.paths.safe_component` spells them:
 the names themselves unless they hold a path separator) with ``<ext>`` one of ``png``, ``jpg``, ``jpeg`` (case-insensitive on the suffix as written: ``.png``,
 ``.PNG``...).  The first level holding a file wins; two files for one frame at the same level (say
 ``S.png`` and ``S.jpg``) are an error.  Use the ``<group>`` levels when one frame is a target of several
@@ -31,8 +31,8 @@ import torch
 
 from setdiff_bench.enhancers.base import TargetRef
 from setdiff_bench.errors import ImageError, UsageError
+from setdiff_bench.evaluation.paths import IMAGES_DIR, MANIFEST_FILE, frame_relative, safe_component
 from setdiff_bench.io.images import read_rgb
-from setdiff_bench.run_paths import IMAGES_DIR, MANIFEST_FILE, frame_relative, safe_component
 from setdiff_bench.types import Packet
 
 EXTENSIONS = (".png", ".jpg", ".jpeg")

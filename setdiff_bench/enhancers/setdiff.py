@@ -12,8 +12,8 @@ from typing import Any
 
 import torch
 
-from setdiff_bench.devices import resolve_device
 from setdiff_bench.errors import UsageError
+from setdiff_bench.runtime.devices import resolve_device
 from setdiff_bench.types import Packet
 
 DTYPES = {"float32": torch.float32, "bfloat16": torch.bfloat16, "float16": torch.float16}

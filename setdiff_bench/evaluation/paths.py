@@ -1,7 +1,7 @@
 """A run folder's file names, and where a run puts each enhanced target:
 ``images/<protocol>/<group>/<scene>/<frame stem>.png``.
 
-Declared once here for :mod:`setdiff_bench.run` (which writes them) and every reader: the leaderboard,
+Declared once here for :mod:`setdiff_bench.evaluation.run` (which writes them) and every reader: the leaderboard,
 grids, the demo, ablations, evaluation profiles and the ``precomputed`` enhancer (which reads a run's
 ``images/`` folder, or any folder in the same layout).
 """
@@ -28,7 +28,7 @@ def safe_component(text: str) -> str:
     Names are used as they are unless they are empty, ``.``/``..`` or contain a path separator or NUL;
     those go through the packet-id slug (runs of characters other than ``A-Za-z0-9.+-`` become ``-``).
     """
-    from setdiff_bench.packet_index import slug
+    from setdiff_bench.packets.index import slug
 
     if not text or text in {".", ".."} or "/" in text or "\\" in text or "\0" in text:
         return slug(text)

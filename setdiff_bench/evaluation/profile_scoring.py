@@ -1,4 +1,4 @@
-"""Score a finished run under an evaluation profile (:mod:`setdiff_bench.profiles`).
+"""Score a finished run under an evaluation profile (:mod:`setdiff_bench.evaluation.profiles`).
 
 Output, next to the run's own tables (``<run>/profiles/<profile>/``)::
 
@@ -31,10 +31,8 @@ import pandas as pd
 import torch
 
 from setdiff_bench.errors import UsageError
-from setdiff_bench.io.atomic import atomic_path, write_text_atomic
-from setdiff_bench.io.images import read_mask, read_rgb
-from setdiff_bench.metrics.registry import METRICS
-from setdiff_bench.profiles import (
+from setdiff_bench.evaluation.paths import METRICS_FILE
+from setdiff_bench.evaluation.profiles import (
     PROFILE_COLUMN,
     EvaluationProfile,
     aggregate,
@@ -43,7 +41,9 @@ from setdiff_bench.profiles import (
     pil_resize,
     render_size,
 )
-from setdiff_bench.run_paths import METRICS_FILE
+from setdiff_bench.io.atomic import atomic_path, write_text_atomic
+from setdiff_bench.io.images import read_mask, read_rgb
+from setdiff_bench.metrics.registry import METRICS
 
 PROFILES_DIR = "profiles"
 KEY_COLUMNS = ("dataset", "protocol", "group", "split", "scene", "frame", "sensor", "timestamp_us", "packet_id",
@@ -133,7 +133,7 @@ def score_run(run: str | Path, profile: EvaluationProfile, *, packets: str | Pat
     """
     from tqdm import tqdm
 
-    from setdiff_bench.packets import PacketStore
+    from setdiff_bench.packets.store import PacketStore
 
     run = Path(run)
     metrics_path = run / METRICS_FILE
@@ -185,7 +185,7 @@ def score_run(run: str | Path, profile: EvaluationProfile, *, packets: str | Pat
             "dinov2": dinov2 is not None, "images": len(frame), "notes": notes}
     write_text_atomic(out / "profile.json", json.dumps(info, indent=2, sort_keys=True) + "\n")
     if profile.name.startswith("euvs"):
-        from setdiff_bench.euvs_compat import compat_report
+        from setdiff_bench.evaluation.euvs_compat import compat_report
 
         by_scene: dict[str, list[str]] = {}
         for row in rows.itertuples():
@@ -215,7 +215,7 @@ class _Originals:
         self.scenes: dict[tuple[str, str], Any] = {}
 
     def target(self, row: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray, tuple[int, int, int, int]]:
-        from setdiff_bench.prepare_plan import crop_window
+        from setdiff_bench.packets.plan import crop_window
         from setdiff_bench.protocols import load_protocol
 
         protocol = load_protocol(str(row["protocol"]))

@@ -65,17 +65,7 @@ from setdiff_bench.enhancers.base import (
     create_enhancer,
 )
 from setdiff_bench.errors import PacketError, SetDiffBenchError, UsageError
-from setdiff_bench.io.atomic import (
-    atomic_path,
-    is_stale_temporary,
-    private_temporary,
-    sha256_file,
-    write_text_atomic,
-)
-from setdiff_bench.io.images import read_rgb, to_tensor_chw, write_png
-from setdiff_bench.metrics.registry import PRESETS, MetricSpec
-from setdiff_bench.packets import PacketStore, timestamp_or_none
-from setdiff_bench.run_paths import (
+from setdiff_bench.evaluation.paths import (
     ENHANCER_FILE,
     FRAGMENTS_DIR,
     IMAGES_DIR,
@@ -86,7 +76,7 @@ from setdiff_bench.run_paths import (
     image_relative,
     safe_component,
 )
-from setdiff_bench.scoring import (
+from setdiff_bench.evaluation.scoring import (
     default_warp_cache,
     quantize,
     resolve_metrics,
@@ -94,7 +84,17 @@ from setdiff_bench.scoring import (
     sequence_warp_error,
     to_uint8_hwc,
 )
-from setdiff_bench.shards import Shard
+from setdiff_bench.io.atomic import (
+    atomic_path,
+    is_stale_temporary,
+    private_temporary,
+    sha256_file,
+    write_text_atomic,
+)
+from setdiff_bench.io.images import read_rgb, to_tensor_chw, write_png
+from setdiff_bench.metrics.registry import PRESETS, MetricSpec
+from setdiff_bench.packets.shards import Shard
+from setdiff_bench.packets.store import PacketStore, timestamp_or_none
 
 RUN_FORMAT = "setdiff-run/1"
 #: Protocols whose targets are time-ordered camera sequences: warp error with ``warp="auto"``.
@@ -126,7 +126,7 @@ class RunSettings:
         batch_size: images per metric call (bounds LPIPS memory); does not change results.
         warp_cache: folder caching the ground truth's flow per sequence (shared by every method; keyed
             by the ground-truth files' SHA-256 and the flow method); ``"auto"`` = the user cache
-            (:func:`setdiff_bench.scoring.default_warp_cache`), ``None`` = no cache.  Does not change results.
+            (:func:`setdiff_bench.evaluation.scoring.default_warp_cache`), ``None`` = no cache.  Does not change results.
     """
 
     method: str
@@ -184,7 +184,7 @@ def run_method(packets: str | os.PathLike[str] | Any, out: str | os.PathLike[str
     """Enhance and score every packet of ``settings.split`` in this shard; merge when all are done.
 
     Args:
-        packets: a packet store folder or an open :class:`~setdiff_bench.packets.PacketStore`.
+        packets: a packet store folder or an open :class:`~setdiff_bench.packets.store.PacketStore`.
         out: the run folder (created; a folder holding a run with other settings is refused).
         settings: method, options and scoring choices.
         shard: which packets this call enhances.
@@ -539,7 +539,7 @@ def _sequence_table(store: Any, out: Path, frame: pd.DataFrame, settings: RunSet
 
 def _manifest(store: Any, out: Path, settings: RunSettings, specs: Sequence[MetricSpec], frame: pd.DataFrame,
               sequences: pa.Table | None, fragments_sha256: str) -> dict[str, Any]:
-    from setdiff_bench.provenance import device_description, git_revision, package_versions
+    from setdiff_bench.runtime.provenance import device_description, git_revision, package_versions
 
     methods = available_methods()
     spec = methods.get(settings.method)

@@ -24,7 +24,7 @@ from typing import Any, Literal
 import torch
 
 from setdiff_bench.errors import UsageError
-from setdiff_bench.lazy import load_attribute
+from setdiff_bench.runtime.lazy import load_attribute
 
 
 @dataclass(frozen=True)

@@ -1,9 +1,9 @@
 """``prepare``: a dataset, a protocol and 3DGS fits → a packet store (``setdiff-bench prepare``).
 
-Per scene and group (:mod:`setdiff_bench.prepare_plan` for the rules): load or fit the group's
+Per scene and group (:mod:`setdiff_bench.packets.plan` for the rules): load or fit the group's
 3DGS, render the targets (RGB, C-map, alpha) and the C-maps of the N references chosen by Eq. 2
 among the clean fit frames, normalise the packet into its first target's frame at unit extent,
-and write it (:mod:`setdiff_bench.packets`).
+and write it (:mod:`setdiff_bench.packets.store`).
 
 Fits
 ----
@@ -23,7 +23,7 @@ A packet is skipped when its folder holds a fragment with the same recipe and ev
 SHA-256.  Work is split into units (scene, fit key), sorted; shard ``i/n`` takes units ``i, i+n, …``,
 so shards write disjoint packets and never fit the same model twice.  Each shard merges the fragments
 of the whole store into ``index.parquet`` when it ends, without a file lock (see
-:func:`~setdiff_bench.packet_index.merge_index`); the last shard to finish publishes the complete index.
+:func:`~setdiff_bench.packets.index.merge_index`); the last shard to finish publishes the complete index.
 On a network filesystem, end with the same command without ``--shard``: it skips every finished packet
 and merges.  ``workers`` > 1 renders packets in that many spawned processes.
 Packets are byte-identical for identical inputs and render backend, whichever run, shard or worker
@@ -48,22 +48,22 @@ import cv2
 import numpy as np
 import torch
 
-from setdiff_bench.devices import resolve_device
 from setdiff_bench.errors import DatasetError, ProtocolError, UsageError
 from setdiff_bench.io.atomic import sha256_file
 from setdiff_bench.io.images import read_mask, read_rgb, to_numpy_hwc
-from setdiff_bench.packet_index import PACKETS_DIR, group_prefix, merge_index
-from setdiff_bench.packets import (
+from setdiff_bench.packets.index import PACKETS_DIR, group_prefix, merge_index
+from setdiff_bench.packets.plan import Crop, GroupPlan, PacketJob, ViewJob, applicable_groups, plan_scene
+from setdiff_bench.packets.shards import Shard
+from setdiff_bench.packets.store import (
     PacketHeader,
     ViewContent,
     packet_is_complete,
     remove_temporaries,
     write_packet,
 )
-from setdiff_bench.prepare_plan import Crop, GroupPlan, PacketJob, ViewJob, applicable_groups, plan_scene
 from setdiff_bench.protocols import Protocol, load_protocol
-from setdiff_bench.shards import Shard
-from setdiff_bench.threads import torch_threads
+from setdiff_bench.runtime.devices import resolve_device
+from setdiff_bench.runtime.threads import torch_threads
 from setdiff_bench.types import Frame, Scene
 from setdiff_bench.undistort import is_distorted, undistort_image, undistortion_maps
 
@@ -212,7 +212,7 @@ def _reference_geometry(model: Any, references: Sequence[Any], options: dict[str
 
 
 def resample(image: np.ndarray, crop: Crop, resolution: tuple[int, int], *, nearest: bool = False) -> np.ndarray:
-    """Crop ``image`` ``(H, W[, C])`` to ``crop`` and resize to ``resolution`` (H, W) (rules in prepare_plan)."""
+    """Crop ``image`` ``(H, W[, C])`` to ``crop`` and resize to ``resolution`` (H, W) (rules in packets.plan)."""
     window = image[crop.top:crop.top + crop.height, crop.left:crop.left + crop.width]
     out_h, out_w = resolution
     if window.shape[:2] == (out_h, out_w):
@@ -346,7 +346,7 @@ def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[s
         backend, device: renderer (``auto``/``torch``/``gsplat``) and torch device (``auto``/``cpu``/``cuda``).
         loader_options: override the protocol's ``[loader]`` options.
         fit_iterations: 3DGS iterations with ``fit``.
-        cmap_precision: ``"float32"`` (default) or ``"half"`` C-map EXRs (see :mod:`setdiff_bench.packets`).
+        cmap_precision: ``"float32"`` (default) or ``"half"`` C-map EXRs (see :mod:`setdiff_bench.packets.store`).
         progress: show tqdm bars.
         groups: only these protocol groups (default all), e.g. ``["holdout8"]`` of a generic capture.
         test_scenes: these scenes are the test scenes and every other one trains, in place of the

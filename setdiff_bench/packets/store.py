@@ -1,6 +1,6 @@
 """PacketStore: packets on disk (index + PNG/EXR files), read as :class:`~setdiff_bench.types.Packet`.
 
-Layout and index columns: :mod:`setdiff_bench.packet_index`.  Files per view:
+Layout and index columns: :mod:`setdiff_bench.packets.index`.  Files per view:
 
 * ``*_rgb.png`` — 8-bit RGB: the clean capture (references) or the 3DGS render (targets), at the
   protocol's working resolution;
@@ -43,7 +43,7 @@ from setdiff_bench.errors import PacketError, SetDiffBenchError
 from setdiff_bench.geometry import normalize_packet
 from setdiff_bench.io.atomic import sha256_file, staging_dir
 from setdiff_bench.io.images import read_exr, read_mask, read_rgb, to_tensor_chw, write_exr, write_png
-from setdiff_bench.packet_index import (
+from setdiff_bench.packets.index import (
     FILE_COLUMNS,
     INDEX_FILE,
     PACKETS_DIR,

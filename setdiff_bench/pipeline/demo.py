@@ -11,11 +11,11 @@ scene, SetDiff and DiFix trained on the training scenes, then the same evaluatio
 the two ablations, which need training).
 
 Every stage is an ordinary ``setdiff-bench`` command run in its own process
-(:mod:`setdiff_bench.stages`); the demo records each command and its wall time in
+(:mod:`setdiff_bench.pipeline.stages`); the demo records each command and its wall time in
 ``<out>/README.md`` and ``<out>/demo.json``.  Bulky intermediate data (scenes, packets,
 checkpoints, runs) goes to ``<out>/work``; tables, plots and the report sit in ``<out>``, by default
 the scratch folder ``runs/demo`` (git-ignored).  The project's published results are replaced only
-on purpose, by ``setdiff-bench publish`` (:mod:`setdiff_bench.publish`).  Every stage resumes, so an
+on purpose, by ``setdiff-bench publish`` (:mod:`setdiff_bench.reporting.publish`).  Every stage resumes, so an
 interrupted demo continues where it stopped; a stage finished by an earlier run keeps its original
 time in the report, marked resumed (``<work>/stages.json``).
 
@@ -45,10 +45,10 @@ from typing import Any
 import pandas as pd
 
 from setdiff_bench.errors import UsageError
+from setdiff_bench.evaluation.paths import METRICS_FILE
 from setdiff_bench.io.atomic import sha256_file, write_text_atomic
-from setdiff_bench.run_paths import METRICS_FILE
-from setdiff_bench.stages import Pipeline, relative
-from setdiff_bench.threads import compute_threads
+from setdiff_bench.pipeline.stages import Pipeline, relative
+from setdiff_bench.runtime.threads import compute_threads
 
 METHODS = ("identity", "reproject", "difix", "setdiff")
 #: The learned methods and the shipped models the demo evaluates unless ``--train``.
@@ -248,7 +248,7 @@ def run_provenance(seed: int) -> dict[str, Any]:
     leaderboards; another thread count, CPU instruction set, torch build or a GPU changes the last bits
     of every float sum, and training amplifies them (README "Reproducibility").
     """
-    from setdiff_bench.provenance import git_revision, package_versions
+    from setdiff_bench.runtime.provenance import git_revision, package_versions
 
     return {"git": git_revision(), "seed": seed, "torch_threads": compute_threads(),
             "machine": {"cpu": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(),

@@ -132,7 +132,7 @@ def ordering_setsize(results: Mapping[tuple[int, int], Mapping[str, float]]) -> 
 
 def reported_frame(table: str) -> pd.DataFrame:
     """The paper's numbers for ``table`` (``table5_geometry_ablation`` or ``table6_setsize_ablation``)."""
-    from setdiff_bench.leaderboard import load_reported
+    from setdiff_bench.reporting.leaderboard import load_reported
 
     rows = load_reported(None, [table])
     return rows.pivot_table(index="setting" if table.startswith("table6") else "method", columns="metric",

@@ -12,9 +12,9 @@ import pandas as pd
 import pytest
 
 from setdiff_bench.cli.main import main
-from setdiff_bench.demo import METHODS
 from setdiff_bench.io.images import read_image_raw
-from setdiff_bench.threads import compute_threads
+from setdiff_bench.pipeline.demo import METHODS
+from setdiff_bench.runtime.threads import compute_threads
 
 
 def run_tiny_demo(folder: Path, omp_threads: str, *extra: str) -> Path:

@@ -12,12 +12,12 @@ from pathlib import Path
 
 import pytest
 
-import setdiff_bench.stages as stages
+import setdiff_bench.pipeline.stages as stages
 from setdiff_bench.cli.main import main
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.atomic import sha256_file
-from setdiff_bench.publish import PROVENANCE_FILE, publish
-from setdiff_bench.stages import Pipeline, StageFailed
+from setdiff_bench.pipeline.stages import Pipeline, StageFailed
+from setdiff_bench.reporting.publish import PROVENANCE_FILE, publish
 
 REVISION = "0123456789abcdef0123456789abcdef01234567"
 
@@ -92,7 +92,7 @@ def test_publish_refuses_what_it_cannot_vouch_for(tmp_path: Path) -> None:
 
 
 def test_demo_default_output_is_git_ignored() -> None:
-    from setdiff_bench.demo import DEFAULT_OUT
+    from setdiff_bench.pipeline.demo import DEFAULT_OUT
 
     root = Path(__file__).resolve().parents[2]
     if not (root / ".git").exists():

@@ -10,9 +10,9 @@ import pandas as pd
 import pytest
 
 from setdiff_bench.errors import UsageError
-from setdiff_bench.grids import BAND, GAP, GridFrame, pick_frames, qualitative_grid
-from setdiff_bench.packets import PacketStore
-from setdiff_bench.plots import (
+from setdiff_bench.packets.store import PacketStore
+from setdiff_bench.reporting.grids import BAND, GAP, GridFrame, pick_frames, qualitative_grid
+from setdiff_bench.reporting.plots import (
     error_bar_caption,
     group_summary,
     lane_shift,

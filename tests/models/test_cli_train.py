@@ -62,9 +62,9 @@ class FakeStore:
 
 @pytest.fixture
 def fake_store(monkeypatch: pytest.MonkeyPatch) -> type[FakeStore]:
-    module = types.ModuleType("setdiff_bench.packets")
+    module = types.ModuleType("setdiff_bench.packets.store")
     module.PacketStore = FakeStore  # type: ignore[attr-defined]
-    monkeypatch.setitem(sys.modules, "setdiff_bench.packets", module)
+    monkeypatch.setitem(sys.modules, "setdiff_bench.packets.store", module)
     FakeStore.calls = []
     return FakeStore
 

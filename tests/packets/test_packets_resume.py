@@ -13,9 +13,9 @@ from pathlib import Path
 
 import pytest
 
-from setdiff_bench.packet_index import PACKETS_DIR
-from setdiff_bench.prepare import prepare
-from setdiff_bench.shards import Shard
+from setdiff_bench.packets.index import PACKETS_DIR
+from setdiff_bench.packets.prepare import prepare
+from setdiff_bench.packets.shards import Shard
 from tests.packets.packet_fixtures import tree_bytes
 
 

@@ -10,7 +10,7 @@ fresh folder.  The default run kills each command twice, the slow suite ten time
 
 Byte identity: the whole packet store (every packet file, fragment, ``index.parquet``), and for ``run``
 every enhanced PNG, ``run.json``, ``enhancer.json``, the fragments and ``metrics.parquet`` without their
-timing column (:func:`setdiff_bench.run.comparable_metrics`), and ``manifest.json`` without its ``timing``
+timing column (:func:`setdiff_bench.evaluation.run.comparable_metrics`), and ``manifest.json`` without its ``timing``
 block, the fragment digest (fragments hold timing) and the git block (other helpers commit meanwhile).  No temporary file may be left behind.
 """
 
@@ -30,9 +30,9 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from setdiff_bench.prepare import prepare
-from setdiff_bench.run import RunSettings, comparable_metrics, run_method
-from setdiff_bench.threads import torch_threads
+from setdiff_bench.evaluation.run import RunSettings, comparable_metrics, run_method
+from setdiff_bench.packets.prepare import prepare
+from setdiff_bench.runtime.threads import torch_threads
 from tests.packets.packet_fixtures import tree_bytes
 from tests.reliability.world import World, tree_state
 from tests.run.store_fixtures import StoreSpec, build_store, files_of

@@ -12,9 +12,14 @@ import pytest
 
 from setdiff_bench.cli.main import main
 from setdiff_bench.errors import UsageError
-from setdiff_bench.leaderboard import LeaderboardError, build_leaderboard, load_runs, render_markdown
-from setdiff_bench.profile_scoring import score_run
-from setdiff_bench.profiles import EvaluationProfile, get_profile
+from setdiff_bench.evaluation.profile_scoring import score_run
+from setdiff_bench.evaluation.profiles import EvaluationProfile, get_profile
+from setdiff_bench.reporting.leaderboard import (
+    LeaderboardError,
+    build_leaderboard,
+    load_runs,
+    render_markdown,
+)
 
 
 @pytest.fixture
@@ -38,7 +43,7 @@ def test_paper_profile_reproduces_the_runs_own_scores(run_copy: Path, store: Pat
 
 def test_scene_mean_profile_in_the_leaderboard_caption_and_never_mixed(run_copy: Path, store: Path, monkeypatch):
     identity_run = run_copy
-    from setdiff_bench import profiles
+    from setdiff_bench.evaluation import profiles
 
     custom = EvaluationProfile("scene_test", "test profile: per-scene means", "", ("psnr",),
                                aggregation="scene_mean")

@@ -23,10 +23,16 @@ from skimage.metrics import structural_similarity
 from setdiff_bench.cli.main import main
 from setdiff_bench.enhancers.identity import IdentityEnhancer
 from setdiff_bench.errors import ImageError, UsageError
+from setdiff_bench.evaluation.run import (
+    EnhancerOutputError,
+    RunSettings,
+    Shard,
+    comparable_metrics,
+    run_method,
+)
 from setdiff_bench.metrics.warp import warp_error, warp_reference
 from setdiff_bench.metrics.weights import resolve_lpips_weights
-from setdiff_bench.packets import PacketStore
-from setdiff_bench.run import EnhancerOutputError, RunSettings, Shard, comparable_metrics, run_method
+from setdiff_bench.packets.store import PacketStore
 from tests.enhancers.plugin_fixtures import install_plugin
 from tests.metrics.lpips_numpy import lpips_numpy
 from tests.run.store_fixtures import StoreSpec, build_store, files_of
@@ -191,7 +197,7 @@ def test_sigkilled_run_resumes_to_identical_outputs(store: Path, identity_run: P
     script = (
         "import sys, time\n"
         "from setdiff_bench.enhancers.identity import IdentityEnhancer\n"
-        "from setdiff_bench.run import RunSettings, run_method\n"
+        "from setdiff_bench.evaluation.run import RunSettings, run_method\n"
         "class Slow(IdentityEnhancer):\n"
         "    def enhance(self, packet):\n"
         "        time.sleep(0.4)\n"

@@ -18,8 +18,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from setdiff_bench.packets import PacketStore
-from setdiff_bench.run import FRAGMENTS_DIR, comparable_metrics, fragment_path
+from setdiff_bench.evaluation.run import FRAGMENTS_DIR, comparable_metrics, fragment_path
+from setdiff_bench.packets.store import PacketStore
 from tests.run.store_fixtures import StoreSpec, build_store
 
 SHARDS = 4

@@ -17,9 +17,9 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from setdiff_bench.packet_index import INDEX_FILE
-from setdiff_bench.prepare import prepare
-from setdiff_bench.threads import torch_threads
+from setdiff_bench.packets.index import INDEX_FILE
+from setdiff_bench.packets.prepare import prepare
+from setdiff_bench.runtime.threads import torch_threads
 from tests.packets.packet_fixtures import write_dataset
 
 REPO = Path(__file__).resolve().parents[2]

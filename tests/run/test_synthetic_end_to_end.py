@@ -13,14 +13,14 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from setdiff_bench.leaderboard import build_leaderboard, load_runs, write_leaderboard
-from setdiff_bench.run import RunSettings, comparable_metrics, run_method
-from setdiff_bench.threads import torch_threads
+from setdiff_bench.evaluation.run import RunSettings, comparable_metrics, run_method
+from setdiff_bench.reporting.leaderboard import build_leaderboard, load_runs, write_leaderboard
+from setdiff_bench.runtime.threads import torch_threads
 
 
 @pytest.mark.slow
 def test_synthetic_packets_end_to_end(tmp_path: Path) -> None:
-    from setdiff_bench.prepare import prepare
+    from setdiff_bench.packets.prepare import prepare
     from setdiff_bench.synthetic.generate import generate_scene
     from setdiff_bench.synthetic.presets import get_preset
 

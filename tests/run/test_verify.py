@@ -10,7 +10,7 @@ import pytest
 
 from setdiff_bench.enhancers.identity import IdentityEnhancer
 from setdiff_bench.errors import PacketError
-from setdiff_bench.run import RunSettings, run_method
+from setdiff_bench.evaluation.run import RunSettings, run_method
 
 
 class CountingIdentity(IdentityEnhancer):

@@ -18,15 +18,15 @@ import pytest
 import torch
 
 from setdiff_bench.enhancers.setdiff import load_enhancer
+from setdiff_bench.evaluation.run import RunSettings, run_method
+from setdiff_bench.evaluation.stream import StreamSession, Views
 from setdiff_bench.io.images import read_rgb
-from setdiff_bench.packet_index import merge_index
-from setdiff_bench.run import RunSettings, run_method
+from setdiff_bench.packets.index import merge_index
 from setdiff_bench.serve import enhancer_pb2 as pb
 from setdiff_bench.serve.client import EnhancerClient
 from setdiff_bench.serve.server import RunningServer, start_server
 from setdiff_bench.serve.settings import ServeSettings
 from setdiff_bench.serve.wire import to_array
-from setdiff_bench.stream import StreamSession, Views
 from tests.stream.stream_fixtures import RIG, recorded_references, tick_frames
 from tests.stream.test_stream import write_tick_store
 

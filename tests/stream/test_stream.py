@@ -9,12 +9,12 @@ import pytest
 import torch
 
 from setdiff_bench.enhancers.setdiff import load_enhancer
+from setdiff_bench.evaluation.run import RunSettings, run_method
+from setdiff_bench.evaluation.stream import StreamInputError, StreamSession, Views
 from setdiff_bench.geometry import normalize_packet
 from setdiff_bench.io.images import read_rgb, uint8_to_float
-from setdiff_bench.packet_index import merge_index, packet_id
-from setdiff_bench.packets import PacketHeader, ViewContent, write_packet
-from setdiff_bench.run import RunSettings, run_method
-from setdiff_bench.stream import StreamInputError, StreamSession, Views
+from setdiff_bench.packets.index import merge_index, packet_id
+from setdiff_bench.packets.store import PacketHeader, ViewContent, write_packet
 from tests.stream.stream_fixtures import HEIGHT, WIDTH, recorded_references, rig_camera, tick_frames
 
 

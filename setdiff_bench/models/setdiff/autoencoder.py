@@ -221,7 +221,7 @@ def train_autoencoder(packets: str | Path, out_dir: str | Path, settings: Autoen
     from safetensors.torch import save_file
     from tqdm.auto import tqdm
 
-    from setdiff_bench.packets import PacketStore
+    from setdiff_bench.packets.store import PacketStore
 
     if settings.crop % 8 or settings.crop < 16 or settings.steps < 1 or settings.batch_size < 1:
         raise UsageError("crop must be a multiple of 8 (>= 16); steps and batch size >= 1", "train autoencoder")
