@@ -33,7 +33,7 @@ from setdiff_bench.enhancers.base import TargetRef
 from setdiff_bench.errors import ImageError, UsageError
 from setdiff_bench.evaluation.paths import IMAGES_DIR, MANIFEST_FILE, frame_relative, safe_component
 from setdiff_bench.io.images import read_rgb
-from setdiff_bench.types import Packet
+from setdiff_bench.types import Packet, key_fields
 
 EXTENSIONS = (".png", ".jpg", ".jpeg")
 SHOW_MISSING = 10
@@ -106,7 +106,7 @@ class PrecomputedEnhancer:
         """``(M, 3, H, W)`` float32 in [0, 1] read from disk, packet order."""
         images = []
         for frame in packet.targets.names:
-            ref = TargetRef(packet.dataset, packet.protocol, packet.group, packet.scene, frame)
+            ref = TargetRef(**key_fields(packet), frame=frame)
             path = self.locate(ref)
             if path is None:
                 self.check_targets([ref])

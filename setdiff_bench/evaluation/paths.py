@@ -1,4 +1,4 @@
-"""A run folder's file names, and where a run puts each enhanced target:
+"""A run folder's file names, the key columns of its tables, and where a run puts each enhanced target:
 ``images/<protocol>/<group>/<scene>/<frame stem>.png``.
 
 Declared once here for :mod:`setdiff_bench.evaluation.run` (which writes them) and every reader: the leaderboard,
@@ -12,6 +12,7 @@ from pathlib import PurePosixPath
 
 from setdiff_bench.enhancers.base import TargetRef
 from setdiff_bench.errors import PacketError
+from setdiff_bench.types import PACKET_KEY_FIELDS
 
 IMAGES_DIR = "images"
 RUN_FILE = "run.json"
@@ -20,6 +21,12 @@ FRAGMENTS_DIR = "fragments"
 METRICS_FILE = "metrics.parquet"
 SEQUENCES_FILE = "sequences.parquet"
 MANIFEST_FILE = "manifest.json"
+
+#: The columns that name one row of a run's (or an evaluation profile's) ``metrics.parquet``, in file
+#: order: where the packet comes from (the :class:`~setdiff_bench.types.PacketKey` fields but its id),
+#: the target view, the packet id, the view's position in it, and the method.
+KEY_COLUMNS: tuple[str, ...] = (*(name for name in PACKET_KEY_FIELDS if name != "packet_id"),
+                                "frame", "sensor", "timestamp_us", "packet_id", "view", "method")
 
 
 def safe_component(text: str) -> str:

@@ -31,7 +31,7 @@ import pandas as pd
 import torch
 
 from setdiff_bench.errors import UsageError
-from setdiff_bench.evaluation.paths import METRICS_FILE
+from setdiff_bench.evaluation.paths import KEY_COLUMNS, METRICS_FILE
 from setdiff_bench.evaluation.profiles import (
     PROFILE_COLUMN,
     EvaluationProfile,
@@ -46,8 +46,6 @@ from setdiff_bench.io.images import read_mask, read_rgb
 from setdiff_bench.metrics.registry import METRICS
 
 PROFILES_DIR = "profiles"
-KEY_COLUMNS = ("dataset", "protocol", "group", "split", "scene", "frame", "sensor", "timestamp_us", "packet_id",
-               "view", "method")
 
 
 @dataclass(frozen=True)

@@ -69,6 +69,7 @@ from setdiff_bench.evaluation.paths import (
     ENHANCER_FILE,
     FRAGMENTS_DIR,
     IMAGES_DIR,
+    KEY_COLUMNS,
     MANIFEST_FILE,
     METRICS_FILE,
     RUN_FILE,
@@ -101,8 +102,6 @@ RUN_FORMAT = "setdiff-run/1"
 SEQUENCE_PROTOCOLS = frozenset({"nuscenes"})
 #: Columns that are measurements of time, not results: excluded from byte-identity comparisons.
 TIMING_COLUMNS = ("ms_per_frame",)
-KEY_COLUMNS = ("dataset", "protocol", "group", "split", "scene", "frame", "sensor", "timestamp_us", "packet_id",
-               "view", "method")
 
 WarpMode = Literal["auto", "on", "off"]
 
@@ -346,7 +345,7 @@ def _target_rows(store: Any, selection: Sequence[str]) -> list[dict[str, Any]]:
 
 
 def _target_ref(row: Mapping[str, Any]) -> TargetRef:
-    return TargetRef(str(row["dataset"]), str(row["protocol"]), str(row["group"]), str(row["scene"]), str(row["frame"]))
+    return TargetRef.from_row(row, frame=str(row["frame"]))
 
 
 def _run_packet(store: Any, out: Path, packet_id: str, enhancer: Enhancer, specs: Sequence[MetricSpec],

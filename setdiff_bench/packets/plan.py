@@ -40,7 +40,7 @@ from setdiff_bench.errors import ProtocolError
 from setdiff_bench.geometry import max_pairwise_distance, overlap_score_matrix, select_references
 from setdiff_bench.packets.index import packet_id
 from setdiff_bench.protocols import GroupSpec, Protocol
-from setdiff_bench.types import Frame, Scene
+from setdiff_bench.types import Frame, PacketKey, Scene
 
 PACKET_FORMAT = "setdiff-packets/1"
 
@@ -81,15 +81,9 @@ class ViewJob:
 
 
 @dataclass(frozen=True)
-class PacketJob:
-    """Everything needed to write one packet."""
+class PacketJob(PacketKey):
+    """Everything needed to write one packet: its key, then what to render and how."""
 
-    packet_id: str
-    dataset: str
-    protocol: str
-    group: str
-    split: str
-    scene: str
     fit_key: str
     fit_path: Path
     references: tuple[ViewJob, ...]

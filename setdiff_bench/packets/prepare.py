@@ -64,7 +64,7 @@ from setdiff_bench.packets.store import (
 from setdiff_bench.protocols import Protocol, load_protocol
 from setdiff_bench.runtime.devices import resolve_device
 from setdiff_bench.runtime.threads import torch_threads
-from setdiff_bench.types import Frame, Scene
+from setdiff_bench.types import Frame, Scene, key_fields
 from setdiff_bench.undistort import is_distorted, undistort_image, undistortion_maps
 
 SPLIT_CHOICES = ("train", "test", "all")
@@ -277,9 +277,8 @@ def build_packet(job: PacketJob, root: Path, backend: str, device: str) -> JobSt
             gt=_capture(view, job.resolution) if is_target else None,
             mask=_mask(view, job.resolution) if is_target else None, overlap_score=view.overlap_score))
     read = time.perf_counter()
-    header = PacketHeader(packet_id=job.packet_id, dataset=job.dataset, protocol=job.protocol, group=job.group,
-                          split=job.split, scene=job.scene, fit_key=job.fit_key, scale=normalised.scale,
-                          recipe=job.recipe, cmap_half=job.cmap_half)
+    header = PacketHeader(**key_fields(job), fit_key=job.fit_key, scale=normalised.scale, recipe=job.recipe,
+                          cmap_half=job.cmap_half)
     n = len(job.references)
     write_packet(root, header, contents[:n], contents[n:])
     done = time.perf_counter()
