@@ -44,13 +44,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from setdiff_bench.pipeline.stages import Pipeline, StageFailed
+    from setdiff_bench.pipeline.stages import LEDGER_FILE, Pipeline, StageFailed
     from setdiff_bench.runtime.devices import resolve_device
 
     if args.device:  # checked here; passed on as given, so the stages resolve "auto" themselves
         resolve_device(args.device)
     work = (args.work or args.out / "work") / f"ablation_{args.study}"
-    pipeline = Pipeline(quiet=args.no_progress, ledger=work / "stages.json")  # reruns keep the original times
+    pipeline = Pipeline(quiet=args.no_progress, ledger=work / LEDGER_FILE)  # reruns keep the original times
     invocation = _invocation(args)
     try:
         if args.study == "geometry":

@@ -57,8 +57,10 @@ def run(args: argparse.Namespace) -> int:
 
     from setdiff_bench.cli.list import parse_option
     from setdiff_bench.errors import UsageError
-    from setdiff_bench.evaluation.run import RunSettings, Shard, run_method
+    from setdiff_bench.evaluation.paths import MANIFEST_FILE, METRICS_FILE
+    from setdiff_bench.evaluation.run import RunSettings, run_method
     from setdiff_bench.evaluation.scoring import resolve_metrics
+    from setdiff_bench.packets.shards import Shard
     from setdiff_bench.runtime.devices import resolve_device
 
     shard = Shard.parse(args.shard)
@@ -83,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.merge:
         print(f"{args.method} [{shard}]: enhanced {result.enhanced} packets, {result.skipped} already done → {out}")
     if result.merged:
-        print(f"complete: {out / 'metrics.parquet'}, {out / 'manifest.json'}")
+        print(f"complete: {out / METRICS_FILE}, {out / MANIFEST_FILE}")
     else:
         print(f"{result.remaining} packets of the selection remain for other shards; "
               "the last shard to finish merges the results (or run the same command with --merge)", file=sys.stderr)

@@ -59,7 +59,7 @@ class PrecomputedEnhancer:
         if not root.is_dir():
             raise UsageError("precomputed images folder not found", root)
         if (root / MANIFEST_FILE).is_file() and (root / IMAGES_DIR).is_dir():
-            root = root / "images"
+            root = root / IMAGES_DIR
         self.root = root.resolve()
         self.options = {"from": str(self.root)}
         self._listings: dict[Path, dict[str, list[Path]]] = {}

@@ -21,6 +21,14 @@ FRAGMENTS_DIR = "fragments"
 METRICS_FILE = "metrics.parquet"
 SEQUENCES_FILE = "sequences.parquet"
 MANIFEST_FILE = "manifest.json"
+#: An evaluation profile's tables (:mod:`setdiff_bench.evaluation.profile_scoring`), under
+#: ``<run>/profiles/<profile>/``: its own ``metrics.parquet`` (:data:`METRICS_FILE`), scene and group means,
+#: the profile and its coverage notes, and (EUVS profiles) the frames whose official mask pairing differs.
+PROFILES_DIR = "profiles"
+SCENES_FILE = "scenes.parquet"
+GROUPS_FILE = "groups.parquet"
+PROFILE_FILE = "profile.json"
+EUVS_COMPAT_FILE = "euvs_compat.txt"
 
 #: The columns that name one row of a run's (or an evaluation profile's) ``metrics.parquet``, in file
 #: order: where the packet comes from (the :class:`~setdiff_bench.types.PacketKey` fields but its id),

@@ -31,7 +31,15 @@ import pandas as pd
 import torch
 
 from setdiff_bench.errors import UsageError
-from setdiff_bench.evaluation.paths import KEY_COLUMNS, METRICS_FILE
+from setdiff_bench.evaluation.paths import (
+    EUVS_COMPAT_FILE,
+    GROUPS_FILE,
+    KEY_COLUMNS,
+    METRICS_FILE,
+    PROFILE_FILE,
+    PROFILES_DIR,
+    SCENES_FILE,
+)
 from setdiff_bench.evaluation.profiles import (
     PROFILE_COLUMN,
     EvaluationProfile,
@@ -44,8 +52,6 @@ from setdiff_bench.evaluation.profiles import (
 from setdiff_bench.io.atomic import atomic_path, write_text_atomic
 from setdiff_bench.io.images import read_mask, read_rgb
 from setdiff_bench.metrics.registry import METRICS
-
-PROFILES_DIR = "profiles"
 
 
 @dataclass(frozen=True)
@@ -174,21 +180,21 @@ def score_run(run: str | Path, profile: EvaluationProfile, *, packets: str | Pat
     groups, scenes = aggregate(frame, [*profile.metrics, *extra], profile.aggregation)
     out = run / PROFILES_DIR / profile.name
     out.mkdir(parents=True, exist_ok=True)
-    for name, table in (("metrics.parquet", frame), ("scenes.parquet", scenes), ("groups.parquet", groups)):
+    for name, table in ((METRICS_FILE, frame), (SCENES_FILE, scenes), (GROUPS_FILE, groups)):
         with atomic_path(out / name) as tmp:
             table.to_parquet(tmp, index=False)
     notes = _coverage_notes(profile, rows, store)
     info = {"profile": _jsonable(asdict(profile)), "run": str(run.resolve()),
             "packets": str(Path(packets).resolve()), "data": str(Path(data).resolve()) if data else None,
             "dinov2": dinov2 is not None, "images": len(frame), "notes": notes}
-    write_text_atomic(out / "profile.json", json.dumps(info, indent=2, sort_keys=True) + "\n")
+    write_text_atomic(out / PROFILE_FILE, json.dumps(info, indent=2, sort_keys=True) + "\n")
     if profile.name.startswith("euvs"):
         from setdiff_bench.evaluation.euvs_compat import compat_report
 
         by_scene: dict[str, list[str]] = {}
         for row in rows.itertuples():
             by_scene.setdefault(str(row.scene), []).append(str(row.frame))
-        write_text_atomic(out / "euvs_compat.txt", compat_report(by_scene))
+        write_text_atomic(out / EUVS_COMPAT_FILE, compat_report(by_scene))
     return out
 
 

@@ -94,6 +94,7 @@ from setdiff_bench.io.atomic import (
 )
 from setdiff_bench.io.images import read_rgb, to_tensor_chw, write_png
 from setdiff_bench.metrics.registry import PRESETS, MetricSpec
+from setdiff_bench.packets.index import INDEX_FILE
 from setdiff_bench.packets.shards import Shard
 from setdiff_bench.packets.store import PacketStore, timestamp_or_none
 
@@ -213,7 +214,7 @@ def run_method(packets: str | os.PathLike[str] | Any, out: str | os.PathLike[str
     if settings.method not in available_methods() and enhancer is None:
         raise UsageError(f"unknown method {settings.method!r}; available: {', '.join(sorted(available_methods()))}",
                          "--method")
-    index_sha256 = sha256_file(Path(store.root) / "index.parquet")
+    index_sha256 = sha256_file(Path(store.root) / INDEX_FILE)
     identity = settings.identity(index_sha256)
     _check_folder(out, identity)
     if merge_only:
@@ -553,7 +554,7 @@ def _manifest(store: Any, out: Path, settings: RunSettings, specs: Sequence[Metr
         "method": {"name": settings.method, "factory": spec.factory if spec else None,
                    "source": spec.source if spec else None, "options": _jsonable(dict(settings.options)),
                    "enhancer": enhancer_info},
-        "packets": {"root": str(Path(store.root).resolve()), "index_sha256": sha256_file(Path(store.root) / "index.parquet"),
+        "packets": {"root": str(Path(store.root).resolve()), "index_sha256": sha256_file(Path(store.root) / INDEX_FILE),
                     "split": settings.split, "packets": int(frame["packet_id"].nunique()), "targets": len(frame),
                     "datasets": sorted(frame["dataset"].unique().tolist()),
                     "protocols": sorted(frame["protocol"].unique().tolist()),

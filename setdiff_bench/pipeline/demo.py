@@ -47,7 +47,7 @@ import pandas as pd
 from setdiff_bench.errors import UsageError
 from setdiff_bench.evaluation.paths import METRICS_FILE
 from setdiff_bench.io.atomic import sha256_file, write_text_atomic
-from setdiff_bench.pipeline.stages import Pipeline, relative
+from setdiff_bench.pipeline.stages import LEDGER_FILE, Pipeline, relative
 from setdiff_bench.runtime.threads import compute_threads
 
 METHODS = ("identity", "reproject", "difix", "setdiff")
@@ -58,8 +58,6 @@ DEFAULT_OUT = "runs/demo"
 #: The demo's summary in ``<out>``; written last, so a folder with it holds one complete run.
 SUMMARY_FILE = "demo.json"
 REPORT_FILE = "README.md"
-#: Stage timings kept across runs, in the work folder.
-LEDGER_FILE = "stages.json"
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,8 @@ import pandas as pd
 import pytest
 
 from setdiff_bench.cli.main import main
-from setdiff_bench.evaluation.run import RunSettings, Shard, run_method
+from setdiff_bench.evaluation.run import RunSettings, run_method
+from setdiff_bench.packets.shards import Shard
 from setdiff_bench.reporting.leaderboard import (
     Block,
     Layout,

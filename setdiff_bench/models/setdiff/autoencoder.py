@@ -35,11 +35,11 @@ import torch
 
 from setdiff_bench.errors import UsageError, WeightsError
 from setdiff_bench.io.atomic import atomic_path, write_text_atomic
+from setdiff_bench.models.setdiff.manifest import MANIFEST_FILE
 from setdiff_bench.models.setdiff.packaged import file_table, packaged_folder, packaged_names
 
 CONFIG_FILE = "config.json"
 WEIGHTS_FILE = "weights.safetensors"
-MANIFEST_FILE = "manifest.json"
 STATE_FILE = "training_state.pt"
 AUTOENCODER_FILES = (CONFIG_FILE, WEIGHTS_FILE, MANIFEST_FILE)
 
