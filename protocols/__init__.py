@@ -52,6 +52,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 from setdiff_bench.errors import ProtocolError
+from setdiff_bench.evaluation.profiles import PROFILES
 
 from .rules import RULES, GroupFrames
 from .scene_split import SceneSplit, read_split_list
@@ -313,8 +314,6 @@ def _images(table: Table) -> ImageSpec:
 
 
 def _evaluation(table: Table) -> tuple[str, ...]:
-    from setdiff_bench.evaluation.profiles import PROFILES
-
     table.check_keys(("profiles",))
     names = table.strings("profiles", ["paper"])
     unknown = [name for name in names if name not in PROFILES]
@@ -371,6 +370,7 @@ def _block(table: Table, groups: list[str]) -> Block:
 
 
 def _check_metrics(table: Table, key: str, names: tuple[str, ...], scope: str) -> None:
+    # lazy: the metric registry imports torch; protocols stay light
     from setdiff_bench.metrics.registry import METRICS
 
     for name in names:

@@ -58,6 +58,7 @@ def invocation(args: argparse.Namespace) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     from setdiff_bench.errors import UsageError
     from setdiff_bench.pipeline.demo import DemoPaths, get_demo_preset, run_demo
     from setdiff_bench.pipeline.stages import StageFailed

@@ -39,6 +39,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     from setdiff_bench.errors import UsageError
     from setdiff_bench.evaluation.paths import EUVS_COMPAT_FILE
     from setdiff_bench.evaluation.profile_scoring import score_run

@@ -47,6 +47,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def fit_config(preset: str, iterations: int | None, seed: int):  # -> FitConfig
     """The configuration for ``--preset``/``--iterations``/``--seed``."""
+    # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     import dataclasses
 
     from setdiff_bench.errors import UsageError

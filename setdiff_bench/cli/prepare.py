@@ -55,6 +55,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     from setdiff_bench.cli.list import parse_option
     from setdiff_bench.packets.prepare import prepare
     from setdiff_bench.packets.shards import Shard

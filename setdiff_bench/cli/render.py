@@ -36,6 +36,7 @@ def view_folder_name(image_name: str) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     import torch
     from tqdm import tqdm
 

@@ -38,6 +38,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     from setdiff_bench.enhancers.setdiff import load_enhancer
     from setdiff_bench.errors import UsageError
     from setdiff_bench.runtime.devices import resolve_device

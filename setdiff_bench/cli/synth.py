@@ -101,6 +101,7 @@ def make_scene(out: Path, preset_name: str, seed: int, index: int, count: int, *
 
     ``report(kind, index, done, total)`` receives render and fit progress (:class:`ProgressEvents`).
     """
+    # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     import shutil
     import time
 

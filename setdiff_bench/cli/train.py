@@ -50,6 +50,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _autoencoder_defaults() -> dict[str, int | float]:
+    # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     from dataclasses import asdict
 
     from setdiff_bench.models.setdiff.autoencoder import AutoencoderTraining

@@ -12,6 +12,7 @@ from pathlib import PurePosixPath
 
 from setdiff_bench.enhancers.base import TargetRef
 from setdiff_bench.errors import PacketError
+from setdiff_bench.packets.index import slug
 from setdiff_bench.types import PACKET_KEY_FIELDS
 
 IMAGES_DIR = "images"
@@ -43,8 +44,6 @@ def safe_component(text: str) -> str:
     Names are used as they are unless they are empty, ``.``/``..`` or contain a path separator or NUL;
     those go through the packet-id slug (runs of characters other than ``A-Za-z0-9.+-`` become ``-``).
     """
-    from setdiff_bench.packets.index import slug
-
     if not text or text in {".", ".."} or "/" in text or "\\" in text or "\0" in text:
         return slug(text)
     return text

@@ -97,6 +97,8 @@ from setdiff_bench.metrics.registry import PRESETS, MetricSpec
 from setdiff_bench.packets.index import INDEX_FILE
 from setdiff_bench.packets.shards import Shard
 from setdiff_bench.packets.store import PacketStore, timestamp_or_none
+from setdiff_bench.runtime.provenance import device_description, git_revision, package_versions
+from setdiff_bench.types import Packet
 
 RUN_FORMAT = "setdiff-run/1"
 #: Protocols whose targets are time-ordered camera sequences: warp error with ``warp="auto"``.
@@ -178,7 +180,7 @@ def fragment_path(out: Path, packet_id: str) -> Path:
 
 
 # ---------------------------------------------------------------------- the run
-def run_method(packets: str | os.PathLike[str] | Any, out: str | os.PathLike[str], settings: RunSettings, *,
+def run_method(packets: str | os.PathLike[str] | PacketStore, out: str | os.PathLike[str], settings: RunSettings, *,
                shard: Shard = Shard(), progress: bool | None = None, enhancer: Enhancer | None = None,
                verify: bool = True, merge_only: bool = False) -> RunResult:
     """Enhance and score every packet of ``settings.split`` in this shard; merge when all are done.
@@ -264,7 +266,7 @@ def run_method(packets: str | os.PathLike[str] | Any, out: str | os.PathLike[str
     return RunResult(out, len(todo), len(mine) - len(todo), remaining, merged)
 
 
-def _merge_finished(store: Any, out: Path, settings: RunSettings, specs: Sequence[MetricSpec],
+def _merge_finished(store: PacketStore, out: Path, settings: RunSettings, specs: Sequence[MetricSpec],
                     selection: Sequence[str]) -> RunResult:
     """``--merge``: merge a run whose shards have all finished; one line naming what is missing otherwise."""
     if not (out / RUN_FILE).is_file():
@@ -278,7 +280,7 @@ def _merge_finished(store: Any, out: Path, settings: RunSettings, specs: Sequenc
     return RunResult(out, 0, len(selection), 0, True)
 
 
-def _open_store(packets: Any) -> Any:
+def _open_store(packets: str | os.PathLike[str] | PacketStore) -> PacketStore:
     if isinstance(packets, str | os.PathLike):
         return PacketStore(packets)
     return packets
@@ -339,7 +341,7 @@ def _record_enhancer(out: Path, enhancer: Enhancer) -> None:
         write_text_atomic(path, text)
 
 
-def _target_rows(store: Any, selection: Sequence[str]) -> list[dict[str, Any]]:
+def _target_rows(store: PacketStore, selection: Sequence[str]) -> list[dict[str, Any]]:
     index = store.index
     rows = index[(index["role"] == "target") & index["packet_id"].isin(list(selection))]
     return rows.sort_values(["packet_id", "view"]).to_dict("records")
@@ -349,7 +351,7 @@ def _target_ref(row: Mapping[str, Any]) -> TargetRef:
     return TargetRef.from_row(row, frame=str(row["frame"]))
 
 
-def _run_packet(store: Any, out: Path, packet_id: str, enhancer: Enhancer, specs: Sequence[MetricSpec],
+def _run_packet(store: PacketStore, out: Path, packet_id: str, enhancer: Enhancer, specs: Sequence[MetricSpec],
                 settings: RunSettings, claim: Callable[[], None]) -> None:
     """Enhance and score one packet, then write its images and (last) its fragment.
 
@@ -389,7 +391,7 @@ def _run_packet(store: Any, out: Path, packet_id: str, enhancer: Enhancer, specs
     _write_rows(fragment_path(out, packet_id), records, [spec.name for spec in specs])
 
 
-def _checked(output: Any, packet: Any, name: str) -> torch.Tensor:
+def _checked(output: Any, packet: Packet, name: str) -> torch.Tensor:
     where = f"method {name}, packet {packet.packet_id}"
     expected = (len(packet.targets), 3, packet.height, packet.width)
     if not isinstance(output, torch.Tensor):
@@ -441,7 +443,7 @@ def warp_enabled(settings: RunSettings, protocols: Sequence[str]) -> bool:
     return settings.warp == "on"
 
 
-def merge_run(store: Any, out: Path, settings: RunSettings, specs: Sequence[MetricSpec],
+def merge_run(store: PacketStore, out: Path, settings: RunSettings, specs: Sequence[MetricSpec],
               selection: Sequence[str]) -> None:
     """Merge every fragment into ``metrics.parquet`` (+ ``sequences.parquet``) and write ``manifest.json``.
 
@@ -500,7 +502,7 @@ SEQUENCE_SCHEMA = pa.schema([
 ])
 
 
-def _sequence_table(store: Any, out: Path, frame: pd.DataFrame, settings: RunSettings) -> pa.Table:
+def _sequence_table(store: PacketStore, out: Path, frame: pd.DataFrame, settings: RunSettings) -> pa.Table:
     """Warp error of every (protocol, scene, sensor) sequence with ≥ 2 time-stamped targets."""
     records = []
     cache = None
@@ -537,10 +539,8 @@ def _sequence_table(store: Any, out: Path, frame: pd.DataFrame, settings: RunSet
     return pa.Table.from_pylist(records, schema=SEQUENCE_SCHEMA)
 
 
-def _manifest(store: Any, out: Path, settings: RunSettings, specs: Sequence[MetricSpec], frame: pd.DataFrame,
+def _manifest(store: PacketStore, out: Path, settings: RunSettings, specs: Sequence[MetricSpec], frame: pd.DataFrame,
               sequences: pa.Table | None, fragments_sha256: str) -> dict[str, Any]:
-    from setdiff_bench.runtime.provenance import device_description, git_revision, package_versions
-
     methods = available_methods()
     spec = methods.get(settings.method)
     enhancer_info: dict[str, Any] = {}

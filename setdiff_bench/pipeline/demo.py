@@ -47,7 +47,10 @@ import pandas as pd
 from setdiff_bench.errors import UsageError
 from setdiff_bench.evaluation.paths import METRICS_FILE
 from setdiff_bench.io.atomic import sha256_file, write_text_atomic
+from setdiff_bench.models.setdiff.packaged import packaged_models
 from setdiff_bench.pipeline.stages import LEDGER_FILE, Pipeline, relative
+from setdiff_bench.protocols import load_protocol
+from setdiff_bench.runtime.provenance import git_revision, package_versions
 from setdiff_bench.runtime.threads import compute_threads
 
 METHODS = ("identity", "reproject", "difix", "setdiff")
@@ -127,7 +130,7 @@ class DemoPaths:
 def evaluation_scene_indices(preset: DemoPreset, seed: int) -> list[int]:
     """The generator indices of the preset's test scenes: the synthetic protocol's scene split over the
     scene names ``synth`` gives the preset's scenes (:func:`setdiff_bench.synthetic.generate.scene_name`)."""
-    from setdiff_bench.protocols import load_protocol
+    # lazy: the CLI imports this module at startup (demo presets); the generator pulls in the 3DGS fitting code
     from setdiff_bench.synthetic.generate import scene_name
     from setdiff_bench.synthetic.presets import get_preset
 
@@ -146,8 +149,6 @@ def check_unseen(test_scenes: list[tuple[int, int]]) -> dict[str, dict[str, Any]
     Raises:
         UsageError: a shipped model is missing, or its training scenes include a test scene.
     """
-    from setdiff_bench.models.setdiff.packaged import packaged_models
-
     shipped = packaged_models()
     manifests = {}
     for method, name in SHIPPED_MODELS.items():
@@ -246,8 +247,6 @@ def run_provenance(seed: int) -> dict[str, Any]:
     leaderboards; another thread count, CPU instruction set, torch build or a GPU changes the last bits
     of every float sum, and training amplifies them (README "Reproducibility").
     """
-    from setdiff_bench.runtime.provenance import git_revision, package_versions
-
     return {"git": git_revision(), "seed": seed, "torch_threads": compute_threads(),
             "machine": {"cpu": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(),
                         "system": platform.system()},

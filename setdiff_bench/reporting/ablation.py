@@ -27,6 +27,7 @@ import pyarrow.parquet as pq
 from setdiff_bench.errors import SetDiffBenchError, UsageError
 from setdiff_bench.io.atomic import atomic_path, write_text_atomic
 from setdiff_bench.metrics.registry import METRICS as METRIC_SPECS
+from setdiff_bench.reporting.leaderboard import load_reported
 
 METRICS = ("psnr", "ssim", "lpips")
 HEADERS = {"psnr": "PSNR", "ssim": "SSIM", "lpips": "LPIPS"}
@@ -132,8 +133,6 @@ def ordering_setsize(results: Mapping[tuple[int, int], Mapping[str, float]]) -> 
 
 def reported_frame(table: str) -> pd.DataFrame:
     """The paper's numbers for ``table`` (``table5_geometry_ablation`` or ``table6_setsize_ablation``)."""
-    from setdiff_bench.reporting.leaderboard import load_reported
-
     rows = load_reported(None, [table])
     return rows.pivot_table(index="setting" if table.startswith("table6") else "method", columns="metric",
                             values="value", sort=False).reset_index()

@@ -23,6 +23,7 @@ from setdiff_bench.errors import UsageError
 from setdiff_bench.evaluation.paths import METRICS_FILE
 from setdiff_bench.io.images import quantize_uint8, read_rgb, write_png
 from setdiff_bench.loaders.common import natural_key
+from setdiff_bench.packets.store import PacketStore
 
 FONT = cv2.FONT_HERSHEY_SIMPLEX
 BAND = 22
@@ -118,8 +119,6 @@ def qualitative_grid(store: object, runs: Mapping[str, str | Path], frames: Sequ
     Raises:
         UsageError: no frames, or a run without one of the frames.
     """
-    from setdiff_bench.packets.store import PacketStore
-
     if not frames:
         raise UsageError("no frames chosen for the grid")
     store = store if isinstance(store, PacketStore) else PacketStore(store)  # type: ignore[arg-type]

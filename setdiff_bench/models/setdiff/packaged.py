@@ -125,6 +125,7 @@ def export_enhancer(checkpoint: Path, training_manifest: dict[str, Any], destina
     Raises:
         CheckpointError: the checkpoint lacks a file.
     """
+    # lazy: the checkpoint module imports this one
     from setdiff_bench.models.setdiff.checkpoint import CONFIG_FILE, WEIGHTS_FILE
 
     names = [CONFIG_FILE, WEIGHTS_FILE]

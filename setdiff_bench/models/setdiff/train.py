@@ -45,6 +45,8 @@ import torch
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.atomic import write_text_atomic
+from setdiff_bench.metrics.psnr import psnr
+from setdiff_bench.metrics.ssim import ssim
 from setdiff_bench.models.setdiff.checkpoint import (
     check_compatible,
     load_training_state,
@@ -337,9 +339,6 @@ def validation_totals(model: SetDiffModel, samples: Sequence[TrainingSample],
                       reconstruction: ReconstructionLoss | None = None) -> dict[str, tuple[float, int]]:
     """Per metric, the sum over every target of ``samples`` and the number of targets (for reduction across
     processes): ``psnr`` and ``ssim`` (masked), ``lpips`` when the loss has LPIPS loaded."""
-    from setdiff_bench.metrics.psnr import psnr
-    from setdiff_bench.metrics.ssim import ssim
-
     was_training = model.training
     model.eval()
     scores: dict[str, list[float]] = {"psnr": [], "ssim": []}
