@@ -52,7 +52,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 from setdiff_bench.errors import ProtocolError
-from setdiff_bench.evaluation.profiles import PROFILES
+from setdiff_bench.evaluation import profiles as evaluation_profiles  # its PROFILES read per call
 
 from .rules import RULES, GroupFrames
 from .scene_split import SceneSplit, read_split_list
@@ -316,9 +316,9 @@ def _images(table: Table) -> ImageSpec:
 def _evaluation(table: Table) -> tuple[str, ...]:
     table.check_keys(("profiles",))
     names = table.strings("profiles", ["paper"])
-    unknown = [name for name in names if name not in PROFILES]
+    unknown = [name for name in names if name not in evaluation_profiles.PROFILES]
     if unknown:
-        raise table.error("profiles", f"unknown profile {unknown[0]!r}; known: {', '.join(PROFILES)}")
+        raise table.error("profiles", f"unknown profile {unknown[0]!r}; known: {', '.join(evaluation_profiles.PROFILES)}")
     return names
 
 

@@ -13,8 +13,8 @@ from typing import Any
 import torch
 
 from setdiff_bench.errors import UsageError
+from setdiff_bench.models.setdiff import inference  # module attribute: looked up per call (tests replace it)
 from setdiff_bench.models.setdiff.checkpoint import load_model, resolve_checkpoint
-from setdiff_bench.models.setdiff.inference import enhance_packet
 from setdiff_bench.runtime.devices import resolve_device
 from setdiff_bench.types import Packet
 
@@ -52,9 +52,9 @@ class ModelEnhancer:
 
     def enhance(self, packet: Packet) -> torch.Tensor:
         """``(M, 3, H, W)`` float32 images in [0, 1], packet order (H, W divisible by 8)."""
-        return enhance_packet(self.model, packet, guidance_scale=self.guidance_scale,
-                              sets_per_call=self.sets_per_call, max_references=self.max_references,
-                              targets_per_set=self.targets_per_set)
+        return inference.enhance_packet(self.model, packet, guidance_scale=self.guidance_scale,
+                                        sets_per_call=self.sets_per_call, max_references=self.max_references,
+                                        targets_per_set=self.targets_per_set)
 
 
 def load_enhancer(method: str, checkpoint: str | None, *, device: str | None = None, dtype: str | None = None,

@@ -22,7 +22,6 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from setdiff_bench.metrics.lpips import load_lpips
 from setdiff_bench.metrics.ssim import ssim
 
 
@@ -55,6 +54,9 @@ class ReconstructionLoss(nn.Module):
         self.l2_weight, self.ssim_weight, self.lpips_weight = float(l2_weight), float(ssim_weight), float(lpips_weight)
         self.lpips: Any = None
         if self.lpips_weight > 0:
+            # lazy: LPIPS (and its weight files) load only when the loss uses it; tests stand in for the module
+            from setdiff_bench.metrics.lpips import load_lpips
+
             self.lpips = load_lpips(net=lpips_net, device=device)
             self.lpips.requires_grad_(False)
 
