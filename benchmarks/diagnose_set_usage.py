@@ -42,7 +42,7 @@ from setdiff_bench.models.setdiff import set_mixer
 from setdiff_bench.models.setdiff.checkpoint import load_model
 from setdiff_bench.models.setdiff.inference import enhance_packet
 from setdiff_bench.models.setdiff.inputs import surface_points
-from setdiff_bench.packets import PacketStore
+from setdiff_bench.packets.store import PacketStore
 
 ProcessorCall = Callable[..., torch.Tensor]
 

@@ -36,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.common import machine
 from setdiff_bench.models.setdiff.checkpoint import load_model
 from setdiff_bench.models.setdiff.inference import enhance_packet
-from setdiff_bench.packets import PacketStore
+from setdiff_bench.packets.store import PacketStore
 
 
 def psnr(image: torch.Tensor, truth: torch.Tensor) -> float:

@@ -7,7 +7,7 @@ share of packet time spent rendering (render + C-map normalisation), reading cap
 every file).  The peer is the obvious alternative write path: every file written through
 ``setdiff_bench.io.images``' per-file atomic write (temporary file + fsync + rename) instead of one
 folder rename per packet; it is timed on the same packet contents.  EXR sizes are also reported for
-float32 (stored) versus half, the precision trade-off named in ``setdiff_bench.packets``.
+float32 (stored) versus half, the precision trade-off named in ``setdiff_bench.packets.store``.
 
     python benchmarks/prepare.py [--data DIR] [--scenes 1] [--workers 1] [--peer-packets 5]
 """
@@ -27,8 +27,8 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.common import machine, write_result
 from setdiff_bench.io.images import to_numpy_hwc, write_exr, write_png
-from setdiff_bench.packets import CMAP_CHANNELS, EXR_ATTRIBUTES, PacketStore
-from setdiff_bench.prepare import prepare
+from setdiff_bench.packets.prepare import prepare
+from setdiff_bench.packets.store import CMAP_CHANNELS, EXR_ATTRIBUTES, PacketStore
 
 
 def ensure_scenes(data: Path, scenes: int) -> None:

@@ -39,7 +39,7 @@ from benchmarks.common import machine
 from setdiff_bench.enhancers.reproject import ReprojectEnhancer, cmap_points, snap_to_rays
 from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.gaussians.render import render
-from setdiff_bench.packets import PacketStore, row_camera
+from setdiff_bench.packets.store import PacketStore, row_camera
 from setdiff_bench.synthetic.generate import build_scene
 from setdiff_bench.synthetic.presets import get_preset
 from setdiff_bench.types import Packet

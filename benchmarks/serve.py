@@ -3,7 +3,7 @@
 Latency per tick (p50 / p99, ms) and frames per second for a 3-camera rig driven along a synthetic
 recorded trajectory (``tests/stream/stream_fixtures``), for
 
-* ``in_process``: :class:`setdiff_bench.stream.StreamSession` called directly (uint8 in, uint8 out);
+* ``in_process``: :class:`setdiff_bench.evaluation.stream.StreamSession` called directly (uint8 in, uint8 out);
 * ``grpc``: ``setdiff-bench serve`` in its own process, called through
   :class:`setdiff_bench.serve.client.EnhancerClient` (request encoding, transport, decoding included);
 * ``in_process_cached``: the same with the reference-latent cache on.
@@ -35,8 +35,8 @@ import torch
 
 from benchmarks.common import machine, write_result
 from setdiff_bench.enhancers.setdiff import load_enhancer
+from setdiff_bench.evaluation.stream import StreamSession
 from setdiff_bench.serve.client import EnhancerClient
-from setdiff_bench.stream import StreamSession
 from tests.stream.stream_fixtures import recorded_references, save_tiny_checkpoint, tick_frames
 
 ROOT = Path(__file__).resolve().parents[1]

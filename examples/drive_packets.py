@@ -18,10 +18,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from setdiff_bench.evaluation.stream import Views
 from setdiff_bench.io.images import write_png
-from setdiff_bench.packets import PacketStore, row_camera
+from setdiff_bench.packets.index import INDEX_FILE
+from setdiff_bench.packets.store import PacketStore, row_camera
 from setdiff_bench.serve.client import EnhancerClient
-from setdiff_bench.stream import Views
 from setdiff_bench.types import ViewSet
 
 
@@ -44,7 +45,7 @@ def main() -> None:
     parser.add_argument("--split", default="test")
     args = parser.parse_args()
     store = PacketStore(args.packets)
-    source = str(args.packets / "index.parquet")
+    source = str(args.packets / INDEX_FILE)
     with EnhancerClient(args.address) as client:
         client.wait_ready()
         for packet_id in store.packet_ids(args.split):

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from setdiff_bench.errors import UsageError
-from setdiff_bench.lazy import load_attribute
+from setdiff_bench.runtime.lazy import load_attribute
 
 if TYPE_CHECKING:  # types imports torch; the registry stays light
     from setdiff_bench.types import Scene

@@ -18,9 +18,9 @@ A protocol file (``protocols/<name>.toml``, format ``setdiff-protocol/1``) decla
   (the paper's "clipped by scene scale"; ``d_max`` = largest pairwise camera distance in the scene;
   0 = no clipping);
 * ``[evaluation]`` — ``profiles``: the evaluation profiles that apply to this protocol's runs
-  (:data:`setdiff_bench.profiles.PROFILES`; default ``["paper"]``, the first is the default);
+  (:data:`setdiff_bench.evaluation.profiles.PROFILES`; default ``["paper"]``, the first is the default);
 * ``[leaderboard]`` — the table shape of the dataset's leaderboard (:class:`Layout`), read from the
-  dataset's default protocol (``protocols/<dataset>.toml``) by :mod:`setdiff_bench.leaderboard`:
+  dataset's default protocol (``protocols/<dataset>.toml``) by :mod:`setdiff_bench.reporting.leaderboard`:
   ``title`` (caption), ``blocks`` (column blocks in order: ``{ group = "<group name>", label = "..." }``
   or ``{ pooled = true, label = "All" }`` for every group pooled; absent = one block per group found),
   ``metrics`` (image metrics per block, default ``["psnr", "ssim", "lpips"]``), ``sequence_metrics``
@@ -52,6 +52,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 from setdiff_bench.errors import ProtocolError
+from setdiff_bench.evaluation import profiles as evaluation_profiles  # its PROFILES read per call
 
 from .rules import RULES, GroupFrames
 from .scene_split import SceneSplit, read_split_list
@@ -313,13 +314,11 @@ def _images(table: Table) -> ImageSpec:
 
 
 def _evaluation(table: Table) -> tuple[str, ...]:
-    from setdiff_bench.profiles import PROFILES
-
     table.check_keys(("profiles",))
     names = table.strings("profiles", ["paper"])
-    unknown = [name for name in names if name not in PROFILES]
+    unknown = [name for name in names if name not in evaluation_profiles.PROFILES]
     if unknown:
-        raise table.error("profiles", f"unknown profile {unknown[0]!r}; known: {', '.join(PROFILES)}")
+        raise table.error("profiles", f"unknown profile {unknown[0]!r}; known: {', '.join(evaluation_profiles.PROFILES)}")
     return names
 
 
@@ -371,6 +370,7 @@ def _block(table: Table, groups: list[str]) -> Block:
 
 
 def _check_metrics(table: Table, key: str, names: tuple[str, ...], scope: str) -> None:
+    # lazy: the metric registry imports torch; protocols stay light
     from setdiff_bench.metrics.registry import METRICS
 
     for name in names:

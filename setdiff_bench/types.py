@@ -1,4 +1,4 @@
-"""The shared vocabulary of the data path: Camera, Frame, Scene, ViewSet, Packet.
+"""The shared vocabulary of the data path: Camera, Frame, Scene, ViewSet, PacketKey, Packet.
 
 Shapes follow docs/architecture.md: images are float32 ``(V, 3, H, W)`` in [0, 1]; C-maps
 ``(V, 3, H, W)`` in the packet's normalised frame; alphas ``(V, 1, H, W)`` in [0, 1]; masks
@@ -8,9 +8,9 @@ bool ``(V, 1, H, W)`` (True = evaluate).
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any
+from typing import Any, Self
 
 import numpy as np
 import torch
@@ -18,7 +18,8 @@ import torch
 from setdiff_bench.cameras import Camera, Distortion
 from setdiff_bench.errors import DatasetError
 
-__all__ = ["Camera", "Distortion", "Frame", "Packet", "Scene", "TrainingSample", "ViewSet"]
+__all__ = ["PACKET_KEY_FIELDS", "Camera", "Distortion", "Frame", "Packet", "PacketKey", "Scene", "TrainingSample",
+           "ViewSet"]
 
 
 @dataclass(frozen=True)
@@ -153,6 +154,47 @@ class ViewSet:
         )
 
 
+@dataclass(frozen=True)
+class PacketKey:
+    """Which packet: the one declaration of a packet's identity.
+
+    Everything that names a packet extends it — the plan's ``PacketJob``, the store's ``PacketHeader``,
+    an enhancer's ``TargetRef`` — and its fields are the key columns of the packet index and of a run's
+    ``metrics.parquet`` (:data:`setdiff_bench.evaluation.paths.KEY_COLUMNS`).  :class:`Packet` is mutable
+    (trainers and tests swap its views), so it carries the same fields and gives its key as :attr:`Packet.key`.
+
+    Attributes:
+        packet_id: unique id in its store.
+        dataset, protocol, group, split, scene: where the packet comes from.
+    """
+
+    packet_id: str
+    dataset: str
+    protocol: str
+    group: str
+    split: str
+    scene: str
+
+    @property
+    def key(self) -> PacketKey:
+        """Only the key (an object that extends :class:`PacketKey` carries more)."""
+        return PacketKey(**key_fields(self))
+
+    @classmethod
+    def from_row(cls, row: Mapping[str, Any], **extra: Any) -> Self:
+        """``cls`` built from the key columns of an index or run row, plus ``extra`` fields."""
+        return cls(**{name: str(row[name]) for name in PACKET_KEY_FIELDS}, **extra)
+
+
+#: The key's field names, in declaration order.
+PACKET_KEY_FIELDS: tuple[str, ...] = tuple(f.name for f in fields(PacketKey))
+
+
+def key_fields(keyed: PacketKey | Packet) -> dict[str, str]:
+    """``{field: value}`` of the packet key of a :class:`PacketKey` (or anything extending it) or a :class:`Packet`."""
+    return {name: getattr(keyed, name) for name in PACKET_KEY_FIELDS}
+
+
 @dataclass
 class Packet:
     """N clean references + M rendered targets of one scene, normalised into the first target's frame.
@@ -160,8 +202,8 @@ class Packet:
     Ground truth and masks are not here: they stay with the runner and never reach an enhancer.
 
     Attributes:
-        packet_id: unique id in its store.
-        dataset, protocol, group, split, scene: where the packet comes from.
+        packet_id, dataset, protocol, group, split, scene: the packet's :class:`PacketKey` (same fields,
+            same order; a ``Packet`` is mutable, a key is not, so it cannot extend it).
         references: the N reference views (clean images).
         targets: the M target views (3DGS renders).
         scale: the factor world units were multiplied by during normalisation.
@@ -177,6 +219,18 @@ class Packet:
     targets: ViewSet
     scale: float = 1.0
     metadata: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def key(self) -> PacketKey:
+        """The packet's identity."""
+        return PacketKey(**key_fields(self))
+
+    @classmethod
+    def from_key(cls, key: PacketKey, references: ViewSet, targets: ViewSet, scale: float = 1.0,
+                 metadata: Mapping[str, Any] | None = None) -> Packet:
+        """A packet named by ``key`` (any :class:`PacketKey`, e.g. a store's ``PacketHeader``)."""
+        return cls(**key_fields(key), references=references, targets=targets, scale=scale,
+                   metadata={} if metadata is None else metadata)
 
     @property
     def height(self) -> int:

@@ -8,7 +8,7 @@ from collections.abc import Iterator
 import pytest
 import torch
 
-from setdiff_bench.threads import torch_threads
+from setdiff_bench.runtime.threads import torch_threads
 
 # Verbs called by the tests (in-process or as subprocesses) run single-threaded unless told otherwise:
 # the test data is tiny, and oversubscribed threads on a shared machine only slow it down.  Results do not

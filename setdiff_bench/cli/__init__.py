@@ -17,7 +17,7 @@ DEVICES = "auto (cuda when available, else cpu), cpu, cuda or cuda:N"
 
 
 def add_device_argument(parser: argparse.ArgumentParser, what: str, devices: str = DEVICES) -> None:
-    """``--device``, default ``"auto"``: the verb resolves it with :func:`setdiff_bench.devices.resolve_device`
+    """``--device``, default ``"auto"``: the verb resolves it with :func:`setdiff_bench.runtime.devices.resolve_device`
     (CUDA when available, else the CPU).  ``what`` says what runs on it; ``devices`` lists the accepted names."""
     parser.add_argument("--device", default="auto", help=f"{devices}; {what}; default auto")
 

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 from setdiff_bench.cli import add_device_argument, add_progress_argument
 
 if TYPE_CHECKING:
-    from setdiff_bench.stages import Pipeline
+    from setdiff_bench.pipeline.stages import Pipeline
 
 VERB = "ablate"
 HELP = "the paper's ablations: geometric grounding (Table 5) and set size (Table 6)"
@@ -46,12 +46,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from setdiff_bench.devices import resolve_device
-    from setdiff_bench.stages import Pipeline, StageFailed
+    # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
+    from setdiff_bench.pipeline.stages import LEDGER_FILE, Pipeline, StageFailed
+    from setdiff_bench.runtime.devices import resolve_device
 
     resolve_device(args.device)  # checked here; passed on as given (auto: not at all), so the stages resolve it
     work = (args.work or args.out / "work") / f"ablation_{args.study}"
-    pipeline = Pipeline(quiet=args.no_progress, ledger=work / "stages.json")  # reruns keep the original times
+    pipeline = Pipeline(quiet=args.no_progress, ledger=work / LEDGER_FILE)  # reruns keep the original times
     invocation = _invocation(args)
     try:
         if args.study == "geometry":
@@ -85,9 +86,9 @@ def _run_args(args: argparse.Namespace) -> list[str]:
 
 
 def _geometry(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocation: str) -> dict[str, Path]:
-    from setdiff_bench import ablation
+    from setdiff_bench.evaluation.paths import METRICS_FILE
     from setdiff_bench.models.setdiff.config import config_toml_data, write_config_toml
-    from setdiff_bench.run_paths import METRICS_FILE
+    from setdiff_bench.reporting import ablation
 
     base = config_toml_data(args.config)
     if base["model"].get("method", "setdiff") != "setdiff":
@@ -123,8 +124,8 @@ def _geometry(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocati
 
 
 def _setsize(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocation: str) -> dict[str, Path]:
-    from setdiff_bench import ablation
-    from setdiff_bench.run_paths import METRICS_FILE
+    from setdiff_bench.evaluation.paths import METRICS_FILE
+    from setdiff_bench.reporting import ablation
 
     sizes = ablation.parse_sizes(args.sizes)
     results = {}

@@ -1,4 +1,4 @@
-"""``setdiff-bench demo``: the embedded synthetic benchmark end to end (see :mod:`setdiff_bench.demo`).
+"""``setdiff-bench demo``: the embedded synthetic benchmark end to end (see :mod:`setdiff_bench.pipeline.demo`).
 
     setdiff-bench demo [--preset tiny|default|full] [--out runs/demo] [--train [--ablations]]
 
@@ -26,7 +26,7 @@ DESCRIPTION = ("Generate the synthetic benchmark's test scenes, fit their 3DGS, 
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from setdiff_bench.demo import DEFAULT_OUT, DEMO_PRESETS
+    from setdiff_bench.pipeline.demo import DEFAULT_OUT, DEMO_PRESETS
 
     parser.add_argument("--preset", default="default", choices=tuple(DEMO_PRESETS),
                         help="; ".join(f"{p.name}: {p.description}" for p in DEMO_PRESETS.values()))
@@ -61,10 +61,11 @@ def invocation(args: argparse.Namespace) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from setdiff_bench.demo import DemoPaths, get_demo_preset, run_demo
-    from setdiff_bench.devices import resolve_device
+    # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     from setdiff_bench.errors import UsageError
-    from setdiff_bench.stages import StageFailed
+    from setdiff_bench.pipeline.demo import DemoPaths, get_demo_preset, run_demo
+    from setdiff_bench.pipeline.stages import StageFailed
+    from setdiff_bench.runtime.devices import resolve_device
 
     if args.jobs < 1:
         raise UsageError(f"--jobs must be >= 1, got {args.jobs}", "--jobs")

@@ -42,10 +42,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from setdiff_bench.devices import resolve_device
+    # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     from setdiff_bench.errors import UsageError
-    from setdiff_bench.profile_scoring import score_run
-    from setdiff_bench.profiles import get_profile
+    from setdiff_bench.evaluation.paths import EUVS_COMPAT_FILE
+    from setdiff_bench.evaluation.profile_scoring import score_run
+    from setdiff_bench.evaluation.profiles import get_profile
+    from setdiff_bench.runtime.devices import resolve_device
 
     device = resolve_device(args.device)
     profile = get_profile(args.profile)
@@ -65,5 +67,5 @@ def run(args: argparse.Namespace) -> int:
     if profile.dinov2 and dinov2 is None:
         print("note: no --dinov2 weights given: Cos_Similarity and Final_Score are not computed", file=sys.stderr)
     if args.euvs_compat_report:
-        sys.stdout.write((out / "euvs_compat.txt").read_text())
+        sys.stdout.write((out / EUVS_COMPAT_FILE).read_text())
     return 0

@@ -48,6 +48,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def fit_config(preset: str, iterations: int | None, seed: int):  # -> FitConfig
     """The configuration for ``--preset``/``--iterations``/``--seed``."""
+    # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     import dataclasses
 
     from setdiff_bench.errors import UsageError
@@ -69,8 +70,8 @@ def fit_config(preset: str, iterations: int | None, seed: int):  # -> FitConfig
 def run(args: argparse.Namespace) -> int:
     import time
 
-    from setdiff_bench.devices import resolve_device
     from setdiff_bench.gaussians.fit import fit_scene
+    from setdiff_bench.runtime.devices import resolve_device
 
     device = resolve_device(args.device)
     config = fit_config(args.preset, args.iterations, args.seed)

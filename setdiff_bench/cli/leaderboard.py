@@ -6,7 +6,7 @@ Examples::
     setdiff-bench leaderboard --dataset euvs --with-reported --format latex,md
     setdiff-bench leaderboard --dataset synthetic --grids 6 --packets packets/synthetic
 
-See :mod:`setdiff_bench.leaderboard` for the aggregation rules (means of per-image values; a method
+See :mod:`setdiff_bench.reporting.leaderboard` for the aggregation rules (means of per-image values; a method
 missing rows in a block is refused) and how reported paper rows are marked.
 """
 
@@ -55,8 +55,9 @@ def _command(args: argparse.Namespace) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     from setdiff_bench.errors import UsageError
-    from setdiff_bench.leaderboard import (
+    from setdiff_bench.reporting.leaderboard import (
         build_leaderboard,
         load_runs,
         profile_rows,
@@ -82,15 +83,15 @@ def run(args: argparse.Namespace) -> int:
     for fmt, path in write_leaderboard(board, args.out, formats, command).items():
         print(f"{fmt}: {path}")
     if args.plots and len(images):
-        from setdiff_bench.plots import write_plots
+        from setdiff_bench.reporting.plots import write_plots
 
         for path in write_plots(args.dataset, images, args.out, split=split):
             print(f"plot: {path}")
     if args.grids:
         if args.packets is None:
             raise UsageError("--grids needs --packets (the store the runs were made on)", "--grids")
-        from setdiff_bench.grids import pick_frames, qualitative_grid
-        from setdiff_bench.packets import PacketStore
+        from setdiff_bench.packets.store import PacketStore
+        from setdiff_bench.reporting.grids import pick_frames, qualitative_grid
 
         store = PacketStore(args.packets)
         chosen = images[(images["dataset"] == args.dataset) & ((images["split"] == split) if split else True)]

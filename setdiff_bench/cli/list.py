@@ -45,6 +45,7 @@ def _datasets_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _datasets_run(args: argparse.Namespace) -> int:
     del args
+    # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     from setdiff_bench.loaders import DATASETS
 
     width = max(len(key) for key in DATASETS)

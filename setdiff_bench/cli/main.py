@@ -24,7 +24,7 @@ from typing import NoReturn
 import setdiff_bench.cli as cli_package
 from setdiff_bench import __version__
 from setdiff_bench.errors import SetDiffBenchError
-from setdiff_bench.threads import verb_threads
+from setdiff_bench.runtime.threads import verb_threads
 
 
 def verb_modules() -> list[ModuleType]:

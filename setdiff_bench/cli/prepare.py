@@ -7,7 +7,7 @@ Examples::
     setdiff-bench prepare dl3dv --root /data/DL3DV --fit --out packets/dl3dv --shard 0/8
 
 Fits are looked up as ``<fits>/<scene>/<fit_key>.ply`` (then ``<fits>/<scene>/fits/<fit_key>.ply``);
-fit keys per protocol: see ``setdiff_bench.prepare`` (EUVS ``level1..3``, Para-Lane ``clip_0``, nuScenes
+fit keys per protocol: see ``setdiff_bench.packets.prepare`` (EUVS ``level1..3``, Para-Lane ``clip_0``, nuScenes
 ``first_10s``, DL3DV ``n3/n6/n9``, synthetic ``lane0``).  A rerun skips complete packets.
 """
 
@@ -56,10 +56,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     from setdiff_bench.cli.list import parse_option
-    from setdiff_bench.devices import resolve_device
-    from setdiff_bench.prepare import prepare
-    from setdiff_bench.shards import Shard
+    from setdiff_bench.packets.prepare import prepare
+    from setdiff_bench.packets.shards import Shard
+    from setdiff_bench.runtime.devices import resolve_device
 
     loader_options = dict(parse_option(text, "--loader-option") for text in args.loader_option)
     summary = prepare(args.dataset, args.root, args.out, protocol=args.protocol, fits=args.fits, fit=args.fit,

@@ -39,15 +39,16 @@ def view_folder_name(image_name: str) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     import torch
     from tqdm import tqdm
 
-    from setdiff_bench.devices import resolve_device
     from setdiff_bench.errors import UsageError
     from setdiff_bench.gaussians.ply import read_ply
     from setdiff_bench.gaussians.render import render
     from setdiff_bench.io.images import to_numpy_hwc, write_exr, write_png
     from setdiff_bench.loaders.colmap import read_colmap_model
+    from setdiff_bench.runtime.devices import resolve_device
     from setdiff_bench.undistort import is_distorted, pinhole_camera
 
     device = resolve_device(args.device) if args.backend == "torch" else "cuda"

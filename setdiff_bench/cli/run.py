@@ -1,6 +1,6 @@
 """``setdiff-bench run``: one enhancer over a packet store → enhanced PNGs, metrics.parquet, manifest.json.
 
-See :mod:`setdiff_bench.run` for the output layout, resume and shard semantics.  Examples::
+See :mod:`setdiff_bench.evaluation.run` for the output layout, resume and shard semantics.  Examples::
 
     setdiff-bench run --method identity --packets packets/synthetic
     setdiff-bench run --method reproject --packets P --out results/runs/synthetic/reproject -o tolerance=0.05
@@ -57,11 +57,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
 
+    # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     from setdiff_bench.cli.list import parse_option
-    from setdiff_bench.devices import resolve_device
     from setdiff_bench.errors import UsageError
-    from setdiff_bench.run import RunSettings, Shard, run_method
-    from setdiff_bench.scoring import resolve_metrics
+    from setdiff_bench.evaluation.paths import MANIFEST_FILE, METRICS_FILE
+    from setdiff_bench.evaluation.run import RunSettings, run_method
+    from setdiff_bench.evaluation.scoring import resolve_metrics
+    from setdiff_bench.packets.shards import Shard
+    from setdiff_bench.runtime.devices import resolve_device
 
     shard = Shard.parse(args.shard)
     device = resolve_device(args.device)
@@ -85,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.merge:
         print(f"{args.method} [{shard}]: enhanced {result.enhanced} packets, {result.skipped} already done → {out}")
     if result.merged:
-        print(f"complete: {out / 'metrics.parquet'}, {out / 'manifest.json'}")
+        print(f"complete: {out / METRICS_FILE}, {out / MANIFEST_FILE}")
     else:
         print(f"{result.remaining} packets of the selection remain for other shards; "
               "the last shard to finish merges the results (or run the same command with --merge)", file=sys.stderr)

@@ -39,9 +39,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from setdiff_bench.devices import resolve_device
+    # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     from setdiff_bench.enhancers.setdiff import load_enhancer
     from setdiff_bench.errors import UsageError
+    from setdiff_bench.runtime.devices import resolve_device
     from setdiff_bench.serve.server import pid_line, serve_until_signalled, start_server
 
     for name in ("workers", "max_queue", "max_sessions", "max_cameras"):

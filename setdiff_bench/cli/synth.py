@@ -102,6 +102,7 @@ def make_scene(out: Path, preset_name: str, seed: int, index: int, count: int, *
 
     ``report(kind, index, done, total)`` receives render and fit progress (:class:`ProgressEvents`).
     """
+    # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     import shutil
     import time
 
@@ -170,10 +171,10 @@ def run(args: argparse.Namespace) -> int:
     import time
     from concurrent.futures import ProcessPoolExecutor
 
-    from setdiff_bench.devices import resolve_device
     from setdiff_bench.errors import UsageError
+    from setdiff_bench.runtime.devices import resolve_device
+    from setdiff_bench.runtime.threads import compute_threads
     from setdiff_bench.synthetic.presets import get_preset
-    from setdiff_bench.threads import compute_threads
 
     preset = get_preset(args.preset)
     count = preset.num_scenes if args.scenes is None else args.scenes

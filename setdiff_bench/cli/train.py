@@ -55,6 +55,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _autoencoder_defaults() -> dict[str, int | float]:
+    # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     from dataclasses import asdict
 
     from setdiff_bench.models.setdiff.autoencoder import AutoencoderTraining
@@ -79,10 +80,10 @@ def run_autoencoder(args: argparse.Namespace) -> int:
 
 def run(args: argparse.Namespace) -> int:
     from setdiff_bench.errors import UsageError
-    from setdiff_bench.interrupts import Interrupted, stop_at_safe_point
     from setdiff_bench.models.setdiff.config import load_config, with_overrides
     from setdiff_bench.models.setdiff.train import train
-    from setdiff_bench.packets import PacketStore
+    from setdiff_bench.packets.store import PacketStore
+    from setdiff_bench.runtime.interrupts import Interrupted, stop_at_safe_point
     from setdiff_bench.types import TrainingSample
 
     if args.model == "autoencoder":
@@ -126,8 +127,8 @@ def _on_cpu(device: str) -> bool:
     Raises:
         UsageError: a numbered GPU (``cuda:N``); choose GPUs with ``CUDA_VISIBLE_DEVICES`` or accelerate.
     """
-    from setdiff_bench.devices import resolve_device
     from setdiff_bench.errors import UsageError
+    from setdiff_bench.runtime.devices import resolve_device
 
     resolved = resolve_device(device)
     if resolved not in ("cpu", "cuda"):

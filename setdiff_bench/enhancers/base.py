@@ -32,8 +32,8 @@ from typing import Any, Protocol, runtime_checkable
 import torch
 
 from setdiff_bench.errors import UsageError
-from setdiff_bench.lazy import load_attribute
-from setdiff_bench.types import Packet
+from setdiff_bench.runtime.lazy import load_attribute
+from setdiff_bench.types import Packet, PacketKey
 
 ENTRY_POINT_GROUP = "setdiff_bench.enhancers"
 #: Command-line spelling of factory options whose flag differs from ``--<option-name>``.
@@ -60,13 +60,10 @@ class Enhancer(Protocol):
 
 
 @dataclass(frozen=True)
-class TargetRef:
-    """Where one target view comes from: enough to find a file produced for it by external code."""
+class TargetRef(PacketKey):
+    """Where one target view comes from: its packet's key and its frame, enough to find a file produced
+    for it by external code."""
 
-    dataset: str
-    protocol: str
-    group: str
-    scene: str
     frame: str
 
 

@@ -9,7 +9,7 @@ specific first, at::
     DIR/<scene>/S.<ext>
     DIR/S.<ext>
 
-(``<protocol>``, ``<group>``, ``<scene>`` as :func:`setdiff_bench.run_paths.safe_component` spells them:
+(``<protocol>``, ``<group>``, ``<scene>`` as :func:`setdiff_bench.evaluation.paths.safe_component` spells them:
 the names themselves unless they hold a path separator) with ``<ext>`` one of ``png``, ``jpg``, ``jpeg`` (case-insensitive on the suffix as written: ``.png``,
 ``.PNG``...).  The first level holding a file wins; two files for one frame at the same level (say
 ``S.png`` and ``S.jpg``) are an error.  Use the ``<group>`` levels when one frame is a target of several
@@ -31,9 +31,9 @@ import torch
 
 from setdiff_bench.enhancers.base import TargetRef
 from setdiff_bench.errors import ImageError, UsageError
+from setdiff_bench.evaluation.paths import IMAGES_DIR, MANIFEST_FILE, frame_relative, safe_component
 from setdiff_bench.io.images import read_rgb
-from setdiff_bench.run_paths import IMAGES_DIR, MANIFEST_FILE, frame_relative, safe_component
-from setdiff_bench.types import Packet
+from setdiff_bench.types import Packet, key_fields
 
 EXTENSIONS = (".png", ".jpg", ".jpeg")
 SHOW_MISSING = 10
@@ -59,7 +59,7 @@ class PrecomputedEnhancer:
         if not root.is_dir():
             raise UsageError("precomputed images folder not found", root)
         if (root / MANIFEST_FILE).is_file() and (root / IMAGES_DIR).is_dir():
-            root = root / "images"
+            root = root / IMAGES_DIR
         self.root = root.resolve()
         self.options = {"from": str(self.root)}
         self._listings: dict[Path, dict[str, list[Path]]] = {}
@@ -106,7 +106,7 @@ class PrecomputedEnhancer:
         """``(M, 3, H, W)`` float32 in [0, 1] read from disk, packet order."""
         images = []
         for frame in packet.targets.names:
-            ref = TargetRef(packet.dataset, packet.protocol, packet.group, packet.scene, frame)
+            ref = TargetRef(**key_fields(packet), frame=frame)
             path = self.locate(ref)
             if path is None:
                 self.check_targets([ref])

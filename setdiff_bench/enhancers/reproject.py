@@ -33,7 +33,13 @@ import torch.nn.functional as F
 
 from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import PacketError, UsageError
-from setdiff_bench.geometry import OVERLAP_ALPHA, OVERLAP_BETA, max_pairwise_distance, overlap_score_matrix
+from setdiff_bench.geometry import (
+    OVERLAP_ALPHA,
+    OVERLAP_BETA,
+    max_pairwise_distance,
+    overlap_score_matrix,
+    pixel_centers,
+)
 from setdiff_bench.types import Packet
 
 
@@ -99,8 +105,6 @@ def snap_to_rays(points: torch.Tensor, valid: torch.Tensor, cameras: tuple[Camer
         ``(V, 3, H, W)``: ``X' = Rᵀ(z · [x_n, y_n, 1] − t)`` with ``z`` the camera-frame depth of ``X`` and
         ``(x_n, y_n)`` the pixel centre's normalised coordinates (undistorted if the camera has distortion).
     """
-    from setdiff_bench.geometry import pixel_centers
-
     height, width = points.shape[-2:]
     snapped = torch.zeros_like(points)
     for v, camera in enumerate(cameras):

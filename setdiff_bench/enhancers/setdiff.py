@@ -12,8 +12,10 @@ from typing import Any
 
 import torch
 
-from setdiff_bench.devices import resolve_device
 from setdiff_bench.errors import UsageError
+from setdiff_bench.models.setdiff import inference  # module attribute: looked up per call (tests replace it)
+from setdiff_bench.models.setdiff.checkpoint import load_model, resolve_checkpoint
+from setdiff_bench.runtime.devices import resolve_device
 from setdiff_bench.types import Packet
 
 DTYPES = {"float32": torch.float32, "bfloat16": torch.bfloat16, "float16": torch.float16}
@@ -50,11 +52,9 @@ class ModelEnhancer:
 
     def enhance(self, packet: Packet) -> torch.Tensor:
         """``(M, 3, H, W)`` float32 images in [0, 1], packet order (H, W divisible by 8)."""
-        from setdiff_bench.models.setdiff.inference import enhance_packet
-
-        return enhance_packet(self.model, packet, guidance_scale=self.guidance_scale,
-                              sets_per_call=self.sets_per_call, max_references=self.max_references,
-                              targets_per_set=self.targets_per_set)
+        return inference.enhance_packet(self.model, packet, guidance_scale=self.guidance_scale,
+                                        sets_per_call=self.sets_per_call, max_references=self.max_references,
+                                        targets_per_set=self.targets_per_set)
 
 
 def load_enhancer(method: str, checkpoint: str | None, *, device: str | None = None, dtype: str | None = None,
@@ -71,8 +71,6 @@ def load_enhancer(method: str, checkpoint: str | None, *, device: str | None = N
         UsageError: no checkpoint given, or an unknown dtype.
         CheckpointError: the checkpoint is missing, broken, or was trained as another method.
     """
-    from setdiff_bench.models.setdiff.checkpoint import load_model, resolve_checkpoint
-
     if not checkpoint:
         raise UsageError(f"method {method!r} needs a trained model: pass --checkpoint CKPT "
                          "(train one with `setdiff-bench train`)", "--checkpoint")

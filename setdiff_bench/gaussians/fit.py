@@ -32,7 +32,6 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from setdiff_bench.devices import resolve_device
 from setdiff_bench.errors import CheckpointError, UsageError
 from setdiff_bench.gaussians.densify import DensificationStrategy, DensityStats
 from setdiff_bench.gaussians.fit_data import FitView
@@ -40,6 +39,7 @@ from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.gaussians.optim import GaussianParameters, exponential_lr
 from setdiff_bench.gaussians.render import render
 from setdiff_bench.io.atomic import atomic_path, sha256_file, write_text_atomic
+from setdiff_bench.runtime.devices import resolve_device
 
 CHECKPOINT_FORMAT = "setdiff-fit-checkpoint/1"
 STATE_TENSORS = "fit_state.safetensors"

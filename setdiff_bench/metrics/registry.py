@@ -7,7 +7,7 @@ Specs reference their function as ``"module:attr"`` so that listing metrics impo
 ``(V, 3, H, W)`` batches and return ``(V,)``; the sequence metric (warp error) is called as
 ``fn(frames, reference, mask, **kwargs)`` per sequence and returns a 0-dim tensor.  The profile metrics
 (EUVS's DINOv2 cosine and ``Final_Score``) are per-target values that ``setdiff-bench evaluate`` computes
-from DINOv2 features and the EUVS metrics (:mod:`setdiff_bench.profile_scoring`); ``run`` cannot select them.
+from DINOv2 features and the EUVS metrics (:mod:`setdiff_bench.evaluation.profile_scoring`); ``run`` cannot select them.
 
 Presets (the metric sets papers report; docs/metrics.md, "Presets"):
 
@@ -28,7 +28,7 @@ from typing import Any, Literal
 import torch
 
 from setdiff_bench.errors import UsageError
-from setdiff_bench.lazy import load_attribute
+from setdiff_bench.runtime.lazy import load_attribute
 
 
 @dataclass(frozen=True)

@@ -18,11 +18,11 @@ import numpy as np
 import torch
 from grpc_health.v1 import health_pb2, health_pb2_grpc
 
+from setdiff_bench.evaluation.stream import Views
 from setdiff_bench.serve import enhancer_pb2 as pb
 from setdiff_bench.serve import enhancer_pb2_grpc as pb_grpc
 from setdiff_bench.serve.server import MAX_MESSAGE_BYTES
 from setdiff_bench.serve.wire import from_array, to_view
-from setdiff_bench.stream import Views
 
 
 def _hwc(tensor: torch.Tensor) -> np.ndarray:
@@ -30,7 +30,7 @@ def _hwc(tensor: torch.Tensor) -> np.ndarray:
 
 
 def view_messages(views: Views) -> list[pb.View]:
-    """:class:`~setdiff_bench.stream.Views` → view messages (uint8 images stay bytes)."""
+    """:class:`~setdiff_bench.evaluation.stream.Views` → view messages (uint8 images stay bytes)."""
     names = list(views.names or (f"view{i}" for i in range(len(views.cameras))))
     messages = []
     for i, camera in enumerate(views.cameras):

@@ -1,4 +1,4 @@
-"""The gRPC enhancer server: sessions of :class:`~setdiff_bench.stream.StreamSession` behind ``enhancer.proto``.
+"""The gRPC enhancer server: sessions of :class:`~setdiff_bench.evaluation.stream.StreamSession` behind ``enhancer.proto``.
 
 Behaviour under bad input and load:
 
@@ -29,11 +29,11 @@ from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 
 from setdiff_bench import __version__
 from setdiff_bench.errors import SetDiffBenchError
+from setdiff_bench.evaluation.stream import StreamInputError, StreamSession
 from setdiff_bench.serve import enhancer_pb2 as pb
 from setdiff_bench.serve import enhancer_pb2_grpc as pb_grpc
 from setdiff_bench.serve.settings import ServeSettings
 from setdiff_bench.serve.wire import from_views, images_to_arrays
-from setdiff_bench.stream import StreamInputError, StreamSession
 
 #: The fully qualified service name (health checks may ask for it).
 SERVICE_NAME = pb.DESCRIPTOR.services_by_name["Enhancer"].full_name

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from setdiff_bench.stream import MAX_CAMERAS_PER_TICK
+from setdiff_bench.evaluation.stream import MAX_CAMERAS_PER_TICK
 
 DEFAULT_HOST = "127.0.0.1"
 
@@ -22,7 +22,7 @@ class ServeSettings:
         max_cameras: most frames one ``enhance`` may carry.
         grace: seconds in-flight RPCs get to finish on shutdown.
         cache_reference_latents: encode each session's references once (faster; outputs may then
-            differ from the batch runner's by one 8-bit level, see :class:`~setdiff_bench.stream.StreamSession`).
+            differ from the batch runner's by one 8-bit level, see :class:`~setdiff_bench.evaluation.stream.StreamSession`).
     """
 
     host: str = DEFAULT_HOST

@@ -1,6 +1,6 @@
 """Messages of ``enhancer.proto`` ↔ tensors and cameras, validating everything a client sends.
 
-Every problem raises :class:`~setdiff_bench.stream.StreamInputError` with a one-line message; the
+Every problem raises :class:`~setdiff_bench.evaluation.stream.StreamInputError` with a one-line message; the
 server answers it with ``INVALID_ARGUMENT``.
 """
 
@@ -13,8 +13,8 @@ import torch
 
 from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import SetDiffBenchError
+from setdiff_bench.evaluation.stream import StreamInputError, Views
 from setdiff_bench.serve import enhancer_pb2 as pb
-from setdiff_bench.stream import StreamInputError, Views
 
 #: dtype names on the wire → numpy dtypes (little endian).
 WIRE_DTYPES = {"uint8": np.dtype("uint8"), "float32": np.dtype("<f4")}
@@ -78,7 +78,7 @@ def to_view(name: str, rgb: np.ndarray, camera: Camera, cmap: np.ndarray | None 
 
 
 def from_views(messages: Sequence[pb.View], role: str) -> Views:
-    """View messages → :class:`~setdiff_bench.stream.Views` (C-maps all given or all absent)."""
+    """View messages → :class:`~setdiff_bench.evaluation.stream.Views` (C-maps all given or all absent)."""
     if not messages:
         raise StreamInputError(f"{role}: no views", role)
     images, cameras, cmaps, alphas = [], [], [], []

@@ -21,6 +21,12 @@ import numpy as np
 import torch
 
 from setdiff_bench.errors import DatasetError
+from setdiff_bench.gaussians.ply import read_ply
+from setdiff_bench.gaussians.render import render
+from setdiff_bench.io.atomic import atomic_path, write_text_atomic
+from setdiff_bench.io.images import read_mask, read_rgb, to_tensor_chw
+from setdiff_bench.loaders import load_scenes
+from setdiff_bench.metrics.psnr import psnr
 from setdiff_bench.types import Frame, Scene
 
 GROUPS: dict[str, Callable[[Frame], bool]] = {
@@ -40,10 +46,6 @@ def fit_ply(scene: Scene) -> Path:
 
 def render_frames(scene: Scene, frames: Sequence[Frame]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """``(pred, target, mask)`` of ``frames``: ``(V, 3, H, W)``, ``(V, 3, H, W)``, ``(V, 1, H, W)`` bool."""
-    from setdiff_bench.gaussians.ply import read_ply
-    from setdiff_bench.gaussians.render import render
-    from setdiff_bench.io.images import read_mask, read_rgb, to_tensor_chw
-
     model = read_ply(fit_ply(scene))
     preds, targets, masks = [], [], []
     for frame in frames:
@@ -57,8 +59,6 @@ def render_frames(scene: Scene, frames: Sequence[Frame]) -> tuple[torch.Tensor, 
 
 def evaluate_scene(scene: Scene) -> dict[str, float]:
     """Mean masked PSNR (dB) per group of one scene."""
-    from setdiff_bench.metrics.psnr import psnr
-
     out = {}
     for group, rule in GROUPS.items():
         frames = [f for f in scene.frames if rule(f)]
@@ -78,9 +78,6 @@ def grid_image(scene: Scene, out_path: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from setdiff_bench.io.atomic import atomic_path
-    from setdiff_bench.metrics.psnr import psnr
 
     indices = sorted({int(f.metadata.get("index", 0)) for f in scene.frames})
     middle = indices[len(indices) // 2]
@@ -140,8 +137,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--command", default=None, help="the command line to record in the report")
     parser.add_argument("--note", action="append", default=[], help="extra line for the report")
     args = parser.parse_args(argv)
-    from setdiff_bench.io.atomic import write_text_atomic
-    from setdiff_bench.loaders import load_scenes
 
     scenes = load_scenes("synthetic", args.root)
     missing = [s.name for s in scenes if not fit_ply(s).is_file()]

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 
 from setdiff_bench.cli.main import build_parser
-from setdiff_bench.devices import resolve_device
+from setdiff_bench.runtime.devices import resolve_device
 
 # Each verb with its required arguments (parsed only; nothing runs), and whether it draws progress bars.
 VERBS = {

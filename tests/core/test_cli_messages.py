@@ -9,8 +9,8 @@ import pandas as pd
 import pytest
 
 from setdiff_bench.cli.main import main
-from setdiff_bench.leaderboard import build_leaderboard
 from setdiff_bench.loaders import DATASETS
+from setdiff_bench.reporting.leaderboard import build_leaderboard
 
 
 def test_help_keeps_examples_on_their_own_lines(capsys: pytest.CaptureFixture[str]) -> None:

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 import torch
 
-from setdiff_bench.devices import resolve_device
 from setdiff_bench.errors import UsageError
+from setdiff_bench.runtime.devices import resolve_device
 
 needs_no_cuda = pytest.mark.skipif(torch.cuda.is_available(), reason="checks the CPU-only answers")
 

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from setdiff_bench.evaluation.paths import METRICS_FILE
 from setdiff_bench.io.atomic import atomic_path, current_umask, staging_dir, write_text_atomic
 from setdiff_bench.io.images import write_exr, write_png
 
@@ -64,7 +65,7 @@ def test_stale_temporaries_are_those_of_dead_writers_or_old_foreign_ones(tmp_pat
 
     from setdiff_bench.io.atomic import STALE_TEMPORARY_SECONDS, atomic_path, is_stale_temporary, writer_tag
 
-    with atomic_path(tmp_path / "metrics.parquet") as tmp:  # this process's write in progress
+    with atomic_path(tmp_path / METRICS_FILE) as tmp:  # this process's write in progress
         assert writer_tag() in tmp.name and not is_stale_temporary(tmp)
     gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True,
                           check=True)

@@ -7,7 +7,7 @@ import signal
 
 import pytest
 
-from setdiff_bench.interrupts import STOP_SIGNALS, stop_at_safe_point, stop_requested
+from setdiff_bench.runtime.interrupts import STOP_SIGNALS, stop_at_safe_point, stop_requested
 
 
 @pytest.mark.parametrize("signum", STOP_SIGNALS)

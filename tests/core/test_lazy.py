@@ -7,7 +7,7 @@ import os.path
 import pytest
 
 from setdiff_bench.errors import DatasetError, UsageError
-from setdiff_bench.lazy import load_attribute
+from setdiff_bench.runtime.lazy import load_attribute
 
 
 def test_good_reference_loads_the_named_object() -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from setdiff_bench.errors import UsageError
-from setdiff_bench.shards import Shard
+from setdiff_bench.packets.shards import Shard
 
 
 def test_parse_and_select() -> None:
@@ -24,7 +24,8 @@ def test_bad_shard_is_one_line_usage_error(text: str) -> None:
 
 
 def test_prepare_and_run_share_the_parser() -> None:
-    from setdiff_bench import prepare, run
+    from setdiff_bench.evaluation import run
+    from setdiff_bench.packets import prepare
 
     assert run.Shard is Shard and prepare.Shard is Shard
     assert not hasattr(prepare, "parse_shard")

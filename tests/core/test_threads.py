@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from setdiff_bench.errors import UsageError
-from setdiff_bench.threads import compute_threads, torch_threads, verb_threads
+from setdiff_bench.runtime.threads import compute_threads, torch_threads, verb_threads
 
 
 def test_count_inside_and_restored_after_an_exception() -> None:

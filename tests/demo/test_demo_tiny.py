@@ -12,9 +12,11 @@ import pandas as pd
 import pytest
 
 from setdiff_bench.cli.main import main
-from setdiff_bench.demo import METHODS
+from setdiff_bench.evaluation.paths import ENHANCER_FILE, FRAGMENTS_DIR, MANIFEST_FILE, METRICS_FILE, RUN_FILE
 from setdiff_bench.io.images import read_image_raw
-from setdiff_bench.threads import compute_threads
+from setdiff_bench.pipeline.demo import METHODS, SUMMARY_FILE
+from setdiff_bench.pipeline.stages import LEDGER_FILE
+from setdiff_bench.runtime.threads import compute_threads
 
 
 def run_tiny_demo(folder: Path, omp_threads: str, *extra: str) -> Path:
@@ -54,8 +56,8 @@ def shipped_demo_out(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 #: Files that record wall times or absolute paths, never results (compared without those fields below).
-TIMED_OR_LOCAL = {"demo.json", "README.md", "stages.json", "train_log.jsonl", "run.json",
-                  "manifest.json", "enhancer.json", ".index.lock"}
+TIMED_OR_LOCAL = {SUMMARY_FILE, "README.md", LEDGER_FILE, "train_log.jsonl", RUN_FILE,
+                  MANIFEST_FILE, ENHANCER_FILE, ".index.lock"}
 
 
 def test_same_command_gives_byte_identical_results(demo_out: Path, second_demo_out: Path) -> None:
@@ -69,7 +71,7 @@ def test_same_command_gives_byte_identical_results(demo_out: Path, second_demo_o
         first, second = demo_out / relative, second_demo_out / relative
         if relative.name in TIMED_OR_LOCAL:
             continue
-        if relative.name == "metrics.parquet" or "fragments" in relative.parts:
+        if relative.name == METRICS_FILE or FRAGMENTS_DIR in relative.parts:
             a, b = pd.read_parquet(first).drop(columns="ms_per_frame"), pd.read_parquet(second).drop(columns="ms_per_frame")
             pd.testing.assert_frame_equal(a, b, check_exact=True)
         else:
@@ -79,7 +81,7 @@ def test_same_command_gives_byte_identical_results(demo_out: Path, second_demo_o
     assert {"work/scenes", "work/packets", "work/checkpoints", "work/runs", "synthetic.md", "synthetic.parquet",
             "synthetic_grid.png", "synthetic_lane_shift.png"} <= groups
     assert compared > 300
-    summaries = [json.loads((out / "demo.json").read_text()) for out in (demo_out, second_demo_out)]
+    summaries = [json.loads((out / SUMMARY_FILE).read_text()) for out in (demo_out, second_demo_out)]
     assert summaries[0]["provenance"]["torch_threads"] == summaries[1]["provenance"]["torch_threads"] == compute_threads()
     assert summaries[0]["files"] == summaries[1]["files"] | {"README.md": summaries[0]["files"]["README.md"]}
 
@@ -110,7 +112,7 @@ def test_demo_writes_leaderboard_with_every_method_and_group(demo_out: Path) -> 
 
 
 def test_demo_summary_records_commands_and_verdict(demo_out: Path) -> None:
-    summary = json.loads((demo_out / "demo.json").read_text())
+    summary = json.loads((demo_out / SUMMARY_FILE).read_text())
     names = [stage["name"] for stage in summary["stages"]]
     assert names[:2] == ["synth", "prepare"]
     assert {"train setdiff", "train difix", "leaderboard"} <= set(names)
@@ -129,7 +131,7 @@ def test_demo_per_target_metrics_and_images(demo_out: Path) -> None:
     runs = demo_out / "work" / "runs"
     counts = set()
     for method in METHODS:
-        frame = pd.read_parquet(runs / method / "metrics.parquet")
+        frame = pd.read_parquet(runs / method / METRICS_FILE)
         assert {"dataset", "protocol", "group", "split", "scene", "frame", "method", "psnr", "ssim", "lpips"} <= set(
             frame.columns)
         assert (frame["split"] == "test").all() and (frame["method"] == method).all()
@@ -142,7 +144,7 @@ def test_demo_per_target_metrics_and_images(demo_out: Path) -> None:
 
 
 def test_shipped_demo_evaluates_the_packaged_models_on_test_scenes_only(shipped_demo_out: Path) -> None:
-    summary = json.loads((shipped_demo_out / "demo.json").read_text())
+    summary = json.loads((shipped_demo_out / SUMMARY_FILE).read_text())
     names = [stage["name"] for stage in summary["stages"]]
     assert names == ["synth", "prepare", *(f"run {m}" for m in METHODS), "leaderboard"]
     commands = {stage["name"]: stage["command"] for stage in summary["stages"]}

@@ -12,12 +12,13 @@ from pathlib import Path
 
 import pytest
 
-import setdiff_bench.stages as stages
+import setdiff_bench.pipeline.stages as stages
 from setdiff_bench.cli.main import main
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.atomic import sha256_file
-from setdiff_bench.publish import PROVENANCE_FILE, publish
-from setdiff_bench.stages import Pipeline, StageFailed
+from setdiff_bench.pipeline.demo import SUMMARY_FILE
+from setdiff_bench.pipeline.stages import LEDGER_FILE, Pipeline, StageFailed
+from setdiff_bench.reporting.publish import PROVENANCE_FILE, publish
 
 REVISION = "0123456789abcdef0123456789abcdef01234567"
 
@@ -32,7 +33,7 @@ def make_run(run: Path, *, dirty: bool = False) -> None:
     files = {p.name: sha256_file(p) for p in run.iterdir() if p.is_file()}
     summary = {"invocation": "setdiff-bench demo --preset tiny --out runs/demo --seed 0", "files": files,
                "provenance": {"git": {"revision": REVISION, "dirty": dirty}, "seed": 0, "torch_threads": 2}}
-    (run / "demo.json").write_text(json.dumps(summary))
+    (run / SUMMARY_FILE).write_text(json.dumps(summary))
 
 
 @pytest.fixture
@@ -53,7 +54,7 @@ def test_publish_replaces_the_whole_folder_with_provenance(tmp_path: Path, umask
     (run / "diagnosis.md").write_text("an analysis written into the run folder\n")
     assert main(["publish", "--run", str(run), "--to", str(published)]) == 0
     names = sorted(p.name for p in published.iterdir())
-    assert names == ["README.md", "demo.json", "diagnosis.md", PROVENANCE_FILE, "synthetic.md", "synthetic.parquet"]
+    assert names == ["README.md", SUMMARY_FILE, "diagnosis.md", PROVENANCE_FILE, "synthetic.md", "synthetic.parquet"]
     assert (published / "synthetic.md").read_text() == "| method | PSNR |\n"
     provenance = json.loads((published / PROVENANCE_FILE).read_text())
     assert provenance["git"]["revision"] == REVISION and provenance["seed"] == 0
@@ -92,7 +93,7 @@ def test_publish_refuses_what_it_cannot_vouch_for(tmp_path: Path) -> None:
 
 
 def test_demo_default_output_is_git_ignored() -> None:
-    from setdiff_bench.demo import DEFAULT_OUT
+    from setdiff_bench.pipeline.demo import DEFAULT_OUT
 
     root = Path(__file__).resolve().parents[2]
     if not (root / ".git").exists():
@@ -112,7 +113,7 @@ def test_stage_ledger_keeps_original_and_interrupted_times(tmp_path: Path, monke
     codes = iter([0, 0, 1, 0, 0])
     monkeypatch.setattr(stages.time, "perf_counter", lambda: next(clock))
     monkeypatch.setattr(stages.subprocess, "run", lambda *a, **k: FakeProcess(next(codes)))
-    ledger = tmp_path / "work" / "stages.json"
+    ledger = tmp_path / "work" / LEDGER_FILE
     first = Pipeline(cwd=tmp_path, quiet=True, ledger=ledger).run("synth", ["synth", "--out", "s"])
     assert (first.seconds, first.resumed) == (100.0, False)
     again = Pipeline(cwd=tmp_path, quiet=True, ledger=ledger).run("synth", ["synth", "--out", "s"])

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from setdiff_bench.run import RunSettings, run_method
-from setdiff_bench.threads import torch_threads
+from setdiff_bench.evaluation.run import RunSettings, run_method
+from setdiff_bench.runtime.threads import torch_threads
 from tests.run.store_fixtures import StoreSpec, build_store
 
 

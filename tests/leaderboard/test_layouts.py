@@ -6,8 +6,8 @@ protocol files declared them, so the tables keep their blocks, captions and repo
 
 from __future__ import annotations
 
-from setdiff_bench.leaderboard import ALL, Block, Layout, dataset_layout, reported_for
 from setdiff_bench.protocols import load_protocol
+from setdiff_bench.reporting.leaderboard import ALL, Block, Layout, dataset_layout, reported_for
 
 
 def test_euvs_layout_is_the_papers_table_1():

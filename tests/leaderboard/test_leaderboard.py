@@ -12,7 +12,9 @@ import pandas as pd
 import pytest
 
 from setdiff_bench.cli.main import main
-from setdiff_bench.leaderboard import (
+from setdiff_bench.evaluation.run import RunSettings, run_method
+from setdiff_bench.packets.shards import Shard
+from setdiff_bench.reporting.leaderboard import (
     Block,
     Layout,
     LeaderboardError,
@@ -26,7 +28,6 @@ from setdiff_bench.leaderboard import (
     to_frame,
     write_leaderboard,
 )
-from setdiff_bench.run import RunSettings, Shard, run_method
 
 
 def images(method: str, group: str, values: list[tuple[float, float, float]], *, dataset: str = "synthetic",

@@ -6,9 +6,9 @@ from __future__ import annotations
 import pandas as pd
 import pytest
 
-from setdiff_bench import ablation
 from setdiff_bench.errors import UsageError
-from setdiff_bench.leaderboard import build_leaderboard, render_latex, render_markdown
+from setdiff_bench.reporting import ablation
+from setdiff_bench.reporting.leaderboard import build_leaderboard, render_latex, render_markdown
 
 # Pooled means per geometry variant: PSNR of "Camera poses" and "Both" tie at two decimals, LPIPS at three.
 GEOMETRY = {

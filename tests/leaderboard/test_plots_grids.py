@@ -10,9 +10,10 @@ import pandas as pd
 import pytest
 
 from setdiff_bench.errors import UsageError
-from setdiff_bench.grids import BAND, GAP, GridFrame, pick_frames, qualitative_grid
-from setdiff_bench.packets import PacketStore
-from setdiff_bench.plots import (
+from setdiff_bench.evaluation.paths import METRICS_FILE
+from setdiff_bench.packets.store import PacketStore
+from setdiff_bench.reporting.grids import BAND, GAP, GridFrame, pick_frames, qualitative_grid
+from setdiff_bench.reporting.plots import (
     error_bar_caption,
     group_summary,
     lane_shift,
@@ -84,7 +85,7 @@ def test_grid_layout_and_cells(lb_store: Path, lb_runs: Path, tmp_path: Path) ->
         top = BAND + r * (cell_h + BAND + GAP)
         record = rows.loc[(frame.packet_id, frame.view)]
         for c, source in enumerate((lb_runs / "identity" /
-                                    pd.read_parquet(lb_runs / "identity" / "metrics.parquet")
+                                    pd.read_parquet(lb_runs / "identity" / METRICS_FILE)
                                     .set_index(["packet_id", "view"]).loc[(frame.packet_id, frame.view), "image"],
                                     None, lb_store / record["gt"])):
             if source is None:

@@ -13,7 +13,7 @@ from importlib import resources
 
 import pytest
 
-from setdiff_bench.leaderboard import load_reported
+from setdiff_bench.reporting.leaderboard import load_reported
 
 # table id -> (setting labels in column order, metrics per setting, rows "Method | v v v ...")
 PAPER: dict[str, tuple[list[str], list[str], str]] = {

@@ -19,6 +19,6 @@ def test_zero_padding_ties_break_on_the_text() -> None:
 
 
 def test_leaderboard_and_grids_use_the_loaders_key() -> None:
-    from setdiff_bench import grids, leaderboard
+    from setdiff_bench.reporting import grids, leaderboard
 
     assert leaderboard.natural_key is natural_key and grids.natural_key is natural_key

@@ -14,6 +14,7 @@ import pytest
 
 from setdiff_bench.cli.main import main
 from setdiff_bench.models.setdiff.checkpoint import read_config, resolve_checkpoint
+from setdiff_bench.models.setdiff.manifest import MANIFEST_FILE
 from tests.models.setdiff_fixtures import TINY_SETDIFF_MODEL_TOML, make_sample
 
 CONFIG = TINY_SETDIFF_MODEL_TOML + """
@@ -62,9 +63,9 @@ class FakeStore:
 
 @pytest.fixture
 def fake_store(monkeypatch: pytest.MonkeyPatch) -> type[FakeStore]:
-    module = types.ModuleType("setdiff_bench.packets")
+    module = types.ModuleType("setdiff_bench.packets.store")
     module.PacketStore = FakeStore  # type: ignore[attr-defined]
-    monkeypatch.setitem(sys.modules, "setdiff_bench.packets", module)
+    monkeypatch.setitem(sys.modules, "setdiff_bench.packets.store", module)
     FakeStore.calls = []
     return FakeStore
 
@@ -86,7 +87,7 @@ def test_train_verb(tmp_path: Path, fake_store: type[FakeStore], capsys: pytest.
     assert main(["train", "--config", str(config), "--packets", "p", "--out", str(out), "--no-progress",
                  "--steps", "3"]) == 0
     assert resolve_checkpoint(out).name == "step-00000003"
-    manifest = json.loads((out / "manifest.json").read_text())
+    manifest = json.loads((out / MANIFEST_FILE).read_text())
     assert [(s["start_step"], s["end_step"]) for s in manifest["sessions"]] == [(0, 2), (2, 3)]
     assert manifest["sessions"][1]["command"].startswith("setdiff-bench train --config")
     assert manifest["steps"] == 3 and manifest["seed"] == 0 and manifest["method"] == "setdiff"

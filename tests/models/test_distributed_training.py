@@ -24,6 +24,7 @@ import torch
 from safetensors.torch import load_file
 
 from setdiff_bench.models.setdiff.checkpoint import WEIGHTS_FILE, resolve_checkpoint
+from setdiff_bench.models.setdiff.manifest import MANIFEST_FILE
 from setdiff_bench.models.setdiff.train import LOG_FILE, SAMPLES_FILE, VALIDATION_FILE
 from tests.models.setdiff_fixtures import TINY_SETDIFF_MODEL_TOML
 from tests.run.store_fixtures import StoreSpec, build_store
@@ -141,7 +142,7 @@ def test_only_the_main_process_writes(runs: dict[str, Path]) -> None:
     listing = sorted(str(p.relative_to(two)) for p in two.rglob("*"))
     assert listing == sorted(str(p.relative_to(one)) for p in one.rglob("*"))
     assert len(records(two / LOG_FILE)) == STEPS  # one line per step, not one per rank
-    manifest = json.loads((two / "manifest.json").read_text())
+    manifest = json.loads((two / MANIFEST_FILE).read_text())
     assert len(manifest["sessions"]) == 1 and manifest["sessions"][0]["end_step"] == STEPS
 
 
@@ -151,5 +152,5 @@ def test_a_killed_run_resumes_the_sample_sequence_where_it_stopped(runs: dict[st
     assert [r["step"] for r in records(killed / LOG_FILE)] == list(range(1, STEPS + 1))
     for key, value in final_weights(killed).items():
         torch.testing.assert_close(value, final_weights(two)[key], rtol=1e-4, atol=1e-5, msg=key)
-    sessions = json.loads((killed / "manifest.json").read_text())["sessions"]
+    sessions = json.loads((killed / MANIFEST_FILE).read_text())["sessions"]
     assert sessions[-1]["end_step"] == STEPS and sessions[-1]["start_step"] > 0

@@ -12,7 +12,6 @@ import pytest
 import torch
 
 from setdiff_bench.cli.main import main
-from setdiff_bench.demo import DEMO_PRESETS, SHIPPED_MODELS, check_unseen, evaluation_scene_indices
 from setdiff_bench.errors import CheckpointError, UsageError
 from setdiff_bench.models.setdiff.checkpoint import (
     load_model,
@@ -22,8 +21,13 @@ from setdiff_bench.models.setdiff.checkpoint import (
     step_folder,
 )
 from setdiff_bench.models.setdiff.inference import enhance_packet
-from setdiff_bench.models.setdiff.manifest import record_training_session, synthetic_scene_seeds
+from setdiff_bench.models.setdiff.manifest import (
+    MANIFEST_FILE,
+    record_training_session,
+    synthetic_scene_seeds,
+)
 from setdiff_bench.models.setdiff.packaged import packaged_models, packaged_root, verify
+from setdiff_bench.pipeline.demo import DEMO_PRESETS, SHIPPED_MODELS, check_unseen, evaluation_scene_indices
 from tests.models.setdiff_fixtures import make_packet
 from tests.models.test_checkpoint import perturbed_model
 
@@ -34,7 +38,7 @@ def test_every_shipped_model_matches_its_manifest_hashes() -> None:
     assert "tiny_autoencoder" in SHIPPED
     for model in SHIPPED.values():
         files = model.manifest["files"]
-        assert set(files) == {p.name for p in model.folder.iterdir() if p.is_file()} - {"manifest.json"}
+        assert set(files) == {p.name for p in model.folder.iterdir() if p.is_file()} - {MANIFEST_FILE}
         for name, expected in files.items():  # hashed here with hashlib, independently of verify()
             assert hashlib.sha256((model.folder / name).read_bytes()).hexdigest() == expected, (model.name, name)
         assert verify(model) == []
@@ -94,7 +98,7 @@ def test_export_then_verify_and_load(tmp_path: Path, capsys: pytest.CaptureFixtu
     run = _training_run(tmp_path / "run", steps=2, finished=2)
     assert main(["weights", "export", str(run), "--name", "my_setdiff", "--to", str(tmp_path / "shipped")]) == 0
     folder = tmp_path / "shipped" / "my_setdiff"
-    assert sorted(p.name for p in folder.iterdir()) == ["config.json", "manifest.json", "model.safetensors"]
+    assert sorted(p.name for p in folder.iterdir()) == ["config.json", MANIFEST_FILE, "model.safetensors"]
     exported = packaged_models(tmp_path / "shipped")["my_setdiff"]
     assert exported.kind == "enhancer" and verify(exported) == []
     assert exported.manifest["export"]["checkpoint_step"] == 2 and exported.manifest["validation"] == {"psnr": 20.0}
@@ -135,9 +139,9 @@ def test_unknown_checkpoint_names_the_shipped_models(tmp_path: Path) -> None:
 
 def test_training_manifest_refuses_other_data(tmp_path: Path) -> None:
     run = _training_run(tmp_path / "run", steps=2, finished=2)
-    manifest = json.loads((run / "manifest.json").read_text())
+    manifest = json.loads((run / MANIFEST_FILE).read_text())
     other = {**manifest["data"], "data_sha256": "1" * 64}
     with pytest.raises(CheckpointError, match="other data"):
         record_training_session(run, command="c", method="setdiff", config_name="c", seed=0, steps=2, start_step=2,
                                 end_step=2, wall_seconds=0.0, data=other, validation=None)
-    assert pd.Series([s["end_step"] for s in json.loads((run / "manifest.json").read_text())["sessions"]]).tolist() == [2]
+    assert pd.Series([s["end_step"] for s in json.loads((run / MANIFEST_FILE).read_text())["sessions"]]).tolist() == [2]

@@ -11,8 +11,8 @@ from setdiff_bench.cli.main import main
 from setdiff_bench.enhancers.base import create_enhancer
 from setdiff_bench.models.setdiff.checkpoint import resolve_checkpoint
 from setdiff_bench.models.setdiff.inputs import training_set
-from setdiff_bench.packet_index import merge_index
-from setdiff_bench.packets import PacketHeader, PacketStore, ViewContent, write_packet
+from setdiff_bench.packets.index import merge_index
+from setdiff_bench.packets.store import PacketHeader, PacketStore, ViewContent, write_packet
 from setdiff_bench.types import ViewSet
 from tests.models.setdiff_fixtures import make_sample
 

@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from setdiff_bench.packets import PacketStore
-from setdiff_bench.prepare import PrepareSummary, prepare
-from setdiff_bench.threads import torch_threads
+from setdiff_bench.packets.prepare import PrepareSummary, prepare
+from setdiff_bench.packets.store import PacketStore
+from setdiff_bench.runtime.threads import torch_threads
 from tests.packets.packet_fixtures import StreetScene, write_dataset
 
 

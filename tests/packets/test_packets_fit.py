@@ -9,8 +9,8 @@ import sys
 import pytest
 
 from setdiff_bench.gaussians.ply import read_ply
-from setdiff_bench.packets import PacketStore
-from setdiff_bench.prepare import prepare
+from setdiff_bench.packets.prepare import prepare
+from setdiff_bench.packets.store import PacketStore
 
 
 def test_fit_mode_trains_once_and_reuses_the_fit(street, tmp_path):

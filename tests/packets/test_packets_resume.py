@@ -13,9 +13,9 @@ from pathlib import Path
 
 import pytest
 
-from setdiff_bench.packet_index import PACKETS_DIR
-from setdiff_bench.prepare import prepare
-from setdiff_bench.shards import Shard
+from setdiff_bench.packets.index import INDEX_FILE, PACKETS_DIR
+from setdiff_bench.packets.prepare import prepare
+from setdiff_bench.packets.shards import Shard
 from tests.packets.packet_fixtures import tree_bytes
 
 
@@ -67,7 +67,7 @@ def test_sigkill_twice_then_restart_is_byte_identical(prepared, street, tmp_path
     rng = random.Random(20240611)
     _kill_after_progress(_cli(root, out), out, 1, rng)
     done = complete_packets(out)
-    assert 1 <= done < 17 and not (out / "index.parquet").exists()
+    assert 1 <= done < 17 and not (out / INDEX_FILE).exists()
     _kill_after_progress(_cli(root, out, "--workers", "2"), out, done + 2, rng)
     assert complete_packets(out) < 17
     final = _cli(root, out)

@@ -12,8 +12,8 @@ from scipy.spatial.distance import pdist
 
 from setdiff_bench.cli.main import main
 from setdiff_bench.errors import PacketError
-from setdiff_bench.packet_index import SCHEMA
-from setdiff_bench.packets import PacketStore
+from setdiff_bench.packets.index import INDEX_FILE, SCHEMA
+from setdiff_bench.packets.store import PacketStore
 
 
 def test_index_columns_and_exr_format(prepared):
@@ -118,7 +118,7 @@ def test_cli_errors_are_one_line(street, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1
     assert str(empty / "street_00" / "lane0.ply") in err and "missing 3DGS fit" in err
-    assert not (tmp_path / "o" / "index.parquet").exists()
+    assert not (tmp_path / "o" / INDEX_FILE).exists()
 
     code = main(["prepare", "synthetic", "--root", str(root), "--fits", str(root), "--out", str(tmp_path / "o"),
                  "--protocol", "euvs"])
@@ -144,7 +144,7 @@ def test_cli_errors_are_one_line(street, tmp_path, capsys):
 
 
 def test_half_precision_cmaps_are_smaller_and_close(prepared, street, tmp_path):
-    from setdiff_bench.prepare import prepare
+    from setdiff_bench.packets.prepare import prepare
 
     root, _ = street
     _, _, full = prepared

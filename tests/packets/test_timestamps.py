@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pandas as pd
 
-from setdiff_bench.packets import timestamp_or_none
+from setdiff_bench.packets.store import timestamp_or_none
 
 
 def test_missing_is_none_else_int() -> None:
@@ -19,7 +19,7 @@ def test_missing_is_none_else_int() -> None:
 
 
 def test_run_uses_the_same_function() -> None:
-    from setdiff_bench import run
+    from setdiff_bench.evaluation import run
 
     assert run.timestamp_or_none is timestamp_or_none
     assert not hasattr(run, "_timestamp")

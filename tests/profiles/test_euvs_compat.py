@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from setdiff_bench.euvs_compat import (
+from setdiff_bench.evaluation.euvs_compat import (
     compat_report,
     digits_key,
     mask_name_disagreements,

@@ -7,8 +7,8 @@ import pandas as pd
 import pytest
 
 from setdiff_bench.errors import UsageError
-from setdiff_bench.profile_scoring import profile_pair
-from setdiff_bench.profiles import (
+from setdiff_bench.evaluation.profile_scoring import profile_pair
+from setdiff_bench.evaluation.profiles import (
     PROFILES,
     aggregate,
     centre_crop_box,
@@ -95,7 +95,7 @@ def test_euvs_pair_is_scored_at_1600x900_and_dl3dv_pair_at_960x512():
 
 
 def test_leaderboard_of_euvs_official_uses_every_scene_scene_means_and_its_metrics():
-    from setdiff_bench.leaderboard import build_leaderboard, render_markdown
+    from setdiff_bench.reporting.leaderboard import build_leaderboard, render_markdown
 
     # level1: scene A (test split) images 10 and 20 dB, scene B (train split) one image 40 dB
     frame = pd.DataFrame({

@@ -28,7 +28,7 @@ import torch
 from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.gaussians.ply import write_ply
 from setdiff_bench.io.images import write_exr
-from setdiff_bench.packet_index import INDEX_FILE
+from setdiff_bench.packets.index import INDEX_FILE
 from tests.loaders.loader_fixtures import (
     build_nuscenes,
     intrinsics,
@@ -782,7 +782,7 @@ def _(tmp: Path, world: World) -> Call:
 @case("run-folder-other-settings", "cli", "`run --out` folder holding a run of another method", "UsageError",
       "holds a run with other settings (method differ)")
 def _(tmp: Path, world: World) -> Call:
-    from setdiff_bench.run import RunSettings, run_method
+    from setdiff_bench.evaluation.run import RunSettings, run_method
 
     run_method(world.store, tmp / "out", RunSettings("identity", metrics=("psnr",), device="cpu",
                                                     warp_cache=None), progress=False)

@@ -10,7 +10,7 @@ fresh folder.  The default run kills each command twice, the slow suite ten time
 
 Byte identity: the whole packet store (every packet file, fragment, ``index.parquet``), and for ``run``
 every enhanced PNG, ``run.json``, ``enhancer.json``, the fragments and ``metrics.parquet`` without their
-timing column (:func:`setdiff_bench.run.comparable_metrics`), and ``manifest.json`` without its ``timing``
+timing column (:func:`setdiff_bench.evaluation.run.comparable_metrics`), and ``manifest.json`` without its ``timing``
 block, the fragment digest (fragments hold timing) and the git block (other helpers commit meanwhile).  No temporary file may be left behind.
 """
 
@@ -30,9 +30,11 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from setdiff_bench.prepare import prepare
-from setdiff_bench.run import RunSettings, comparable_metrics, run_method
-from setdiff_bench.threads import torch_threads
+from setdiff_bench.evaluation.paths import ENHANCER_FILE, FRAGMENTS_DIR, MANIFEST_FILE, METRICS_FILE, RUN_FILE
+from setdiff_bench.evaluation.run import RunSettings, comparable_metrics, run_method
+from setdiff_bench.packets.index import PACKETS_DIR
+from setdiff_bench.packets.prepare import prepare
+from setdiff_bench.runtime.threads import torch_threads
 from tests.packets.packet_fixtures import tree_bytes
 from tests.reliability.world import World, tree_state
 from tests.run.store_fixtures import StoreSpec, build_store, files_of
@@ -118,7 +120,7 @@ def prepared_reference(world: World, tmp_path_factory: pytest.TempPathFactory) -
 
 def prepare_crashes(world: World, reference: Path, seconds: float, tmp_path: Path, kills: int, seed: int) -> CrashLog:
     expected = tree_bytes(reference)
-    total = sum(1 for p in (reference / "packets").iterdir())
+    total = sum(1 for p in (reference / PACKETS_DIR).iterdir())
 
     def command(folder: Path, attempt: int) -> list[str]:
         workers = ["--workers", "2"] if attempt % 3 == 2 else []  # now and then, killed with its worker processes
@@ -150,7 +152,7 @@ def test_prepare_killed_ten_times_resumes_byte_identical(world: World, prepared_
     reference, seconds = prepared_reference
     log = prepare_crashes(world, reference, seconds, tmp_path, kills=10, seed=2)
     print(f"prepare: window {seconds:.2f} s, (s after work began, packets complete) per kill: {log.kills}")
-    total = sum(1 for _ in (reference / "packets").iterdir())
+    total = sum(1 for _ in (reference / PACKETS_DIR).iterdir())
     assert len(log.kills) == 10 and log.mid_work(total) >= 3, log
 
 
@@ -168,20 +170,20 @@ def run_reference(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path,
 
 
 def comparable_manifest(folder: Path) -> dict:
-    manifest = json.loads((folder / "manifest.json").read_text())
+    manifest = json.loads((folder / MANIFEST_FILE).read_text())
     for key in ("timing", "fragments_sha256", "git"):  # git: other helpers commit to this tree meanwhile
         manifest.pop(key)
     return manifest
 
 
 def comparable_fragments(folder: Path) -> dict[str, pd.DataFrame]:
-    return {p.name: comparable_metrics(p) for p in sorted((folder / "fragments").glob("*.parquet"))}
+    return {p.name: comparable_metrics(p) for p in sorted((folder / FRAGMENTS_DIR).glob("*.parquet"))}
 
 
 def run_crashes(store: Path, reference: Path, seconds: float, tmp_path: Path, kills: int, seed: int) -> CrashLog:
     expected_images = files_of(reference)
-    expected_files = files_of(reference, ("run.json", "enhancer.json"))
-    expected_metrics = comparable_metrics(reference / "metrics.parquet")
+    expected_files = files_of(reference, (RUN_FILE, ENHANCER_FILE))
+    expected_metrics = comparable_metrics(reference / METRICS_FILE)
     expected_fragments = comparable_fragments(reference)
     expected_manifest = comparable_manifest(reference)
     total = len(expected_fragments)
@@ -197,8 +199,8 @@ def run_crashes(store: Path, reference: Path, seconds: float, tmp_path: Path, ki
     def verify(folder: Path) -> None:
         no_temporaries(folder)
         assert files_of(folder) == expected_images
-        assert files_of(folder, ("run.json", "enhancer.json")) == expected_files
-        pd.testing.assert_frame_equal(comparable_metrics(folder / "metrics.parquet"), expected_metrics)
+        assert files_of(folder, (RUN_FILE, ENHANCER_FILE)) == expected_files
+        pd.testing.assert_frame_equal(comparable_metrics(folder / METRICS_FILE), expected_metrics)
         fragments = comparable_fragments(folder)
         assert fragments.keys() == expected_fragments.keys()
         for name, frame in fragments.items():
@@ -223,5 +225,5 @@ def test_run_killed_ten_times_resumes_byte_identical(run_reference, tmp_path: Pa
     store, reference, seconds = run_reference
     log = run_crashes(store, reference, seconds, tmp_path, kills=10, seed=4)
     print(f"run: window {seconds:.2f} s, (s after work began, packets complete) per kill: {log.kills}")
-    total = sum(1 for _ in (reference / "fragments").glob("*.parquet"))
+    total = sum(1 for _ in (reference / FRAGMENTS_DIR).glob("*.parquet"))
     assert len(log.kills) == 10 and log.mid_work(total) >= 3, log

@@ -221,7 +221,7 @@ SANCTIONED = {
 }
 #: Imports by name: the registries' one lazy loader (names from the code itself or from installed entry points,
 #: the user's own plugins) and the CLI's verb modules; never a name from a dataset file.
-IMPORT_BY_NAME_OK = {"setdiff_bench/lazy.py", "setdiff_bench/cli/main.py"}
+IMPORT_BY_NAME_OK = {"setdiff_bench/runtime/lazy.py", "setdiff_bench/cli/main.py"}
 UNSAFE_MODULES = {"marshal", "shelve", "dill", "cloudpickle", "joblib", "_pickle", "cPickle"}
 
 

@@ -25,8 +25,8 @@ import pyarrow.parquet as pq
 import torch
 
 from setdiff_bench.io.atomic import sha256_file
-from setdiff_bench.packet_index import FILE_COLUMNS, INDEX_FILE, PACKETS_DIR, merge_index, write_rows
-from setdiff_bench.threads import torch_threads
+from setdiff_bench.packets.index import FILE_COLUMNS, INDEX_FILE, PACKETS_DIR, merge_index, write_rows
+from setdiff_bench.runtime.threads import torch_threads
 from tests.packets.packet_fixtures import write_dataset
 from tests.run.store_fixtures import StoreSpec, build_store
 

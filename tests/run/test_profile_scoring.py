@@ -12,9 +12,15 @@ import pytest
 
 from setdiff_bench.cli.main import main
 from setdiff_bench.errors import UsageError
-from setdiff_bench.leaderboard import LeaderboardError, build_leaderboard, load_runs, render_markdown
-from setdiff_bench.profile_scoring import score_run
-from setdiff_bench.profiles import EvaluationProfile, get_profile
+from setdiff_bench.evaluation.paths import GROUPS_FILE, METRICS_FILE, PROFILE_FILE, PROFILES_DIR
+from setdiff_bench.evaluation.profile_scoring import score_run
+from setdiff_bench.evaluation.profiles import EvaluationProfile, get_profile
+from setdiff_bench.reporting.leaderboard import (
+    LeaderboardError,
+    build_leaderboard,
+    load_runs,
+    render_markdown,
+)
 
 
 @pytest.fixture
@@ -26,19 +32,19 @@ def run_copy(identity_run: Path, tmp_path: Path) -> Path:
 def test_paper_profile_reproduces_the_runs_own_scores(run_copy: Path, store: Path):
     identity_run = run_copy
     out = score_run(identity_run, get_profile("paper"), packets=store, progress=False)
-    own = pd.read_parquet(identity_run / "metrics.parquet").sort_values(["packet_id", "view"])
-    rescored = pd.read_parquet(out / "metrics.parquet").sort_values(["packet_id", "view"])
+    own = pd.read_parquet(identity_run / METRICS_FILE).sort_values(["packet_id", "view"])
+    rescored = pd.read_parquet(out / METRICS_FILE).sort_values(["packet_id", "view"])
     for metric in ("psnr", "ssim", "lpips"):
         assert np.allclose(rescored[metric], own[metric], rtol=1e-5, atol=1e-6, equal_nan=True), metric
-    groups = pd.read_parquet(out / "groups.parquet")
+    groups = pd.read_parquet(out / GROUPS_FILE)
     pooled = own.groupby("group")["psnr"].mean()
     assert np.allclose(groups.set_index("group")["psnr"].loc[pooled.index], pooled)
-    assert json.loads((out / "profile.json").read_text())["profile"]["name"] == "paper"
+    assert json.loads((out / PROFILE_FILE).read_text())["profile"]["name"] == "paper"
 
 
 def test_scene_mean_profile_in_the_leaderboard_caption_and_never_mixed(run_copy: Path, store: Path, monkeypatch):
     identity_run = run_copy
-    from setdiff_bench import profiles
+    from setdiff_bench.evaluation import profiles
 
     custom = EvaluationProfile("scene_test", "test profile: per-scene means", "", ("psnr",),
                                aggregation="scene_mean")
@@ -75,8 +81,8 @@ def test_profiles_needing_the_dataset_say_so(identity_run: Path, store: Path, ca
 def test_evaluate_and_leaderboard_commands(run_copy: Path, store: Path, tmp_path: Path, capsys):
     assert main(["evaluate", str(run_copy), "--profile", "paper", "--packets", str(store)]) == 0
     assert "evaluation profile: paper" in capsys.readouterr().out
-    assert (run_copy / "profiles" / "paper" / "groups.parquet").is_file()
-    dataset = pd.read_parquet(run_copy / "metrics.parquet")["dataset"].iloc[0]
+    assert (run_copy / PROFILES_DIR / "paper" / GROUPS_FILE).is_file()
+    dataset = pd.read_parquet(run_copy / METRICS_FILE)["dataset"].iloc[0]
     out = tmp_path / "boards"
     assert main(["leaderboard", "--dataset", dataset, "--runs", str(run_copy), "--out", str(out),
                  "--format", "md"]) == 0

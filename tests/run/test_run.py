@@ -23,10 +23,18 @@ from skimage.metrics import structural_similarity
 from setdiff_bench.cli.main import main
 from setdiff_bench.enhancers.identity import IdentityEnhancer
 from setdiff_bench.errors import ImageError, UsageError
+from setdiff_bench.evaluation.paths import IMAGES_DIR, MANIFEST_FILE, METRICS_FILE, RUN_FILE, SEQUENCES_FILE
+from setdiff_bench.evaluation.run import (
+    EnhancerOutputError,
+    RunSettings,
+    Shard,
+    comparable_metrics,
+    run_method,
+)
 from setdiff_bench.metrics.warp import warp_error, warp_reference
 from setdiff_bench.metrics.weights import resolve_lpips_weights
-from setdiff_bench.packets import PacketStore
-from setdiff_bench.run import EnhancerOutputError, RunSettings, Shard, comparable_metrics, run_method
+from setdiff_bench.packets.index import INDEX_FILE
+from setdiff_bench.packets.store import PacketStore
 from tests.enhancers.plugin_fixtures import install_plugin
 from tests.metrics.lpips_numpy import lpips_numpy
 from tests.run.store_fixtures import StoreSpec, build_store, files_of
@@ -42,14 +50,14 @@ def read_rgb_cv2(path: Path) -> np.ndarray:
 
 
 def store_rows(store: Path) -> pd.DataFrame:
-    index = pd.read_parquet(store / "index.parquet")
+    index = pd.read_parquet(store / INDEX_FILE)
     return index[index["role"] == "target"].set_index(["packet_id", "view"])
 
 
 def same_results(a: Path, b: Path, *, method_b: str | None = None) -> None:
     """Images byte-identical and metrics equal except timing (and the method name when renamed)."""
     assert files_of(a) == files_of(b)
-    left, right = comparable_metrics(a / "metrics.parquet"), comparable_metrics(b / "metrics.parquet")
+    left, right = comparable_metrics(a / METRICS_FILE), comparable_metrics(b / METRICS_FILE)
     if method_b:
         right = right.assign(method=left["method"])
     pd.testing.assert_frame_equal(left, right)
@@ -76,7 +84,7 @@ class FailingIdentity(IdentityEnhancer):
 
 # ---------------------------------------------------------------------- outputs and metrics
 def test_identity_run_writes_images_metrics_and_manifest(store: Path, identity_run: Path) -> None:
-    metrics = pd.read_parquet(identity_run / "metrics.parquet")
+    metrics = pd.read_parquet(identity_run / METRICS_FILE)
     assert list(metrics.columns) == COLUMNS
     assert len(metrics) == 12 and set(metrics["method"]) == {"identity"}
     assert list(metrics["packet_id"]) == sorted(metrics["packet_id"])
@@ -101,7 +109,7 @@ def test_identity_run_writes_images_metrics_and_manifest(store: Path, identity_r
 
 
 def test_lpips_column_equals_an_independent_numpy_lpips(store: Path, identity_run: Path) -> None:
-    row = pd.read_parquet(identity_run / "metrics.parquet").iloc[1]  # the partly masked target
+    row = pd.read_parquet(identity_run / METRICS_FILE).iloc[1]  # the partly masked target
     target = store_rows(store).loc[(row["packet_id"], row["view"])]
     mask = (cv2.imread(str(store / target["mask"]), cv2.IMREAD_GRAYSCALE) > 127)[:, :, None]
     assert not mask.all()
@@ -111,10 +119,10 @@ def test_lpips_column_equals_an_independent_numpy_lpips(store: Path, identity_ru
 
 
 def test_manifest_records_method_versions_device_and_index_hash(store: Path, identity_run: Path) -> None:
-    manifest = json.loads((identity_run / "manifest.json").read_text())
+    manifest = json.loads((identity_run / MANIFEST_FILE).read_text())
     assert manifest["method"]["name"] == "identity"
     assert manifest["method"]["factory"] == "setdiff_bench.enhancers.identity:create"
-    assert manifest["packets"]["index_sha256"] == hashlib.sha256((store / "index.parquet").read_bytes()).hexdigest()
+    assert manifest["packets"]["index_sha256"] == hashlib.sha256((store / INDEX_FILE).read_bytes()).hexdigest()
     assert manifest["packets"]["targets"] == 12 and manifest["packets"]["packets"] == 4
     assert manifest["versions"]["torch"] == torch.__version__.split("+")[0] or manifest["versions"]["torch"]
     assert set(manifest["git"]) == {"revision", "dirty"}
@@ -127,7 +135,7 @@ def test_manifest_records_method_versions_device_and_index_hash(store: Path, ide
 def test_precomputed_on_a_copy_of_identity_outputs_gives_identical_metrics(store: Path, identity_run: Path,
                                                                            tmp_path: Path) -> None:
     copy = tmp_path / "external"
-    shutil.copytree(identity_run / "images", copy)
+    shutil.copytree(identity_run / IMAGES_DIR, copy)
     run_method(store, tmp_path / "pre", RunSettings("precomputed", {"source": str(copy)}), progress=False)
     same_results(identity_run, tmp_path / "pre", method_b="identity")
     # a run folder itself also works (its images/ is used)
@@ -137,7 +145,7 @@ def test_precomputed_on_a_copy_of_identity_outputs_gives_identical_metrics(store
 
 def test_precomputed_scene_level_layout(store: Path, identity_run: Path, tmp_path: Path) -> None:
     flat = tmp_path / "flat"
-    for png in (identity_run / "images").glob("*/*/*/*/*.png"):  # images/<protocol>/<group>/<scene>/front/x.png
+    for png in (identity_run / IMAGES_DIR).glob("*/*/*/*/*.png"):  # images/<protocol>/<group>/<scene>/front/x.png
         scene, sub, name = png.parts[-3], png.parts[-2], png.name
         (flat / scene / sub).mkdir(parents=True, exist_ok=True)
         shutil.copy(png, flat / scene / sub / name)
@@ -148,7 +156,7 @@ def test_precomputed_scene_level_layout(store: Path, identity_run: Path, tmp_pat
 def test_precomputed_missing_frames_are_listed(store: Path, identity_run: Path, tmp_path: Path,
                                                capsys: pytest.CaptureFixture[str]) -> None:
     copy = tmp_path / "external"
-    shutil.copytree(identity_run / "images", copy)
+    shutil.copytree(identity_run / IMAGES_DIR, copy)
     (copy / "synthetic/lane+2/scene_b/front/000004.png").unlink()
     (copy / "synthetic/lane+1/scene_a/front/000001.png").unlink()
     with pytest.raises(UsageError, match=r"2 of 12 target frames have no precomputed image: "
@@ -163,7 +171,7 @@ def test_precomputed_missing_frames_are_listed(store: Path, identity_run: Path, 
 
 def test_precomputed_wrong_size_names_the_file(store: Path, identity_run: Path, tmp_path: Path) -> None:
     copy = tmp_path / "external"
-    shutil.copytree(identity_run / "images", copy)
+    shutil.copytree(identity_run / IMAGES_DIR, copy)
     bad = copy / "synthetic/lane+1/scene_a/front/000000.png"
     cv2.imwrite(str(bad), np.zeros((10, 10, 3), np.uint8))
     with pytest.raises(ImageError, match=r"000000\.png: precomputed image for scene_a/front/000000\.jpg: image is 10x10"):
@@ -180,7 +188,7 @@ def test_crashed_run_resumes_to_identical_outputs(store: Path, identity_run: Pat
     out = tmp_path / "crashed"
     with pytest.raises(RuntimeError, match="simulated crash"):
         run_method(store, out, RunSettings("identity"), enhancer=FailingIdentity(fail_at=3), progress=False)
-    assert len(fragments(out)) == 2 and not (out / "metrics.parquet").exists()
+    assert len(fragments(out)) == 2 and not (out / METRICS_FILE).exists()
     result = run_method(store, out, RunSettings("identity"), progress=False)
     assert (result.enhanced, result.skipped, result.merged) == (2, 2, True)
     same_results(identity_run, out)
@@ -191,7 +199,7 @@ def test_sigkilled_run_resumes_to_identical_outputs(store: Path, identity_run: P
     script = (
         "import sys, time\n"
         "from setdiff_bench.enhancers.identity import IdentityEnhancer\n"
-        "from setdiff_bench.run import RunSettings, run_method\n"
+        "from setdiff_bench.evaluation.run import RunSettings, run_method\n"
         "class Slow(IdentityEnhancer):\n"
         "    def enhance(self, packet):\n"
         "        time.sleep(0.4)\n"
@@ -216,7 +224,7 @@ def test_two_shards_merge_to_the_single_run(store: Path, identity_run: Path, tmp
     out = tmp_path / "sharded"
     first = run_method(store, out, RunSettings("identity"), shard=Shard(0, 2), progress=False)
     assert (first.enhanced, first.remaining, first.merged) == (2, 2, False)
-    assert not (out / "metrics.parquet").exists()
+    assert not (out / METRICS_FILE).exists()
     second = run_method(store, out, RunSettings("identity"), shard=Shard(1, 2), progress=False)
     assert (second.enhanced, second.remaining, second.merged) == (2, 0, True)
     same_results(identity_run, out)
@@ -234,8 +242,8 @@ def test_concurrent_shard_processes_into_one_new_folder(store: Path, identity_ru
 
 
 def test_second_run_does_nothing(store: Path, identity_run: Path) -> None:
-    before = {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in (identity_run / "metrics.parquet",
-                                                                   identity_run / "manifest.json")}
+    before = {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in (identity_run / METRICS_FILE,
+                                                                   identity_run / MANIFEST_FILE)}
     result = run_method(store, identity_run, RunSettings("identity"), progress=False)
     assert (result.enhanced, result.skipped, result.merged) == (0, 4, True)
     assert {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in before} == before
@@ -284,14 +292,14 @@ def test_plugin_method_runs(store: Path, tmp_path: Path, monkeypatch: pytest.Mon
     monkeypatch.syspath_prepend(str(install_plugin(tmp_path / "site")))
     assert main(["run", "--method", "darken", "-o", "factor=0.5", "--packets", str(store), "--out",
                  str(tmp_path / "darken"), "--no-progress"]) == 0
-    metrics = pd.read_parquet(tmp_path / "darken" / "metrics.parquet")
+    metrics = pd.read_parquet(tmp_path / "darken" / METRICS_FILE)
     assert set(metrics["method"]) == {"darken"} and len(metrics) == 12
     targets = store_rows(store)
     for row in metrics.head(3).itertuples():
         render = cv2.imread(str(store / targets.loc[(row.packet_id, row.view)]["image"]))
         written = cv2.imread(str(tmp_path / "darken" / row.image))
         assert np.abs(written.astype(int) - np.rint(render * 0.5).astype(int)).max() <= 1
-    assert json.loads((tmp_path / "darken" / "manifest.json").read_text())["method"]["enhancer"]["options"] == \
+    assert json.loads((tmp_path / "darken" / MANIFEST_FILE).read_text())["method"]["enhancer"]["options"] == \
         {"factor": 0.5}
 
 
@@ -301,19 +309,19 @@ def test_warp_error_per_camera_sequence_across_groups(tmp_path: Path) -> None:
     store = build_store(tmp_path / "store", spec)
     out, cache = tmp_path / "run", tmp_path / "flows"
     run_method(store, out, RunSettings("identity", flow_method="dis", warp_cache=str(cache)), progress=False)
-    sequences = pd.read_parquet(out / "sequences.parquet")
+    sequences = pd.read_parquet(out / SEQUENCES_FILE)
     cached = {p: p.stat().st_mtime_ns for p in cache.glob("*.safetensors")}
     assert len(cached) == 2  # one ground-truth flow per camera sequence
     # another method on the same store reuses the flows; a copy of identity's images scores the same
     run_method(store, tmp_path / "pre", RunSettings("precomputed", {"source": str(out)}, flow_method="dis",
                                                     warp_cache=str(cache)), progress=False)
     assert {p: p.stat().st_mtime_ns for p in cache.glob("*.safetensors")} == cached
-    again = pd.read_parquet(tmp_path / "pre" / "sequences.parquet")
+    again = pd.read_parquet(tmp_path / "pre" / SEQUENCES_FILE)
     assert again["warp"].tolist() == sequences["warp"].tolist()
     assert list(sequences["sensor"]) == ["CAM_BACK", "CAM_FRONT"] and list(sequences["frames"]) == [4, 4]
     assert list(sequences["first_frame"]) == ["CAM_BACK/000001.jpg", "CAM_FRONT/000000.jpg"]
     assert list(sequences["last_frame"]) == ["CAM_BACK/000007.jpg", "CAM_FRONT/000006.jpg"]
-    metrics = pd.read_parquet(out / "metrics.parquet")
+    metrics = pd.read_parquet(out / METRICS_FILE)
     packets = PacketStore(store)
     for sequence in sequences.itertuples():
         rows = metrics[metrics["sensor"] == sequence.sensor].sort_values("timestamp_us")
@@ -322,7 +330,7 @@ def test_warp_error_per_camera_sequence_across_groups(tmp_path: Path) -> None:
         reference = warp_reference(torch.cat(gts), method="dis")
         expected = float(warp_error(frames, reference, torch.cat(masks)))
         assert sequence.warp == pytest.approx(expected, rel=1e-6)
-    assert json.loads((out / "manifest.json").read_text())["metrics"]["warp"]["sequences"] == 2
+    assert json.loads((out / MANIFEST_FILE).read_text())["metrics"]["warp"]["sequences"] == 2
 
 
 def test_run_verb_takes_a_shipped_model_by_name(store: Path, tmp_path: Path) -> None:
@@ -334,5 +342,5 @@ def test_run_verb_takes_a_shipped_model_by_name(store: Path, tmp_path: Path) -> 
     out = tmp_path / "difix"
     assert main(["run", "--method", "difix", "--checkpoint", "tiny_difix", "--packets", str(store), "--out", str(out),
                  "--metrics", "psnr", "--no-progress"]) == 0
-    assert json.loads((out / "run.json").read_text())["options"] == {"checkpoint": "tiny_difix"}
-    assert len(pd.read_parquet(out / "metrics.parquet")) > 0
+    assert json.loads((out / RUN_FILE).read_text())["options"] == {"checkpoint": "tiny_difix"}
+    assert len(pd.read_parquet(out / METRICS_FILE)) > 0

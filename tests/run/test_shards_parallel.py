@@ -18,8 +18,9 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from setdiff_bench.packets import PacketStore
-from setdiff_bench.run import FRAGMENTS_DIR, comparable_metrics, fragment_path
+from setdiff_bench.evaluation.paths import FRAGMENTS_DIR, METRICS_FILE
+from setdiff_bench.evaluation.run import comparable_metrics, fragment_path
+from setdiff_bench.packets.store import PacketStore
 from tests.run.store_fixtures import StoreSpec, build_store
 
 SHARDS = 4
@@ -144,7 +145,7 @@ def test_sharded_leaderboard_is_byte_identical_to_one_process(cluster: dict) -> 
     assert names and names == sorted(p.name for p in sharded.iterdir())
     for name in names:
         assert (one / name).read_bytes() == (sharded / name).read_bytes(), name
-    pd.testing.assert_frame_equal(comparable_metrics(cluster["one"] / "metrics.parquet"),
-                                  comparable_metrics(cluster["sharded"] / "metrics.parquet"))
+    pd.testing.assert_frame_equal(comparable_metrics(cluster["one"] / METRICS_FILE),
+                                  comparable_metrics(cluster["sharded"] / METRICS_FILE))
     assert len(list((cluster["sharded"] / FRAGMENTS_DIR).iterdir())) == 12
     assert not list(cluster["sharded"].glob(".*")), "no lock or claim file is left behind"

@@ -17,9 +17,10 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from setdiff_bench.packet_index import INDEX_FILE
-from setdiff_bench.prepare import prepare
-from setdiff_bench.threads import torch_threads
+from setdiff_bench.evaluation.paths import METRICS_FILE
+from setdiff_bench.packets.index import INDEX_FILE
+from setdiff_bench.packets.prepare import prepare
+from setdiff_bench.runtime.threads import torch_threads
 from tests.packets.packet_fixtures import write_dataset
 
 REPO = Path(__file__).resolve().parents[2]
@@ -87,7 +88,7 @@ def test_submit_chain_shards_prepare_and_run_and_ends_in_a_leaderboard(tmp_path:
     assert (packets / INDEX_FILE).read_bytes() == (reference / INDEX_FILE).read_bytes()
     board = pd.read_parquet(runs / "leaderboards" / "synthetic.parquet")
     assert set(board["method"]) == {"identity"} and board["value"].notna().all()
-    assert len(pd.read_parquet(runs / "identity" / "metrics.parquet")) > 0
+    assert len(pd.read_parquet(runs / "identity" / METRICS_FILE)) > 0
 
 
 @pytest.mark.parametrize("stage", ["bogus"])

@@ -13,14 +13,15 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from setdiff_bench.leaderboard import build_leaderboard, load_runs, write_leaderboard
-from setdiff_bench.run import RunSettings, comparable_metrics, run_method
-from setdiff_bench.threads import torch_threads
+from setdiff_bench.evaluation.paths import IMAGES_DIR, METRICS_FILE
+from setdiff_bench.evaluation.run import RunSettings, comparable_metrics, run_method
+from setdiff_bench.reporting.leaderboard import build_leaderboard, load_runs, write_leaderboard
+from setdiff_bench.runtime.threads import torch_threads
 
 
 @pytest.mark.slow
 def test_synthetic_packets_end_to_end(tmp_path: Path) -> None:
-    from setdiff_bench.prepare import prepare
+    from setdiff_bench.packets.prepare import prepare
     from setdiff_bench.synthetic.generate import generate_scene
     from setdiff_bench.synthetic.presets import get_preset
 
@@ -31,11 +32,11 @@ def test_synthetic_packets_end_to_end(tmp_path: Path) -> None:
         for method in ("identity", "reproject"):
             run_method(tmp_path / "packets", runs / method, RunSettings(method, split=None), progress=False)
         external = tmp_path / "external"
-        shutil.copytree(runs / "identity" / "images", external)
+        shutil.copytree(runs / "identity" / IMAGES_DIR, external)
         run_method(tmp_path / "packets", runs / "precomputed", RunSettings("precomputed", {"source": str(external)},
                                                                              split=None), progress=False)
-    identity = comparable_metrics(runs / "identity" / "metrics.parquet")
-    copied = comparable_metrics(runs / "precomputed" / "metrics.parquet").assign(method="identity")
+    identity = comparable_metrics(runs / "identity" / METRICS_FILE)
+    copied = comparable_metrics(runs / "precomputed" / METRICS_FILE).assign(method="identity")
     pd.testing.assert_frame_equal(identity, copied)
     images, sequences = load_runs(runs)
     board = build_leaderboard("synthetic", images, sequences, split=None)

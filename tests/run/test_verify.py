@@ -10,7 +10,8 @@ import pytest
 
 from setdiff_bench.enhancers.identity import IdentityEnhancer
 from setdiff_bench.errors import PacketError
-from setdiff_bench.run import RunSettings, run_method
+from setdiff_bench.evaluation.run import RunSettings, run_method
+from setdiff_bench.packets.index import INDEX_FILE
 
 
 class CountingIdentity(IdentityEnhancer):
@@ -26,7 +27,7 @@ class CountingIdentity(IdentityEnhancer):
 def corrupt_last_packet(store: Path, tmp_path: Path) -> tuple[Path, Path]:
     copy = tmp_path / "store"
     shutil.copytree(store, copy)
-    index = pd.read_parquet(copy / "index.parquet")
+    index = pd.read_parquet(copy / INDEX_FILE)
     last = sorted(index["packet_id"].unique())[-1]
     victim = copy / index[(index["packet_id"] == last) & (index["role"] == "target")]["gt"].iloc[0]
     victim.write_bytes(victim.read_bytes()[:-7])  # a truncated ground-truth PNG

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from setdiff_bench.threads import torch_threads
+from setdiff_bench.runtime.threads import torch_threads
 from tests.stream.stream_fixtures import save_tiny_checkpoint
 
 

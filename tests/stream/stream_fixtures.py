@@ -9,7 +9,7 @@ import numpy as np
 import torch
 
 from setdiff_bench.cameras import Camera
-from setdiff_bench.stream import Views
+from setdiff_bench.evaluation.stream import Views
 
 HEIGHT, WIDTH = 32, 48
 #: The rig: (name, yaw in degrees) of the three cameras of every tick.

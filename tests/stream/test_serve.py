@@ -18,15 +18,16 @@ import pytest
 import torch
 
 from setdiff_bench.enhancers.setdiff import load_enhancer
+from setdiff_bench.evaluation.paths import IMAGES_DIR
+from setdiff_bench.evaluation.run import RunSettings, run_method
+from setdiff_bench.evaluation.stream import StreamSession, Views
 from setdiff_bench.io.images import read_rgb
-from setdiff_bench.packet_index import merge_index
-from setdiff_bench.run import RunSettings, run_method
+from setdiff_bench.packets.index import merge_index
 from setdiff_bench.serve import enhancer_pb2 as pb
 from setdiff_bench.serve.client import EnhancerClient
 from setdiff_bench.serve.server import RunningServer, start_server
 from setdiff_bench.serve.settings import ServeSettings
 from setdiff_bench.serve.wire import to_array
-from setdiff_bench.stream import StreamSession, Views
 from tests.stream.stream_fixtures import RIG, recorded_references, tick_frames
 from tests.stream.test_stream import write_tick_store
 
@@ -70,7 +71,7 @@ def test_drive_of_30_ticks_equals_batch_runner(client: EnhancerClient, checkpoin
     for tick, images in streamed.items():
         assert images.shape == (3, 32, 48, 3) and images.dtype == np.uint8
         for position, (sensor, _) in enumerate(RIG):
-            [written] = (tmp_path / "run" / "images").rglob(f"{sensor}/{tick:06d}.png")
+            [written] = (tmp_path / "run" / IMAGES_DIR).rglob(f"{sensor}/{tick:06d}.png")
             batch = np.rint(read_rgb(written) * 255).astype(np.uint8)
             assert np.array_equal(batch, images[position]), (tick, sensor)
             compared += 1
@@ -227,7 +228,7 @@ def test_example_replays_a_store_through_the_server(server: RunningServer, check
     assert len(replayed) == 9
     worst = 0
     for path in replayed:
-        [batch] = (tmp_path / "run" / "images").rglob(f"{path.parent.name}/{path.name}")
+        [batch] = (tmp_path / "run" / IMAGES_DIR).rglob(f"{path.parent.name}/{path.name}")
         difference = np.abs(np.rint(read_rgb(path) * 255) - np.rint(read_rgb(batch) * 255))
         worst = max(worst, int(difference.max()))
     assert worst <= 1  # C-maps pass a float64 round trip to the world frame and back (0 when last run)

@@ -9,12 +9,13 @@ import pytest
 import torch
 
 from setdiff_bench.enhancers.setdiff import load_enhancer
+from setdiff_bench.evaluation.paths import IMAGES_DIR
+from setdiff_bench.evaluation.run import RunSettings, run_method
+from setdiff_bench.evaluation.stream import StreamInputError, StreamSession, Views
 from setdiff_bench.geometry import normalize_packet
 from setdiff_bench.io.images import read_rgb, uint8_to_float
-from setdiff_bench.packet_index import merge_index, packet_id
-from setdiff_bench.packets import PacketHeader, ViewContent, write_packet
-from setdiff_bench.run import RunSettings, run_method
-from setdiff_bench.stream import StreamInputError, StreamSession, Views
+from setdiff_bench.packets.index import merge_index, packet_id
+from setdiff_bench.packets.store import PacketHeader, ViewContent, write_packet
 from tests.stream.stream_fixtures import HEIGHT, WIDTH, recorded_references, rig_camera, tick_frames
 
 
@@ -59,7 +60,7 @@ def test_equals_batch_runner_to_the_last_8bit_level(checkpoint: Path, tmp_path: 
     run_method(tmp_path / "store", tmp_path / "run", RunSettings("setdiff", options={"checkpoint": str(checkpoint)},
                                                                  metrics=("psnr",), warp="off"), progress=False)
     for position, name in enumerate(frames.names):
-        written = sorted((tmp_path / "run" / "images").rglob(Path(name).stem + ".png"))
+        written = sorted((tmp_path / "run" / IMAGES_DIR).rglob(Path(name).stem + ".png"))
         written = [p for p in written if p.parent.name == Path(name).parent.name]
         assert len(written) == 1, written
         batch = np.rint(read_rgb(written[0]) * 255).astype(np.int16)

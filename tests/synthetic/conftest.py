@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
+from setdiff_bench.runtime.threads import torch_threads
 from setdiff_bench.synthetic.generate import generate_scene
-from setdiff_bench.threads import torch_threads
 from tests.synthetic.synthetic_fixtures import SEED, small_preset
 
 

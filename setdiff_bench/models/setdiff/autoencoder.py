@@ -35,11 +35,13 @@ import torch
 
 from setdiff_bench.errors import UsageError, WeightsError
 from setdiff_bench.io.atomic import atomic_path, write_text_atomic
+from setdiff_bench.io.images import read_rgb
+from setdiff_bench.models.setdiff.config import TINY_VAE
+from setdiff_bench.models.setdiff.manifest import MANIFEST_FILE
 from setdiff_bench.models.setdiff.packaged import file_table, packaged_folder, packaged_names
 
 CONFIG_FILE = "config.json"
 WEIGHTS_FILE = "weights.safetensors"
-MANIFEST_FILE = "manifest.json"
 STATE_FILE = "training_state.pt"
 AUTOENCODER_FILES = (CONFIG_FILE, WEIGHTS_FILE, MANIFEST_FILE)
 
@@ -71,8 +73,6 @@ class AutoencoderTraining:
 
 def tiny_vae_config(latent_channels: int) -> dict[str, Any]:
     """The ``tiny`` preset's VAE config with ``latent_channels`` latent channels."""
-    from setdiff_bench.models.setdiff.config import TINY_VAE
-
     return {**TINY_VAE, "latent_channels": int(latent_channels)}
 
 
@@ -137,8 +137,6 @@ def ground_truth_frames(store: Any, split: str) -> FrameSet:
 
     Frames are deduplicated by their file's SHA-256 (references recur across packets).
     """
-    from setdiff_bench.io.images import read_rgb
-
     seen: dict[str, torch.Tensor] = {}
     for packet_id in store.packet_ids(split):
         rows = store.rows(packet_id)
@@ -186,6 +184,7 @@ def reconstruct(vae: Any, images: torch.Tensor) -> tuple[torch.Tensor, Any]:
 @torch.no_grad()
 def reconstruction_metrics(vae: Any, frames: torch.Tensor, batch: int = 8) -> dict[str, float]:
     """Mean PSNR (dB) and SSIM of whole-frame reconstructions (H, W must be multiples of 8)."""
+    # lazy: this module loads when the CLI starts (packaged models), and SSIM's filter imports OpenCV
     from setdiff_bench.metrics.psnr import psnr
     from setdiff_bench.metrics.ssim import ssim
 
@@ -221,7 +220,7 @@ def train_autoencoder(packets: str | Path, out_dir: str | Path, settings: Autoen
     from safetensors.torch import save_file
     from tqdm.auto import tqdm
 
-    from setdiff_bench.packets import PacketStore
+    from setdiff_bench.packets.store import PacketStore  # lazy, like the metrics above
 
     if settings.crop % 8 or settings.crop < 16 or settings.steps < 1 or settings.batch_size < 1:
         raise UsageError("crop must be a multiple of 8 (>= 16); steps and batch size >= 1", "train autoencoder")

@@ -26,6 +26,7 @@ from setdiff_bench.errors import CheckpointError, UsageError
 from setdiff_bench.io.atomic import new_file_mode, staged_folder, write_text_atomic
 from setdiff_bench.io.safetensors_header import sort_metadata
 from setdiff_bench.models.setdiff.config import Config, ModelConfig, config_from_dict
+from setdiff_bench.models.setdiff.model import SetDiffModel
 from setdiff_bench.models.setdiff.packaged import packaged_folder, packaged_names
 
 WEIGHTS_FILE = "model.safetensors"
@@ -145,8 +146,6 @@ def load_model(checkpoint: str | os.PathLike[str], *, expected: Config | None = 
     Returns:
         ``(model in eval mode, saved config)``.
     """
-    from setdiff_bench.models.setdiff.model import SetDiffModel
-
     folder = resolve_checkpoint(checkpoint)
     config = read_config(folder)
     if expected is not None:

@@ -32,6 +32,7 @@ from typing import Any, Literal
 import numpy as np
 
 from setdiff_bench.errors import UsageError
+from setdiff_bench.io.atomic import write_text_atomic
 
 Method = Literal["setdiff", "difix"]
 Prediction = Literal["v_prediction", "epsilon"]
@@ -449,6 +450,7 @@ def model_config_from_dict(data: Mapping[str, Any]) -> ModelConfig:
         raise UsageError(f"unknown preset {preset_name!r}; known: {', '.join(PRESETS)}", "[model]")
     preset = copy.deepcopy(PRESETS[preset_name])
     if data.get("autoencoder") and not _complete_vae(data.get("vae", {})):
+        # lazy: the autoencoder module imports this one
         from setdiff_bench.models.setdiff.autoencoder import read_autoencoder_config
 
         autoencoder = read_autoencoder_config(str(data["autoencoder"]))
@@ -511,8 +513,6 @@ def write_config_toml(path: str | Path, data: Mapping[str, Mapping[str, Any]], c
 
     The result is validated by reading it back with :func:`load_config`.
     """
-    from setdiff_bench.io.atomic import write_text_atomic
-
     lines = [f"# {line}" for line in comment.splitlines()] if comment else []
     for table in ("model", "train"):
         lines.append(f"[{table}]")

@@ -22,6 +22,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from setdiff_bench.metrics.ssim import ssim
+
 
 def latent_loss(predicted: torch.Tensor, target: torch.Tensor, masks: torch.Tensor | None = None) -> torch.Tensor:
     """Mean squared error between latents ``(K, C, h, w)``, weighted by ``masks`` ``(K, 1, H, W)`` if given."""
@@ -52,6 +54,7 @@ class ReconstructionLoss(nn.Module):
         self.l2_weight, self.ssim_weight, self.lpips_weight = float(l2_weight), float(ssim_weight), float(lpips_weight)
         self.lpips: Any = None
         if self.lpips_weight > 0:
+            # lazy: LPIPS (and its weight files) load only when the loss uses it; tests stand in for the module
             from setdiff_bench.metrics.lpips import load_lpips
 
             self.lpips = load_lpips(net=lpips_net, device=device)
@@ -72,8 +75,6 @@ class ReconstructionLoss(nn.Module):
             total = total + self.l2_weight * terms["l2"]
         composite = torch.where(masks.bool(), predicted, target)
         if self.ssim_weight > 0:
-            from setdiff_bench.metrics.ssim import ssim
-
             terms["ssim"] = 1.0 - ssim(composite, target, border="valid", backend="torch").mean()
             total = total + self.ssim_weight * terms["ssim"]
         if self.lpips_weight > 0:

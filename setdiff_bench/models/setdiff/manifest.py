@@ -20,9 +20,9 @@ from typing import Any
 
 from setdiff_bench.errors import CheckpointError
 from setdiff_bench.io.atomic import write_text_atomic
-from setdiff_bench.packet_index import FILE_COLUMNS
-from setdiff_bench.provenance import git_revision
-from setdiff_bench.threads import compute_threads
+from setdiff_bench.packets.index import FILE_COLUMNS
+from setdiff_bench.runtime.provenance import git_revision
+from setdiff_bench.runtime.threads import compute_threads
 
 MANIFEST_FILE = "manifest.json"
 MANIFEST_FORMAT = "setdiff-enhancer-manifest/1"
@@ -37,7 +37,7 @@ def synthetic_scene_seeds(scene: str) -> tuple[int, int] | None:
 
 
 def training_data_record(store: Any, split: str) -> dict[str, Any]:
-    """What a training run reads from a :class:`~setdiff_bench.packets.PacketStore`'s ``split``.
+    """What a training run reads from a :class:`~setdiff_bench.packets.store.PacketStore`'s ``split``.
 
     Returns:
         ``{"split", "packets", "views", "scenes", "synthetic_seeds", "data_sha256"}``; ``synthetic_seeds``

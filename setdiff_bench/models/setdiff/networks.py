@@ -19,6 +19,7 @@ from typing import Any
 import torch
 
 from setdiff_bench.errors import WeightsError
+from setdiff_bench.models.setdiff.autoencoder import load_autoencoder_weights
 from setdiff_bench.models.setdiff.config import ModelConfig
 
 ARCHITECTURE_KEYS = ("in_channels", "out_channels", "block_out_channels", "down_block_types", "up_block_types",
@@ -44,8 +45,6 @@ def build_networks(config: ModelConfig, *, load_pretrained: bool = True) -> Netw
     unet = UNet2DConditionModel.from_config(dict(config.unet))
     vae = AutoencoderKL.from_config(dict(config.vae))
     if config.autoencoder and load_pretrained:
-        from setdiff_bench.models.setdiff.autoencoder import load_autoencoder_weights
-
         load_autoencoder_weights(vae, config.autoencoder)
     return Networks(unet=unet, vae=vae, prompt_embedding=None)
 

@@ -24,9 +24,9 @@ from typing import Any
 
 from setdiff_bench.errors import CheckpointError, WeightsError
 from setdiff_bench.io.atomic import sha256_file, staged_folder, write_text_atomic
+from setdiff_bench.models.setdiff.manifest import MANIFEST_FILE
 
 PACKAGED_FOLDER = "weights"
-MANIFEST_FILE = "manifest.json"
 #: The file that tells the kinds apart: an enhancer checkpoint's weights, else an autoencoder's.
 ENHANCER_WEIGHTS = "model.safetensors"
 AUTOENCODER_WEIGHTS = "weights.safetensors"
@@ -125,6 +125,7 @@ def export_enhancer(checkpoint: Path, training_manifest: dict[str, Any], destina
     Raises:
         CheckpointError: the checkpoint lacks a file.
     """
+    # lazy: the checkpoint module imports this one
     from setdiff_bench.models.setdiff.checkpoint import CONFIG_FILE, WEIGHTS_FILE
 
     names = [CONFIG_FILE, WEIGHTS_FILE]

@@ -19,8 +19,8 @@ Validation samples are split across the processes and their scores reduced.  Onl
 writes files.
 
 Checkpoints are written every ``min(checkpoint_every, 500, steps // 4)`` steps, at the end, and, inside
-:func:`setdiff_bench.interrupts.stop_at_safe_point` (the ``train`` verb), at the step where SIGINT or
-SIGTERM arrived, before :class:`~setdiff_bench.interrupts.Interrupted` is raised.
+:func:`setdiff_bench.runtime.interrupts.stop_at_safe_point` (the ``train`` verb), at the step where SIGINT or
+SIGTERM arrived, before :class:`~setdiff_bench.runtime.interrupts.Interrupted` is raised.
 Outputs in ``OUT``: ``checkpoints/step-<8-digit step>/`` (see :mod:`.checkpoint`), ``latest``,
 ``train_log.jsonl`` (losses every ``log_every`` steps), ``validation.jsonl`` (PSNR/SSIM[/LPIPS]
 of the enhanced targets of the validation samples every ``validate_every`` steps) and ``samples.jsonl``
@@ -44,8 +44,9 @@ from typing import Any
 import torch
 
 from setdiff_bench.errors import UsageError
-from setdiff_bench.interrupts import Interrupted, stop_requested
 from setdiff_bench.io.atomic import write_text_atomic
+from setdiff_bench.metrics.psnr import psnr
+from setdiff_bench.metrics.ssim import ssim
 from setdiff_bench.models.setdiff.checkpoint import (
     check_compatible,
     load_training_state,
@@ -61,6 +62,7 @@ from setdiff_bench.models.setdiff.inference import enhance_packet
 from setdiff_bench.models.setdiff.inputs import training_set
 from setdiff_bench.models.setdiff.losses import ReconstructionLoss, latent_loss
 from setdiff_bench.models.setdiff.model import SetDiffModel
+from setdiff_bench.runtime.interrupts import Interrupted, stop_requested
 from setdiff_bench.types import TrainingSample
 
 LOG_FILE = "train_log.jsonl"
@@ -337,9 +339,6 @@ def validation_totals(model: SetDiffModel, samples: Sequence[TrainingSample],
                       reconstruction: ReconstructionLoss | None = None) -> dict[str, tuple[float, int]]:
     """Per metric, the sum over every target of ``samples`` and the number of targets (for reduction across
     processes): ``psnr`` and ``ssim`` (masked), ``lpips`` when the loss has LPIPS loaded."""
-    from setdiff_bench.metrics.psnr import psnr
-    from setdiff_bench.metrics.ssim import ssim
-
     was_training = model.training
     model.eval()
     scores: dict[str, list[float]] = {"psnr": [], "ssim": []}

@@ -1,6 +1,6 @@
 """Leaderboards: per-group means of per-image metrics per method → Parquet, LaTeX (booktabs), Markdown.
 
-Inputs are finished runs (``metrics.parquet`` of :mod:`setdiff_bench.run`, found recursively under
+Inputs are finished runs (``metrics.parquet`` of :mod:`setdiff_bench.evaluation.run`, found recursively under
 ``--runs``) and, only when asked (``with_reported``), the SetDiff paper's reported numbers from
 ``protocols/reported/*.csv`` — always marked: a ``source`` column (``measured`` / ``reported``), a
 "(paper)" suffix in Markdown and a dagger in LaTeX.
@@ -19,7 +19,7 @@ from the metric's :class:`~setdiff_bench.metrics.registry.MetricSpec`; nothing h
 
 The writers (:func:`render_markdown`, :func:`render_latex`, :func:`to_frame`) take any
 :class:`Leaderboard`; :func:`pooled_table` builds a one-block table of labelled rows, which is how the
-ablation tables (:mod:`setdiff_bench.ablation`) are written.
+ablation tables (:mod:`setdiff_bench.reporting.ablation`) are written.
 
 Table shapes follow the paper: EUVS Settings 1–3 (Table 1), Para-Lane single/double lane shift
 (Table 2), nuScenes one pooled block with warp error (Table 3 + supplement), DL3DV 3/6/9 views
@@ -41,13 +41,13 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from setdiff_bench.errors import SetDiffBenchError, UsageError
+from setdiff_bench.evaluation.paths import METRICS_FILE, RUN_FILE, SEQUENCES_FILE
+from setdiff_bench.evaluation.profiles import DEFAULT_PROFILE, PROFILE_COLUMN, get_profile
 from setdiff_bench.io.atomic import atomic_path, write_text_atomic
 from setdiff_bench.loaders import DATASETS
 from setdiff_bench.loaders.common import natural_key
 from setdiff_bench.metrics.registry import METRICS, get_metric
-from setdiff_bench.profiles import DEFAULT_PROFILE, PROFILE_COLUMN, get_profile
 from setdiff_bench.protocols import POOLED, Block, Layout, list_protocols, load_protocol
-from setdiff_bench.run_paths import METRICS_FILE, RUN_FILE, SEQUENCES_FILE
 
 FORMATS = ("parquet", "latex", "md")
 ALL = POOLED  # block key of the pooled block (every group)
@@ -222,7 +222,7 @@ def build_leaderboard(dataset: str, images: pd.DataFrame, sequences: pd.DataFram
         metrics: image metric columns (default: the layout's).
         methods: measured methods to show, in this order (default: all, sorted).
         layout: override the dataset's layout.
-        profile: the evaluation profile tabulated (:mod:`setdiff_bench.profiles`): rows of plain runs are
+        profile: the evaluation profile tabulated (:mod:`setdiff_bench.evaluation.profiles`): rows of plain runs are
             ``paper``; ``setdiff-bench evaluate`` tables carry their profile.  The caption names it, and the
             profile's averaging is used (``scene_mean``: the mean of per-scene means).
 

@@ -23,6 +23,8 @@ import torch
 
 from setdiff_bench.errors import ImageError, UsageError
 from setdiff_bench.metrics.registry import METRICS, PRESETS, MetricSpec
+from setdiff_bench.metrics.warp import WarpReference, warp_error, warp_reference
+from setdiff_bench.metrics.weights import cache_dir
 
 
 def quantize(images: torch.Tensor) -> torch.Tensor:
@@ -99,8 +101,6 @@ def sequence_warp_error(frames: torch.Tensor, ground_truth: torch.Tensor, masks:
         gt_key: content key of the ground-truth sequence (e.g. the joined SHA-256 of its files);
             required with ``cache``.
     """
-    from setdiff_bench.metrics.warp import WarpReference, warp_error, warp_reference
-
     reference = None
     path = None
     if cache is not None and gt_key:
@@ -122,6 +122,4 @@ def sequence_warp_error(frames: torch.Tensor, ground_truth: torch.Tensor, masks:
 
 def default_warp_cache() -> Path:
     """``$XDG_CACHE_HOME/setdiff_bench/warp`` (next to the converted LPIPS weights)."""
-    from setdiff_bench.metrics.weights import cache_dir
-
     return cache_dir() / "warp"

@@ -20,9 +20,10 @@ import numpy as np
 import pandas as pd
 
 from setdiff_bench.errors import UsageError
+from setdiff_bench.evaluation.paths import METRICS_FILE
 from setdiff_bench.io.images import quantize_uint8, read_rgb, write_png
 from setdiff_bench.loaders.common import natural_key
-from setdiff_bench.run_paths import METRICS_FILE
+from setdiff_bench.packets.store import PacketStore
 
 FONT = cv2.FONT_HERSHEY_SIMPLEX
 BAND = 22
@@ -108,7 +109,7 @@ def qualitative_grid(store: object, runs: Mapping[str, str | Path], frames: Sequ
     images all equal the render replaces the render column, labelled "<run> = 3DGS render").
 
     Args:
-        store: a :class:`~setdiff_bench.packets.PacketStore` (or its folder) holding the packets.
+        store: a :class:`~setdiff_bench.packets.store.PacketStore` (or its folder) holding the packets.
         runs: column label → finished run folder (with ``metrics.parquet``), in column order.
         frames: the targets, one row each (e.g. from :func:`pick_frames`).
         out: the PNG to write (atomically).
@@ -118,8 +119,6 @@ def qualitative_grid(store: object, runs: Mapping[str, str | Path], frames: Sequ
     Raises:
         UsageError: no frames, or a run without one of the frames.
     """
-    from setdiff_bench.packets import PacketStore
-
     if not frames:
         raise UsageError("no frames chosen for the grid")
     store = store if isinstance(store, PacketStore) else PacketStore(store)  # type: ignore[arg-type]

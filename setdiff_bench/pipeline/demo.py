@@ -11,11 +11,11 @@ scene, SetDiff and DiFix trained on the training scenes, then the same evaluatio
 the two ablations, which need training).
 
 Every stage is an ordinary ``setdiff-bench`` command run in its own process
-(:mod:`setdiff_bench.stages`); the demo records each command and its wall time in
+(:mod:`setdiff_bench.pipeline.stages`); the demo records each command and its wall time in
 ``<out>/README.md`` and ``<out>/demo.json``.  Bulky intermediate data (scenes, packets,
 checkpoints, runs) goes to ``<out>/work``; tables, plots and the report sit in ``<out>``, by default
 the scratch folder ``runs/demo`` (git-ignored).  The project's published results are replaced only
-on purpose, by ``setdiff-bench publish`` (:mod:`setdiff_bench.publish`).  Every stage resumes, so an
+on purpose, by ``setdiff-bench publish`` (:mod:`setdiff_bench.reporting.publish`).  Every stage resumes, so an
 interrupted demo continues where it stopped; a stage finished by an earlier run keeps its original
 time in the report, marked resumed (``<work>/stages.json``).
 
@@ -45,11 +45,14 @@ from typing import Any
 import pandas as pd
 
 from setdiff_bench.errors import UsageError
+from setdiff_bench.evaluation.paths import METRICS_FILE
 from setdiff_bench.io.atomic import sha256_file, write_text_atomic
 from setdiff_bench.metrics.registry import get_metric
-from setdiff_bench.run_paths import METRICS_FILE
-from setdiff_bench.stages import Pipeline, relative
-from setdiff_bench.threads import compute_threads
+from setdiff_bench.models.setdiff.packaged import packaged_models
+from setdiff_bench.pipeline.stages import LEDGER_FILE, Pipeline, relative
+from setdiff_bench.protocols import load_protocol
+from setdiff_bench.runtime.provenance import git_revision, package_versions
+from setdiff_bench.runtime.threads import compute_threads
 
 METHODS = ("identity", "reproject", "difix", "setdiff")
 VERDICT_METRICS = ("psnr", "ssim", "lpips")  # the +2-lane verdict's metrics, in table order
@@ -60,8 +63,6 @@ DEFAULT_OUT = "runs/demo"
 #: The demo's summary in ``<out>``; written last, so a folder with it holds one complete run.
 SUMMARY_FILE = "demo.json"
 REPORT_FILE = "README.md"
-#: Stage timings kept across runs, in the work folder.
-LEDGER_FILE = "stages.json"
 
 
 @dataclass(frozen=True)
@@ -131,7 +132,7 @@ class DemoPaths:
 def evaluation_scene_indices(preset: DemoPreset, seed: int) -> list[int]:
     """The generator indices of the preset's test scenes: the synthetic protocol's scene split over the
     scene names ``synth`` gives the preset's scenes (:func:`setdiff_bench.synthetic.generate.scene_name`)."""
-    from setdiff_bench.protocols import load_protocol
+    # lazy: the CLI imports this module at startup (demo presets); the generator pulls in the 3DGS fitting code
     from setdiff_bench.synthetic.generate import scene_name
     from setdiff_bench.synthetic.presets import get_preset
 
@@ -150,8 +151,6 @@ def check_unseen(test_scenes: list[tuple[int, int]]) -> dict[str, dict[str, Any]
     Raises:
         UsageError: a shipped model is missing, or its training scenes include a test scene.
     """
-    from setdiff_bench.models.setdiff.packaged import packaged_models
-
     shipped = packaged_models()
     manifests = {}
     for method, name in SHIPPED_MODELS.items():
@@ -250,8 +249,6 @@ def run_provenance(seed: int) -> dict[str, Any]:
     leaderboards; another thread count, CPU instruction set, torch build or a GPU changes the last bits
     of every float sum, and training amplifies them (README "Reproducibility").
     """
-    from setdiff_bench.provenance import git_revision, package_versions
-
     return {"git": git_revision(), "seed": seed, "torch_threads": compute_threads(),
             "machine": {"cpu": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(),
                         "system": platform.system()},

@@ -1,7 +1,7 @@
-"""A run folder's file names, and where a run puts each enhanced target:
+"""A run folder's file names, the key columns of its tables, and where a run puts each enhanced target:
 ``images/<protocol>/<group>/<scene>/<frame stem>.png``.
 
-Declared once here for :mod:`setdiff_bench.run` (which writes them) and every reader: the leaderboard,
+Declared once here for :mod:`setdiff_bench.evaluation.run` (which writes them) and every reader: the leaderboard,
 grids, the demo, ablations, evaluation profiles and the ``precomputed`` enhancer (which reads a run's
 ``images/`` folder, or any folder in the same layout).
 """
@@ -12,6 +12,8 @@ from pathlib import PurePosixPath
 
 from setdiff_bench.enhancers.base import TargetRef
 from setdiff_bench.errors import PacketError
+from setdiff_bench.packets.index import slug
+from setdiff_bench.types import PACKET_KEY_FIELDS
 
 IMAGES_DIR = "images"
 RUN_FILE = "run.json"
@@ -20,6 +22,20 @@ FRAGMENTS_DIR = "fragments"
 METRICS_FILE = "metrics.parquet"
 SEQUENCES_FILE = "sequences.parquet"
 MANIFEST_FILE = "manifest.json"
+#: An evaluation profile's tables (:mod:`setdiff_bench.evaluation.profile_scoring`), under
+#: ``<run>/profiles/<profile>/``: its own ``metrics.parquet`` (:data:`METRICS_FILE`), scene and group means,
+#: the profile and its coverage notes, and (EUVS profiles) the frames whose official mask pairing differs.
+PROFILES_DIR = "profiles"
+SCENES_FILE = "scenes.parquet"
+GROUPS_FILE = "groups.parquet"
+PROFILE_FILE = "profile.json"
+EUVS_COMPAT_FILE = "euvs_compat.txt"
+
+#: The columns that name one row of a run's (or an evaluation profile's) ``metrics.parquet``, in file
+#: order: where the packet comes from (the :class:`~setdiff_bench.types.PacketKey` fields but its id),
+#: the target view, the packet id, the view's position in it, and the method.
+KEY_COLUMNS: tuple[str, ...] = (*(name for name in PACKET_KEY_FIELDS if name != "packet_id"),
+                                "frame", "sensor", "timestamp_us", "packet_id", "view", "method")
 
 
 def safe_component(text: str) -> str:
@@ -28,8 +44,6 @@ def safe_component(text: str) -> str:
     Names are used as they are unless they are empty, ``.``/``..`` or contain a path separator or NUL;
     those go through the packet-id slug (runs of characters other than ``A-Za-z0-9.+-`` become ``-``).
     """
-    from setdiff_bench.packet_index import slug
-
     if not text or text in {".", ".."} or "/" in text or "\\" in text or "\0" in text:
         return slug(text)
     return text

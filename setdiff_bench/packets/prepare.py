@@ -1,9 +1,9 @@
 """``prepare``: a dataset, a protocol and 3DGS fits → a packet store (``setdiff-bench prepare``).
 
-Per scene and group (:mod:`setdiff_bench.prepare_plan` for the rules): load or fit the group's
+Per scene and group (:mod:`setdiff_bench.packets.plan` for the rules): load or fit the group's
 3DGS, render the targets (RGB, C-map, alpha) and the C-maps of the N references chosen by Eq. 2
 among the clean fit frames, normalise the packet into its first target's frame at unit extent,
-and write it (:mod:`setdiff_bench.packets`).
+and write it (:mod:`setdiff_bench.packets.store`).
 
 Fits
 ----
@@ -23,7 +23,7 @@ A packet is skipped when its folder holds a fragment with the same recipe and ev
 SHA-256.  Work is split into units (scene, fit key), sorted; shard ``i/n`` takes units ``i, i+n, …``,
 so shards write disjoint packets and never fit the same model twice.  Each shard merges the fragments
 of the whole store into ``index.parquet`` when it ends, without a file lock (see
-:func:`~setdiff_bench.packet_index.merge_index`); the last shard to finish publishes the complete index.
+:func:`~setdiff_bench.packets.index.merge_index`); the last shard to finish publishes the complete index.
 On a network filesystem, end with the same command without ``--shard``: it skips every finished packet
 and merges.  ``workers`` > 1 renders packets in that many spawned processes.
 Packets are byte-identical for identical inputs and render backend, whichever run, shard or worker
@@ -48,23 +48,31 @@ import cv2
 import numpy as np
 import torch
 
-from setdiff_bench.devices import resolve_device
 from setdiff_bench.errors import DatasetError, ProtocolError, UsageError
+from setdiff_bench.gaussians.fit import FitConfig, fit_gaussians
+from setdiff_bench.gaussians.fit_data import load_fit_views
+from setdiff_bench.gaussians.ply import read_ply, write_ply
+from setdiff_bench.gaussians.render import render
+from setdiff_bench.gaussians.triangulate import initial_points
+from setdiff_bench.geometry import normalize_packet
 from setdiff_bench.io.atomic import sha256_file
 from setdiff_bench.io.images import read_mask, read_rgb, to_numpy_hwc
-from setdiff_bench.packet_index import PACKETS_DIR, group_prefix, merge_index
-from setdiff_bench.packets import (
+from setdiff_bench.loaders import dataset_spec, list_scenes, load_scenes
+from setdiff_bench.loaders.common import select_scenes
+from setdiff_bench.packets.index import PACKETS_DIR, group_prefix, merge_index
+from setdiff_bench.packets.plan import Crop, GroupPlan, PacketJob, ViewJob, applicable_groups, plan_scene
+from setdiff_bench.packets.shards import Shard
+from setdiff_bench.packets.store import (
     PacketHeader,
     ViewContent,
     packet_is_complete,
     remove_temporaries,
     write_packet,
 )
-from setdiff_bench.prepare_plan import Crop, GroupPlan, PacketJob, ViewJob, applicable_groups, plan_scene
 from setdiff_bench.protocols import Protocol, load_protocol
-from setdiff_bench.shards import Shard
-from setdiff_bench.threads import torch_threads
-from setdiff_bench.types import Frame, Scene
+from setdiff_bench.runtime.devices import resolve_device
+from setdiff_bench.runtime.threads import torch_threads
+from setdiff_bench.types import Frame, Scene, key_fields
 from setdiff_bench.undistort import is_distorted, undistort_image, undistortion_maps
 
 SPLIT_CHOICES = ("train", "test", "all")
@@ -131,9 +139,6 @@ class FitSource:
         """Train the fit if ``--fit`` and it does not exist yet."""
         if not self.fit or self.existing(scene.name, fit_key) is not None:
             return
-        from setdiff_bench.gaussians.fit import FitConfig, fit_gaussians
-        from setdiff_bench.gaussians.fit_data import load_fit_views
-        from setdiff_bench.gaussians.ply import write_ply
 
         target = self.candidates(scene.name, fit_key)[0]
         if self.fit_iterations == FitConfig().iterations:
@@ -142,7 +147,6 @@ class FitSource:
             config = FitConfig.schedule(self.fit_iterations, densify_every=min(100, max(1, self.fit_iterations // 50)))
         device = resolve_device(self.fit_device)
         views = load_fit_views(scene, [f.name for f in fit_frames], downscale=self.downscale)
-        from setdiff_bench.gaussians.triangulate import initial_points
 
         points, colors = initial_points(scene, views)  # sparse points, else triangulated from the poses
         result = fit_gaussians(views, config, points=points, colors=colors, device=device,
@@ -173,8 +177,6 @@ _REFERENCE_CACHE_SIZE = 64  # views; 64 × (4 × 576 × 1024) float32 ≈ 600 MB
 def _model(path: Path, device: str) -> Any:
     """The fit at ``path``, cached per process; the key includes the file's size and mtime, so a PLY
     replaced between two in-process ``prepare`` calls is read again instead of rendering the old one."""
-    from setdiff_bench.gaussians.ply import read_ply
-
     stat = path.stat() if path.is_file() else None
     key = (path, stat.st_size if stat else -1, stat.st_mtime_ns if stat else -1, device)
     if key not in _MODELS:
@@ -191,8 +193,6 @@ def _reference_geometry(model: Any, references: Sequence[Any], options: dict[str
     A scene's fit frames serve as references of many packets; their renders do not depend on the
     packet (normalisation is applied afterwards), so each is rendered once per process and model.
     """
-    from setdiff_bench.gaussians.render import render
-
     keys = [(id(model), v.frame, repr(v.camera.K.tolist()), repr(v.camera.w2c.tolist()),
              repr(options["cmap_bound"]), repr(tuple(np.asarray(options["cmap_center"]).tolist())))
             for v in references]
@@ -212,7 +212,7 @@ def _reference_geometry(model: Any, references: Sequence[Any], options: dict[str
 
 
 def resample(image: np.ndarray, crop: Crop, resolution: tuple[int, int], *, nearest: bool = False) -> np.ndarray:
-    """Crop ``image`` ``(H, W[, C])`` to ``crop`` and resize to ``resolution`` (H, W) (rules in prepare_plan)."""
+    """Crop ``image`` ``(H, W[, C])`` to ``crop`` and resize to ``resolution`` (H, W) (rules in packets.plan)."""
     window = image[crop.top:crop.top + crop.height, crop.left:crop.left + crop.width]
     out_h, out_w = resolution
     if window.shape[:2] == (out_h, out_w):
@@ -249,9 +249,6 @@ def _mask(view: ViewJob, resolution: tuple[int, int]) -> np.ndarray:
 
 def build_packet(job: PacketJob, root: Path, backend: str, device: str) -> JobStats:
     """Render, normalise and write one packet (runs in a worker process or in-process)."""
-    from setdiff_bench.gaussians.render import render
-    from setdiff_bench.geometry import normalize_packet
-
     views = (*job.references, *job.targets)
     cameras = [v.camera for v in views]
     start = time.perf_counter()
@@ -277,9 +274,8 @@ def build_packet(job: PacketJob, root: Path, backend: str, device: str) -> JobSt
             gt=_capture(view, job.resolution) if is_target else None,
             mask=_mask(view, job.resolution) if is_target else None, overlap_score=view.overlap_score))
     read = time.perf_counter()
-    header = PacketHeader(packet_id=job.packet_id, dataset=job.dataset, protocol=job.protocol, group=job.group,
-                          split=job.split, scene=job.scene, fit_key=job.fit_key, scale=normalised.scale,
-                          recipe=job.recipe, cmap_half=job.cmap_half)
+    header = PacketHeader(**key_fields(job), fit_key=job.fit_key, scale=normalised.scale, recipe=job.recipe,
+                          cmap_half=job.cmap_half)
     n = len(job.references)
     write_packet(root, header, contents[:n], contents[n:])
     done = time.perf_counter()
@@ -346,7 +342,7 @@ def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[s
         backend, device: renderer (``auto``/``torch``/``gsplat``) and torch device (``auto``/``cpu``/``cuda``).
         loader_options: override the protocol's ``[loader]`` options.
         fit_iterations: 3DGS iterations with ``fit``.
-        cmap_precision: ``"float32"`` (default) or ``"half"`` C-map EXRs (see :mod:`setdiff_bench.packets`).
+        cmap_precision: ``"float32"`` (default) or ``"half"`` C-map EXRs (see :mod:`setdiff_bench.packets.store`).
         progress: show tqdm bars.
         groups: only these protocol groups (default all), e.g. ``["holdout8"]`` of a generic capture.
         test_scenes: these scenes are the test scenes and every other one trains, in place of the
@@ -356,8 +352,6 @@ def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[s
         UsageError / ProtocolError / DatasetError: bad arguments, a protocol that does not fit the
             dataset, missing fits or data.
     """
-    from setdiff_bench.loaders import dataset_spec
-
     dataset_spec(dataset)  # an unknown key is refused with the list of known ones
     if threads < 1:
         raise UsageError(f"threads must be >= 1, got {threads}", "--threads")
@@ -376,9 +370,6 @@ def _prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[
              loader_options: Mapping[str, Any] | None, fit_iterations: int, threads: int, cmap_half: bool,
              progress: bool, groups: Sequence[str] | None = None,
              test_scenes: Sequence[str] | None = None) -> PrepareSummary:
-    from setdiff_bench.loaders import list_scenes, load_scenes
-    from setdiff_bench.loaders.common import select_scenes
-
     started = time.perf_counter()
     spec = load_protocol(protocol or dataset)
     if spec.dataset != dataset:

@@ -179,6 +179,7 @@ class StreamSession:
         self._model = None
         self._device = device
         if ply is not None:
+            # lazy: the CLI imports this module at startup (serve's settings); 3DGS loads only for a PLY
             from setdiff_bench.gaussians.ply import read_ply
 
             self._model = read_ply(Path(ply)).to(device)

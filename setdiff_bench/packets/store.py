@@ -1,6 +1,6 @@
 """PacketStore: packets on disk (index + PNG/EXR files), read as :class:`~setdiff_bench.types.Packet`.
 
-Layout and index columns: :mod:`setdiff_bench.packet_index`.  Files per view:
+Layout and index columns: :mod:`setdiff_bench.packets.index`.  Files per view:
 
 * ``*_rgb.png`` — 8-bit RGB: the clean capture (references) or the 3DGS render (targets), at the
   protocol's working resolution;
@@ -43,7 +43,7 @@ from setdiff_bench.errors import PacketError, SetDiffBenchError
 from setdiff_bench.geometry import normalize_packet
 from setdiff_bench.io.atomic import sha256_file, staging_dir
 from setdiff_bench.io.images import read_exr, read_mask, read_rgb, to_tensor_chw, write_exr, write_png
-from setdiff_bench.packet_index import (
+from setdiff_bench.packets.index import (
     FILE_COLUMNS,
     INDEX_FILE,
     PACKETS_DIR,
@@ -52,7 +52,7 @@ from setdiff_bench.packet_index import (
     read_rows,
     write_rows,
 )
-from setdiff_bench.types import Packet, TrainingSample, ViewSet
+from setdiff_bench.types import Packet, PacketKey, TrainingSample, ViewSet
 
 CMAP_CHANNELS = ("X", "Y", "Z", "A")
 #: OpenEXR stamps the write time unless a DateTime is given; a fixed one keeps files byte-identical.
@@ -90,15 +90,9 @@ class ViewContent:
 
 
 @dataclass(frozen=True)
-class PacketHeader:
-    """Packet-level columns of the index."""
+class PacketHeader(PacketKey):
+    """Packet-level columns of the index: the packet's key, then how it was made."""
 
-    packet_id: str
-    dataset: str
-    protocol: str
-    group: str
-    split: str
-    scene: str
     fit_key: str
     scale: float
     recipe: str
@@ -253,9 +247,8 @@ class PacketStore:
         rows = self.rows(packet_id)
         refs, tgts = rows[rows["role"] == "ref"], rows[rows["role"] == "target"]
         first = rows.iloc[0]
-        return Packet(
-            packet_id=packet_id, dataset=first["dataset"], protocol=first["protocol"], group=first["group"],
-            split=first["split"], scene=first["scene"],
+        return Packet.from_key(
+            PacketKey.from_row(first),
             references=self._view_set(_pick(refs, references)), targets=self._view_set(_pick(tgts, targets)),
             scale=float(first["scale"]),
             metadata={"fit_key": first["fit_key"], "recipe": first["recipe"],

@@ -1,9 +1,9 @@
 """Evaluation profiles: what gets scored, at what size, and how values are averaged.
 
-A run (:mod:`setdiff_bench.run`) scores every target at the protocol's working resolution and a
+A run (:mod:`setdiff_bench.evaluation.run`) scores every target at the protocol's working resolution and a
 leaderboard pools per-image values per group: that is the paper's profile (``paper``, the default).
 Published baselines score differently, so their numbers are only comparable under their own rules.
-A profile states those rules as data; :mod:`setdiff_bench.profile_scoring` applies one to a finished
+A profile states those rules as data; :mod:`setdiff_bench.evaluation.profile_scoring` applies one to a finished
 run.  Facts behind each built-in profile, with the official file and commit: docs/evaluation_profiles.md.
 
 Built-in profiles (:data:`PROFILES`):

@@ -1,7 +1,7 @@
 """Planning packets: protocol × scene → packet jobs (which frames, which cameras, which fit).
 
 Nothing is rendered here; a :class:`PacketJob` is a small picklable description that a worker
-process turns into files (:mod:`setdiff_bench.prepare`).
+process turns into files (:mod:`setdiff_bench.packets.prepare`).
 
 Rules (choices where the paper is silent, all deterministic):
 
@@ -38,9 +38,9 @@ import numpy as np
 from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import ProtocolError
 from setdiff_bench.geometry import max_pairwise_distance, overlap_score_matrix, select_references
-from setdiff_bench.packet_index import packet_id
+from setdiff_bench.packets.index import packet_id
 from setdiff_bench.protocols import GroupSpec, Protocol
-from setdiff_bench.types import Frame, Scene
+from setdiff_bench.types import Frame, PacketKey, Scene
 
 PACKET_FORMAT = "setdiff-packets/1"
 
@@ -81,15 +81,9 @@ class ViewJob:
 
 
 @dataclass(frozen=True)
-class PacketJob:
-    """Everything needed to write one packet."""
+class PacketJob(PacketKey):
+    """Everything needed to write one packet: its key, then what to render and how."""
 
-    packet_id: str
-    dataset: str
-    protocol: str
-    group: str
-    split: str
-    scene: str
     fit_key: str
     fit_path: Path
     references: tuple[ViewJob, ...]

@@ -65,6 +65,26 @@ from setdiff_bench.enhancers.base import (
     create_enhancer,
 )
 from setdiff_bench.errors import PacketError, SetDiffBenchError, UsageError
+from setdiff_bench.evaluation.paths import (
+    ENHANCER_FILE,
+    FRAGMENTS_DIR,
+    IMAGES_DIR,
+    KEY_COLUMNS,
+    MANIFEST_FILE,
+    METRICS_FILE,
+    RUN_FILE,
+    SEQUENCES_FILE,
+    image_relative,
+    safe_component,
+)
+from setdiff_bench.evaluation.scoring import (
+    default_warp_cache,
+    quantize,
+    resolve_metrics,
+    score_images,
+    sequence_warp_error,
+    to_uint8_hwc,
+)
 from setdiff_bench.io.atomic import (
     atomic_path,
     is_stale_temporary,
@@ -74,35 +94,17 @@ from setdiff_bench.io.atomic import (
 )
 from setdiff_bench.io.images import read_rgb, to_tensor_chw, write_png
 from setdiff_bench.metrics.registry import PRESETS, MetricSpec
-from setdiff_bench.packets import PacketStore, timestamp_or_none
-from setdiff_bench.run_paths import (
-    ENHANCER_FILE,
-    FRAGMENTS_DIR,
-    IMAGES_DIR,
-    MANIFEST_FILE,
-    METRICS_FILE,
-    RUN_FILE,
-    SEQUENCES_FILE,
-    image_relative,
-    safe_component,
-)
-from setdiff_bench.scoring import (
-    default_warp_cache,
-    quantize,
-    resolve_metrics,
-    score_images,
-    sequence_warp_error,
-    to_uint8_hwc,
-)
-from setdiff_bench.shards import Shard
+from setdiff_bench.packets.index import INDEX_FILE
+from setdiff_bench.packets.shards import Shard
+from setdiff_bench.packets.store import PacketStore, timestamp_or_none
+from setdiff_bench.runtime.provenance import device_description, git_revision, package_versions
+from setdiff_bench.types import Packet
 
 RUN_FORMAT = "setdiff-run/1"
 #: Protocols whose targets are time-ordered camera sequences: warp error with ``warp="auto"``.
 SEQUENCE_PROTOCOLS = frozenset({"nuscenes"})
 #: Columns that are measurements of time, not results: excluded from byte-identity comparisons.
 TIMING_COLUMNS = ("ms_per_frame",)
-KEY_COLUMNS = ("dataset", "protocol", "group", "split", "scene", "frame", "sensor", "timestamp_us", "packet_id",
-               "view", "method")
 
 WarpMode = Literal["auto", "on", "off"]
 
@@ -126,7 +128,7 @@ class RunSettings:
         batch_size: images per metric call (bounds LPIPS memory); does not change results.
         warp_cache: folder caching the ground truth's flow per sequence (shared by every method; keyed
             by the ground-truth files' SHA-256 and the flow method); ``"auto"`` = the user cache
-            (:func:`setdiff_bench.scoring.default_warp_cache`), ``None`` = no cache.  Does not change results.
+            (:func:`setdiff_bench.evaluation.scoring.default_warp_cache`), ``None`` = no cache.  Does not change results.
     """
 
     method: str
@@ -178,13 +180,13 @@ def fragment_path(out: Path, packet_id: str) -> Path:
 
 
 # ---------------------------------------------------------------------- the run
-def run_method(packets: str | os.PathLike[str] | Any, out: str | os.PathLike[str], settings: RunSettings, *,
+def run_method(packets: str | os.PathLike[str] | PacketStore, out: str | os.PathLike[str], settings: RunSettings, *,
                shard: Shard = Shard(), progress: bool | None = None, enhancer: Enhancer | None = None,
                verify: bool = True, merge_only: bool = False) -> RunResult:
     """Enhance and score every packet of ``settings.split`` in this shard; merge when all are done.
 
     Args:
-        packets: a packet store folder or an open :class:`~setdiff_bench.packets.PacketStore`.
+        packets: a packet store folder or an open :class:`~setdiff_bench.packets.store.PacketStore`.
         out: the run folder (created; a folder holding a run with other settings is refused).
         settings: method, options and scoring choices.
         shard: which packets this call enhances.
@@ -214,7 +216,7 @@ def run_method(packets: str | os.PathLike[str] | Any, out: str | os.PathLike[str
     if settings.method not in available_methods() and enhancer is None:
         raise UsageError(f"unknown method {settings.method!r}; available: {', '.join(sorted(available_methods()))}",
                          "--method")
-    index_sha256 = sha256_file(Path(store.root) / "index.parquet")
+    index_sha256 = sha256_file(Path(store.root) / INDEX_FILE)
     identity = settings.identity(index_sha256)
     _check_folder(out, identity)
     if merge_only:
@@ -264,7 +266,7 @@ def run_method(packets: str | os.PathLike[str] | Any, out: str | os.PathLike[str
     return RunResult(out, len(todo), len(mine) - len(todo), remaining, merged)
 
 
-def _merge_finished(store: Any, out: Path, settings: RunSettings, specs: Sequence[MetricSpec],
+def _merge_finished(store: PacketStore, out: Path, settings: RunSettings, specs: Sequence[MetricSpec],
                     selection: Sequence[str]) -> RunResult:
     """``--merge``: merge a run whose shards have all finished; one line naming what is missing otherwise."""
     if not (out / RUN_FILE).is_file():
@@ -278,7 +280,7 @@ def _merge_finished(store: Any, out: Path, settings: RunSettings, specs: Sequenc
     return RunResult(out, 0, len(selection), 0, True)
 
 
-def _open_store(packets: Any) -> Any:
+def _open_store(packets: str | os.PathLike[str] | PacketStore) -> PacketStore:
     if isinstance(packets, str | os.PathLike):
         return PacketStore(packets)
     return packets
@@ -339,17 +341,17 @@ def _record_enhancer(out: Path, enhancer: Enhancer) -> None:
         write_text_atomic(path, text)
 
 
-def _target_rows(store: Any, selection: Sequence[str]) -> list[dict[str, Any]]:
+def _target_rows(store: PacketStore, selection: Sequence[str]) -> list[dict[str, Any]]:
     index = store.index
     rows = index[(index["role"] == "target") & index["packet_id"].isin(list(selection))]
     return rows.sort_values(["packet_id", "view"]).to_dict("records")
 
 
 def _target_ref(row: Mapping[str, Any]) -> TargetRef:
-    return TargetRef(str(row["dataset"]), str(row["protocol"]), str(row["group"]), str(row["scene"]), str(row["frame"]))
+    return TargetRef.from_row(row, frame=str(row["frame"]))
 
 
-def _run_packet(store: Any, out: Path, packet_id: str, enhancer: Enhancer, specs: Sequence[MetricSpec],
+def _run_packet(store: PacketStore, out: Path, packet_id: str, enhancer: Enhancer, specs: Sequence[MetricSpec],
                 settings: RunSettings, claim: Callable[[], None]) -> None:
     """Enhance and score one packet, then write its images and (last) its fragment.
 
@@ -389,7 +391,7 @@ def _run_packet(store: Any, out: Path, packet_id: str, enhancer: Enhancer, specs
     _write_rows(fragment_path(out, packet_id), records, [spec.name for spec in specs])
 
 
-def _checked(output: Any, packet: Any, name: str) -> torch.Tensor:
+def _checked(output: Any, packet: Packet, name: str) -> torch.Tensor:
     where = f"method {name}, packet {packet.packet_id}"
     expected = (len(packet.targets), 3, packet.height, packet.width)
     if not isinstance(output, torch.Tensor):
@@ -441,7 +443,7 @@ def warp_enabled(settings: RunSettings, protocols: Sequence[str]) -> bool:
     return settings.warp == "on"
 
 
-def merge_run(store: Any, out: Path, settings: RunSettings, specs: Sequence[MetricSpec],
+def merge_run(store: PacketStore, out: Path, settings: RunSettings, specs: Sequence[MetricSpec],
               selection: Sequence[str]) -> None:
     """Merge every fragment into ``metrics.parquet`` (+ ``sequences.parquet``) and write ``manifest.json``.
 
@@ -500,7 +502,7 @@ SEQUENCE_SCHEMA = pa.schema([
 ])
 
 
-def _sequence_table(store: Any, out: Path, frame: pd.DataFrame, settings: RunSettings) -> pa.Table:
+def _sequence_table(store: PacketStore, out: Path, frame: pd.DataFrame, settings: RunSettings) -> pa.Table:
     """Warp error of every (protocol, scene, sensor) sequence with ≥ 2 time-stamped targets."""
     records = []
     cache = None
@@ -537,10 +539,8 @@ def _sequence_table(store: Any, out: Path, frame: pd.DataFrame, settings: RunSet
     return pa.Table.from_pylist(records, schema=SEQUENCE_SCHEMA)
 
 
-def _manifest(store: Any, out: Path, settings: RunSettings, specs: Sequence[MetricSpec], frame: pd.DataFrame,
+def _manifest(store: PacketStore, out: Path, settings: RunSettings, specs: Sequence[MetricSpec], frame: pd.DataFrame,
               sequences: pa.Table | None, fragments_sha256: str) -> dict[str, Any]:
-    from setdiff_bench.provenance import device_description, git_revision, package_versions
-
     methods = available_methods()
     spec = methods.get(settings.method)
     enhancer_info: dict[str, Any] = {}
@@ -554,7 +554,7 @@ def _manifest(store: Any, out: Path, settings: RunSettings, specs: Sequence[Metr
         "method": {"name": settings.method, "factory": spec.factory if spec else None,
                    "source": spec.source if spec else None, "options": _jsonable(dict(settings.options)),
                    "enhancer": enhancer_info},
-        "packets": {"root": str(Path(store.root).resolve()), "index_sha256": sha256_file(Path(store.root) / "index.parquet"),
+        "packets": {"root": str(Path(store.root).resolve()), "index_sha256": sha256_file(Path(store.root) / INDEX_FILE),
                     "split": settings.split, "packets": int(frame["packet_id"].nunique()), "targets": len(frame),
                     "datasets": sorted(frame["dataset"].unique().tolist()),
                     "protocols": sorted(frame["protocol"].unique().tolist()),

@@ -1,4 +1,4 @@
-"""Score a finished run under an evaluation profile (:mod:`setdiff_bench.profiles`).
+"""Score a finished run under an evaluation profile (:mod:`setdiff_bench.evaluation.profiles`).
 
 Output, next to the run's own tables (``<run>/profiles/<profile>/``)::
 
@@ -31,10 +31,17 @@ import pandas as pd
 import torch
 
 from setdiff_bench.errors import UsageError
-from setdiff_bench.io.atomic import atomic_path, write_text_atomic
-from setdiff_bench.io.images import read_mask, read_rgb
-from setdiff_bench.metrics.registry import METRICS
-from setdiff_bench.profiles import (
+from setdiff_bench.evaluation.euvs_compat import compat_report
+from setdiff_bench.evaluation.paths import (
+    EUVS_COMPAT_FILE,
+    GROUPS_FILE,
+    KEY_COLUMNS,
+    METRICS_FILE,
+    PROFILE_FILE,
+    PROFILES_DIR,
+    SCENES_FILE,
+)
+from setdiff_bench.evaluation.profiles import (
     PROFILE_COLUMN,
     EvaluationProfile,
     aggregate,
@@ -43,11 +50,14 @@ from setdiff_bench.profiles import (
     pil_resize,
     render_size,
 )
-from setdiff_bench.run_paths import METRICS_FILE
-
-PROFILES_DIR = "profiles"
-KEY_COLUMNS = ("dataset", "protocol", "group", "split", "scene", "frame", "sensor", "timestamp_us", "packet_id",
-               "view", "method")
+from setdiff_bench.io.atomic import atomic_path, write_text_atomic
+from setdiff_bench.io.images import read_mask, read_rgb
+from setdiff_bench.loaders import load_scenes
+from setdiff_bench.metrics.dinov2 import final_score, masked_cosine
+from setdiff_bench.metrics.registry import METRICS
+from setdiff_bench.packets.plan import crop_window
+from setdiff_bench.packets.store import PacketStore
+from setdiff_bench.protocols import load_protocol
 
 
 @dataclass(frozen=True)
@@ -133,8 +143,6 @@ def score_run(run: str | Path, profile: EvaluationProfile, *, packets: str | Pat
     """
     from tqdm import tqdm
 
-    from setdiff_bench.packets import PacketStore
-
     run = Path(run)
     metrics_path = run / METRICS_FILE
     if not metrics_path.is_file():
@@ -164,8 +172,6 @@ def score_run(run: str | Path, profile: EvaluationProfile, *, packets: str | Pat
         record[PROFILE_COLUMN] = profile.name
         record.update(image_metrics(profile, pair, device))
         if profile.dinov2 and dinov2 is not None:
-            from setdiff_bench.metrics.dinov2 import final_score, masked_cosine
-
             record["cos_dinov2"] = masked_cosine(dinov2, pair.prediction, pair.ground_truth, pair.mask)
             # linear in the four metrics, so its mean over images equals the score of the means
             record["final_score"] = final_score(record["ssim_euvs"], record["psnr_euvs"], record["lpips_euvs"],
@@ -176,21 +182,19 @@ def score_run(run: str | Path, profile: EvaluationProfile, *, packets: str | Pat
     groups, scenes = aggregate(frame, [*profile.metrics, *extra], profile.aggregation)
     out = run / PROFILES_DIR / profile.name
     out.mkdir(parents=True, exist_ok=True)
-    for name, table in (("metrics.parquet", frame), ("scenes.parquet", scenes), ("groups.parquet", groups)):
+    for name, table in ((METRICS_FILE, frame), (SCENES_FILE, scenes), (GROUPS_FILE, groups)):
         with atomic_path(out / name) as tmp:
             table.to_parquet(tmp, index=False)
     notes = _coverage_notes(profile, rows, store)
     info = {"profile": _jsonable(asdict(profile)), "run": str(run.resolve()),
             "packets": str(Path(packets).resolve()), "data": str(Path(data).resolve()) if data else None,
             "dinov2": dinov2 is not None, "images": len(frame), "notes": notes}
-    write_text_atomic(out / "profile.json", json.dumps(info, indent=2, sort_keys=True) + "\n")
+    write_text_atomic(out / PROFILE_FILE, json.dumps(info, indent=2, sort_keys=True) + "\n")
     if profile.name.startswith("euvs"):
-        from setdiff_bench.euvs_compat import compat_report
-
         by_scene: dict[str, list[str]] = {}
         for row in rows.itertuples():
             by_scene.setdefault(str(row.scene), []).append(str(row.frame))
-        write_text_atomic(out / "euvs_compat.txt", compat_report(by_scene))
+        write_text_atomic(out / EUVS_COMPAT_FILE, compat_report(by_scene))
     return out
 
 
@@ -215,14 +219,9 @@ class _Originals:
         self.scenes: dict[tuple[str, str], Any] = {}
 
     def target(self, row: Mapping[str, Any]) -> tuple[np.ndarray, np.ndarray, tuple[int, int, int, int]]:
-        from setdiff_bench.prepare_plan import crop_window
-        from setdiff_bench.protocols import load_protocol
-
         protocol = load_protocol(str(row["protocol"]))
         key = (str(row["protocol"]), str(row["scene"]))
         if key not in self.scenes:
-            from setdiff_bench.loaders import load_scenes
-
             self.scenes[key] = load_scenes(str(row["dataset"]), self.data, [str(row["scene"])],
                                            **dict(protocol.loader_options))[0]
         frame = self.scenes[key].frame(str(row["frame"]))

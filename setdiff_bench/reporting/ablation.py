@@ -9,7 +9,7 @@
 
 Each cell is the mean of per-target values over the whole test split (all groups pooled), like
 the paper's tables.  The Markdown and LaTeX (booktabs) tables are written by the leaderboard's writers
-(:func:`setdiff_bench.leaderboard.pooled_table`), so cells, bold and headers follow the metric specs
+(:func:`setdiff_bench.reporting.leaderboard.pooled_table`), so cells, bold and headers follow the metric specs
 exactly as in the leaderboards; the Markdown adds the paper's numbers (DL3DV) below for orientation —
 never mixed into our rows — and the exact commands that produced them.  The set-size table has one row
 per set size (the paper prints Table 6 transposed, one row per metric); its Parquet keeps the paper's
@@ -28,7 +28,8 @@ import pyarrow.parquet as pq
 
 from setdiff_bench.errors import SetDiffBenchError, UsageError
 from setdiff_bench.io.atomic import atomic_path, write_text_atomic
-from setdiff_bench.leaderboard import (
+from setdiff_bench.metrics.registry import get_metric
+from setdiff_bench.reporting.leaderboard import (
     Leaderboard,
     load_reported,
     pooled_row,
@@ -36,7 +37,6 @@ from setdiff_bench.leaderboard import (
     render_latex,
     render_markdown,
 )
-from setdiff_bench.metrics.registry import get_metric
 
 METRICS = ("psnr", "ssim", "lpips")
 GEOMETRY_HEADER = "Geometric grounding"

@@ -26,6 +26,9 @@ from pathlib import Path
 from setdiff_bench.errors import SetDiffBenchError
 from setdiff_bench.io.atomic import write_text_atomic
 
+#: Stage timings kept across runs (``Pipeline(ledger=<work folder> / LEDGER_FILE)``).
+LEDGER_FILE = "stages.json"
+
 
 class StageFailed(SetDiffBenchError):
     """A stage's process exited non-zero; it has already printed its own error line."""

@@ -18,7 +18,7 @@ import pandas as pd
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.atomic import atomic_path
-from setdiff_bench.leaderboard import higher_is_better, metric_header
+from setdiff_bench.reporting.leaderboard import higher_is_better, metric_header
 
 _BUCKET = re.compile(r"^(\d+(?:\.\d+)?)-(\d+(?:\.\d+)?)s$")
 _LANE = re.compile(r"^lane\+(\d+)$")

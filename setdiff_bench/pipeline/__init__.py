@@ -1,0 +1,1 @@
+"""Whole pipelines of CLI stages as separate processes: the embedded demo and the stage runner."""

@@ -1,0 +1,1 @@
+"""The execution environment: device and thread choice, safe interrupts, lazy imports, provenance."""
