@@ -178,7 +178,7 @@ def score_run(run: str | Path, profile: EvaluationProfile, *, packets: str | Pat
                                                 record["cos_dinov2"])
         records.append(record)
     frame = pd.DataFrame.from_records(records)
-    extra = ["cos_dinov2", "final_score"] if "cos_dinov2" in frame.columns else []
+    extra = [name for name, spec in METRICS.items() if spec.scope == "profile" and name in frame.columns]
     groups, scenes = aggregate(frame, [*profile.metrics, *extra], profile.aggregation)
     out = run / PROFILES_DIR / profile.name
     out.mkdir(parents=True, exist_ok=True)
