@@ -16,7 +16,9 @@ import torch
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
-def time_call(fn: Callable[[], Any], *, repeats: int = 5, warmup: int = 1, cuda: bool = False) -> dict[str, float]:
+def time_call(
+    fn: Callable[[], Any], *, repeats: int = 5, warmup: int = 1, cuda: bool = False
+) -> dict[str, float]:
     """Run ``fn`` ``warmup`` times, then time ``repeats`` calls; milliseconds (median, min, mean)."""
     for _ in range(warmup):
         fn()
@@ -29,15 +31,22 @@ def time_call(fn: Callable[[], Any], *, repeats: int = 5, warmup: int = 1, cuda:
         if cuda:
             torch.cuda.synchronize()
         samples.append((time.perf_counter() - start) * 1000.0)
-    return {"median_ms": statistics.median(samples), "min_ms": min(samples), "mean_ms": statistics.fmean(samples),
-            "repeats": repeats}
+    return {
+        "median_ms": statistics.median(samples),
+        "min_ms": min(samples),
+        "mean_ms": statistics.fmean(samples),
+        "repeats": repeats,
+    }
 
 
 def machine() -> dict[str, Any]:
     """Device, versions and load: what a reader needs to interpret timings."""
     info: dict[str, Any] = {
-        "python": platform.python_version(), "torch": torch.__version__, "cpu": platform.processor() or platform.machine(),
-        "cpu_count": os.cpu_count(), "torch_threads": torch.get_num_threads(),
+        "python": platform.python_version(),
+        "torch": torch.__version__,
+        "cpu": platform.processor() or platform.machine(),
+        "cpu_count": os.cpu_count(),
+        "torch_threads": torch.get_num_threads(),
         "load_average_1min": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
         "cuda": torch.cuda.is_available(),
     }

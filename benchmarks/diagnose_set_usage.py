@@ -60,9 +60,19 @@ def patched_set_attention(wrapper: Callable[[ProcessorCall], ProcessorCall]) -> 
 
 def zeroed(original: ProcessorCall) -> ProcessorCall:
     """A processor whose output is zero (diffusers passes ``num_views`` only to a named parameter)."""
-    def call(self: Any, attn: Any, hidden_states: torch.Tensor, encoder_hidden_states: Any = None,
-             attention_mask: Any = None, temb: Any = None, num_views: int | None = None, **kwargs: Any) -> torch.Tensor:
+
+    def call(
+        self: Any,
+        attn: Any,
+        hidden_states: torch.Tensor,
+        encoder_hidden_states: Any = None,
+        attention_mask: Any = None,
+        temb: Any = None,
+        num_views: int | None = None,
+        **kwargs: Any,
+    ) -> torch.Tensor:
         return 0.0 * original(self, attn, hidden_states, num_views=num_views)
+
     return call
 
 
@@ -71,8 +81,10 @@ def token_points(points: torch.Tensor, tokens: int) -> tuple[torch.Tensor, torch
     ``(V·L,)`` and the median distance between horizontally adjacent valid tokens (one footprint)."""
     height, width = points.shape[-2:]
     # the token grid: the divisor pair of ``tokens`` closest to the image's aspect ratio
-    h = min((d for d in range(1, tokens + 1) if tokens % d == 0),
-            key=lambda d: abs(math.log((d / (tokens // d)) / (height / width))))
+    h = min(
+        (d for d in range(1, tokens + 1) if tokens % d == 0),
+        key=lambda d: abs(math.log((d / (tokens // d)) / (height / width))),
+    )
     w = tokens // h
     pooled = F.adaptive_avg_pool2d(points, (h, w))
     coverage = pooled[:, 3:]
@@ -83,13 +95,22 @@ def token_points(points: torch.Tensor, tokens: int) -> tuple[torch.Tensor, torch
     return xyz.flatten(2).transpose(1, 2).reshape(-1, 3), valid.reshape(-1), footprint
 
 
-def attention_stats(record: list[dict[str, float]], points: torch.Tensor,
-                    references: int) -> Callable[[ProcessorCall], ProcessorCall]:
+def attention_stats(
+    record: list[dict[str, float]], points: torch.Tensor, references: int
+) -> Callable[[ProcessorCall], ProcessorCall]:
     """A processor that appends, per layer, the statistics listed in the module docstring."""
+
     def wrap(original: ProcessorCall) -> ProcessorCall:
-        def call(self: Any, attn: Any, hidden_states: torch.Tensor, encoder_hidden_states: Any = None,
-                 attention_mask: Any = None, temb: Any = None, num_views: int | None = None,
-                 **kwargs: Any) -> torch.Tensor:
+        def call(
+            self: Any,
+            attn: Any,
+            hidden_states: torch.Tensor,
+            encoder_hidden_states: Any = None,
+            attention_mask: Any = None,
+            temb: Any = None,
+            num_views: int | None = None,
+            **kwargs: Any,
+        ) -> torch.Tensor:
             assert num_views is not None
             views, tokens = num_views, hidden_states.shape[1]
             sets, heads = hidden_states.shape[0] // views, attn.heads
@@ -97,19 +118,25 @@ def attention_stats(record: list[dict[str, float]], points: torch.Tensor,
             dim = query.shape[-1] // heads
             query = query.reshape(sets, views * tokens, heads, dim).transpose(1, 2)
             key = key.reshape(sets, views * tokens, heads, dim).transpose(1, 2)
-            logits = query @ key.transpose(-1, -2) / dim ** 0.5
+            logits = query @ key.transpose(-1, -2) / dim**0.5
             log_scale = getattr(attn, set_mixer.BIAS_PARAMETER, None)
             if kwargs.get("token_points") is not None and log_scale is not None:  # the C-map distance bias
                 bias_points, bias_valid = set_mixer.pool_token_points(kwargs["token_points"], tokens)
-                logits = logits + set_mixer.distance_bias(bias_points.reshape(sets, views * tokens, 3),
-                                                          bias_valid.reshape(sets, -1), log_scale.exp())
+                logits = logits + set_mixer.distance_bias(
+                    bias_points.reshape(sets, views * tokens, 3),
+                    bias_valid.reshape(sets, -1),
+                    log_scale.exp(),
+                )
             weights = torch.softmax(logits.float(), dim=-1).mean(dim=(0, 1))  # (T, T), over sets and heads
             total = views * tokens
             view_of = torch.arange(total) // tokens
             own = (view_of[:, None] == view_of[None, :]).float()
             entropy = -(weights * torch.log(weights.clamp_min(1e-30))).sum(-1).mean()
-            stats = {"tokens_per_view": float(tokens), "own_view": float((weights * own).sum(-1).mean()),
-                     "entropy": float(entropy / math.log(total))}
+            stats = {
+                "tokens_per_view": float(tokens),
+                "own_view": float((weights * own).sum(-1).mean()),
+                "entropy": float(entropy / math.log(total)),
+            }
             is_ref = view_of < references
             target_rows = weights[~is_ref]
             if references > 0 and target_rows.numel():
@@ -127,14 +154,18 @@ def attention_stats(record: list[dict[str, float]], points: torch.Tensor,
                         stats["corresponding_tokens"] = float(near.sum(-1)[rows].float().mean())
             record.append(stats)
             return original(self, attn, hidden_states, num_views=num_views, **kwargs)
+
         return call
+
     return wrap
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--packets", required=True, help="packet store")
-    parser.add_argument("--checkpoint", required=True, help="checkpoint folder or shipped name (tiny_setdiff)")
+    parser.add_argument(
+        "--checkpoint", required=True, help="checkpoint folder or shipped name (tiny_setdiff)"
+    )
     parser.add_argument("--group", default="lane+2")
     parser.add_argument("--packets-max", type=int, default=2)
     parser.add_argument("--out", type=Path, help="also write the JSON here")
@@ -148,13 +179,18 @@ def main() -> None:
         for packet_id in ids:
             packet = store.load_packet(packet_id)
             full = enhance_packet(model, packet)
-            row: dict[str, Any] = {"packet": packet_id, "references": len(packet.references),
-                                   "targets": len(packet.targets)}
+            row: dict[str, Any] = {
+                "packet": packet_id,
+                "references": len(packet.references),
+                "targets": len(packet.targets),
+            }
             for refs in (0, 1, 3):
                 smaller = enhance_packet(model, packet, max_references=refs, targets_per_set=1)
                 row[f"mean_abs_change_{refs}+1"] = float((smaller - full).abs().mean())
             with patched_set_attention(zeroed):
-                row["mean_abs_change_no_self_attention"] = float((enhance_packet(model, packet) - full).abs().mean())
+                row["mean_abs_change_no_self_attention"] = float(
+                    (enhance_packet(model, packet) - full).abs().mean()
+                )
             original_to_x0 = model.to_x0
             model.to_x0 = lambda latents, prediction: latents  # type: ignore[method-assign]
             try:
@@ -164,13 +200,20 @@ def main() -> None:
             stats: list[dict[str, float]] = []
             points = surface_points(packet)
             with patched_set_attention(attention_stats(stats, points, len(packet.references))):
-                enhance_packet(model, packet, guidance_scale=1.0,
-                               targets_per_set=len(packet.targets), max_references=len(packet.references))
+                enhance_packet(
+                    model,
+                    packet,
+                    guidance_scale=1.0,
+                    targets_per_set=len(packet.targets),
+                    max_references=len(packet.references),
+                )
             row["layers"] = [{k: round(v, 4) for k, v in layer.items()} for layer in stats]
             row["uniform_over_views"] = round(1.0 / (len(packet.references) + len(packet.targets)), 4)
             rows.append(row)
-    text = json.dumps({"checkpoint": args.checkpoint, "packets": str(args.packets), "group": args.group,
-                       "rows": rows}, indent=1)
+    text = json.dumps(
+        {"checkpoint": args.checkpoint, "packets": str(args.packets), "group": args.group, "rows": rows},
+        indent=1,
+    )
     print(text)
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)

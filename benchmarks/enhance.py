@@ -56,8 +56,16 @@ def build(name: str, device: torch.device, dtype: torch.dtype) -> SetDiffModel:
     return model.to(device=device, dtype=dtype).eval()
 
 
-def inputs(sets: int, views: int, refs: int, height: int, width: int, geometry: bool, device: torch.device,
-           dtype: torch.dtype) -> SetBatch:
+def inputs(
+    sets: int,
+    views: int,
+    refs: int,
+    height: int,
+    width: int,
+    geometry: bool,
+    device: torch.device,
+    dtype: torch.dtype,
+) -> SetBatch:
     g = torch.Generator().manual_seed(0)
     images = torch.rand(sets, views, 3, height, width, generator=g)
     geo = torch.randn(sets, views, 9, height, width, generator=g) if geometry else None
@@ -71,12 +79,15 @@ def attention_kernels(fast: bool) -> AbstractContextManager[Any]:
     return nullcontext() if fast else sdpa_kernel([SDPBackend.MATH])
 
 
-def stage_times(model: SetDiffModel, batch: SetBatch, guidance: float, *, cuda: bool, repeats: int,
-                warmup: int) -> dict[str, Any]:
+def stage_times(
+    model: SetDiffModel, batch: SetBatch, guidance: float, *, cuda: bool, repeats: int, warmup: int
+) -> dict[str, Any]:
     """Median ms of encode, Ψ + UNet, decode and the whole ``enhance`` call, per call and per target frame."""
     sets, views, refs = batch.num_sets, batch.num_views, batch.num_references
     images = batch.images.reshape(sets * views, *batch.images.shape[2:])
-    geometry = None if batch.geometry is None else batch.geometry.reshape(sets * views, *batch.geometry.shape[2:])
+    geometry = (
+        None if batch.geometry is None else batch.geometry.reshape(sets * views, *batch.geometry.shape[2:])
+    )
     targets = (torch.arange(sets)[:, None] * views + torch.arange(refs, views)[None, :]).reshape(-1)
     targets = targets.to(images.device)
     frames = sets * (views - refs)
@@ -124,8 +135,14 @@ def apply_step(model: SetDiffModel, step: str, device: torch.device) -> None:
         codec.decode = torch.compile(type(codec).decode.__get__(codec), mode=mode)  # type: ignore[method-assign]
 
 
-def run_ladder(model: SetDiffModel, batch: SetBatch, guidance: float, steps: list[str], device: torch.device,
-               repeats: int) -> dict[str, Any]:
+def run_ladder(
+    model: SetDiffModel,
+    batch: SetBatch,
+    guidance: float,
+    steps: list[str],
+    device: torch.device,
+    repeats: int,
+) -> dict[str, Any]:
     cuda = device.type == "cuda"
     results: dict[str, Any] = {}
     previous = None
@@ -133,11 +150,15 @@ def run_ladder(model: SetDiffModel, batch: SetBatch, guidance: float, steps: lis
         if step not in steps:
             continue
         if not cuda and step in ("+torch_compile", "+cuda_graphs"):
-            results[step] = {"skipped": "CPU run: torch.compile of the SD UNet takes many minutes on 2 cores and "
-                                        "CUDA graphs need CUDA"}
+            results[step] = {
+                "skipped": "CPU run: torch.compile of the SD UNet takes many minutes on 2 cores and "
+                "CUDA graphs need CUDA"
+            }
             continue
         fast_attention = step != "baseline"
-        model.config = dataclasses.replace(model.config, cfg_batched=LADDER.index(step) >= LADDER.index("+batched_cfg"))
+        model.config = dataclasses.replace(
+            model.config, cfg_batched=LADDER.index(step) >= LADDER.index("+batched_cfg")
+        )
         apply_step(model, step, device)
         if cuda:
             torch.cuda.empty_cache()
@@ -157,15 +178,20 @@ def run_ladder(model: SetDiffModel, batch: SetBatch, guidance: float, steps: lis
             timing["speedup_vs_previous_step"] = previous / timing["total_ms_per_frame"]
         previous = timing["total_ms_per_frame"]
         results[step] = timing
-        print(f"  {step:<15} {timing['total_ms_per_frame']:9.1f} ms/frame  (encode {timing['encode_ms_per_frame']:.1f}"
-              f" | unet {timing['unet_ms_per_frame']:.1f} | decode {timing['decode_ms_per_frame']:.1f})"
-              + (f"  peak {timing['peak_gpu_memory_gib']:.1f} GiB" if cuda else ""), flush=True)
+        print(
+            f"  {step:<15} {timing['total_ms_per_frame']:9.1f} ms/frame  (encode {timing['encode_ms_per_frame']:.1f}"
+            f" | unet {timing['unet_ms_per_frame']:.1f} | decode {timing['decode_ms_per_frame']:.1f})"
+            + (f"  peak {timing['peak_gpu_memory_gib']:.1f} GiB" if cuda else ""),
+            flush=True,
+        )
     return results
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--device", choices=("cuda", "cpu"), default="cuda" if torch.cuda.is_available() else "cpu")
+    parser.add_argument(
+        "--device", choices=("cuda", "cpu"), default="cuda" if torch.cuda.is_available() else "cpu"
+    )
     parser.add_argument("--height", type=int)
     parser.add_argument("--width", type=int)
     parser.add_argument("--refs", type=int)
@@ -175,7 +201,9 @@ def main() -> None:
     parser.add_argument("--steps", default=",".join(LADDER), help="comma-separated subset of the ladder")
     parser.add_argument("--threads", type=int, help="torch intra-op threads (CPU runs)")
     parser.add_argument("--no-difix", action="store_true")
-    parser.add_argument("--no-write", action="store_true", help="print only; do not write results/enhance.json")
+    parser.add_argument(
+        "--no-write", action="store_true", help="print only; do not write results/enhance.json"
+    )
     args = parser.parse_args()
     device = torch.device(args.device)
     if args.threads:
@@ -192,11 +220,16 @@ def main() -> None:
     unknown = sorted(set(steps) - set(LADDER))
     if unknown:
         parser.error(f"unknown steps {unknown}; known: {', '.join(LADDER)}")
-    note = ("GPU run at the target setting" if cuda else
-            f"CPU run at a SMALL size ({height}x{width}, {refs}+{targets} views, float32): no GPU in this task; "
-            "numbers only show the relative effect of the CPU-applicable steps and are contended by other jobs")
-    print(f"enhance benchmark on {device}: SD-Turbo architecture, random weights, {height}x{width}, "
-          f"{refs} refs + {targets} targets, CFG {args.guidance}, {str(dtype).removeprefix('torch.')}")
+    note = (
+        "GPU run at the target setting"
+        if cuda
+        else f"CPU run at a SMALL size ({height}x{width}, {refs}+{targets} views, float32): no GPU in this task; "
+        "numbers only show the relative effect of the CPU-applicable steps and are contended by other jobs"
+    )
+    print(
+        f"enhance benchmark on {device}: SD-Turbo architecture, random weights, {height}x{width}, "
+        f"{refs} refs + {targets} targets, CFG {args.guidance}, {str(dtype).removeprefix('torch.')}"
+    )
     if not cuda:
         print(f"NOTE: {note}")
 
@@ -214,7 +247,9 @@ def main() -> None:
         print("DiFix (1 reference + 1 target per set, the sets batched, no geometry, no CFG):")
         model = build("sd_turbo_difix", device, dtype)
         pairs = inputs(targets, 2 if refs else 1, 1 if refs else 0, height, width, False, device, dtype)
-        difix_steps = [s for s in ("+sdpa_flash", "+channels_last", "+torch_compile", "+cuda_graphs") if s in steps]
+        difix_steps = [
+            s for s in ("+sdpa_flash", "+channels_last", "+torch_compile", "+cuda_graphs") if s in steps
+        ]
         difix = run_ladder(model, pairs, 1.0, difix_steps, device, repeats)
         del model, pairs
         gc.collect()
@@ -226,7 +261,11 @@ def main() -> None:
         "device": str(device),
         "dtype": str(dtype).removeprefix("torch."),
         "architecture": "sd-turbo (random weights)",
-        "height": height, "width": width, "references": refs, "targets": targets, "guidance_scale": args.guidance,
+        "height": height,
+        "width": width,
+        "references": refs,
+        "targets": targets,
+        "guidance_scale": args.guidance,
         "paper_ms_per_frame_a100": PAPER_MS_PER_FRAME_A100,
         "goal": f"<= {GOAL_MS_PER_FRAME_H100:.0f} ms per target frame (>= 10 fps) on an H100 at 576x1024, 8+8, CFG 2",
         "best_setdiff_ms_per_frame": best,

@@ -57,7 +57,9 @@ def main() -> None:
     parser.add_argument("--scene")
     parser.add_argument("-o", "--option", action="append", default=[])
     parser.add_argument("--downscale", type=int, default=1)
-    parser.add_argument("--threads", type=int, default=1, help="torch threads (default 1, the shared-CPU setting)")
+    parser.add_argument(
+        "--threads", type=int, default=1, help="torch threads (default 1, the shared-CPU setting)"
+    )
     parser.add_argument("--out", default="fit", help="results name (benchmarks/results/<out>.json)")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
@@ -85,8 +87,15 @@ def main() -> None:
 
     def forward_backward() -> None:
         params = trainer.params.model()
-        out = render(params, [camera], trainer.backend, with_geometry=False, sh_degree=trainer.active_sh,
-                     background=config.background, **kwargs)
+        out = render(
+            params,
+            [camera],
+            trainer.backend,
+            with_geometry=False,
+            sh_degree=trainer.active_sh,
+            background=config.background,
+            **kwargs,
+        )
         out.rgb.sum().backward()
         trainer.params.optimizer.zero_grad(set_to_none=True)
 
@@ -94,17 +103,32 @@ def main() -> None:
     ratio = step_ms / peer["median_ms"]
     overhead_s = first_s - step_ms / 1000.0
     payload = {
-        "benchmark": "fit", "scene": label, "views": len(views), "image_size": [camera.width, camera.height],
-        "gaussians": len(model), "backend": trainer.backend, "machine": machine(),
-        "setup_s": setup_s, "first_iteration_s": first_s, "steady_step_median_ms": step_ms,
-        "render_forward_backward": peer, "step_cost_ratio": ratio, "first_iteration_overhead_s": overhead_s,
+        "benchmark": "fit",
+        "scene": label,
+        "views": len(views),
+        "image_size": [camera.width, camera.height],
+        "gaussians": len(model),
+        "backend": trainer.backend,
+        "machine": machine(),
+        "setup_s": setup_s,
+        "first_iteration_s": first_s,
+        "steady_step_median_ms": step_ms,
+        "render_forward_backward": peer,
+        "step_cost_ratio": ratio,
+        "first_iteration_overhead_s": overhead_s,
         "goals": {"step_cost_ratio_max": 1.3, "first_iteration_overhead_s_max": 10.0},
         "within_goals": {"step_cost_ratio": ratio <= 1.3, "first_iteration_overhead": overhead_s <= 10.0},
     }
     path = write_result(args.out, payload)
-    print(f"{label}: {len(views)} views {camera.width}x{camera.height}, {len(model)} Gaussians, {trainer.backend}")
-    print(f"step {step_ms:.0f} ms vs render fwd+bwd {peer['median_ms']:.0f} ms: ratio {ratio:.2f} (goal <= 1.3)")
-    print(f"first iteration {first_s:.2f} s, overhead {overhead_s:.2f} s (goal <= 10 s); setup {setup_s:.2f} s -> {path}")
+    print(
+        f"{label}: {len(views)} views {camera.width}x{camera.height}, {len(model)} Gaussians, {trainer.backend}"
+    )
+    print(
+        f"step {step_ms:.0f} ms vs render fwd+bwd {peer['median_ms']:.0f} ms: ratio {ratio:.2f} (goal <= 1.3)"
+    )
+    print(
+        f"first iteration {first_s:.2f} s, overhead {overhead_s:.2f} s (goal <= 10 s); setup {setup_s:.2f} s -> {path}"
+    )
 
 
 if __name__ == "__main__":

@@ -57,7 +57,9 @@ def packet_measures(model: Any, store: PacketStore, packet_id: str) -> dict[str,
         "enhanced_psnr": statistics.fmean(psnr(enhanced[m], truth[m]) for m in range(len(truth))),
         "no_reference_psnr": statistics.fmean(psnr(alone[m], truth[m]) for m in range(len(truth))),
         "change_psnr": statistics.fmean(psnr(enhanced[m], render[m]) for m in range(len(truth))),
-        "change_error_correlation": float((change * error).sum() / (change.norm() * error.norm()).clamp_min(1e-12)),
+        "change_error_correlation": float(
+            (change * error).sum() / (change.norm() * error.norm()).clamp_min(1e-12)
+        ),
         "best_step": float((change * error).sum() / (change * change).sum().clamp_min(1e-12)),
         "lowpass_identity_psnr": psnr(F.avg_pool2d(render, 8), F.avg_pool2d(truth, 8)),
         "lowpass_enhanced_psnr": psnr(F.avg_pool2d(enhanced, 8), F.avg_pool2d(truth, 8)),
@@ -67,8 +69,12 @@ def packet_measures(model: Any, store: PacketStore, packet_id: str) -> dict[str,
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--packets", required=True, type=Path, help="packet store")
-    parser.add_argument("--checkpoint", action="append", required=True,
-                        help="checkpoint folder or shipped model name (repeatable)")
+    parser.add_argument(
+        "--checkpoint",
+        action="append",
+        required=True,
+        help="checkpoint folder or shipped model name (repeatable)",
+    )
     parser.add_argument("--group", action="append", required=True, help="packet group (repeatable)")
     parser.add_argument("--split", default="test")
     parser.add_argument("--threads", type=int, default=2)
@@ -76,20 +82,29 @@ def main() -> int:
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     store = PacketStore(args.packets)
-    ids = {group: [p for p in store.packet_ids(args.split) if store.rows(p)["group"].iloc[0] == group]
-           for group in args.group}
+    ids = {
+        group: [p for p in store.packet_ids(args.split) if store.rows(p)["group"].iloc[0] == group]
+        for group in args.group
+    }
     results: dict[str, Any] = {}
     for checkpoint in args.checkpoint:
         model, _ = load_model(checkpoint)
         per_group = {}
         for group, packet_ids in ids.items():
             records = {packet_id: packet_measures(model, store, packet_id) for packet_id in packet_ids}
-            means = {key: statistics.fmean(r[key] for r in records.values()) for key in next(iter(records.values()))}
+            means = {
+                key: statistics.fmean(r[key] for r in records.values())
+                for key in next(iter(records.values()))
+            }
             per_group[group] = {"means": means, "packets": records}
             print(checkpoint, group, json.dumps({k: round(v, 3) for k, v in means.items()}), flush=True)
         results[checkpoint] = per_group
-    output = {"benchmark": "heldout_damage", "command": " ".join(["python", *sys.argv]), "machine": machine(),
-              "checkpoints": results}
+    output = {
+        "benchmark": "heldout_damage",
+        "command": " ".join(["python", *sys.argv]),
+        "machine": machine(),
+        "checkpoints": results,
+    }
     if args.out:
         args.out.write_text(json.dumps(output, indent=2) + "\n")
     return 0

@@ -36,8 +36,21 @@ def ensure_scenes(data: Path, scenes: int) -> None:
     present = [p for p in data.glob("*/scene.json")] if data.is_dir() else []
     if len(present) >= scenes and all((p.parent / "fits" / "lane0.ply").is_file() for p in present):
         return
-    command = [sys.executable, "-m", "setdiff_bench", "synth", "--preset", "default", "--scenes", str(scenes),
-               "--out", str(data), "--device", "cpu", "--no-progress"]
+    command = [
+        sys.executable,
+        "-m",
+        "setdiff_bench",
+        "synth",
+        "--preset",
+        "default",
+        "--scenes",
+        str(scenes),
+        "--out",
+        str(data),
+        "--device",
+        "cpu",
+        "--no-progress",
+    ]
     print("generating:", " ".join(command), flush=True)
     subprocess.run(command, check=True)
 
@@ -62,27 +75,37 @@ def time_writes(files, folder: Path, atomic: bool) -> float:
     for stem, image, cmap in files:
         write_png(folder / f"{stem}.png", image, atomic=atomic)
         if cmap is not None:
-            write_exr(folder / f"{stem}_cmap.exr", cmap, CMAP_CHANNELS, attributes=EXR_ATTRIBUTES, atomic=atomic)
+            write_exr(
+                folder / f"{stem}_cmap.exr", cmap, CMAP_CHANNELS, attributes=EXR_ATTRIBUTES, atomic=atomic
+            )
     return time.perf_counter() - start
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--data", type=Path, default=Path(tempfile.gettempdir()) / "setdiff-bench" / "synthetic-default",
-                        help="synthetic default-preset scenes (generated here when missing)")
+    parser.add_argument(
+        "--data",
+        type=Path,
+        default=Path(tempfile.gettempdir()) / "setdiff-bench" / "synthetic-default",
+        help="synthetic default-preset scenes (generated here when missing)",
+    )
     parser.add_argument("--scenes", type=int, default=1, help="scenes to generate/use (the preset has 5)")
     parser.add_argument("--workers", type=int, default=1)
-    parser.add_argument("--peer-packets", type=int, default=5, help="packets rewritten for the write-path peer")
+    parser.add_argument(
+        "--peer-packets", type=int, default=5, help="packets rewritten for the write-path peer"
+    )
     args = parser.parse_args()
     ensure_scenes(args.data, args.scenes)
     names = sorted(p.parent.name for p in args.data.glob("*/scene.json"))[: args.scenes]
     torch.set_num_threads(1)
     with tempfile.TemporaryDirectory(prefix="setdiff-prepare-bench-") as tmp:
         out = Path(tmp) / "store"
-        summary = prepare("synthetic", args.data, out, fits=args.data, scenes=names, workers=args.workers,
-                          progress=False)
-        rerun = prepare("synthetic", args.data, out, fits=args.data, scenes=names, workers=args.workers,
-                        progress=False)
+        summary = prepare(
+            "synthetic", args.data, out, fits=args.data, scenes=names, workers=args.workers, progress=False
+        )
+        rerun = prepare(
+            "synthetic", args.data, out, fits=args.data, scenes=names, workers=args.workers, progress=False
+        )
         store = PacketStore(out)
         busy = summary.render_s + summary.read_s + summary.write_s
         files = [f for pid in store.packet_ids()[: args.peer_packets] for f in packet_views(store, pid)]
@@ -96,26 +119,51 @@ def main() -> None:
         exr_f32, exr_f16 = (Path(tmp) / "f32.exr").stat().st_size, (Path(tmp) / "f16.exr").stat().st_size
         height, width = cmaps[0].shape[:2]
     results = {
-        "scenes": names, "packets": summary.written, "views": summary.views_written, "resolution": [height, width],
-        "wall_s": summary.wall_s, "views_per_s": summary.views_written / summary.wall_s,
-        "packet_time_s": {"render_and_normalise": summary.render_s, "read_captures": summary.read_s,
-                          "write_files": summary.write_s},
-        "share": {"render": summary.render_s / busy, "read": summary.read_s / busy, "write": summary.write_s / busy},
+        "scenes": names,
+        "packets": summary.written,
+        "views": summary.views_written,
+        "resolution": [height, width],
+        "wall_s": summary.wall_s,
+        "views_per_s": summary.views_written / summary.wall_s,
+        "packet_time_s": {
+            "render_and_normalise": summary.render_s,
+            "read_captures": summary.read_s,
+            "write_files": summary.write_s,
+        },
+        "share": {
+            "render": summary.render_s / busy,
+            "read": summary.read_s / busy,
+            "write": summary.write_s / busy,
+        },
         "planning_and_merge_s": summary.wall_s - busy,
-        "resume_noop_run_s": rerun.wall_s, "resume_skipped": rerun.skipped,
-        "write_path_peer": {"files": len(files) + len(cmaps), "folder_rename_no_fsync_s": ours,
-                            "per_file_atomic_fsync_s": peer, "ratio_peer_over_ours": peer / ours if ours else None},
+        "resume_noop_run_s": rerun.wall_s,
+        "resume_skipped": rerun.skipped,
+        "write_path_peer": {
+            "files": len(files) + len(cmaps),
+            "folder_rename_no_fsync_s": ours,
+            "per_file_atomic_fsync_s": peer,
+            "ratio_peer_over_ours": peer / ours if ours else None,
+        },
         "exr_bytes": {"float32": exr_f32, "half": exr_f16},
     }
-    payload = {"benchmark": "prepare", "preset": "default", "workers": args.workers, "machine": machine(),
-               "results": results,
-               "note": "timings on a 2-core machine shared with other jobs (see load_average_1min); the torch "
-                       "renderer runs one thread per process (prepare's default)"}
+    payload = {
+        "benchmark": "prepare",
+        "preset": "default",
+        "workers": args.workers,
+        "machine": machine(),
+        "results": results,
+        "note": "timings on a 2-core machine shared with other jobs (see load_average_1min); the torch "
+        "renderer runs one thread per process (prepare's default)",
+    }
     path = write_result("prepare", payload)
     share = results["share"]
-    print(f"{'views':>8} {'views/s':>8} {'render':>7} {'read':>6} {'write':>6} {'resume s':>9} {'peer/ours':>9}")
-    print(f"{summary.views_written:8d} {results['views_per_s']:8.2f} {share['render']:7.1%} {share['read']:6.1%} "
-          f"{share['write']:6.1%} {rerun.wall_s:9.2f} {results['write_path_peer']['ratio_peer_over_ours'] or 0:9.2f}")
+    print(
+        f"{'views':>8} {'views/s':>8} {'render':>7} {'read':>6} {'write':>6} {'resume s':>9} {'peer/ours':>9}"
+    )
+    print(
+        f"{summary.views_written:8d} {results['views_per_s']:8.2f} {share['render']:7.1%} {share['read']:6.1%} "
+        f"{share['write']:6.1%} {rerun.wall_s:9.2f} {results['write_path_peer']['ratio_peer_over_ours'] or 0:9.2f}"
+    )
     print(f"wrote {path}")
 
 

@@ -56,7 +56,9 @@ def world_model(scenes: Path, scene: str, cache: dict[str, GaussianModel]) -> Ga
     """The static world of a synthetic scene, rebuilt from its ``scene.json`` (preset, seed, index)."""
     if scene not in cache:
         description = json.loads((scenes / scene / "scene.json").read_text())
-        build = build_scene(get_preset(description["preset"]), int(description["seed"]), int(description["index"]))
+        build = build_scene(
+            get_preset(description["preset"]), int(description["seed"]), int(description["index"])
+        )
         cache[scene] = build.world.static
     return cache[scene]
 
@@ -68,8 +70,9 @@ def with_true_geometry(packet: Packet, cameras: list, cmaps: torch.Tensor, alpha
     def swap(views: Any, part: slice) -> Any:
         return replace(views, cameras=tuple(cameras[part]), cmaps=cmaps[part], alphas=alphas[part])
 
-    return replace(packet, references=swap(packet.references, slice(0, n)),
-                   targets=swap(packet.targets, slice(n, None)))
+    return replace(
+        packet, references=swap(packet.references, slice(0, n)), targets=swap(packet.targets, slice(n, None))
+    )
 
 
 def changed(output: torch.Tensor, render_images: torch.Tensor) -> torch.Tensor:
@@ -77,16 +80,20 @@ def changed(output: torch.Tensor, render_images: torch.Tensor) -> torch.Tensor:
     return (output - render_images).abs().sum(dim=1) > 1e-6
 
 
-def packet_measures(store: PacketStore, packet_id: str, scenes: Path, cache: dict[str, GaussianModel],
-                    enhancer: ReprojectEnhancer) -> dict[str, Any]:
+def packet_measures(
+    store: PacketStore,
+    packet_id: str,
+    scenes: Path,
+    cache: dict[str, GaussianModel],
+    enhancer: ReprojectEnhancer,
+) -> dict[str, Any]:
     """Every measure of the module docstring for one packet."""
     rows = store.rows(packet_id)
     packet = store.load_packet(packet_id)
     truth, masks = store.load_ground_truth(packet_id)
     cameras = [row_camera(row, world=True) for _, row in rows.iterrows()]
     with torch.no_grad():
-        world = render(world_model(scenes, packet.scene, cache), cameras, with_geometry=True,
-                       tile_size=8)
+        world = render(world_model(scenes, packet.scene, cache), cameras, with_geometry=True, tile_size=8)
     cmaps, alphas = world.cmap.float(), world.alpha.float()
     n, renders = len(packet.references), packet.targets.images
     fit_output = enhancer.enhance(packet)
@@ -98,8 +105,13 @@ def packet_measures(store: PacketStore, packet_id: str, scenes: Path, cache: dic
     for m in range(len(packet.targets)):
         target_points, target_valid = points[n + m].reshape(3, -1).T, valid[n + m].reshape(-1)
         for r in range(n):
-            colour, found = enhancer._gather(target_points, (cameras[r],), geometry[r:r + 1],
-                                             packet.references.images[r:r + 1], torch.ones(1))
+            colour, found = enhancer._gather(
+                target_points,
+                (cameras[r],),
+                geometry[r : r + 1],
+                packet.references.images[r : r + 1],
+                torch.ones(1),
+            )
             keep = found & target_valid & masks[m].reshape(-1)
             record = {"target": m, "reference": r, "accepted": float(keep.float().mean())}
             if int(keep.sum()) >= 100:
@@ -108,30 +120,47 @@ def packet_measures(store: PacketStore, packet_id: str, scenes: Path, cache: dic
                 record["warp_psnr"] = masked_psnr(colour, flat_truth, on[:1])
                 record["render_psnr"] = masked_psnr(renders[m].reshape(3, -1), flat_truth, on[:1])
             pairs.append(record)
-    per_image = {name: [masked_psnr(images[m], truth[m], masks[m]) for m in range(len(truth))]
-                 for name, images in (("identity", renders), ("reproject_fit", fit_output),
-                                      ("reproject_true", true_output))}
+    per_image = {
+        name: [masked_psnr(images[m], truth[m], masks[m]) for m in range(len(truth))]
+        for name, images in (
+            ("identity", renders),
+            ("reproject_fit", fit_output),
+            ("reproject_true", true_output),
+        )
+    }
     return {
-        "packet_id": packet_id, "group": packet.group, "targets": len(truth), "references": n,
+        "packet_id": packet_id,
+        "group": packet.group,
+        "targets": len(truth),
+        "references": n,
         **{name: statistics.fmean(values) for name, values in per_image.items()},
         "coverage_fit": float(changed(fit_output, renders).float().mean()),
         "coverage_true": float(changed(true_output, renders).float().mean()),
         "world_vs_ground_truth_psnr": statistics.fmean(
-            masked_psnr(world.rgb[n + m].clamp(0, 1), truth[m], masks[m]) for m in range(len(truth))),
+            masked_psnr(world.rgb[n + m].clamp(0, 1), truth[m], masks[m]) for m in range(len(truth))
+        ),
         "pairs": pairs,
     }
 
 
 def group_summary(records: list[dict[str, Any]]) -> dict[str, float]:
     """Means over a group's packets (pair measures over all pairs with enough accepted pixels)."""
-    keys = ("identity", "reproject_fit", "reproject_true", "coverage_fit", "coverage_true",
-            "world_vs_ground_truth_psnr")
+    keys = (
+        "identity",
+        "reproject_fit",
+        "reproject_true",
+        "coverage_fit",
+        "coverage_true",
+        "world_vs_ground_truth_psnr",
+    )
     summary = {key: statistics.fmean(r[key] for r in records) for key in keys}
     pairs = [p for r in records for p in r["pairs"]]
     scored = [p for p in pairs if "warp_psnr" in p]
     summary["pair_accepted"] = statistics.fmean(p["accepted"] for p in pairs)
     summary["pair_warp_psnr"] = statistics.fmean(p["warp_psnr"] for p in scored) if scored else float("nan")
-    summary["pair_render_psnr"] = statistics.fmean(p["render_psnr"] for p in scored) if scored else float("nan")
+    summary["pair_render_psnr"] = (
+        statistics.fmean(p["render_psnr"] for p in scored) if scored else float("nan")
+    )
     summary["packets"] = len(records)
     return summary
 
@@ -139,7 +168,9 @@ def group_summary(records: list[dict[str, Any]]) -> dict[str, float]:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--packets", required=True, type=Path, help="synthetic packet store")
-    parser.add_argument("--scenes", required=True, type=Path, help="the synthetic scenes the packets came from")
+    parser.add_argument(
+        "--scenes", required=True, type=Path, help="the synthetic scenes the packets came from"
+    )
     parser.add_argument("--group", action="append", required=True, help="packet group (repeatable)")
     parser.add_argument("--per-group", type=int, default=2, help="packets per group (first in id order)")
     parser.add_argument("--split", default="test")
@@ -149,14 +180,20 @@ def main() -> int:
     store, cache, enhancer = PacketStore(args.packets), {}, ReprojectEnhancer()
     records: dict[str, list[dict[str, Any]]] = {}
     for group in args.group:
-        ids = [p for p in store.packet_ids(args.split) if store.rows(p)["group"].iloc[0] == group][: args.per_group]
+        ids = [p for p in store.packet_ids(args.split) if store.rows(p)["group"].iloc[0] == group][
+            : args.per_group
+        ]
         for packet_id in ids:
             record = packet_measures(store, packet_id, args.scenes, cache, enhancer)
             records.setdefault(group, []).append(record)
             print(json.dumps({k: v for k, v in record.items() if k != "pairs"}), flush=True)
-    result = {"benchmark": "reproject_geometry", "command": " ".join(["python", *sys.argv]), "machine": machine(),
-              "groups": {group: group_summary(items) for group, items in records.items()},
-              "packets": records}
+    result = {
+        "benchmark": "reproject_geometry",
+        "command": " ".join(["python", *sys.argv]),
+        "machine": machine(),
+        "groups": {group: group_summary(items) for group, items in records.items()},
+        "packets": records,
+    }
     print(json.dumps(result["groups"], indent=2))
     if args.out:
         args.out.write_text(json.dumps(result, indent=2) + "\n")

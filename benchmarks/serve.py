@@ -44,14 +44,23 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def percentiles(samples: list[float], frames_per_tick: int) -> dict[str, float]:
     ms = np.asarray(samples) * 1000.0
-    return {"p50_ms": float(np.percentile(ms, 50)), "p99_ms": float(np.percentile(ms, 99)),
-            "mean_ms": float(ms.mean()), "ticks": len(ms),
-            "frames_per_s": float(frames_per_tick * len(ms) / (ms.sum() / 1000.0))}
+    return {
+        "p50_ms": float(np.percentile(ms, 50)),
+        "p99_ms": float(np.percentile(ms, 99)),
+        "mean_ms": float(ms.mean()),
+        "ticks": len(ms),
+        "frames_per_s": float(frames_per_tick * len(ms) / (ms.sum() / 1000.0)),
+    }
 
 
-def in_process(checkpoint: Path, size: tuple[int, int], ticks: int, cache: bool, device: str) -> dict[str, float]:
-    session = StreamSession(load_enhancer("setdiff", str(checkpoint), device=device), recorded_references(size),
-                            cache_reference_latents=cache)
+def in_process(
+    checkpoint: Path, size: tuple[int, int], ticks: int, cache: bool, device: str
+) -> dict[str, float]:
+    session = StreamSession(
+        load_enhancer("setdiff", str(checkpoint), device=device),
+        recorded_references(size),
+        cache_reference_latents=cache,
+    )
     frames = [tick_frames(t, size) for t in range(ticks)]
     session.enhance(frames[0])  # warm-up
     samples = []
@@ -65,10 +74,25 @@ def in_process(checkpoint: Path, size: tuple[int, int], ticks: int, cache: bool,
 
 def start_served(checkpoint: Path, *extra: str, device: str = "cpu") -> tuple[subprocess.Popen[str], int]:
     env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(ROOT)}
-    process = subprocess.Popen([sys.executable, "-c", "import torch, sys; torch.set_num_threads(1); "
-                                "from setdiff_bench.cli.main import main; sys.exit(main(sys.argv[1:]))",
-                                "serve", "--checkpoint", str(checkpoint), "--port", "0", "--device", device, *extra],
-                               stdout=subprocess.PIPE, text=True, env=env)
+    process = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "import torch, sys; torch.set_num_threads(1); "
+            "from setdiff_bench.cli.main import main; sys.exit(main(sys.argv[1:]))",
+            "serve",
+            "--checkpoint",
+            str(checkpoint),
+            "--port",
+            "0",
+            "--device",
+            device,
+            *extra,
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
     line = process.stdout.readline()
     return process, int(line.split(":")[1].split()[0])
 
@@ -121,8 +145,12 @@ def memory(checkpoint: Path, size: tuple[int, int], requests: int) -> dict[str, 
     finally:
         stop_served(process)
     after_warmup = [s["rss_mib"] for s in samples[1:]]
-    return {"requests": requests, "seconds": seconds, "samples": samples,
-            "growth_after_first_sample_mib": max(after_warmup) - after_warmup[0] if after_warmup else 0.0}
+    return {
+        "requests": requests,
+        "seconds": seconds,
+        "samples": samples,
+        "growth_after_first_sample_mib": max(after_warmup) - after_warmup[0] if after_warmup else 0.0,
+    }
 
 
 def main() -> None:
@@ -131,8 +159,12 @@ def main() -> None:
     parser.add_argument("--width", type=int, default=256)
     parser.add_argument("--ticks", type=int, default=40)
     parser.add_argument("--checkpoint", type=Path, default=None)
-    parser.add_argument("--device", default="cpu", help="cpu, or cuda (e.g. --height 576 --width 1024 on a GPU)")
-    parser.add_argument("--memory", type=int, default=0, help="instead: N requests, served process RSS sampled")
+    parser.add_argument(
+        "--device", default="cpu", help="cpu, or cuda (e.g. --height 576 --width 1024 on a GPU)"
+    )
+    parser.add_argument(
+        "--memory", type=int, default=0, help="instead: N requests, served process RSS sampled"
+    )
     args = parser.parse_args()
     torch.set_num_threads(1)
     size = (args.height, args.width)
@@ -140,27 +172,48 @@ def main() -> None:
         checkpoint = args.checkpoint or save_tiny_checkpoint(Path(folder) / "tiny_setdiff")
         if args.memory:
             result = memory(checkpoint, size, args.memory)
-            path = write_result("serve_memory", {"machine": machine(), "size": list(size), "memory": result,
-                                                 "checkpoint": "tiny random" if args.checkpoint is None
-                                                 else str(args.checkpoint)})
-            print(f"{args.memory} requests in {result['seconds']:.0f} s; RSS "
-                  f"{[round(s['rss_mib'], 1) for s in result['samples']]} MiB; "
-                  f"growth after first sample {result['growth_after_first_sample_mib']:.1f} MiB → {path}")
+            path = write_result(
+                "serve_memory",
+                {
+                    "machine": machine(),
+                    "size": list(size),
+                    "memory": result,
+                    "checkpoint": "tiny random" if args.checkpoint is None else str(args.checkpoint),
+                },
+            )
+            print(
+                f"{args.memory} requests in {result['seconds']:.0f} s; RSS "
+                f"{[round(s['rss_mib'], 1) for s in result['samples']]} MiB; "
+                f"growth after first sample {result['growth_after_first_sample_mib']:.1f} MiB → {path}"
+            )
             return
-        runs = {"in_process": in_process(checkpoint, size, args.ticks, False, args.device),
-                "grpc": over_grpc(checkpoint, size, args.ticks, args.device),
-                "in_process_cached": in_process(checkpoint, size, args.ticks, True, args.device)}
-    payload = {"machine": machine(), "size": list(size), "device": args.device, "cameras_per_tick": 3, "references_per_tick": 3,
-               "checkpoint": "tiny random" if args.checkpoint is None else str(args.checkpoint), "runs": runs,
-               "overhead_ratio_p50": runs["grpc"]["p50_ms"] / runs["in_process"]["p50_ms"],
-               "overhead_ratio_p99": runs["grpc"]["p99_ms"] / runs["in_process"]["p99_ms"],
-               "cache_saving_p50": 1.0 - runs["in_process_cached"]["p50_ms"] / runs["in_process"]["p50_ms"],
-               "goal": "grpc p50 <= 1.2 x in-process p50"}
+        runs = {
+            "in_process": in_process(checkpoint, size, args.ticks, False, args.device),
+            "grpc": over_grpc(checkpoint, size, args.ticks, args.device),
+            "in_process_cached": in_process(checkpoint, size, args.ticks, True, args.device),
+        }
+    payload = {
+        "machine": machine(),
+        "size": list(size),
+        "device": args.device,
+        "cameras_per_tick": 3,
+        "references_per_tick": 3,
+        "checkpoint": "tiny random" if args.checkpoint is None else str(args.checkpoint),
+        "runs": runs,
+        "overhead_ratio_p50": runs["grpc"]["p50_ms"] / runs["in_process"]["p50_ms"],
+        "overhead_ratio_p99": runs["grpc"]["p99_ms"] / runs["in_process"]["p99_ms"],
+        "cache_saving_p50": 1.0 - runs["in_process_cached"]["p50_ms"] / runs["in_process"]["p50_ms"],
+        "goal": "grpc p50 <= 1.2 x in-process p50",
+    }
     path = write_result(f"serve_{args.device}_{args.height}x{args.width}", payload)
     for name, run in runs.items():
-        print(f"{name:18s} p50 {run['p50_ms']:7.1f} ms  p99 {run['p99_ms']:7.1f} ms  {run['frames_per_s']:6.2f} frames/s")
-    print(f"overhead ratio (p50) {payload['overhead_ratio_p50']:.3f}; cache saves {payload['cache_saving_p50']:.1%} "
-          f"of a tick → {path}")
+        print(
+            f"{name:18s} p50 {run['p50_ms']:7.1f} ms  p99 {run['p99_ms']:7.1f} ms  {run['frames_per_s']:6.2f} frames/s"
+        )
+    print(
+        f"overhead ratio (p50) {payload['overhead_ratio_p50']:.3f}; cache saves {payload['cache_saving_p50']:.1%} "
+        f"of a tick → {path}"
+    )
 
 
 if __name__ == "__main__":

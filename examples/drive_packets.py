@@ -34,7 +34,9 @@ def world_views(view_set: ViewSet, rows: list, anchor_world, scale: float, sourc
     local = view_set.cmaps.to(torch.float64) / scale - view_set.alphas.to(torch.float64) * translation
     cmaps = torch.einsum("ji,vjhw->vihw", rotation, local).float()
     images = torch.round(view_set.images * 255).to(torch.uint8)
-    return Views(images=images, cameras=cameras, cmaps=cmaps, alphas=view_set.alphas, names=list(view_set.names))
+    return Views(
+        images=images, cameras=cameras, cmaps=cmaps, alphas=view_set.alphas, names=list(view_set.names)
+    )
 
 
 def main() -> None:

@@ -52,15 +52,18 @@ def _spec(key: str, description: str) -> DatasetSpec:
     return DatasetSpec(key, f"{module}:list_scenes", f"{module}:load_scenes", description)
 
 
-DATASETS: dict[str, DatasetSpec] = {spec.key: spec for spec in (
-    _spec("euvs", "EUVS: <scene>/{images, sparse/0, test_set.txt, dynamic_masks}, levels 1-3"),
-    _spec("paralane", "Para-Lane: scene_<i>/clip_{0,1,2} parallel lanes, COLMAP text + lidar_poses.txt"),
-    _spec("nuscenes", "nuScenes: v1.0-* JSON tables, every CAM_* keyframe and sweep in time order"),
-    _spec("dl3dv", "DL3DV-10K: [<batch>/]<hash>/images_4 + colmap/sparse/0 or transforms.json"),
-    _spec("synthetic", "setdiff-bench synthetic streets: EUVS layout + scene.json"),
-    _spec("colmap", "any COLMAP scene: <scene>/sparse/0 + <scene>/images"),
-    _spec("nerfstudio", "any nerfstudio scene: <scene>/transforms.json"),
-)}
+DATASETS: dict[str, DatasetSpec] = {
+    spec.key: spec
+    for spec in (
+        _spec("euvs", "EUVS: <scene>/{images, sparse/0, test_set.txt, dynamic_masks}, levels 1-3"),
+        _spec("paralane", "Para-Lane: scene_<i>/clip_{0,1,2} parallel lanes, COLMAP text + lidar_poses.txt"),
+        _spec("nuscenes", "nuScenes: v1.0-* JSON tables, every CAM_* keyframe and sweep in time order"),
+        _spec("dl3dv", "DL3DV-10K: [<batch>/]<hash>/images_4 + colmap/sparse/0 or transforms.json"),
+        _spec("synthetic", "setdiff-bench synthetic streets: EUVS layout + scene.json"),
+        _spec("colmap", "any COLMAP scene: <scene>/sparse/0 + <scene>/images"),
+        _spec("nerfstudio", "any nerfstudio scene: <scene>/transforms.json"),
+    )
+}
 
 
 #: The datasets a single scene folder is recognised as by its own files, most specific layout first (a
@@ -100,7 +103,9 @@ def _check_options(dataset: str, function: Callable[..., Any], options: dict[str
     accepted = [n for n, p in inspect.signature(function).parameters.items() if p.kind is p.KEYWORD_ONLY]
     unknown = sorted(set(options) - set(accepted))
     if unknown:
-        raise UsageError(f"{dataset} loader has no option {unknown[0]!r}; options: {', '.join(accepted) or 'none'}")
+        raise UsageError(
+            f"{dataset} loader has no option {unknown[0]!r}; options: {', '.join(accepted) or 'none'}"
+        )
 
 
 def list_scenes(dataset: str, root: str | os.PathLike[str], **options: Any) -> list[str]:
@@ -116,8 +121,9 @@ def list_scenes(dataset: str, root: str | os.PathLike[str], **options: Any) -> l
     return lister(root, **{k: v for k, v in options.items() if k in accepted})
 
 
-def load_scenes(dataset: str, root: str | os.PathLike[str], scenes: Iterable[str] | None = None,
-                **options: Any) -> list[Scene]:
+def load_scenes(
+    dataset: str, root: str | os.PathLike[str], scenes: Iterable[str] | None = None, **options: Any
+) -> list[Scene]:
     """Load scenes of ``dataset`` from ``root`` in their official layout.
 
     Args:
@@ -139,5 +145,13 @@ def load_scenes(dataset: str, root: str | os.PathLike[str], scenes: Iterable[str
     return loader(root, scenes, **options)
 
 
-__all__ = ["DATASETS", "SCENE_DETECTORS", "DatasetSpec", "dataset_spec", "detect_dataset", "list_scenes",
-           "load_scenes", "loader_options"]
+__all__ = [
+    "DATASETS",
+    "SCENE_DETECTORS",
+    "DatasetSpec",
+    "dataset_spec",
+    "detect_dataset",
+    "list_scenes",
+    "load_scenes",
+    "loader_options",
+]

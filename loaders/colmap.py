@@ -94,7 +94,9 @@ def find_sparse_dir(scene_dir: Path) -> Path | None:
     return None
 
 
-def read_colmap_model(sparse_dir: str | os.PathLike[str], *, distortion: DistortionPolicy = "keep") -> ColmapModel:
+def read_colmap_model(
+    sparse_dir: str | os.PathLike[str], *, distortion: DistortionPolicy = "keep"
+) -> ColmapModel:
     """Read ``cameras``, ``images`` and (optional) ``points3D``; ``.bin`` preferred, else ``.txt``.
 
     Args:
@@ -110,15 +112,20 @@ def read_colmap_model(sparse_dir: str | os.PathLike[str], *, distortion: Distort
         CameraError: a quaternion off unit norm by more than 1e-3, an unsupported camera model.
     """
     if distortion not in DISTORTION_POLICIES:
-        raise DatasetError(f"unknown distortion policy {distortion!r}; use one of {', '.join(DISTORTION_POLICIES)}",
-                           sparse_dir)
+        raise DatasetError(
+            f"unknown distortion policy {distortion!r}; use one of {', '.join(DISTORTION_POLICIES)}",
+            sparse_dir,
+        )
     sparse = Path(sparse_dir)
     if not sparse.is_dir():
         raise DatasetError("COLMAP sparse folder not found", sparse)
     fmt = _model_format(sparse)
     if fmt is None:
-        missing = [stem for stem in ("cameras", "images")
-                   if not ((sparse / f"{stem}.bin").is_file() or (sparse / f"{stem}.txt").is_file())]
+        missing = [
+            stem
+            for stem in ("cameras", "images")
+            if not ((sparse / f"{stem}.bin").is_file() or (sparse / f"{stem}.txt").is_file())
+        ]
         raise DatasetError(f"missing COLMAP file {missing[0]}.bin (or {missing[0]}.txt)", sparse)
     ext = ".bin" if fmt == "binary" else ".txt"
     images_file = sparse / f"images{ext}"
@@ -128,9 +135,11 @@ def read_colmap_model(sparse_dir: str | os.PathLike[str], *, distortion: Distort
     if fmt == "text":
         expected = _count_text_image_records(images_file)
         if expected > len(reconstruction.images):  # lost records; (a purely numeric NAME is not counted)
-            raise DatasetError(f"lists {expected} images but COLMAP's reader parsed {len(reconstruction.images)}; "
-                               "every image line must be followed by its POINTS2D line (which may be empty)",
-                               images_file)
+            raise DatasetError(
+                f"lists {expected} images but COLMAP's reader parsed {len(reconstruction.images)}; "
+                "every image line must be followed by its POINTS2D line (which may be empty)",
+                images_file,
+            )
 
     cameras: dict[str, Camera] = {}
     image_ids: dict[str, int] = {}
@@ -142,24 +151,38 @@ def read_colmap_model(sparse_dir: str | os.PathLike[str], *, distortion: Distort
         except UnicodeDecodeError:
             raise DatasetError(f"image {image_id} has a NAME that is not valid UTF-8", images_file) from None
         if image.name in cameras:
-            raise DatasetError(f"duplicate image name {image.name!r} (ids {image_ids[image.name]} and {image_id})",
-                               images_file)
+            raise DatasetError(
+                f"duplicate image name {image.name!r} (ids {image_ids[image.name]} and {image_id})",
+                images_file,
+            )
         colmap_camera = reconstruction.cameras[image.camera_id]
         source = f"{images_file} (image {image_id} {image.name!r})"
         pose = image.cam_from_world() if callable(image.cam_from_world) else image.cam_from_world
-        K, lens = intrinsics_from_colmap(colmap_camera.model.name, list(colmap_camera.params),
-                                         source=f"{sparse / f'cameras{ext}'} (camera {image.camera_id})")
+        K, lens = intrinsics_from_colmap(
+            colmap_camera.model.name,
+            list(colmap_camera.params),
+            source=f"{sparse / f'cameras{ext}'} (camera {image.camera_id})",
+        )
         if lens is not None and not lens.is_zero():
             if distortion == "error":
-                raise DatasetError(f"camera {image.camera_id} is {colmap_camera.model.name} with non-zero distortion "
-                                   f"{list(lens.params)}; undistort the images first or pass -o distortion=ignore (Python: distortion='ignore')",
-                                   sparse / f"cameras{ext}")
+                raise DatasetError(
+                    f"camera {image.camera_id} is {colmap_camera.model.name} with non-zero distortion "
+                    f"{list(lens.params)}; undistort the images first or pass -o distortion=ignore (Python: distortion='ignore')",
+                    sparse / f"cameras{ext}",
+                )
             if distortion == "ignore":
                 lens = None
-        camera = Camera.from_quaternion(np.asarray(pose.rotation.quat, dtype=np.float64),
-                                        np.asarray(pose.translation, dtype=np.float64), K,
-                                        int(colmap_camera.width), int(colmap_camera.height),
-                                        order="xyzw", direction="w2c", distortion=lens, source=source)
+        camera = Camera.from_quaternion(
+            np.asarray(pose.rotation.quat, dtype=np.float64),
+            np.asarray(pose.translation, dtype=np.float64),
+            K,
+            int(colmap_camera.width),
+            int(colmap_camera.height),
+            order="xyzw",
+            direction="w2c",
+            distortion=lens,
+            source=source,
+        )
         cameras[image.name] = camera
         image_ids[image.name] = int(image_id)
         camera_ids[image.name] = int(image.camera_id)
@@ -188,8 +211,9 @@ def _read_reconstruction(sparse: Path, ext: str) -> object:
             return pycolmap.Reconstruction(str(folder))
         except Exception as exc:  # pycolmap raises plain RuntimeError/ValueError for corrupt files
             lines = str(exc).strip().splitlines()
-            raise DatasetError(f"cannot read COLMAP model ({lines[0] if lines else type(exc).__name__})",
-                               sparse) from exc
+            raise DatasetError(
+                f"cannot read COLMAP model ({lines[0] if lines else type(exc).__name__})", sparse
+            ) from exc
 
     if (sparse / f"points3D{ext}").is_file():
         return read(sparse)
@@ -220,8 +244,11 @@ def _check_binary_complete(sparse: Path, reconstruction: object) -> None:
             if original.is_file() and rewritten.is_file():
                 size, expected = original.stat().st_size, rewritten.stat().st_size
                 if size != expected:
-                    raise DatasetError(f"truncated or corrupt COLMAP binary file: {size} bytes, but the records it "
-                                       f"declares take {expected} bytes", original)
+                    raise DatasetError(
+                        f"truncated or corrupt COLMAP binary file: {size} bytes, but the records it "
+                        f"declares take {expected} bytes",
+                        original,
+                    )
 
 
 def _count_text_image_records(images_txt: Path) -> int:
@@ -252,7 +279,9 @@ def is_colmap_scene(folder: Path) -> bool:
 def _scene_dirs(base: Path) -> dict[str, Path]:
     found = discover_scenes(base, is_colmap_scene)
     if not found:
-        raise DatasetError("no COLMAP scenes found (expected <scene>/sparse/0/{cameras,images}.{bin,txt})", base)
+        raise DatasetError(
+            "no COLMAP scenes found (expected <scene>/sparse/0/{cameras,images}.{bin,txt})", base
+        )
     return found
 
 
@@ -261,8 +290,13 @@ def list_scenes(root: str | os.PathLike[str]) -> list[str]:
     return list(_scene_dirs(dataset_root(root)))
 
 
-def load_scenes(root: str | os.PathLike[str], scenes: Iterable[str] | None = None, *, images_dir: str = "images",
-                distortion: DistortionPolicy = "keep") -> list[Scene]:
+def load_scenes(
+    root: str | os.PathLike[str],
+    scenes: Iterable[str] | None = None,
+    *,
+    images_dir: str = "images",
+    distortion: DistortionPolicy = "keep",
+) -> list[Scene]:
     """Load generic COLMAP scenes: ``<scene>/sparse/0`` + ``<scene>/<images_dir>/<image name>``.
 
     Args:
@@ -290,11 +324,27 @@ def load_scenes(root: str | os.PathLike[str], scenes: Iterable[str] | None = Non
         frames = []
         for image_name in sorted(model.cameras, key=natural_key):
             path = resolve_inside(image_root, image_name, source=model.images_file)
-            camera = fit_camera_to_image(model.cameras[image_name], path, allow_rescale=images_dir != "images")
-            frames.append(Frame(name=image_name, image_path=path, camera=camera,
-                                sensor=f"camera_{model.camera_ids[image_name]}" if multi else "",
-                                metadata={"colmap_image_id": model.image_ids[image_name]}))
-        out.append(Scene(dataset="colmap", name=name, root=scene_dir, frames=tuple(frames),
-                         points3d=model.points3d, points_rgb=model.points_rgb,
-                         metadata={"sparse_dir": str(sparse)}))
+            camera = fit_camera_to_image(
+                model.cameras[image_name], path, allow_rescale=images_dir != "images"
+            )
+            frames.append(
+                Frame(
+                    name=image_name,
+                    image_path=path,
+                    camera=camera,
+                    sensor=f"camera_{model.camera_ids[image_name]}" if multi else "",
+                    metadata={"colmap_image_id": model.image_ids[image_name]},
+                )
+            )
+        out.append(
+            Scene(
+                dataset="colmap",
+                name=name,
+                root=scene_dir,
+                frames=tuple(frames),
+                points3d=model.points3d,
+                points_rgb=model.points_rgb,
+                metadata={"sparse_dir": str(sparse)},
+            )
+        )
     return out

@@ -80,7 +80,9 @@ def find_scene_dirs(root: Path, is_scene: Callable[[Path], bool], *, max_depth: 
         if depth >= max_depth:
             return
         try:
-            children = [entry for entry in os.scandir(folder) if entry.is_dir() and not entry.name.startswith(".")]
+            children = [
+                entry for entry in os.scandir(folder) if entry.is_dir() and not entry.name.startswith(".")
+            ]
         except OSError:
             return
         for entry in children:
@@ -92,7 +94,9 @@ def find_scene_dirs(root: Path, is_scene: Callable[[Path], bool], *, max_depth: 
 
 def discover_scenes(root: Path, is_scene: Callable[[Path], bool], *, max_depth: int = 3) -> dict[str, Path]:
     """Scene name → folder for every scene :func:`find_scene_dirs` finds, in its order."""
-    return {scene_key(root, folder): folder for folder in find_scene_dirs(root, is_scene, max_depth=max_depth)}
+    return {
+        scene_key(root, folder): folder for folder in find_scene_dirs(root, is_scene, max_depth=max_depth)
+    }
 
 
 def scene_key(root: Path, scene_dir: Path) -> str:
@@ -102,8 +106,9 @@ def scene_key(root: Path, scene_dir: Path) -> str:
     return scene_dir.relative_to(root).as_posix()
 
 
-def select_scenes(available: Sequence[str], requested: Iterable[str] | None, root: Path,
-                  dataset: str) -> list[str]:
+def select_scenes(
+    available: Sequence[str], requested: Iterable[str] | None, root: Path, dataset: str
+) -> list[str]:
     """Resolve requested scene names against the available ones, keeping the request order.
 
     A request matches a scene by its full name or, when unambiguous, by its last path component
@@ -184,7 +189,9 @@ def check_image_matches_camera(path: Path, camera: Camera) -> None:
     """Raise ``ImageError`` unless the image at ``path`` is exactly the camera's size."""
     width, height = image_size(path)
     if (width, height) != (camera.width, camera.height):
-        raise ImageError(f"image is {width}x{height} (WxH) but its camera is {camera.width}x{camera.height}", path)
+        raise ImageError(
+            f"image is {width}x{height} (WxH) but its camera is {camera.width}x{camera.height}", path
+        )
 
 
 def fit_camera_to_image(camera: Camera, path: Path, *, allow_rescale: bool) -> Camera:
@@ -206,13 +213,17 @@ def fit_camera_to_image(camera: Camera, path: Path, *, allow_rescale: bool) -> C
         scale = width / camera.width
         if abs(camera.height * scale - height) <= RESCALE_TOLERANCE_PX:
             return camera.resized(width, height)
-        raise ImageError(f"image is {width}x{height} (WxH), not a uniform rescale of its camera's "
-                         f"{camera.width}x{camera.height}", path)
-    raise ImageError(f"image is {width}x{height} (WxH) but its camera is {camera.width}x{camera.height}", path)
+        raise ImageError(
+            f"image is {width}x{height} (WxH), not a uniform rescale of its camera's "
+            f"{camera.width}x{camera.height}",
+            path,
+        )
+    raise ImageError(
+        f"image is {width}x{height} (WxH) but its camera is {camera.width}x{camera.height}", path
+    )
 
 
 def mask_name_for(image_name: str, suffix: str = ".png") -> str:
     """Mask file name paired by name: the image name with its extension replaced (EUVS: stem + ``.png``)."""
     pure = Path(image_name)
     return (pure.with_suffix(suffix) if pure.suffix else pure.with_name(pure.name + suffix)).as_posix()
-

@@ -76,8 +76,11 @@ def _scene_dirs(base: Path, images_dir: str | None) -> dict[str, Path]:
         found[folder.name] = folder
     if not found:
         wanted = images_dir or "images*"
-        raise DatasetError(f"no DL3DV scenes found (expected [<batch>/]<hash>/{wanted}/ with colmap/sparse/0 or "
-                           "transforms.json)", base)
+        raise DatasetError(
+            f"no DL3DV scenes found (expected [<batch>/]<hash>/{wanted}/ with colmap/sparse/0 or "
+            "transforms.json)",
+            base,
+        )
     return dict(sorted(found.items()))  # plain order: natural order would split hex hashes at digits
 
 
@@ -86,9 +89,14 @@ def list_scenes(root: str | os.PathLike[str], *, images_dir: str = "images_4") -
     return list(_scene_dirs(dataset_root(root), images_dir))
 
 
-def load_scenes(root: str | os.PathLike[str], scenes: Iterable[str] | None = None, *,
-                images_dir: str = "images_4", poses: PoseSource = "auto",
-                distortion: DistortionPolicy = "keep") -> list[Scene]:
+def load_scenes(
+    root: str | os.PathLike[str],
+    scenes: Iterable[str] | None = None,
+    *,
+    images_dir: str = "images_4",
+    poses: PoseSource = "auto",
+    distortion: DistortionPolicy = "keep",
+) -> list[Scene]:
     """Load DL3DV scenes (rules in the module docstring).
 
     Args:
@@ -119,20 +127,47 @@ def load_scenes(root: str | os.PathLike[str], scenes: Iterable[str] | None = Non
             for image_name in model.cameras:
                 path = resolve_inside(image_root, image_name, source=model.images_file)
                 camera = fit_camera_to_image(model.cameras[image_name], path, allow_rescale=True)
-                frames.append(Frame(name=PurePosixPath(image_name).name, image_path=path, camera=camera,
-                                    metadata={"colmap_image_id": model.image_ids[image_name]}))
+                frames.append(
+                    Frame(
+                        name=PurePosixPath(image_name).name,
+                        image_path=path,
+                        camera=camera,
+                        metadata={"colmap_image_id": model.image_ids[image_name]},
+                    )
+                )
             if len(model.points3d):
                 points, colors = model.points3d, model.points_rgb
         else:
-            entries = read_transforms(data_dir / "transforms.json", images_dir=images_dir, world="colmap",
-                                      distortion=distortion)
-            frames = [Frame(name=e.image_path.name, image_path=e.image_path, camera=e.camera,
-                            metadata={"colmap_image_id": e.colmap_im_id, "transforms_index": e.index})
-                      for e in entries]
+            entries = read_transforms(
+                data_dir / "transforms.json", images_dir=images_dir, world="colmap", distortion=distortion
+            )
+            frames = [
+                Frame(
+                    name=e.image_path.name,
+                    image_path=e.image_path,
+                    camera=e.camera,
+                    metadata={"colmap_image_id": e.colmap_im_id, "transforms_index": e.index},
+                )
+                for e in entries
+            ]
         frames.sort(key=lambda f: natural_key(f.name))
-        batch = scene_dir.parent.name if scene_dir != base and BATCH_NAME.match(scene_dir.parent.name) else None
-        out.append(Scene(dataset="dl3dv", name=name, root=scene_dir, frames=tuple(frames), points3d=points,
-                         points_rgb=colors,
-                         metadata={"batch": batch, "poses": source, "data_dir": str(data_dir),
-                                   "images_dir": images_dir}))
+        batch = (
+            scene_dir.parent.name if scene_dir != base and BATCH_NAME.match(scene_dir.parent.name) else None
+        )
+        out.append(
+            Scene(
+                dataset="dl3dv",
+                name=name,
+                root=scene_dir,
+                frames=tuple(frames),
+                points3d=points,
+                points_rgb=colors,
+                metadata={
+                    "batch": batch,
+                    "poses": source,
+                    "data_dir": str(data_dir),
+                    "images_dir": images_dir,
+                },
+            )
+        )
     return out

@@ -65,8 +65,14 @@ from .common import (
 MaskPolicy = Literal["require_test", "optional", "none"]
 PoseSource = Literal["sparse", "gt"]
 TRAIN_SET_FILES = ("train_set.txt", "training_set.txt")
-MARS_CHANNELS = {1: "CAM_FRONT_CENTER", 2: "CAM_FRONT_LEFT", 3: "CAM_FRONT_RIGHT", 4: "CAM_BACK_CENTER",
-                 5: "CAM_SIDE_LEFT", 6: "CAM_SIDE_RIGHT"}
+MARS_CHANNELS = {
+    1: "CAM_FRONT_CENTER",
+    2: "CAM_FRONT_LEFT",
+    3: "CAM_FRONT_RIGHT",
+    4: "CAM_BACK_CENTER",
+    5: "CAM_SIDE_LEFT",
+    6: "CAM_SIDE_RIGHT",
+}
 MARS_NAME = re.compile(r"^trav_(\d+)_channel_(\d+)_img_(\d+)\.[A-Za-z0-9]+$")
 LEVEL_FOLDER = re.compile(r"^level[\s_-]*([123])(?:\D.*)?$", re.IGNORECASE)
 
@@ -108,8 +114,10 @@ def read_gt_poses(path: Path) -> dict[str, np.ndarray]:
             continue
         fields = line.split()
         if len(fields) < 10:
-            raise DatasetError(f"line {number}: expected 'ID QW QX QY QZ TX TY TZ CAMERA_ID NAME', "
-                               f"got {len(fields)} fields", path)
+            raise DatasetError(
+                f"line {number}: expected 'ID QW QX QY QZ TX TY TZ CAMERA_ID NAME', got {len(fields)} fields",
+                path,
+            )
         try:
             values = [float(v) for v in fields[1:8]]
         except ValueError as exc:
@@ -117,7 +125,9 @@ def read_gt_poses(path: Path) -> dict[str, np.ndarray]:
         name = " ".join(fields[9:])
         if name in poses:
             raise DatasetError(f"line {number}: duplicate image name {name!r}", path)
-        poses[name] = rigid_from_quaternion(values[:4], values[4:7], order="wxyz", source=f"{path} (line {number})")
+        poses[name] = rigid_from_quaternion(
+            values[:4], values[4:7], order="wxyz", source=f"{path} (line {number})"
+        )
     return poses
 
 
@@ -133,9 +143,15 @@ def list_scenes(root: str | os.PathLike[str]) -> list[str]:
     return list(_scene_dirs(dataset_root(root)))
 
 
-def load_scenes(root: str | os.PathLike[str], scenes: Iterable[str] | None = None, *, level: int | None = None,
-                masks: MaskPolicy = "require_test", poses: PoseSource = "sparse",
-                distortion: DistortionPolicy = "keep") -> list[Scene]:
+def load_scenes(
+    root: str | os.PathLike[str],
+    scenes: Iterable[str] | None = None,
+    *,
+    level: int | None = None,
+    masks: MaskPolicy = "require_test",
+    poses: PoseSource = "sparse",
+    distortion: DistortionPolicy = "keep",
+) -> list[Scene]:
     """Load EUVS scenes (rules in the module docstring).
 
     Args:
@@ -157,13 +173,22 @@ def load_scenes(root: str | os.PathLike[str], scenes: Iterable[str] | None = Non
             scene_level, source = level, "given"
         else:
             scene_level, source = infer_level(base, scene_dir)
-        scene = load_layout(scene_dir, name=name, dataset="euvs", masks=masks, poses=poses, distortion=distortion)
+        scene = load_layout(
+            scene_dir, name=name, dataset="euvs", masks=masks, poses=poses, distortion=distortion
+        )
         out.append(replace(scene, metadata={**scene.metadata, "level": scene_level, "level_source": source}))
     return out
 
 
-def load_layout(scene_dir: Path, *, name: str, dataset: str, masks: MaskPolicy = "require_test",
-                poses: PoseSource = "sparse", distortion: DistortionPolicy = "keep") -> Scene:
+def load_layout(
+    scene_dir: Path,
+    *,
+    name: str,
+    dataset: str,
+    masks: MaskPolicy = "require_test",
+    poses: PoseSource = "sparse",
+    distortion: DistortionPolicy = "keep",
+) -> Scene:
     """Read one scene folder in the EUVS layout (shared with the synthetic benchmark).
 
     Returns:
@@ -180,15 +205,25 @@ def load_layout(scene_dir: Path, *, name: str, dataset: str, masks: MaskPolicy =
     train_names = read_name_list(train_file, allow_empty=True) if train_file else []
     overlap = sorted(set(test_names) & set(train_names), key=natural_key)
     if overlap:
-        raise DatasetError(f"{len(overlap)} names are in both {train_file.name} and test_set.txt, "
-                           f"e.g. {overlap[0]!r}", test_file)
-    sparse = next((p for p in (scene_dir / "sparse" / "0", scene_dir / "sparse") if (p / "images.bin").is_file()
-                   or (p / "images.txt").is_file()), scene_dir / "sparse" / "0")
+        raise DatasetError(
+            f"{len(overlap)} names are in both {train_file.name} and test_set.txt, e.g. {overlap[0]!r}",
+            test_file,
+        )
+    sparse = next(
+        (
+            p
+            for p in (scene_dir / "sparse" / "0", scene_dir / "sparse")
+            if (p / "images.bin").is_file() or (p / "images.txt").is_file()
+        ),
+        scene_dir / "sparse" / "0",
+    )
     model = read_colmap_model(sparse, distortion=distortion)
     missing = [n for n in test_names if n not in model.cameras]
     if missing:
-        raise DatasetError(f"{len(missing)} test images have no pose in {model.images_file.name}, "
-                           f"e.g. {missing[0]!r}", test_file)
+        raise DatasetError(
+            f"{len(missing)} test images have no pose in {model.images_file.name}, e.g. {missing[0]!r}",
+            test_file,
+        )
     gt_file = scene_dir / "poses" / "images.txt"
     gt_poses = read_gt_poses(gt_file) if gt_file.is_file() else {}
     if poses == "gt" and not gt_poses:
@@ -197,9 +232,11 @@ def load_layout(scene_dir: Path, *, name: str, dataset: str, masks: MaskPolicy =
     image_root = require_dir(scene_dir / "images", "image folder")
     mask_root = scene_dir / "dynamic_masks"
     if masks == "require_test" and not mask_root.is_dir():
-        raise DatasetError("dynamic mask folder not found; every test image needs its mask "
-                           "(generate them with EUVS' GroundedSAM2/extract_masks.sh or pass masks='optional')",
-                           mask_root)
+        raise DatasetError(
+            "dynamic mask folder not found; every test image needs its mask "
+            "(generate them with EUVS' GroundedSAM2/extract_masks.sh or pass masks='optional')",
+            mask_root,
+        )
     sky_root = scene_dir / "sky_masks"
     test_set = set(test_names)
     train_set = set(train_names)
@@ -210,24 +247,37 @@ def load_layout(scene_dir: Path, *, name: str, dataset: str, masks: MaskPolicy =
         camera = model.cameras[image_name]
         image_path = resolve_inside(image_root, image_name, source=model.images_file)
         check_image_matches_camera(image_path, camera)
-        metadata: dict[str, object] = {"colmap_image_id": model.image_ids[image_name],
-                                       "in_train_set": image_name in train_set}
+        metadata: dict[str, object] = {
+            "colmap_image_id": model.image_ids[image_name],
+            "in_train_set": image_name in train_set,
+        }
         if image_name in gt_poses:
             metadata["gt_w2c"] = gt_poses[image_name]
         if poses == "gt":
             if image_name not in gt_poses:
                 raise DatasetError(f"image {image_name!r} has no ground-truth pose", gt_file)
-            camera = Camera(camera.K, gt_poses[image_name], camera.width, camera.height, camera.distortion,
-                            f"{gt_file} ({image_name!r})")
+            camera = Camera(
+                camera.K,
+                gt_poses[image_name],
+                camera.width,
+                camera.height,
+                camera.distortion,
+                f"{gt_file} ({image_name!r})",
+            )
         split = "test" if image_name in test_set else "train"
         mask_path = None
         if masks != "none":
             mask_name = mask_name_for(image_name)
             if mask_name in mask_owner:
-                raise DatasetError(f"images {mask_owner[mask_name]!r} and {image_name!r} pair with the same mask "
-                                   f"{mask_name!r}", image_root)
+                raise DatasetError(
+                    f"images {mask_owner[mask_name]!r} and {image_name!r} pair with the same mask "
+                    f"{mask_name!r}",
+                    image_root,
+                )
             mask_owner[mask_name] = image_name
-            candidate = resolve_inside(mask_root, mask_name, source=model.images_file) if mask_root.is_dir() else None
+            candidate = (
+                resolve_inside(mask_root, mask_name, source=model.images_file) if mask_root.is_dir() else None
+            )
             if candidate is not None and candidate.is_file():
                 _check_mask_size(candidate, camera)
                 mask_path = candidate
@@ -242,18 +292,40 @@ def load_layout(scene_dir: Path, *, name: str, dataset: str, masks: MaskPolicy =
             traversal = f"trav_{int(mars.group(1))}"
             sensor = MARS_CHANNELS.get(int(mars.group(2)), f"channel_{int(mars.group(2))}")
             metadata["frame_index"] = int(mars.group(3)) - 1
-        frames.append(Frame(name=image_name, image_path=image_path, camera=camera, sensor=sensor,
-                            traversal=traversal, mask_path=mask_path, split=split, metadata=metadata))
+        frames.append(
+            Frame(
+                name=image_name,
+                image_path=image_path,
+                camera=camera,
+                sensor=sensor,
+                traversal=traversal,
+                mask_path=mask_path,
+                split=split,
+                metadata=metadata,
+            )
+        )
     use_points = poses == "sparse" and len(model.points3d) > 0
-    return Scene(dataset=dataset, name=name, root=scene_dir, frames=tuple(frames),
-                 points3d=model.points3d if use_points else None,
-                 points_rgb=model.points_rgb if use_points else None,
-                 metadata={"test_set": test_file.name, "train_set": train_file.name if train_file else None,
-                           "has_gt_poses": bool(gt_poses), "poses": poses, "mask_policy": masks,
-                           "sparse_dir": str(sparse)})
+    return Scene(
+        dataset=dataset,
+        name=name,
+        root=scene_dir,
+        frames=tuple(frames),
+        points3d=model.points3d if use_points else None,
+        points_rgb=model.points_rgb if use_points else None,
+        metadata={
+            "test_set": test_file.name,
+            "train_set": train_file.name if train_file else None,
+            "has_gt_poses": bool(gt_poses),
+            "poses": poses,
+            "mask_policy": masks,
+            "sparse_dir": str(sparse),
+        },
+    )
 
 
 def _check_mask_size(path: Path, camera: Camera) -> None:
     width, height = image_size(path)
     if (width, height) != (camera.width, camera.height):
-        raise DatasetError(f"mask is {width}x{height} (WxH) but its image is {camera.width}x{camera.height}", path)
+        raise DatasetError(
+            f"mask is {width}x{height} (WxH) but its image is {camera.width}x{camera.height}", path
+        )

@@ -75,9 +75,14 @@ class TransformsFrame:
     colmap_im_id: int | None
 
 
-def read_transforms(path: str | os.PathLike[str], *, images_dir: str | None = None, world: WorldFrame = "colmap",
-                    distortion: DistortionPolicy = "keep", missing: MissingPolicy = "error"
-                    ) -> list[TransformsFrame]:
+def read_transforms(
+    path: str | os.PathLike[str],
+    *,
+    images_dir: str | None = None,
+    world: WorldFrame = "colmap",
+    distortion: DistortionPolicy = "keep",
+    missing: MissingPolicy = "error",
+) -> list[TransformsFrame]:
     """Read a ``transforms.json`` into cameras in the project convention (module docstring).
 
     Args:
@@ -99,18 +104,22 @@ def read_transforms(path: str | os.PathLike[str], *, images_dir: str | None = No
     if world not in ("colmap", "file"):
         raise DatasetError(f"unknown world frame {world!r}; use 'colmap' or 'file'", path)
     if distortion not in DISTORTION_POLICIES:
-        raise DatasetError(f"unknown distortion policy {distortion!r}; use one of {', '.join(DISTORTION_POLICIES)}",
-                           path)
+        raise DatasetError(
+            f"unknown distortion policy {distortion!r}; use one of {', '.join(DISTORTION_POLICIES)}", path
+        )
     if missing not in MISSING_POLICIES:
-        raise DatasetError(f"unknown missing-image policy {missing!r}; use one of {', '.join(MISSING_POLICIES)}",
-                           path)
+        raise DatasetError(
+            f"unknown missing-image policy {missing!r}; use one of {', '.join(MISSING_POLICIES)}", path
+        )
     transforms = Path(path)
     if not transforms.is_file():
         raise DatasetError("missing transforms.json", transforms)
     try:
         meta = json.loads(transforms.read_text(encoding="utf-8"))
     except json.JSONDecodeError as exc:
-        raise DatasetError(f"invalid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}", transforms) from exc
+        raise DatasetError(
+            f"invalid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}", transforms
+        ) from exc
     except (OSError, UnicodeDecodeError) as exc:
         raise DatasetError(f"cannot read file ({exc.__class__.__name__})", transforms) from exc
     if not isinstance(meta, dict) or not isinstance(meta.get("frames"), list):
@@ -133,8 +142,9 @@ def read_transforms(path: str | os.PathLike[str], *, images_dir: str | None = No
         image_path = resolve_inside(scene_dir, relative, source=transforms)
         name = image_path.relative_to(scene_dir.resolve()).as_posix()
         if name in seen:
-            raise DatasetError(f"duplicate frame name {name!r} (frames[{seen[name]}] and frames[{index}])",
-                               transforms)
+            raise DatasetError(
+                f"duplicate frame name {name!r} (frames[{seen[name]}] and frames[{index}])", transforms
+            )
         seen[name] = index
         if not image_path.is_file():
             absent.append(image_path)
@@ -176,8 +186,9 @@ def _number(value: Any, key: str, where: str, *, required: bool = True, default:
     return number
 
 
-def _intrinsics(meta: Mapping[str, Any], entry: Mapping[str, Any], policy: str,
-                where: str) -> tuple[np.ndarray, int, int, Distortion | None]:
+def _intrinsics(
+    meta: Mapping[str, Any], entry: Mapping[str, Any], policy: str, where: str
+) -> tuple[np.ndarray, int, int, Distortion | None]:
     width = _number(_field(meta, entry, "w"), "w", where)
     height = _number(_field(meta, entry, "h"), "h", where)
     fx = _number(_field(meta, entry, "fl_x"), "fl_x", where)
@@ -193,14 +204,20 @@ def _intrinsics(meta: Mapping[str, Any], entry: Mapping[str, Any], policy: str,
         lens = None
     elif model == "OPENCV":
         if any(extra.values()):
-            raise CameraError(f"OPENCV camera with k3/k4 {list(extra.values())} is not supported (only k1 k2 p1 p2)",
-                              where)
+            raise CameraError(
+                f"OPENCV camera with k3/k4 {list(extra.values())} is not supported (only k1 k2 p1 p2)", where
+            )
         lens = Distortion("OPENCV", coefficients) if any(coefficients) else None
     else:
-        raise CameraError(f"unsupported camera_model {model!r}; supported: OPENCV, PINHOLE, SIMPLE_PINHOLE", where)
+        raise CameraError(
+            f"unsupported camera_model {model!r}; supported: OPENCV, PINHOLE, SIMPLE_PINHOLE", where
+        )
     if lens is not None and policy == "error":
-        raise CameraError(f"camera has non-zero distortion {list(coefficients)}; undistort the images first or "
-                          "pass -o distortion=ignore (Python: distortion='ignore')", where)
+        raise CameraError(
+            f"camera has non-zero distortion {list(coefficients)}; undistort the images first or "
+            "pass -o distortion=ignore (Python: distortion='ignore')",
+            where,
+        )
     if policy == "ignore":
         lens = None
     if int(width) != width or int(height) != height:
@@ -246,8 +263,10 @@ def _undo_applied_transform(meta: Mapping[str, Any], transforms: Path):
     with float_errors_raised(where):
         det = float(np.linalg.det(M))
     if not det > 0:
-        raise DatasetError(f"applied_transform has determinant {det:.4g}; expected a rotation with positive scale",
-                           transforms)
+        raise DatasetError(
+            f"applied_transform has determinant {det:.4g}; expected a rotation with positive scale",
+            transforms,
+        )
     scale = det ** (1.0 / 3.0)
     R = M / scale
     try:
@@ -282,9 +301,15 @@ def list_scenes(root: str | os.PathLike[str]) -> list[str]:
     return list(_scene_dirs(dataset_root(root)))
 
 
-def load_scenes(root: str | os.PathLike[str], scenes: Iterable[str] | None = None, *, images_dir: str | None = None,
-                world: WorldFrame = "colmap", distortion: DistortionPolicy = "keep",
-                missing: MissingPolicy = "error") -> list[Scene]:
+def load_scenes(
+    root: str | os.PathLike[str],
+    scenes: Iterable[str] | None = None,
+    *,
+    images_dir: str | None = None,
+    world: WorldFrame = "colmap",
+    distortion: DistortionPolicy = "keep",
+    missing: MissingPolicy = "error",
+) -> list[Scene]:
     """Load nerfstudio scenes (see :func:`read_transforms` for the options).
 
     Returns:
@@ -295,11 +320,23 @@ def load_scenes(root: str | os.PathLike[str], scenes: Iterable[str] | None = Non
     out = []
     for name in select_scenes(list(found), scenes, base, "nerfstudio"):
         scene_dir = found[name]
-        entries = read_transforms(scene_dir / "transforms.json", images_dir=images_dir, world=world,
-                                  distortion=distortion, missing=missing)
-        frames = tuple(Frame(name=e.name, image_path=e.image_path, camera=e.camera,
-                             metadata={"transforms_index": e.index, "colmap_im_id": e.colmap_im_id})
-                       for e in sorted(entries, key=lambda e: natural_key(e.name)))
-        out.append(Scene(dataset="nerfstudio", name=name, root=scene_dir, frames=frames,
-                         metadata={"world": world}))
+        entries = read_transforms(
+            scene_dir / "transforms.json",
+            images_dir=images_dir,
+            world=world,
+            distortion=distortion,
+            missing=missing,
+        )
+        frames = tuple(
+            Frame(
+                name=e.name,
+                image_path=e.image_path,
+                camera=e.camera,
+                metadata={"transforms_index": e.index, "colmap_im_id": e.colmap_im_id},
+            )
+            for e in sorted(entries, key=lambda e: natural_key(e.name))
+        )
+        out.append(
+            Scene(dataset="nerfstudio", name=name, root=scene_dir, frames=frames, metadata={"world": world})
+        )
     return out

@@ -44,7 +44,14 @@ from .common import dataset_root, image_size, natural_key, select_scenes
 
 VERSIONS = ("v1.0-mini", "v1.0-trainval", "v1.0-test")
 REQUIRED_TABLES = ("scene", "sample", "sample_data", "calibrated_sensor", "sensor", "ego_pose")
-CAMERA_CHANNELS = ("CAM_FRONT", "CAM_FRONT_LEFT", "CAM_FRONT_RIGHT", "CAM_BACK", "CAM_BACK_LEFT", "CAM_BACK_RIGHT")
+CAMERA_CHANNELS = (
+    "CAM_FRONT",
+    "CAM_FRONT_LEFT",
+    "CAM_FRONT_RIGHT",
+    "CAM_BACK",
+    "CAM_BACK_LEFT",
+    "CAM_BACK_RIGHT",
+)
 
 Record = Mapping[str, Any]
 
@@ -63,9 +70,13 @@ def locate(root: str | os.PathLike[str], version: str | None = None) -> tuple[Pa
         return base, tables
     present = sorted(p.name for p in base.iterdir() if p.is_dir() and (p / "scene.json").is_file())
     if not present:
-        raise DatasetError(f"no nuScenes table folder found (expected {' or '.join(VERSIONS)} with scene.json)", base)
+        raise DatasetError(
+            f"no nuScenes table folder found (expected {' or '.join(VERSIONS)} with scene.json)", base
+        )
     if len(present) > 1:
-        raise DatasetError(f"several nuScenes versions ({', '.join(present)}); choose one with version=<name>", base)
+        raise DatasetError(
+            f"several nuScenes versions ({', '.join(present)}); choose one with version=<name>", base
+        )
     return base, base / present[0]
 
 
@@ -84,8 +95,9 @@ def load_table(tables: Path, name: str) -> list[dict[str, Any]]:
         raise DatasetError(f"invalid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}", path) from exc
     except (OSError, UnicodeDecodeError) as exc:
         raise DatasetError(f"cannot read table ({exc.__class__.__name__})", path) from exc
-    if not isinstance(records, list) or not all(isinstance(r, dict) and isinstance(r.get("token"), str)
-                                                for r in records):
+    if not isinstance(records, list) or not all(
+        isinstance(r, dict) and isinstance(r.get("token"), str) for r in records
+    ):
         raise DatasetError("expected a JSON list of records with a string 'token' field", path)
     return records
 
@@ -96,11 +108,24 @@ _LIST = (list,)
 FIELD_TYPES: dict[str, dict[str, tuple[type, ...]]] = {
     "scene": {"name": (str,), "first_sample_token": _TOKEN, "log_token": _TOKEN, "description": (str,)},
     "sample": {"scene_token": _TOKEN, "next": _TOKEN, "prev": _TOKEN},
-    "sample_data": {"sample_token": _TOKEN, "ego_pose_token": _TOKEN, "calibrated_sensor_token": _TOKEN,
-                    "timestamp": (int,), "is_key_frame": (bool,), "filename": (str,), "width": (int,),
-                    "height": (int,), "prev": _TOKEN, "next": _TOKEN},
-    "calibrated_sensor": {"sensor_token": _TOKEN, "rotation": _LIST, "translation": _LIST,
-                          "camera_intrinsic": _LIST},
+    "sample_data": {
+        "sample_token": _TOKEN,
+        "ego_pose_token": _TOKEN,
+        "calibrated_sensor_token": _TOKEN,
+        "timestamp": (int,),
+        "is_key_frame": (bool,),
+        "filename": (str,),
+        "width": (int,),
+        "height": (int,),
+        "prev": _TOKEN,
+        "next": _TOKEN,
+    },
+    "calibrated_sensor": {
+        "sensor_token": _TOKEN,
+        "rotation": _LIST,
+        "translation": _LIST,
+        "camera_intrinsic": _LIST,
+    },
     "sensor": {"channel": (str,), "modality": (str,)},
     "ego_pose": {"rotation": _LIST, "translation": _LIST},
     "log": {"location": (str,), "logfile": (str,)},
@@ -121,8 +146,10 @@ def check_field_types(record: dict[str, Any], table: str, path: Path) -> None:
             record[field] = value = int(value)
         if not isinstance(value, kinds) or (isinstance(value, bool) and bool not in kinds):
             expected = " or ".join("list" if k is list else k.__name__ for k in kinds)
-            raise DatasetError(f"{table} {record['token']!r} field {field!r} must be a JSON {expected}, "
-                               f"got {value!r:.60}", path)
+            raise DatasetError(
+                f"{table} {record['token']!r} field {field!r} must be a JSON {expected}, got {value!r:.60}",
+                path,
+            )
 
 
 @dataclass
@@ -149,8 +176,11 @@ class _Table:
         if record is None and field not in referrer.rows.get(referrer_token, {}):
             raise DatasetError(f"{referrer.name} {referrer_token!r}: missing field {field!r}", referrer.path)
         if record is None:
-            raise DatasetError(f"{referrer.name} {referrer_token!r} field {field!r} refers to token {token!r}, "
-                               f"which is not in {self.name}.json", referrer.path)
+            raise DatasetError(
+                f"{referrer.name} {referrer_token!r} field {field!r} refers to token {token!r}, "
+                f"which is not in {self.name}.json",
+                referrer.path,
+            )
         return record
 
 
@@ -164,9 +194,15 @@ def list_scenes(root: str | os.PathLike[str], *, version: str | None = None) -> 
     return sorted(names, key=natural_key)
 
 
-def load_scenes(root: str | os.PathLike[str], scenes: Iterable[str] | None = None, *, version: str | None = None,
-                channels: Sequence[str] | None = None, sweeps: bool = True,
-                check_images: bool = True) -> list[Scene]:
+def load_scenes(
+    root: str | os.PathLike[str],
+    scenes: Iterable[str] | None = None,
+    *,
+    version: str | None = None,
+    channels: Sequence[str] | None = None,
+    sweeps: bool = True,
+    check_images: bool = True,
+) -> list[Scene]:
     """Load nuScenes scenes by name (rules in the module docstring).
 
     Args:
@@ -188,8 +224,10 @@ def load_scenes(root: str | os.PathLike[str], scenes: Iterable[str] | None = Non
         known = {channel for _, channel in camera_records.values()}
         unknown = sorted(set(channels) - known)
         if unknown:
-            raise DatasetError(f"unknown camera channel {unknown[0]!r}; available: {', '.join(sorted(known))}",
-                               t["sensor"].path)
+            raise DatasetError(
+                f"unknown camera channel {unknown[0]!r}; available: {', '.join(sorted(known))}",
+                t["sensor"].path,
+            )
     by_sample: dict[str, list[str]] = {}
     for token, (record, _) in camera_records.items():
         by_sample.setdefault(record.get("sample_token"), []).append(token)
@@ -215,12 +253,23 @@ def load_scenes(root: str | os.PathLike[str], scenes: Iterable[str] | None = Non
                 frames.append(((frame.timestamp_us, order, channel, token), frame))
         frames.sort(key=lambda item: item[0])
         log = logs.rows.get(scene.get("log_token")) if logs else None
-        out.append(Scene(dataset="nuscenes", name=name, root=dataroot, frames=tuple(f for _, f in frames),
-                         metadata={"version": tables.name, "scene_token": scene["token"],
-                                   "description": scene.get("description", ""),
-                                   "location": log.get("location") if log else None,
-                                   "logfile": log.get("logfile") if log else None,
-                                   "num_samples": len(sample_tokens), "sweeps": sweeps}))
+        out.append(
+            Scene(
+                dataset="nuscenes",
+                name=name,
+                root=dataroot,
+                frames=tuple(f for _, f in frames),
+                metadata={
+                    "version": tables.name,
+                    "scene_token": scene["token"],
+                    "description": scene.get("description", ""),
+                    "location": log.get("location") if log else None,
+                    "logfile": log.get("logfile") if log else None,
+                    "num_samples": len(sample_tokens),
+                    "sweeps": sweeps,
+                },
+            )
+        )
     return out
 
 
@@ -228,9 +277,12 @@ def _camera_records(t: Mapping[str, _Table]) -> dict[str, tuple[dict[str, Any], 
     """Camera ``sample_data`` token → (record, channel)."""
     out = {}
     for token, record in t["sample_data"].rows.items():
-        calib = t["calibrated_sensor"].get(record.get("calibrated_sensor_token"), t["sample_data"], token,
-                                           "calibrated_sensor_token")
-        sensor = t["sensor"].get(calib.get("sensor_token"), t["calibrated_sensor"], calib["token"], "sensor_token")
+        calib = t["calibrated_sensor"].get(
+            record.get("calibrated_sensor_token"), t["sample_data"], token, "calibrated_sensor_token"
+        )
+        sensor = t["sensor"].get(
+            calib.get("sensor_token"), t["calibrated_sensor"], calib["token"], "sensor_token"
+        )
         if sensor.get("modality") == "camera":
             out[token] = (record, str(sensor.get("channel")))
     return out
@@ -243,12 +295,16 @@ def _sample_chain(scene: Record, t: Mapping[str, _Table]) -> list[str]:
     referrer, ref_token, field = t["scene"], scene["token"], "first_sample_token"
     while token:
         if token in tokens:
-            raise DatasetError(f"sample {token!r} repeats in the next chain of scene {scene.get('name')!r}",
-                               t["sample"].path)
+            raise DatasetError(
+                f"sample {token!r} repeats in the next chain of scene {scene.get('name')!r}", t["sample"].path
+            )
         sample = t["sample"].get(token, referrer, ref_token, field)
         if sample.get("scene_token") != scene["token"]:
-            raise DatasetError(f"sample {token!r} on the chain of scene {scene.get('name')!r} belongs to scene "
-                               f"{sample.get('scene_token')!r}", t["sample"].path)
+            raise DatasetError(
+                f"sample {token!r} on the chain of scene {scene.get('name')!r} belongs to scene "
+                f"{sample.get('scene_token')!r}",
+                t["sample"].path,
+            )
         tokens.append(token)
         referrer, ref_token, field = t["sample"], token, "next"
         token = sample.get("next")
@@ -257,8 +313,13 @@ def _sample_chain(scene: Record, t: Mapping[str, _Table]) -> list[str]:
     return tokens
 
 
-def _channel_chain(tokens: list[str], t: Mapping[str, _Table], camera_records: Mapping[str, tuple],
-                   scene_name: str, channel: str) -> list[str]:
+def _channel_chain(
+    tokens: list[str],
+    t: Mapping[str, _Table],
+    camera_records: Mapping[str, tuple],
+    scene_name: str,
+    channel: str,
+) -> list[str]:
     """The channel's records in ``next`` order; every record of the scene must be on the chain."""
     members = set(tokens)
     sample_data = t["sample_data"]
@@ -279,45 +340,84 @@ def _channel_chain(tokens: list[str], t: Mapping[str, _Table], camera_records: M
             sample_data.get(token, sample_data, chain[-1], "next")
     if len(chain) != len(members):
         stray = sorted(members - set(chain))[0]
-        raise DatasetError(f"{channel} sample_data {stray!r} of {scene_name} is not on the next chain that starts "
-                           f"at {head!r}", sample_data.path)
+        raise DatasetError(
+            f"{channel} sample_data {stray!r} of {scene_name} is not on the next chain that starts "
+            f"at {head!r}",
+            sample_data.path,
+        )
     return chain
 
 
-def _frame(record: Record, channel: str, t: Mapping[str, _Table], dataroot: Path, check_images: bool) -> Frame:
+def _frame(
+    record: Record, channel: str, t: Mapping[str, _Table], dataroot: Path, check_images: bool
+) -> Frame:
     token = record["token"]
     calib = t["calibrated_sensor"].rows[record["calibrated_sensor_token"]]
     ego = t["ego_pose"].get(record.get("ego_pose_token"), t["sample_data"], token, "ego_pose_token")
-    ego_from_camera = rigid_from_quaternion(calib.get("rotation", ()), calib.get("translation", ()), order="wxyz",
-                                            source=f"{t['calibrated_sensor'].path} (token {calib['token']!r})")
-    world_from_ego = rigid_from_quaternion(ego.get("rotation", ()), ego.get("translation", ()), order="wxyz",
-                                           source=f"{t['ego_pose'].path} (token {ego['token']!r})")
-    K = numeric_array(calib.get("camera_intrinsic") or [], "camera_intrinsic",
-                      f"{t['calibrated_sensor'].path} (token {calib['token']!r})")
+    ego_from_camera = rigid_from_quaternion(
+        calib.get("rotation", ()),
+        calib.get("translation", ()),
+        order="wxyz",
+        source=f"{t['calibrated_sensor'].path} (token {calib['token']!r})",
+    )
+    world_from_ego = rigid_from_quaternion(
+        ego.get("rotation", ()),
+        ego.get("translation", ()),
+        order="wxyz",
+        source=f"{t['ego_pose'].path} (token {ego['token']!r})",
+    )
+    K = numeric_array(
+        calib.get("camera_intrinsic") or [],
+        "camera_intrinsic",
+        f"{t['calibrated_sensor'].path} (token {calib['token']!r})",
+    )
     if K.shape != (3, 3):
-        raise DatasetError(f"calibrated_sensor {calib['token']!r} of camera {channel} has no 3x3 camera_intrinsic",
-                           t["calibrated_sensor"].path)
+        raise DatasetError(
+            f"calibrated_sensor {calib['token']!r} of camera {channel} has no 3x3 camera_intrinsic",
+            t["calibrated_sensor"].path,
+        )
     filename = record.get("filename")
     image_path = resolve_inside(dataroot, filename, source=t["sample_data"].path)
     width, height = record.get("width"), record.get("height")
     if check_images:
         if not image_path.is_file():
-            hint = "" if record.get("is_key_frame") else " (a sweep: download the sweeps or pass sweeps=false)"
+            hint = (
+                "" if record.get("is_key_frame") else " (a sweep: download the sweeps or pass sweeps=false)"
+            )
             raise ImageError(f"image of sample_data {token!r} not found{hint}", image_path)
         actual = image_size(image_path)
         if width and height and actual != (int(width), int(height)):
-            raise ImageError(f"image is {actual[0]}x{actual[1]} (WxH) but sample_data {token!r} says "
-                             f"{width}x{height}", image_path)
+            raise ImageError(
+                f"image is {actual[0]}x{actual[1]} (WxH) but sample_data {token!r} says {width}x{height}",
+                image_path,
+            )
         width, height = actual
     if not width or not height:
         raise DatasetError(f"sample_data {token!r} has no width/height", t["sample_data"].path)
-    camera = Camera.from_c2w(world_from_ego @ ego_from_camera, K, int(width), int(height),
-                             source=f"{t['sample_data'].path} (token {token!r})")
+    camera = Camera.from_c2w(
+        world_from_ego @ ego_from_camera,
+        K,
+        int(width),
+        int(height),
+        source=f"{t['sample_data'].path} (token {token!r})",
+    )
     timestamp = record.get("timestamp")
     if isinstance(timestamp, bool) or not isinstance(timestamp, int):
-        raise DatasetError(f"sample_data {token!r} timestamp must be integer microseconds, got {timestamp!r}",
-                           t["sample_data"].path)
-    return Frame(name=str(filename), image_path=image_path, camera=camera, timestamp_us=timestamp, sensor=channel,
-                 metadata={"sample_data_token": token, "sample_token": record.get("sample_token"),
-                           "is_key_frame": bool(record.get("is_key_frame")),
-                           "ego_pose_token": ego["token"], "calibrated_sensor_token": calib["token"]})
+        raise DatasetError(
+            f"sample_data {token!r} timestamp must be integer microseconds, got {timestamp!r}",
+            t["sample_data"].path,
+        )
+    return Frame(
+        name=str(filename),
+        image_path=image_path,
+        camera=camera,
+        timestamp_us=timestamp,
+        sensor=channel,
+        metadata={
+            "sample_data_token": token,
+            "sample_token": record.get("sample_token"),
+            "is_key_frame": bool(record.get("is_key_frame")),
+            "ego_pose_token": ego["token"],
+            "calibrated_sensor_token": calib["token"],
+        },
+    )

@@ -66,8 +66,10 @@ LANE_NAMES = {0: "left", 1: "middle", 2: "right"}
 
 def _clip_dirs(scene_dir: Path) -> list[Path]:
     try:
-        children = sorted((p for p in scene_dir.iterdir() if p.is_dir() and CLIP_NAME.match(p.name)),
-                          key=lambda p: natural_key(p.name))
+        children = sorted(
+            (p for p in scene_dir.iterdir() if p.is_dir() and CLIP_NAME.match(p.name)),
+            key=lambda p: natural_key(p.name),
+        )
     except OSError:
         return []
     return [p for p in children if (p / "sparse").is_dir()]
@@ -111,14 +113,21 @@ def read_lidar_poses(path: Path) -> dict[str, np.ndarray]:
             raise DatasetError(f"line {number}: pose values are not numbers", path) from exc
         if name in poses:
             raise DatasetError(f"line {number}: duplicate lidar frame {name!r}", path)
-        poses[name] = rigid_from_quaternion(values[:4], values[4:], order="xyzw", source=f"{path} (line {number})")
+        poses[name] = rigid_from_quaternion(
+            values[:4], values[4:], order="xyzw", source=f"{path} (line {number})"
+        )
         index += 1
     return poses
 
 
-def load_scenes(root: str | os.PathLike[str], scenes: Iterable[str] | None = None, *,
-                mask_polarity: MaskPolarity = "foreground", lane_of_clip: Mapping[str, int] | None = None,
-                distortion: DistortionPolicy = "keep") -> list[Scene]:
+def load_scenes(
+    root: str | os.PathLike[str],
+    scenes: Iterable[str] | None = None,
+    *,
+    mask_polarity: MaskPolarity = "foreground",
+    lane_of_clip: Mapping[str, int] | None = None,
+    distortion: DistortionPolicy = "keep",
+) -> list[Scene]:
     """Load Para-Lane scenes (rules in the module docstring).
 
     Args:
@@ -144,9 +153,20 @@ def load_scenes(root: str | os.PathLike[str], scenes: Iterable[str] | None = Non
             clip_frames, lidar[clip_dir.name] = _load_clip(clip_dir, lane, mask_polarity, distortion)
             frames.extend(clip_frames)
         frames.sort(key=lambda item: item[0])
-        out.append(Scene(dataset="paralane", name=name, root=scene_dir, frames=tuple(f for _, f in frames),
-                         metadata={"lanes": lanes, "lidar_poses": lidar, "mask_polarity": mask_polarity,
-                                   "shared_world": "assumed"}))
+        out.append(
+            Scene(
+                dataset="paralane",
+                name=name,
+                root=scene_dir,
+                frames=tuple(f for _, f in frames),
+                metadata={
+                    "lanes": lanes,
+                    "lidar_poses": lidar,
+                    "mask_polarity": mask_polarity,
+                    "shared_world": "assumed",
+                },
+            )
+        )
     return out
 
 
@@ -176,18 +196,27 @@ def _resolve_images(clip_dir: Path, names: list[str], source: Path) -> dict[str,
     if resolved:
         missing = next(n for n in names if n not in resolved)
         raise DatasetError(f"image {missing!r} listed in {source.name} not found", image_root)
-    folders = sorted((p for p in image_root.iterdir() if p.is_dir() and (p / SENSOR_FILE).is_file()),
-                     key=lambda p: natural_key(p.name))
+    folders = sorted(
+        (p for p in image_root.iterdir() if p.is_dir() and (p / SENSOR_FILE).is_file()),
+        key=lambda p: natural_key(p.name),
+    )
     if len(folders) != len(names):
-        raise DatasetError(f"no image name of {source.name} matches a file, and its {len(names)} images cannot be "
-                           f"paired by order with {len(folders)} timestamp folders", image_root)
-    warnings.warn(f"{source}: image names do not match images/<timestamp>/{SENSOR_FILE}; pairing the "
-                  f"{len(names)} images with the timestamp folders by sorted order", stacklevel=3)
+        raise DatasetError(
+            f"no image name of {source.name} matches a file, and its {len(names)} images cannot be "
+            f"paired by order with {len(folders)} timestamp folders",
+            image_root,
+        )
+    warnings.warn(
+        f"{source}: image names do not match images/<timestamp>/{SENSOR_FILE}; pairing the "
+        f"{len(names)} images with the timestamp folders by sorted order",
+        stacklevel=3,
+    )
     return {name: folder / SENSOR_FILE for name, folder in zip(sorted(names, key=natural_key), folders)}
 
 
-def _load_clip(clip_dir: Path, lane: int, mask_polarity: MaskPolarity,
-               distortion: DistortionPolicy) -> tuple[list[tuple[tuple, Frame]], dict[str, np.ndarray]]:
+def _load_clip(
+    clip_dir: Path, lane: int, mask_polarity: MaskPolarity, distortion: DistortionPolicy
+) -> tuple[list[tuple[tuple, Frame]], dict[str, np.ndarray]]:
     sparse = clip_dir / "sparse" / "0"
     model = read_colmap_model(sparse, distortion=distortion)
     paths = _resolve_images(clip_dir, list(model.cameras), model.images_file)
@@ -202,8 +231,12 @@ def _load_clip(clip_dir: Path, lane: int, mask_polarity: MaskPolarity,
         relative = path.relative_to(image_root).as_posix()
         stamp = path.parent.name if path.parent != image_root else PurePosixPath(relative).stem
         timestamp = int(stamp) if stamp.isdigit() else None
-        metadata: dict[str, object] = {"lane": lane, "lane_name": LANE_NAMES.get(lane, str(lane)),
-                                       "colmap_name": image_name, "colmap_image_id": model.image_ids[image_name]}
+        metadata: dict[str, object] = {
+            "lane": lane,
+            "lane_name": LANE_NAMES.get(lane, str(lane)),
+            "colmap_name": image_name,
+            "colmap_image_id": model.image_ids[image_name],
+        }
         if stamp in lidar:
             metadata["lidar_to_world"] = lidar[stamp]
         mask_path = None
@@ -212,15 +245,24 @@ def _load_clip(clip_dir: Path, lane: int, mask_polarity: MaskPolarity,
             if candidate.is_file():
                 size = image_size(candidate)
                 if size != (camera.width, camera.height):
-                    raise DatasetError(f"mask is {size[0]}x{size[1]} (WxH) but its image is "
-                                       f"{camera.width}x{camera.height}", candidate)
+                    raise DatasetError(
+                        f"mask is {size[0]}x{size[1]} (WxH) but its image is {camera.width}x{camera.height}",
+                        candidate,
+                    )
                 if mask_polarity == "keep":
                     mask_path = candidate
                 else:
                     metadata["foreground_mask_path"] = candidate
-        frame = Frame(name=f"{clip_dir.name}/{relative}", image_path=path, camera=camera, timestamp_us=timestamp,
-                      sensor=PurePosixPath(relative).stem if path.parent != image_root else "CAMERA_FRONT",
-                      traversal=clip_dir.name, mask_path=mask_path, metadata=metadata)
+        frame = Frame(
+            name=f"{clip_dir.name}/{relative}",
+            image_path=path,
+            camera=camera,
+            timestamp_us=timestamp,
+            sensor=PurePosixPath(relative).stem if path.parent != image_root else "CAMERA_FRONT",
+            traversal=clip_dir.name,
+            mask_path=mask_path,
+            metadata=metadata,
+        )
         key = (lane, timestamp if timestamp is not None else -1, natural_key(frame.name))
         frames.append((key, frame))
     return frames, lidar

@@ -41,7 +41,9 @@ def is_synthetic_scene(folder: Path) -> bool:
 def _scene_dirs(base: Path) -> dict[str, Path]:
     found = discover_scenes(base, is_synthetic_scene)
     if not found:
-        raise DatasetError("no synthetic scenes found (expected <scene>/scene.json and <scene>/test_set.txt)", base)
+        raise DatasetError(
+            "no synthetic scenes found (expected <scene>/scene.json and <scene>/test_set.txt)", base
+        )
     return found
 
 
@@ -68,8 +70,13 @@ def read_scene_json(path: Path) -> dict[str, Any]:
     return meta
 
 
-def load_scenes(root: str | os.PathLike[str], scenes: Iterable[str] | None = None, *,
-                masks: MaskPolicy = "require_test", distortion: DistortionPolicy = "keep") -> list[Scene]:
+def load_scenes(
+    root: str | os.PathLike[str],
+    scenes: Iterable[str] | None = None,
+    *,
+    masks: MaskPolicy = "require_test",
+    distortion: DistortionPolicy = "keep",
+) -> list[Scene]:
     """Load synthetic scenes.
 
     Args:
@@ -80,15 +87,18 @@ def load_scenes(root: str | os.PathLike[str], scenes: Iterable[str] | None = Non
     """
     base = dataset_root(root)
     found = _scene_dirs(base)
-    return [_load_one(found[name], name, masks, distortion)
-            for name in select_scenes(list(found), scenes, base, "synthetic")]
+    return [
+        _load_one(found[name], name, masks, distortion)
+        for name in select_scenes(list(found), scenes, base, "synthetic")
+    ]
 
 
 def _load_one(scene_dir: Path, name: str, masks: MaskPolicy, distortion: DistortionPolicy) -> Scene:
     json_path = scene_dir / "scene.json"
     meta = read_scene_json(json_path)
-    layout = load_layout(scene_dir, name=name, dataset="synthetic", masks=masks, poses="sparse",
-                         distortion=distortion)
+    layout = load_layout(
+        scene_dir, name=name, dataset="synthetic", masks=masks, poses="sparse", distortion=distortion
+    )
     traversals = {t.get("name"): (i, t) for i, t in enumerate(meta["traversals"]) if isinstance(t, dict)}
     cameras = {c.get("name"): (i, c) for i, c in enumerate(meta["cameras"]) if isinstance(c, dict)}
     entries: dict[str, Mapping[str, Any]] = {}
@@ -101,7 +111,9 @@ def _load_one(scene_dir: Path, name: str, masks: MaskPolicy, distortion: Distort
     posed = {frame.name for frame in layout.frames}
     unposed = sorted(set(entries) - posed)
     if unposed:
-        raise DatasetError(f"{len(unposed)} frames have no pose in the COLMAP model, e.g. {unposed[0]!r}", json_path)
+        raise DatasetError(
+            f"{len(unposed)} frames have no pose in the COLMAP model, e.g. {unposed[0]!r}", json_path
+        )
 
     keyed = []
     for frame in layout.frames:
@@ -110,14 +122,34 @@ def _load_one(scene_dir: Path, name: str, masks: MaskPolicy, distortion: Distort
             raise DatasetError(f"no entry for frame {frame.name!r}", json_path)
         keyed.append(_annotate(frame, entry, traversals, cameras, json_path))
     keyed.sort(key=lambda item: item[0])
-    scene_meta = {key: meta.get(key) for key in ("seed", "preset", "units", "lane_width_m", "num_lanes", "world_up",
-                                                 "traversals", "cameras", "dynamic_objects")}
-    return replace(layout, frames=tuple(frame for _, frame in keyed),
-                   metadata={**layout.metadata, **scene_meta, "scene_json": str(json_path)})
+    scene_meta = {
+        key: meta.get(key)
+        for key in (
+            "seed",
+            "preset",
+            "units",
+            "lane_width_m",
+            "num_lanes",
+            "world_up",
+            "traversals",
+            "cameras",
+            "dynamic_objects",
+        )
+    }
+    return replace(
+        layout,
+        frames=tuple(frame for _, frame in keyed),
+        metadata={**layout.metadata, **scene_meta, "scene_json": str(json_path)},
+    )
 
 
-def _annotate(frame: Frame, entry: Mapping[str, Any], traversals: Mapping[str, tuple[int, Any]],
-              cameras: Mapping[str, tuple[int, Any]], json_path: Path) -> tuple[tuple[int, int, int, str], Frame]:
+def _annotate(
+    frame: Frame,
+    entry: Mapping[str, Any],
+    traversals: Mapping[str, tuple[int, Any]],
+    cameras: Mapping[str, tuple[int, Any]],
+    json_path: Path,
+) -> tuple[tuple[int, int, int, str], Frame]:
     where = f"frame {frame.name!r}"
     traversal, camera_name = entry.get("traversal"), entry.get("camera")
     if traversal not in traversals:
@@ -125,8 +157,9 @@ def _annotate(frame: Frame, entry: Mapping[str, Any], traversals: Mapping[str, t
     if camera_name not in cameras:
         raise DatasetError(f"{where}: camera {camera_name!r} is not declared in 'cameras'", json_path)
     if entry.get("split") != frame.split:
-        raise DatasetError(f"{where}: split {entry.get('split')!r} disagrees with the set files ({frame.split})",
-                           json_path)
+        raise DatasetError(
+            f"{where}: split {entry.get('split')!r} disagrees with the set files ({frame.split})", json_path
+        )
     timestamp, index = entry.get("timestamp_us"), entry.get("index")
     for key, value in (("timestamp_us", timestamp), ("index", index)):
         if isinstance(value, bool) or not isinstance(value, int):
@@ -136,11 +169,18 @@ def _annotate(frame: Frame, entry: Mapping[str, Any], traversals: Mapping[str, t
     for key, value in (("fx", K[0, 0]), ("fy", K[1, 1]), ("cx", K[0, 2]), ("cy", K[1, 2])):
         stated = camera_entry.get(key)
         if stated is not None and abs(float(stated) - value) > INTRINSICS_TOLERANCE:
-            raise DatasetError(f"{where}: COLMAP {key}={value:g} but camera {camera_name!r} states {stated}",
-                               json_path)
+            raise DatasetError(
+                f"{where}: COLMAP {key}={value:g} but camera {camera_name!r} states {stated}", json_path
+            )
     traversal_entry = traversals[traversal][1]
-    metadata = {**frame.metadata, "lane_offset": traversal_entry.get("lane_offset"),
-                "traversal_kind": traversal_entry.get("kind"), "index": index,
-                "has_dynamic": bool(entry.get("has_dynamic", False))}
-    annotated = replace(frame, traversal=traversal, sensor=camera_name, timestamp_us=timestamp, metadata=metadata)
+    metadata = {
+        **frame.metadata,
+        "lane_offset": traversal_entry.get("lane_offset"),
+        "traversal_kind": traversal_entry.get("kind"),
+        "index": index,
+        "has_dynamic": bool(entry.get("has_dynamic", False)),
+    }
+    annotated = replace(
+        frame, traversal=traversal, sensor=camera_name, timestamp_us=timestamp, metadata=metadata
+    )
     return (traversals[traversal][0], cameras[camera_name][0], index, frame.name), annotated

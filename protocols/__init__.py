@@ -191,8 +191,10 @@ class Protocol:
         for group in self.groups:
             if group.name == name:
                 return group
-        raise ProtocolError(f"protocol {self.name!r} has no group {name!r}; groups: "
-                            f"{', '.join(g.name for g in self.groups)}", self.path)
+        raise ProtocolError(
+            f"protocol {self.name!r} has no group {name!r}; groups: {', '.join(g.name for g in self.groups)}",
+            self.path,
+        )
 
     def references_for(self, split: str) -> int:
         return int(self.references.count[split])
@@ -221,8 +223,11 @@ def protocol_path(name_or_path: str | os.PathLike[str]) -> Path:
         return candidate
     packaged = protocol_dir() / f"{text}.toml"
     if not packaged.is_file():
-        raise ProtocolError(f"unknown protocol {text!r}; packaged: {', '.join(list_protocols())} "
-                            "(or pass a path to a .toml file)", protocol_dir())
+        raise ProtocolError(
+            f"unknown protocol {text!r}; packaged: {', '.join(list_protocols())} "
+            "(or pass a path to a .toml file)",
+            protocol_dir(),
+        )
     return packaged
 
 
@@ -245,8 +250,23 @@ def load_protocol(name_or_path: str | os.PathLike[str]) -> Protocol:
 def parse_protocol(data: Mapping[str, Any], path: Path) -> Protocol:
     """Validate parsed TOML ``data`` (read from ``path``, named in errors) into a :class:`Protocol`."""
     root = Table(data, path)
-    root.check_keys(("format", "name", "dataset", "description", "loader", "split", "images", "references",
-                     "packets", "render", "groups", "evaluation", "leaderboard"))
+    root.check_keys(
+        (
+            "format",
+            "name",
+            "dataset",
+            "description",
+            "loader",
+            "split",
+            "images",
+            "references",
+            "packets",
+            "render",
+            "groups",
+            "evaluation",
+            "leaderboard",
+        )
+    )
     if root.raw("format") != FORMAT:
         raise root.error("format", f"expected {FORMAT!r}, got {root.raw('format')!r}")
     loader = root.table("loader", {})
@@ -254,8 +274,11 @@ def parse_protocol(data: Mapping[str, Any], path: Path) -> Protocol:
     packets = _packets(root.table("packets"))
     for split in SPLITS:
         if references.count[split] >= packets.views[split]:
-            raise root.error(f"references.{split}", f"N = {references.count[split]} leaves no target in a packet of "
-                             f"{packets.views[split]} views (packets.{split}_views)")
+            raise root.error(
+                f"references.{split}",
+                f"N = {references.count[split]} leaves no target in a packet of "
+                f"{packets.views[split]} views (packets.{split}_views)",
+            )
     render = root.table("render", {})
     render.check_keys(("cmap_clip",))
     groups = tuple(_group(t) for t in root.tables("groups"))
@@ -266,11 +289,20 @@ def parse_protocol(data: Mapping[str, Any], path: Path) -> Protocol:
     dataset = root.string("dataset")
     leaderboard = _leaderboard(root.table("leaderboard"), names, dataset) if root.has("leaderboard") else None
     return Protocol(
-        name=root.string("name"), dataset=dataset, description=root.string("description", "-"),
-        path=path, loader_options=dict(loader.data), split=_split(root.table("split")),
-        images=_images(root.table("images")), references=references, packets=packets,
-        cmap_clip=render.number("cmap_clip", 0.0, minimum=0.0), groups=groups,
-        evaluation=_evaluation(root.table("evaluation", {})), leaderboard=leaderboard)
+        name=root.string("name"),
+        dataset=dataset,
+        description=root.string("description", "-"),
+        path=path,
+        loader_options=dict(loader.data),
+        split=_split(root.table("split")),
+        images=_images(root.table("images")),
+        references=references,
+        packets=packets,
+        cmap_clip=render.number("cmap_clip", 0.0, minimum=0.0),
+        groups=groups,
+        evaluation=_evaluation(root.table("evaluation", {})),
+        leaderboard=leaderboard,
+    )
 
 
 # ---------------------------------------------------------------------- sections
@@ -280,8 +312,10 @@ def _split(table: Table) -> SceneSplit:
         table.check_keys(("rule", "test_fraction"))
         value = table.integers("test_fraction", minimum=0)
         if len(value) != 2 or not 0 < value[0] < value[1]:
-            raise table.error("test_fraction", f"expected [numerator, denominator] with 0 < numerator < "
-                              f"denominator, got {value!r}")
+            raise table.error(
+                "test_fraction",
+                f"expected [numerator, denominator] with 0 < numerator < denominator, got {value!r}",
+            )
         numerator, denominator = value
         return SceneSplit("interleaved", test_fraction=Fraction(numerator, denominator))
     if rule == "every_nth":
@@ -306,11 +340,14 @@ def _images(table: Table) -> ImageSpec:
     else:
         size = table.integers("resolution", minimum=1)
         if len(size) != 2:
-            raise table.error("resolution", f"expected [height, width] or \"native\", got {value!r}")
+            raise table.error("resolution", f'expected [height, width] or "native", got {value!r}')
         resolution = (size[0], size[1])
-    return ImageSpec(resolution=resolution, resize=table.string("resize", "crop", choices=("crop", "stretch")),
-                     masks=table.string("masks", choices=("dataset", "foreground", "none")),  # type: ignore[arg-type]
-                     downscale=table.integer("downscale", 1, minimum=1))
+    return ImageSpec(
+        resolution=resolution,
+        resize=table.string("resize", "crop", choices=("crop", "stretch")),
+        masks=table.string("masks", choices=("dataset", "foreground", "none")),  # type: ignore[arg-type]
+        downscale=table.integer("downscale", 1, minimum=1),
+    )
 
 
 def _evaluation(table: Table) -> tuple[str, ...]:
@@ -318,7 +355,9 @@ def _evaluation(table: Table) -> tuple[str, ...]:
     names = table.strings("profiles", ["paper"])
     unknown = [name for name in names if name not in evaluation_profiles.PROFILES]
     if unknown:
-        raise table.error("profiles", f"unknown profile {unknown[0]!r}; known: {', '.join(evaluation_profiles.PROFILES)}")
+        raise table.error(
+            "profiles", f"unknown profile {unknown[0]!r}; known: {', '.join(evaluation_profiles.PROFILES)}"
+        )
     return names
 
 
@@ -328,15 +367,22 @@ def _leaderboard(table: Table, groups: list[str], dataset: str) -> Layout:
     if table.has("blocks"):
         value = table.raw("blocks")
         if not isinstance(value, list) or not value or not all(isinstance(v, Mapping) for v in value):
-            raise table.error("blocks", f"expected a non-empty list of tables ({{ group = ..., label = ... }}), "
-                              f"got {value!r}")
-        blocks = tuple(_block(Table(v, table.path, f"{table.key('blocks')}[{i}]"), groups)
-                       for i, v in enumerate(value))
+            raise table.error(
+                "blocks",
+                f"expected a non-empty list of tables ({{ group = ..., label = ... }}), got {value!r}",
+            )
+        blocks = tuple(
+            _block(Table(v, table.path, f"{table.key('blocks')}[{i}]"), groups) for i, v in enumerate(value)
+        )
         keys = [b.key for b in blocks]
         duplicate = next((k for k in keys if keys.count(k) > 1), None)
         if duplicate is not None:
-            raise table.error("blocks", "the pooled block appears twice" if duplicate == POOLED
-                              else f"group {duplicate!r} appears twice")
+            raise table.error(
+                "blocks",
+                "the pooled block appears twice"
+                if duplicate == POOLED
+                else f"group {duplicate!r} appears twice",
+            )
     metrics = table.strings("metrics", list(Layout.metrics))
     sequence_metrics = table.strings("sequence_metrics") if table.has("sequence_metrics") else ()
     _check_metrics(table, "metrics", metrics, "image")
@@ -346,10 +392,18 @@ def _leaderboard(table: Table, groups: list[str], dataset: str) -> Layout:
         known = _reported_tables(table, dataset)
         unknown = [name for name in reported if name not in known]
         if unknown:
-            raise table.error("reported_tables", f"no reported table {unknown[0]!r} of dataset {dataset!r} in "
-                              f"protocols/reported/*.csv; known: {', '.join(sorted(known)) or 'none'}")
-    return Layout(blocks=blocks, metrics=metrics, sequence_metrics=sequence_metrics, reported_tables=reported,
-                  title=table.string("title") if table.has("title") else "")
+            raise table.error(
+                "reported_tables",
+                f"no reported table {unknown[0]!r} of dataset {dataset!r} in "
+                f"protocols/reported/*.csv; known: {', '.join(sorted(known)) or 'none'}",
+            )
+    return Layout(
+        blocks=blocks,
+        metrics=metrics,
+        sequence_metrics=sequence_metrics,
+        reported_tables=reported,
+        title=table.string("title") if table.has("title") else "",
+    )
 
 
 def _block(table: Table, groups: list[str]) -> Block:
@@ -387,17 +441,24 @@ def _reported_tables(table: Table, dataset: str) -> set[str]:
     for file in sorted((protocol_dir() / "reported").glob("*.csv")):
         try:
             with file.open(encoding="utf-8", newline="") as handle:
-                known.update(row.get("table", "") for row in csv.DictReader(handle) if row.get("dataset") == dataset)
+                known.update(
+                    row.get("table", "") for row in csv.DictReader(handle) if row.get("dataset") == dataset
+                )
         except (OSError, UnicodeDecodeError, csv.Error) as exc:
-            raise table.error("reported_tables", f"cannot read {file.name} ({exc.__class__.__name__})") from exc
+            raise table.error(
+                "reported_tables", f"cannot read {file.name} ({exc.__class__.__name__})"
+            ) from exc
     return known
 
 
 def _references(table: Table) -> ReferenceSpec:
     table.check_keys(("alpha", "beta", "aggregate", "train", "test"))
-    return ReferenceSpec(alpha=table.number("alpha", minimum=0.0), beta=table.number("beta", minimum=0.0),
-                         aggregate=table.string("aggregate", "mean", choices=("mean", "max")),  # type: ignore[arg-type]
-                         count={s: table.integer(s, minimum=1) for s in SPLITS})
+    return ReferenceSpec(
+        alpha=table.number("alpha", minimum=0.0),
+        beta=table.number("beta", minimum=0.0),
+        aggregate=table.string("aggregate", "mean", choices=("mean", "max")),  # type: ignore[arg-type]
+        count={s: table.integer(s, minimum=1) for s in SPLITS},
+    )
 
 
 def _packets(table: Table) -> PacketSpec:
@@ -405,8 +466,11 @@ def _packets(table: Table) -> PacketSpec:
     views = {s: table.integer(f"{s}_views", minimum=2) for s in SPLITS}
     low, high = table.integer("train_min_views", minimum=2), table.integer("train_max_views", minimum=2)
     if not low <= high <= views["train"]:
-        raise table.error("train_max_views", f"expected train_min_views <= train_max_views <= train_views, got "
-                          f"{low}, {high}, {views['train']}")
+        raise table.error(
+            "train_max_views",
+            f"expected train_min_views <= train_max_views <= train_views, got "
+            f"{low}, {high}, {views['train']}",
+        )
     return PacketSpec(views=views, train_views=(low, high))
 
 
@@ -422,11 +486,29 @@ def _group(table: Table) -> GroupSpec:
     fit_key = table.string("fit_key")
     for label, value in (("name", name), ("fit_key", fit_key)):
         if any(c in value for c in "/\\") or value.startswith(".") or value.startswith("_") or "__" in value:
-            raise table.error(label, f"must not contain '/', '\\' or '__' nor start with '.' or '_', got {value!r}")
-    return GroupSpec(name=name, rule=rule_name, params=RULES[rule_name].validate(params), fit_key=fit_key,
-                     scenes=scenes)
+            raise table.error(
+                label, f"must not contain '/', '\\' or '__' nor start with '.' or '_', got {value!r}"
+            )
+    return GroupSpec(
+        name=name, rule=rule_name, params=RULES[rule_name].validate(params), fit_key=fit_key, scenes=scenes
+    )
 
 
-__all__ = ["FORMAT", "POOLED", "PROTOCOL_NAMES", "Block", "GroupFrames", "GroupSpec", "ImageSpec", "Layout",
-           "PacketSpec", "Protocol", "ReferenceSpec", "SceneSplit", "list_protocols", "load_protocol", "parse_protocol",
-           "protocol_path"]
+__all__ = [
+    "FORMAT",
+    "POOLED",
+    "PROTOCOL_NAMES",
+    "Block",
+    "GroupFrames",
+    "GroupSpec",
+    "ImageSpec",
+    "Layout",
+    "PacketSpec",
+    "Protocol",
+    "ReferenceSpec",
+    "SceneSplit",
+    "list_protocols",
+    "load_protocol",
+    "parse_protocol",
+    "protocol_path",
+]

@@ -111,17 +111,21 @@ def _validate_test_set(table: Table) -> dict[str, Any]:
 
 
 def _select_test_set(scene: Scene, params: Mapping[str, Any]) -> GroupFrames:
-    return GroupFrames(fit=tuple(f for f in scene.frames if f.split != "test"),
-                       targets=tuple(f for f in scene.frames if f.split == "test"))
+    return GroupFrames(
+        fit=tuple(f for f in scene.frames if f.split != "test"),
+        targets=tuple(f for f in scene.frames if f.split == "test"),
+    )
 
 
 # ---------------------------------------------------------------------- lanes
 def _validate_lanes(table: Table) -> dict[str, Any]:
     table.check_keys(("train_lane", "target_lane", "fit_frames", "target_frames"))
-    params = {"train_lane": table.integer("train_lane", minimum=0),
-              "target_lane": table.integer("target_lane", minimum=0),
-              "fit_frames": table.integer("fit_frames", minimum=1),
-              "target_frames": table.integer("target_frames", minimum=1)}
+    params = {
+        "train_lane": table.integer("train_lane", minimum=0),
+        "target_lane": table.integer("target_lane", minimum=0),
+        "fit_frames": table.integer("fit_frames", minimum=1),
+        "target_frames": table.integer("target_frames", minimum=1),
+    }
     if params["train_lane"] == params["target_lane"]:
         raise table.error("target_lane", "must differ from train_lane (targets would be fit frames)")
     return params
@@ -132,8 +136,10 @@ def _select_lanes(scene: Scene, params: Mapping[str, Any]) -> GroupFrames:
         frames = [f for f in scene.frames if f.metadata.get("lane") == index]
         return tuple(frames[i] for i in uniform_indices(len(frames), count))
 
-    return GroupFrames(fit=lane(params["train_lane"], params["fit_frames"]),
-                       targets=lane(params["target_lane"], params["target_frames"]))
+    return GroupFrames(
+        fit=lane(params["train_lane"], params["fit_frames"]),
+        targets=lane(params["target_lane"], params["target_frames"]),
+    )
 
 
 # ---------------------------------------------------------------------- time_window
@@ -146,9 +152,12 @@ def _window_us(table: Table, name: str) -> tuple[int, int]:
 
 def _validate_time_window(table: Table) -> dict[str, Any]:
     table.check_keys(("sensors", "fit_window", "target_window", "targets"))
-    params = {"sensors": table.strings("sensors"), "fit_window": _window_us(table, "fit_window"),
-              "target_window": _window_us(table, "target_window"),
-              "targets": table.string("targets", "keyframes", choices=("keyframes", "all"))}
+    params = {
+        "sensors": table.strings("sensors"),
+        "fit_window": _window_us(table, "fit_window"),
+        "target_window": _window_us(table, "target_window"),
+        "targets": table.string("targets", "keyframes", choices=("keyframes", "all")),
+    }
     fit, target = params["fit_window"], params["target_window"]
     if target[0] < fit[1] and fit[0] < target[1]:
         raise table.error("target_window", "overlaps fit_window (targets would be fit frames)")
@@ -162,8 +171,11 @@ def time_offsets_us(scene: Scene, sensors: Sequence[str]) -> list[tuple[int, Fra
         return []
     untimed = [f.name for f in frames if f.timestamp_us is None]
     if untimed:
-        raise ProtocolError(f"scene {scene.name!r}: frame {untimed[0]!r} has no timestamp; the time_window rule "
-                            "needs timestamps", scene.root)
+        raise ProtocolError(
+            f"scene {scene.name!r}: frame {untimed[0]!r} has no timestamp; the time_window rule "
+            "needs timestamps",
+            scene.root,
+        )
     t0 = min(int(f.timestamp_us) for f in frames)  # type: ignore[arg-type]
     return [(int(f.timestamp_us) - t0, f) for f in frames]  # type: ignore[arg-type]
 
@@ -172,8 +184,11 @@ def _select_time_window(scene: Scene, params: Mapping[str, Any]) -> GroupFrames:
     offsets = time_offsets_us(scene, params["sensors"])
     (f0, f1), (t0, t1) = params["fit_window"], params["target_window"]
     fit = tuple(f for dt, f in offsets if f0 <= dt < f1)
-    targets = tuple(f for dt, f in offsets if t0 <= dt < t1
-                    and (params["targets"] == "all" or bool(f.metadata.get("is_key_frame", True))))
+    targets = tuple(
+        f
+        for dt, f in offsets
+        if t0 <= dt < t1 and (params["targets"] == "all" or bool(f.metadata.get("is_key_frame", True)))
+    )
     return GroupFrames(fit=fit, targets=targets)
 
 
@@ -197,9 +212,12 @@ def _select_sparse_views(scene: Scene, params: Mapping[str, Any]) -> GroupFrames
 def _validate_timestep_stride(table: Table) -> dict[str, Any]:
     table.check_keys(("sensors", "stride", "first", "interpolate"))
     stride = table.integer("stride", minimum=2)
-    params = {"sensors": table.strings("sensors"), "stride": stride,
-              "first": table.integer("first", stride - 1, minimum=0),
-              "interpolate": table.integer("interpolate", 4, minimum=0)}
+    params = {
+        "sensors": table.strings("sensors"),
+        "stride": stride,
+        "first": table.integer("first", stride - 1, minimum=0),
+        "interpolate": table.integer("interpolate", 4, minimum=0),
+    }
     if params["first"] > stride:
         raise table.error("first", f"expected an integer <= stride ({stride}), got {params['first']}")
     return params
@@ -216,10 +234,18 @@ def timesteps_us(keyframes_us: Sequence[int], interpolate: int) -> list[int]:
 
 def _select_timestep_stride(scene: Scene, params: Mapping[str, Any]) -> GroupFrames:
     sensors = params["sensors"]
-    by_sensor = {s: sorted((f for f in scene.frames if f.sensor == s and f.timestamp_us is not None),
-                           key=lambda f: int(f.timestamp_us)) for s in sensors}  # type: ignore[arg-type]
-    keys = [int(f.timestamp_us) for f in by_sensor[sensors[0]]  # type: ignore[arg-type]
-            if bool(f.metadata.get("is_key_frame", True))]
+    by_sensor = {
+        s: sorted(
+            (f for f in scene.frames if f.sensor == s and f.timestamp_us is not None),
+            key=lambda f: int(f.timestamp_us),
+        )
+        for s in sensors
+    }  # type: ignore[arg-type]
+    keys = [
+        int(f.timestamp_us)
+        for f in by_sensor[sensors[0]]  # type: ignore[arg-type]
+        if bool(f.metadata.get("is_key_frame", True))
+    ]
     steps = timesteps_us(keys, params["interpolate"])
     test_steps = set(range(params["first"], len(steps), params["stride"]))
 
@@ -240,6 +266,7 @@ def _select_timestep_stride(scene: Scene, params: Mapping[str, Any]) -> GroupFra
 
     return GroupFrames(fit=pick({k: v for k, v in fit.items() if k not in targets}), targets=pick(targets))
 
+
 # ---------------------------------------------------------------------- holdout_every
 def _validate_holdout_every(table: Table) -> dict[str, Any]:
     table.check_keys(("every",))
@@ -248,8 +275,10 @@ def _validate_holdout_every(table: Table) -> dict[str, Any]:
 
 def _select_holdout_every(scene: Scene, params: Mapping[str, Any]) -> GroupFrames:
     every = params["every"]
-    return GroupFrames(fit=tuple(f for i, f in enumerate(scene.frames) if i % every != 0),
-                       targets=tuple(f for i, f in enumerate(scene.frames) if i % every == 0))
+    return GroupFrames(
+        fit=tuple(f for i, f in enumerate(scene.frames) if i % every != 0),
+        targets=tuple(f for i, f in enumerate(scene.frames) if i % every == 0),
+    )
 
 
 # ---------------------------------------------------------------------- select
@@ -285,16 +314,21 @@ def matches(frame: Frame, where: Mapping[str, Sequence[Any]]) -> bool:
 
 
 def _select_select(scene: Scene, params: Mapping[str, Any]) -> GroupFrames:
-    return GroupFrames(fit=tuple(f for f in scene.frames if matches(f, params["fit"])),
-                       targets=tuple(f for f in scene.frames if matches(f, params["targets"])))
+    return GroupFrames(
+        fit=tuple(f for f in scene.frames if matches(f, params["fit"])),
+        targets=tuple(f for f in scene.frames if matches(f, params["targets"])),
+    )
 
 
-RULES: dict[str, Rule] = {rule.name: rule for rule in (
-    Rule("test_set", _validate_test_set, _select_test_set),
-    Rule("lanes", _validate_lanes, _select_lanes),
-    Rule("time_window", _validate_time_window, _select_time_window),
-    Rule("sparse_views", _validate_sparse_views, _select_sparse_views),
-    Rule("holdout_every", _validate_holdout_every, _select_holdout_every),
-    Rule("select", _validate_select, _select_select),
-    Rule("timestep_stride", _validate_timestep_stride, _select_timestep_stride),
-)}
+RULES: dict[str, Rule] = {
+    rule.name: rule
+    for rule in (
+        Rule("test_set", _validate_test_set, _select_test_set),
+        Rule("lanes", _validate_lanes, _select_lanes),
+        Rule("time_window", _validate_time_window, _select_time_window),
+        Rule("sparse_views", _validate_sparse_views, _select_sparse_views),
+        Rule("holdout_every", _validate_holdout_every, _select_holdout_every),
+        Rule("select", _validate_select, _select_select),
+        Rule("timestep_stride", _validate_timestep_stride, _select_timestep_stride),
+    )
+}

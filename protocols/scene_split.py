@@ -51,13 +51,17 @@ class SceneSplit:
         if self.rule == "interleaved":
             p = self.test_fraction
             assert p is not None
-            return {name: "test" if math.floor((i + 1) * p) > math.floor(i * p) else "train"
-                    for i, name in enumerate(ordered)}
+            return {
+                name: "test" if math.floor((i + 1) * p) > math.floor(i * p) else "train"
+                for i, name in enumerate(ordered)
+            }
         if self.rule == "every_nth":
             assert self.every is not None
             return {name: "test" if (i + 1) % self.every == 0 else "train" for i, name in enumerate(ordered)}
-        return {name: "test" if name in self.test_names or name.rsplit("/", 1)[-1] in self.test_names else "train"
-                for name in ordered}
+        return {
+            name: "test" if name in self.test_names or name.rsplit("/", 1)[-1] in self.test_names else "train"
+            for name in ordered
+        }
 
     def describe(self) -> str:
         if self.rule == "interleaved":

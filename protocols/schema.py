@@ -74,8 +74,14 @@ class Table:
             raise self.error(name, f"expected an integer{bound}, got {value!r}")
         return value
 
-    def number(self, name: str, default: Any = _MISSING, *, minimum: float | None = None,
-               maximum: float | None = None) -> float:
+    def number(
+        self,
+        name: str,
+        default: Any = _MISSING,
+        *,
+        minimum: float | None = None,
+        maximum: float | None = None,
+    ) -> float:
         value = self.raw(name, default)
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise self.error(name, f"expected a number, got {value!r}")
@@ -100,15 +106,24 @@ class Table:
 
     def numbers(self, name: str, length: int, default: Any = _MISSING) -> tuple[float, ...]:
         value = self.raw(name, default)
-        if (not isinstance(value, list) or len(value) != length
-                or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)):
+        if (
+            not isinstance(value, list)
+            or len(value) != length
+            or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
+        ):
             raise self.error(name, f"expected a list of {length} numbers, got {value!r}")
         return tuple(float(v) for v in value)
 
     def integers(self, name: str, default: Any = _MISSING, *, minimum: int | None = None) -> tuple[int, ...]:
         value = self.raw(name, default)
-        ok = isinstance(value, list) and value and all(isinstance(v, int) and not isinstance(v, bool)
-                                                       and (minimum is None or v >= minimum) for v in value)
+        ok = (
+            isinstance(value, list)
+            and value
+            and all(
+                isinstance(v, int) and not isinstance(v, bool) and (minimum is None or v >= minimum)
+                for v in value
+            )
+        )
         if not ok:
             bound = f" >= {minimum}" if minimum is not None else ""
             raise self.error(name, f"expected a non-empty list of integers{bound}, got {value!r}")

@@ -78,11 +78,22 @@ class Camera:
         if not (K[0, 0] > 0 and K[1, 1] > 0):
             raise CameraError(f"focal lengths must be positive, got fx={K[0, 0]:g} fy={K[1, 1]:g}", where)
         if not np.allclose(K[2], [0.0, 0.0, 1.0]) or K[1, 0] != 0.0:
-            raise CameraError(f"intrinsics must be upper triangular with last row [0 0 1], got {K.tolist()}", where)
-        if int(self.width) != self.width or int(self.height) != self.height or self.width <= 0 or self.height <= 0:
+            raise CameraError(
+                f"intrinsics must be upper triangular with last row [0 0 1], got {K.tolist()}", where
+            )
+        if (
+            int(self.width) != self.width
+            or int(self.height) != self.height
+            or self.width <= 0
+            or self.height <= 0
+        ):
             raise CameraError(f"image size must be positive integers, got {self.width}x{self.height}", where)
-        if self.width > MAX_IMAGE_SIDE or self.height > MAX_IMAGE_SIDE:  # e.g. a negative size read as unsigned
-            raise CameraError(f"image size {self.width}x{self.height} exceeds {MAX_IMAGE_SIDE} px per side", where)
+        if (
+            self.width > MAX_IMAGE_SIDE or self.height > MAX_IMAGE_SIDE
+        ):  # e.g. a negative size read as unsigned
+            raise CameraError(
+                f"image size {self.width}x{self.height} exceeds {MAX_IMAGE_SIDE} px per side", where
+            )
         K.setflags(write=False)
         w2c.setflags(write=False)
         object.__setattr__(self, "K", K)
@@ -139,8 +150,16 @@ class Camera:
 
     # ------------------------------------------------------------------ constructors
     @classmethod
-    def from_c2w(cls, c2w: np.ndarray, K: np.ndarray, width: int, height: int, *,
-                 distortion: Distortion | None = None, source: str = "") -> Camera:
+    def from_c2w(
+        cls,
+        c2w: np.ndarray,
+        K: np.ndarray,
+        width: int,
+        height: int,
+        *,
+        distortion: Distortion | None = None,
+        source: str = "",
+    ) -> Camera:
         """From an OpenCV-axes camera-to-world ``(4, 4)`` or ``(3, 4)`` matrix."""
         c2w = numeric_array(c2w, "camera-to-world", source or "camera")
         if c2w.shape == (3, 4):
@@ -155,8 +174,16 @@ class Camera:
         return cls(K, w2c, width, height, distortion, source)
 
     @classmethod
-    def from_opengl_c2w(cls, c2w: np.ndarray, K: np.ndarray, width: int, height: int, *,
-                        distortion: Distortion | None = None, source: str = "") -> Camera:
+    def from_opengl_c2w(
+        cls,
+        c2w: np.ndarray,
+        K: np.ndarray,
+        width: int,
+        height: int,
+        *,
+        distortion: Distortion | None = None,
+        source: str = "",
+    ) -> Camera:
         """From an OpenGL/Blender/nerfstudio camera-to-world (x right, y up, z back)."""
         c2w = numeric_array(c2w, "camera-to-world", source or "camera")
         if c2w.shape == (3, 4):
@@ -170,10 +197,19 @@ class Camera:
         return cls.from_c2w(c2w, K, width, height, distortion=distortion, source=source)
 
     @classmethod
-    def from_quaternion(cls, quaternion: Sequence[float], translation: Sequence[float], K: np.ndarray,
-                        width: int, height: int, *, order: QuaternionOrder,
-                        direction: Literal["w2c", "c2w"] = "w2c", distortion: Distortion | None = None,
-                        source: str = "") -> Camera:
+    def from_quaternion(
+        cls,
+        quaternion: Sequence[float],
+        translation: Sequence[float],
+        K: np.ndarray,
+        width: int,
+        height: int,
+        *,
+        order: QuaternionOrder,
+        direction: Literal["w2c", "c2w"] = "w2c",
+        distortion: Distortion | None = None,
+        source: str = "",
+    ) -> Camera:
         """From a rotation quaternion and a translation.
 
         Args:
@@ -217,8 +253,10 @@ class Camera:
     def cropped(self, left: int, top: int, width: int, height: int) -> Camera:
         """The camera of the crop ``[left, left + width) × [top, top + height)``."""
         if left < 0 or top < 0 or left + width > self.width or top + height > self.height:
-            raise CameraError(f"crop {left},{top},{width}x{height} outside image {self.width}x{self.height}",
-                              self.source or "camera")
+            raise CameraError(
+                f"crop {left},{top},{width}x{height} outside image {self.width}x{self.height}",
+                self.source or "camera",
+            )
         K = self.K.copy()
         K[0, 2] -= left
         K[1, 2] -= top
@@ -301,8 +339,9 @@ def check_rotation(R: np.ndarray, where: str) -> None:
         raise CameraError(f"rotation is not orthonormal (an entry has magnitude {largest:.3g} > 1)", where)
     error = float(np.abs(R @ R.T - np.eye(3)).max())
     if error > ORTHONORMAL_TOLERANCE:
-        raise CameraError(f"rotation is not orthonormal (max |R·Rᵀ − I| = {error:.2e} > {ORTHONORMAL_TOLERANCE:g})",
-                          where)
+        raise CameraError(
+            f"rotation is not orthonormal (max |R·Rᵀ − I| = {error:.2e} > {ORTHONORMAL_TOLERANCE:g})", where
+        )
     det = float(np.linalg.det(R))
     if det < 0:
         raise CameraError(f"rotation has determinant {det:.4f} (a reflection, expected +1)", where)
@@ -328,8 +367,9 @@ def float_errors_raised(source: str) -> Iterator[None]:
         with np.errstate(over="raise", invalid="raise", divide="raise"):
             yield
     except FloatingPointError as error:
-        raise CameraError(f"camera arithmetic overflowed or became invalid ({error}); values out of range",
-                          source) from None
+        raise CameraError(
+            f"camera arithmetic overflowed or became invalid ({error}); values out of range", source
+        ) from None
 
 
 def numeric_array(values: object, what: str, source: str) -> np.ndarray:
@@ -346,8 +386,13 @@ def _preview(values: object, limit: int = 80) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
-def quaternion_to_matrix(q: Sequence[float], *, order: QuaternionOrder, source: str = "quaternion",
-                         tolerance: float = QUATERNION_NORM_TOLERANCE) -> np.ndarray:
+def quaternion_to_matrix(
+    q: Sequence[float],
+    *,
+    order: QuaternionOrder,
+    source: str = "quaternion",
+    tolerance: float = QUATERNION_NORM_TOLERANCE,
+) -> np.ndarray:
     """Unit quaternion → ``(3, 3)`` rotation.
 
     Args:
@@ -372,15 +417,22 @@ def quaternion_to_matrix(q: Sequence[float], *, order: QuaternionOrder, source: 
     if abs(norm - 1.0) > tolerance:
         raise CameraError(f"quaternion ({order}) has norm {norm:.6f}, not 1 within {tolerance:g}", source)
     w, x, y, z = w / norm, x / norm, y / norm, z / norm
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
-def rigid_from_quaternion(quaternion: Sequence[float], translation: Sequence[float], *, order: QuaternionOrder,
-                          source: str = "transform") -> np.ndarray:
+def rigid_from_quaternion(
+    quaternion: Sequence[float],
+    translation: Sequence[float],
+    *,
+    order: QuaternionOrder,
+    source: str = "transform",
+) -> np.ndarray:
     """``(4, 4)`` rigid transform ``[R(q) t; 0 1]`` from a pose record (quaternion norm checked).
 
     For chains of dataset poses, e.g. nuScenes camera-to-world
@@ -393,6 +445,7 @@ def rigid_from_quaternion(quaternion: Sequence[float], translation: Sequence[flo
         raise CameraError(f"translation must be 3 finite numbers, got {_preview(translation)}", source)
     T[:3, 3] = t
     return T
+
 
 def matrix_to_quaternion(R: np.ndarray, *, order: QuaternionOrder) -> np.ndarray:
     """``(3, 3)`` rotation → unit quaternion with non-negative scalar part, in the named order."""
@@ -422,7 +475,9 @@ def intrinsics_matrix(fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
     return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
 
 
-def intrinsics_from_colmap(model: str, params: Sequence[float], *, source: str = "") -> tuple[np.ndarray, Distortion | None]:
+def intrinsics_from_colmap(
+    model: str, params: Sequence[float], *, source: str = ""
+) -> tuple[np.ndarray, Distortion | None]:
     """COLMAP camera model + params → ``(K, distortion)``.
 
     Supported: SIMPLE_PINHOLE (f cx cy), PINHOLE (fx fy cx cy), SIMPLE_RADIAL (f cx cy k),
@@ -431,8 +486,9 @@ def intrinsics_from_colmap(model: str, params: Sequence[float], *, source: str =
     p = [float(v) for v in params]
     counts = {"SIMPLE_PINHOLE": 3, "PINHOLE": 4, "SIMPLE_RADIAL": 4, "RADIAL": 5, "OPENCV": 8}
     if model not in counts:
-        raise CameraError(f"unsupported COLMAP camera model {model}; supported: {', '.join(counts)}",
-                          source or "camera")
+        raise CameraError(
+            f"unsupported COLMAP camera model {model}; supported: {', '.join(counts)}", source or "camera"
+        )
     if len(p) != counts[model]:
         raise CameraError(f"{model} needs {counts[model]} parameters, got {len(p)}", source or "camera")
     if model == "SIMPLE_PINHOLE":
@@ -456,8 +512,9 @@ def apply_distortion(distortion: Distortion, xn: np.ndarray, yn: np.ndarray) -> 
     return xd, yd
 
 
-def invert_distortion(distortion: Distortion, xd: np.ndarray, yd: np.ndarray,
-                      iterations: int = 20) -> tuple[np.ndarray, np.ndarray]:
+def invert_distortion(
+    distortion: Distortion, xd: np.ndarray, yd: np.ndarray, iterations: int = 20
+) -> tuple[np.ndarray, np.ndarray]:
     """Undo :func:`apply_distortion` by fixed-point iteration (as OpenCV's ``undistortPoints``)."""
     k1, k2, p1, p2 = (list(distortion.params) + [0.0] * 4)[:4]
     xn, yn = xd.copy(), yd.copy()
@@ -471,7 +528,9 @@ def invert_distortion(distortion: Distortion, xd: np.ndarray, yd: np.ndarray,
     return xn, yn
 
 
-def look_at(center: Sequence[float], target: Sequence[float], up: Sequence[float] = (0.0, 0.0, 1.0)) -> np.ndarray:
+def look_at(
+    center: Sequence[float], target: Sequence[float], up: Sequence[float] = (0.0, 0.0, 1.0)
+) -> np.ndarray:
     """``(4, 4)`` OpenCV world-to-camera matrix of a camera at ``center`` looking at ``target``.
 
     ``up`` is the world's up direction; the camera's −y axis points along its projection.

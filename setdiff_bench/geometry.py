@@ -78,14 +78,15 @@ def max_pairwise_distance(centers: np.ndarray, chunk: int = 2048) -> float:
     centers = np.asarray(centers, dtype=np.float64)
     best = 0.0
     for start in range(0, len(centers), chunk):
-        block = centers[start:start + chunk]
+        block = centers[start : start + chunk]
         d2 = ((block[:, None, :] - centers[None, :, :]) ** 2).sum(-1)
         best = max(best, float(d2.max(initial=0.0)))
     return float(np.sqrt(best))
 
 
-def normalize_packet(cameras: Sequence[Camera], cmaps: torch.Tensor, first_target: int, *,
-                     alphas: torch.Tensor) -> NormalizedPacket:
+def normalize_packet(
+    cameras: Sequence[Camera], cmaps: torch.Tensor, first_target: int, *, alphas: torch.Tensor
+) -> NormalizedPacket:
     """Move a packet into the first target camera's frame and scale it to unit extent.
 
     The new world frame is the camera frame of ``cameras[first_target]`` (which becomes the identity
@@ -116,8 +117,9 @@ def normalize_packet(cameras: Sequence[Camera], cmaps: torch.Tensor, first_targe
     return NormalizedPacket(new_cameras, new_cmaps, rotation, translation, scale)
 
 
-def view_overlap_score(a: Camera, b: Camera, d_max: float, *, alpha: float = OVERLAP_ALPHA,
-                       beta: float = OVERLAP_BETA) -> float:
+def view_overlap_score(
+    a: Camera, b: Camera, d_max: float, *, alpha: float = OVERLAP_ALPHA, beta: float = OVERLAP_BETA
+) -> float:
     """Eq. 2: ``alpha · cos(view_a, view_b) + beta · (1 − ‖c_a − c_b‖ / d_max)``.
 
     ``d_max`` is the largest pairwise camera-centre distance in the scene; when it is 0 the distance
@@ -126,8 +128,14 @@ def view_overlap_score(a: Camera, b: Camera, d_max: float, *, alpha: float = OVE
     return float(overlap_score_matrix([a], [b], d_max, alpha=alpha, beta=beta)[0, 0])
 
 
-def overlap_score_matrix(targets: Sequence[Camera], candidates: Sequence[Camera], d_max: float, *,
-                         alpha: float = OVERLAP_ALPHA, beta: float = OVERLAP_BETA) -> np.ndarray:
+def overlap_score_matrix(
+    targets: Sequence[Camera],
+    candidates: Sequence[Camera],
+    d_max: float,
+    *,
+    alpha: float = OVERLAP_ALPHA,
+    beta: float = OVERLAP_BETA,
+) -> np.ndarray:
     """Eq. 2 for every (target, candidate) pair → ``(T, C)`` float64."""
     vt = np.stack([c.view_direction for c in targets])
     vc = np.stack([c.view_direction for c in candidates])
@@ -139,9 +147,16 @@ def overlap_score_matrix(targets: Sequence[Camera], candidates: Sequence[Camera]
     return alpha * cos + beta * proximity
 
 
-def select_references(targets: Sequence[Camera], candidates: Sequence[Camera], n: int, *,
-                      d_max: float | None = None, alpha: float = OVERLAP_ALPHA, beta: float = OVERLAP_BETA,
-                      aggregate: Literal["mean", "max"] = "mean") -> list[int]:
+def select_references(
+    targets: Sequence[Camera],
+    candidates: Sequence[Camera],
+    n: int,
+    *,
+    d_max: float | None = None,
+    alpha: float = OVERLAP_ALPHA,
+    beta: float = OVERLAP_BETA,
+    aggregate: Literal["mean", "max"] = "mean",
+) -> list[int]:
     """Pick the ``n`` candidates that overlap the packet's targets most (Eq. 2).
 
     Aggregation over targets: each candidate's score is the **mean** of its Eq. 2 scores against all

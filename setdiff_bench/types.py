@@ -18,8 +18,17 @@ import torch
 from setdiff_bench.cameras import Camera, Distortion
 from setdiff_bench.errors import DatasetError
 
-__all__ = ["PACKET_KEY_FIELDS", "Camera", "Distortion", "Frame", "Packet", "PacketKey", "Scene", "TrainingSample",
-           "ViewSet"]
+__all__ = [
+    "PACKET_KEY_FIELDS",
+    "Camera",
+    "Distortion",
+    "Frame",
+    "Packet",
+    "PacketKey",
+    "Scene",
+    "TrainingSample",
+    "ViewSet",
+]
 
 
 @dataclass(frozen=True)
@@ -226,11 +235,22 @@ class Packet:
         return PacketKey(**key_fields(self))
 
     @classmethod
-    def from_key(cls, key: PacketKey, references: ViewSet, targets: ViewSet, scale: float = 1.0,
-                 metadata: Mapping[str, Any] | None = None) -> Packet:
+    def from_key(
+        cls,
+        key: PacketKey,
+        references: ViewSet,
+        targets: ViewSet,
+        scale: float = 1.0,
+        metadata: Mapping[str, Any] | None = None,
+    ) -> Packet:
         """A packet named by ``key`` (any :class:`PacketKey`, e.g. a store's ``PacketHeader``)."""
-        return cls(**key_fields(key), references=references, targets=targets, scale=scale,
-                   metadata={} if metadata is None else metadata)
+        return cls(
+            **key_fields(key),
+            references=references,
+            targets=targets,
+            scale=scale,
+            metadata={} if metadata is None else metadata,
+        )
 
     @property
     def height(self) -> int:

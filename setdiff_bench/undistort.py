@@ -61,8 +61,14 @@ def undistort_image(image: np.ndarray, camera: Camera) -> tuple[np.ndarray, Came
     if not is_distorted(camera):
         return image, camera, np.ones((camera.height, camera.width), bool)
     map_x, map_y, valid = undistortion_maps(camera)
-    out = cv2.remap(np.ascontiguousarray(image), map_x, map_y, interpolation=cv2.INTER_LINEAR,
-                    borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    out = cv2.remap(
+        np.ascontiguousarray(image),
+        map_x,
+        map_y,
+        interpolation=cv2.INTER_LINEAR,
+        borderMode=cv2.BORDER_CONSTANT,
+        borderValue=0,
+    )
     if out.ndim < image.ndim:
         out = out[..., None]
     return out, pinhole_camera(camera), valid

@@ -31,16 +31,26 @@ DESCRIPTION = __doc__.split("\n\n", 1)[1] if __doc__ else HELP
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="study", metavar="STUDY", required=True)
     geometry = sub.add_parser("geometry", help="train and score SetDiff without / with C-maps / poses / both")
-    geometry.add_argument("--config", default="tiny_setdiff", help="base SetDiff config (TOML or packaged name)")
-    geometry.add_argument("--steps", type=int, default=None, help="training steps per variant (default: the config's)")
+    geometry.add_argument(
+        "--config", default="tiny_setdiff", help="base SetDiff config (TOML or packaged name)"
+    )
+    geometry.add_argument(
+        "--steps", type=int, default=None, help="training steps per variant (default: the config's)"
+    )
     geometry.add_argument("--seed", type=int, default=None, help="training seed (default: the config's)")
-    setsize = sub.add_parser("setsize", help="score one trained SetDiff at several reference + target set sizes")
-    setsize.add_argument("--checkpoint", required=True, type=Path, help="trained SetDiff (setdiff-bench train --out)")
+    setsize = sub.add_parser(
+        "setsize", help="score one trained SetDiff at several reference + target set sizes"
+    )
+    setsize.add_argument(
+        "--checkpoint", required=True, type=Path, help="trained SetDiff (setdiff-bench train --out)"
+    )
     setsize.add_argument("--sizes", default="1+1,2+1,3+1,3+2,3+4,3+6", help="comma list of N+M set sizes")
     for study in (geometry, setsize):
         study.add_argument("--packets", required=True, type=Path, help="packet store (setdiff-bench prepare)")
         study.add_argument("--out", required=True, type=Path, help="folder for the ablation tables")
-        study.add_argument("--work", type=Path, default=None, help="checkpoints and runs (default: <out>/work)")
+        study.add_argument(
+            "--work", type=Path, default=None, help="checkpoints and runs (default: <out>/work)"
+        )
         add_device_argument(study, "where training and inference run")
         add_progress_argument(study)
 
@@ -50,7 +60,9 @@ def run(args: argparse.Namespace) -> int:
     from setdiff_bench.pipeline.stages import LEDGER_FILE, Pipeline, StageFailed
     from setdiff_bench.runtime.devices import resolve_device
 
-    resolve_device(args.device)  # checked here; passed on as given (auto: not at all), so the stages resolve it
+    resolve_device(
+        args.device
+    )  # checked here; passed on as given (auto: not at all), so the stages resolve it
     work = (args.work or args.out / "work") / f"ablation_{args.study}"
     pipeline = Pipeline(quiet=args.no_progress, ledger=work / LEDGER_FILE)  # reruns keep the original times
     invocation = _invocation(args)
@@ -94,7 +106,7 @@ def _geometry(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocati
     if base["model"].get("method", "setdiff") != "setdiff":
         from setdiff_bench.errors import UsageError
 
-        raise UsageError("the geometry ablation needs a SetDiff config (method = \"setdiff\")", args.config)
+        raise UsageError('the geometry ablation needs a SetDiff config (method = "setdiff")', args.config)
     results = {}
     for variant in ablation.GEOMETRY_VARIANTS:
         data = {"model": {**base["model"], **variant.overrides}, "train": dict(base["train"])}
@@ -102,8 +114,11 @@ def _geometry(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocati
             data["train"]["steps"] = args.steps
         if args.seed is not None:
             data["train"]["seed"] = args.seed
-        config = write_config_toml(work / "configs" / f"{variant.key}.toml", data,
-                                   f"Geometry ablation variant '{variant.label}' of {args.config}")
+        config = write_config_toml(
+            work / "configs" / f"{variant.key}.toml",
+            data,
+            f"Geometry ablation variant '{variant.label}' of {args.config}",
+        )
         checkpoints = work / "checkpoints" / variant.key
         train = ["train", "--config", config, "--packets", args.packets, "--out", checkpoints]
         if args.device == "cpu":  # train runs where accelerate puts it: CUDA when available unless told cpu
@@ -112,15 +127,31 @@ def _geometry(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocati
             train.append("--no-progress")
         pipeline.run(f"train {variant.key}", train)
         runs = work / "runs" / variant.key
-        pipeline.run(f"run {variant.key}", ["run", "--method", "setdiff", "--checkpoint", checkpoints,
-                                           "--packets", args.packets, "--split", "test", "--out", runs,
-                                           *_run_args(args)])
+        pipeline.run(
+            f"run {variant.key}",
+            [
+                "run",
+                "--method",
+                "setdiff",
+                "--checkpoint",
+                checkpoints,
+                "--packets",
+                args.packets,
+                "--split",
+                "test",
+                "--out",
+                runs,
+                *_run_args(args),
+            ],
+        )
         results[variant.key] = ablation.pooled_means(runs / METRICS_FILE)
     frame = ablation.geometry_frame(results)
     caption = "Geometric grounding ablation on the synthetic streets (paper Table 5 shape)"
     commands = f"`{invocation}`, which ran:\n\n" + pipeline.commands_markdown()
     markdown = ablation.geometry_markdown(frame, ablation.ordering_geometry(frame), commands, caption)
-    return ablation.write_tables(args.out, "ablation_geometry", frame, markdown, ablation.geometry_latex(frame, caption))
+    return ablation.write_tables(
+        args.out, "ablation_geometry", frame, markdown, ablation.geometry_latex(frame, caption)
+    )
 
 
 def _setsize(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocation: str) -> dict[str, Path]:
@@ -131,14 +162,35 @@ def _setsize(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocatio
     results = {}
     for refs, targets in sizes:
         runs = work / "runs" / f"{refs}+{targets}"
-        pipeline.run(f"run {refs}+{targets}", ["run", "--method", "setdiff", "--checkpoint", args.checkpoint,
-                                               "--packets", args.packets, "--split", "test", "--out", runs,
-                                               "-o", f"max_references={refs}", "-o", f"targets_per_set={targets}",
-                                               *_run_args(args)])
+        pipeline.run(
+            f"run {refs}+{targets}",
+            [
+                "run",
+                "--method",
+                "setdiff",
+                "--checkpoint",
+                args.checkpoint,
+                "--packets",
+                args.packets,
+                "--split",
+                "test",
+                "--out",
+                runs,
+                "-o",
+                f"max_references={refs}",
+                "-o",
+                f"targets_per_set={targets}",
+                *_run_args(args),
+            ],
+        )
         results[(refs, targets)] = ablation.pooled_means(runs / METRICS_FILE)
     frame = ablation.setsize_frame(results)
     caption = "Set-size ablation on the synthetic streets (paper Table 6, one row per set size)"
     commands = f"`{invocation}`, which ran:\n\n" + pipeline.commands_markdown()
     targets = int(next(iter(results.values()))["targets"])
-    markdown = ablation.setsize_markdown(frame, ablation.ordering_setsize(results), commands, caption, targets)
-    return ablation.write_tables(args.out, "ablation_setsize", frame, markdown, ablation.setsize_latex(frame, caption))
+    markdown = ablation.setsize_markdown(
+        frame, ablation.ordering_setsize(results), commands, caption, targets
+    )
+    return ablation.write_tables(
+        args.out, "ablation_setsize", frame, markdown, ablation.setsize_latex(frame, caption)
+    )

@@ -16,42 +16,64 @@ from setdiff_bench.cli import add_device_argument, add_progress_argument
 
 VERB = "demo"
 HELP = "the embedded benchmark end to end: synthetic scenes, 3DGS fits, packets, SetDiff vs baselines, leaderboard"
-DESCRIPTION = ("Generate the synthetic benchmark's test scenes, fit their 3DGS, build packets, run identity, "
-               "reproject and the shipped DiFix and SetDiff models (tiny_difix, tiny_setdiff; trained on other "
-               "scenes), and write the leaderboard, plots and grids into a scratch folder (default runs/demo, "
-               "git-ignored; `setdiff-bench publish` copies a finished run to results/). --train makes every scene "
-               "and trains SetDiff and DiFix first. Every stage resumes.\n\n"
-               "examples:\n  setdiff-bench demo\n  setdiff-bench demo --preset tiny --out runs/smoke\n"
-               "  setdiff-bench demo --train --setdiff-steps 1000 --difix-steps 1000 --ablations")
+DESCRIPTION = (
+    "Generate the synthetic benchmark's test scenes, fit their 3DGS, build packets, run identity, "
+    "reproject and the shipped DiFix and SetDiff models (tiny_difix, tiny_setdiff; trained on other "
+    "scenes), and write the leaderboard, plots and grids into a scratch folder (default runs/demo, "
+    "git-ignored; `setdiff-bench publish` copies a finished run to results/). --train makes every scene "
+    "and trains SetDiff and DiFix first. Every stage resumes.\n\n"
+    "examples:\n  setdiff-bench demo\n  setdiff-bench demo --preset tiny --out runs/smoke\n"
+    "  setdiff-bench demo --train --setdiff-steps 1000 --difix-steps 1000 --ablations"
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from setdiff_bench.pipeline.demo import DEFAULT_OUT, DEMO_PRESETS
 
-    parser.add_argument("--preset", default="default", choices=tuple(DEMO_PRESETS),
-                        help="; ".join(f"{p.name}: {p.description}" for p in DEMO_PRESETS.values()))
-    parser.add_argument("--out", type=Path, default=Path(DEFAULT_OUT),
-                        help=f"output folder (default {DEFAULT_OUT}, a git-ignored scratch folder)")
+    parser.add_argument(
+        "--preset",
+        default="default",
+        choices=tuple(DEMO_PRESETS),
+        help="; ".join(f"{p.name}: {p.description}" for p in DEMO_PRESETS.values()),
+    )
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=Path(DEFAULT_OUT),
+        help=f"output folder (default {DEFAULT_OUT}, a git-ignored scratch folder)",
+    )
     parser.add_argument("--work", type=Path, default=None, help="intermediate data (default: <out>/work)")
     parser.add_argument("--seed", type=int, default=0, help="scene and training seed")
-    parser.add_argument("--jobs", type=int, default=2, help="processes for scene generation and packet rendering")
+    parser.add_argument(
+        "--jobs", type=int, default=2, help="processes for scene generation and packet rendering"
+    )
     add_device_argument(parser, "device of every stage")
-    parser.add_argument("--train", action="store_true",
-                        help="make every scene and train SetDiff and DiFix on the training scenes instead of "
-                             "evaluating the shipped models")
+    parser.add_argument(
+        "--train",
+        action="store_true",
+        help="make every scene and train SetDiff and DiFix on the training scenes instead of "
+        "evaluating the shipped models",
+    )
     parser.add_argument("--setdiff-steps", type=int, default=None, help="override the preset's SetDiff steps")
     parser.add_argument("--difix-steps", type=int, default=None, help="override the preset's DiFix steps")
-    parser.add_argument("--ablations", action="store_true",
-                        help="with --train: also run the geometry and set-size ablations (four more trainings)")
+    parser.add_argument(
+        "--ablations",
+        action="store_true",
+        help="with --train: also run the geometry and set-size ablations (four more trainings)",
+    )
     add_progress_argument(parser)
 
 
 def invocation(args: argparse.Namespace) -> str:
     """The command line that reproduces this demo, from the parsed arguments."""
     parts = ["demo", "--preset", args.preset, "--out", str(args.out), "--seed", str(args.seed)]
-    device = None if args.device == "auto" else args.device   # auto is the default: not repeated
-    for flag, value in (("--work", args.work), ("--device", device), ("--setdiff-steps", args.setdiff_steps),
-                        ("--difix-steps", args.difix_steps)):
+    device = None if args.device == "auto" else args.device  # auto is the default: not repeated
+    for flag, value in (
+        ("--work", args.work),
+        ("--device", device),
+        ("--setdiff-steps", args.setdiff_steps),
+        ("--difix-steps", args.difix_steps),
+    ):
         if value is not None:
             parts += [flag, str(value)]
     parts += ["--train"] if args.train else []
@@ -69,17 +91,31 @@ def run(args: argparse.Namespace) -> int:
 
     if args.jobs < 1:
         raise UsageError(f"--jobs must be >= 1, got {args.jobs}", "--jobs")
-    resolve_device(args.device)  # checked here; passed on as given (auto: not at all), so the stages resolve it
+    resolve_device(
+        args.device
+    )  # checked here; passed on as given (auto: not at all), so the stages resolve it
     preset = get_demo_preset(args.preset)
     paths = DemoPaths(out=args.out, work=args.work or args.out / "work")
-    device = None if args.device == "auto" else args.device   # the stages' own default is auto
+    device = None if args.device == "auto" else args.device  # the stages' own default is auto
     try:
-        summary = run_demo(preset, paths, seed=args.seed, jobs=args.jobs, device=device, train=args.train,
-                           setdiff_steps=args.setdiff_steps, difix_steps=args.difix_steps, ablations=args.ablations,
-                           progress=not args.no_progress, invocation=invocation(args))
+        summary = run_demo(
+            preset,
+            paths,
+            seed=args.seed,
+            jobs=args.jobs,
+            device=device,
+            train=args.train,
+            setdiff_steps=args.setdiff_steps,
+            difix_steps=args.difix_steps,
+            ablations=args.ablations,
+            progress=not args.no_progress,
+            invocation=invocation(args),
+        )
     except StageFailed as failure:
         return failure.code
     this_run = sum(s["rerun_seconds"] if s["resumed"] else s["seconds"] for s in summary["stages"])
-    print(f"demo finished: {summary['total_seconds'] / 60:.1f} min of stage work, {this_run / 60:.1f} min in this run: "
-          f"{args.out / 'README.md'}")
+    print(
+        f"demo finished: {summary['total_seconds'] / 60:.1f} min of stage work, {this_run / 60:.1f} min in this run: "
+        f"{args.out / 'README.md'}"
+    )
     return 0

@@ -21,22 +21,36 @@ from setdiff_bench.cli import add_device_argument, add_progress_argument
 
 VERB = "evaluate"
 HELP = "score a finished run under an evaluation profile (the official EUVS / 3DGS-Enhancer scoring)"
-DESCRIPTION = ("Rescore a finished run's enhanced images under an evaluation profile: scoring size and filters, "
-               "crop, metrics, per-scene or pooled averaging (profiles: paper, euvs_official, dl3dv_3dgs_enhancer).")
+DESCRIPTION = (
+    "Rescore a finished run's enhanced images under an evaluation profile: scoring size and filters, "
+    "crop, metrics, per-scene or pooled averaging (profiles: paper, euvs_official, dl3dv_3dgs_enhancer)."
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("run", type=Path, help="a finished run folder (metrics.parquet, images/)")
     parser.add_argument("--profile", default="paper", help="evaluation profile (default: paper)")
     parser.add_argument("--packets", type=Path, required=True, help="the packet store the run was made on")
-    parser.add_argument("--data", type=Path, default=None,
-                        help="dataset root (official layout): original images and masks, for profiles that score "
-                             "at another size than the working one")
-    parser.add_argument("--dinov2", type=Path, default=None, metavar="DIR",
-                        help="local DINOv2 transformers folder (config.json + model.safetensors) for the EUVS "
-                             "cosine and Final_Score; nothing is downloaded")
-    parser.add_argument("--euvs-compat-report", action="store_true",
-                        help="print the frames where EUVS's positional mask pairing differs from ours")
+    parser.add_argument(
+        "--data",
+        type=Path,
+        default=None,
+        help="dataset root (official layout): original images and masks, for profiles that score "
+        "at another size than the working one",
+    )
+    parser.add_argument(
+        "--dinov2",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="local DINOv2 transformers folder (config.json + model.safetensors) for the EUVS "
+        "cosine and Final_Score; nothing is downloaded",
+    )
+    parser.add_argument(
+        "--euvs-compat-report",
+        action="store_true",
+        help="print the frames where EUVS's positional mask pairing differs from ours",
+    )
     add_device_argument(parser, "where metrics (and DINOv2) run")
     add_progress_argument(parser)
 
@@ -59,13 +73,25 @@ def run(args: argparse.Namespace) -> int:
 
         dinov2 = load_dinov2(args.dinov2, device)
     if args.euvs_compat_report and not profile.name.startswith("euvs"):
-        raise UsageError("--euvs-compat-report applies to EUVS profiles (euvs_official)", "--euvs-compat-report")
-    out = score_run(args.run, profile, packets=args.packets, data=args.data, dinov2=dinov2, device=device,
-                    progress=False if args.no_progress else None)
+        raise UsageError(
+            "--euvs-compat-report applies to EUVS profiles (euvs_official)", "--euvs-compat-report"
+        )
+    out = score_run(
+        args.run,
+        profile,
+        packets=args.packets,
+        data=args.data,
+        dinov2=dinov2,
+        device=device,
+        progress=False if args.no_progress else None,
+    )
     print(f"{profile.caption()}")
     print(f"tables: {out}")
     if profile.dinov2 and dinov2 is None:
-        print("note: no --dinov2 weights given: Cos_Similarity and Final_Score are not computed", file=sys.stderr)
+        print(
+            "note: no --dinov2 weights given: Cos_Similarity and Final_Score are not computed",
+            file=sys.stderr,
+        )
     if args.euvs_compat_report:
         sys.stdout.write((out / EUVS_COMPAT_FILE).read_text())
     return 0

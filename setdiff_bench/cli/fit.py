@@ -19,29 +19,64 @@ HELP = "fit 3D Gaussian Splatting to a scene's training frames and write the sta
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from setdiff_bench.loaders import DATASETS
 
-    parser.add_argument("--scene", required=True, help="scene folder (synthetic, EUVS or COLMAP layout), or with "
-                                                       "--dataset the scene's name under --root")
-    parser.add_argument("--dataset", default=None, choices=list(DATASETS),
-                        help="read the scene through this dataset's loader (with --root and -o options)")
+    parser.add_argument(
+        "--scene",
+        required=True,
+        help="scene folder (synthetic, EUVS or COLMAP layout), or with "
+        "--dataset the scene's name under --root",
+    )
+    parser.add_argument(
+        "--dataset",
+        default=None,
+        choices=list(DATASETS),
+        help="read the scene through this dataset's loader (with --root and -o options)",
+    )
     parser.add_argument("--root", type=Path, default=None, help="dataset folder for --dataset")
-    parser.add_argument("-o", "--option", action="append", default=[], metavar="KEY=VALUE",
-                        help="loader option, e.g. -o missing=skip, -o images_dir=images_4")
-    parser.add_argument("--init", default="auto", choices=("auto", "sparse", "triangulate", "random"),
-                        help="initial Gaussians: auto = the scene's sparse points, else points triangulated from "
-                             "the known poses (pycolmap), else random points sized to the scene")
-    parser.add_argument("--downscale", type=int, default=1,
-                        help="fit on images downscaled by this integer factor (intrinsics scaled to match)")
+    parser.add_argument(
+        "-o",
+        "--option",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="loader option, e.g. -o missing=skip, -o images_dir=images_4",
+    )
+    parser.add_argument(
+        "--init",
+        default="auto",
+        choices=("auto", "sparse", "triangulate", "random"),
+        help="initial Gaussians: auto = the scene's sparse points, else points triangulated from "
+        "the known poses (pycolmap), else random points sized to the scene",
+    )
+    parser.add_argument(
+        "--downscale",
+        type=int,
+        default=1,
+        help="fit on images downscaled by this integer factor (intrinsics scaled to match)",
+    )
     parser.add_argument("--out", required=True, type=Path, help="output PLY")
-    parser.add_argument("--frames", default=None,
-                        help="frames to fit: 'train' (default: the scene's training split), comma-separated "
-                             "names, or @FILE / FILE.txt with one name per line")
-    parser.add_argument("--preset", default="default", choices=("tiny", "default", "large", "standard"),
-                        help="schedule: a synthetic preset's fit, or 'standard' (Inria 30k iterations)")
-    parser.add_argument("--iterations", type=int, default=None,
-                        help="override the number of iterations (the schedule is rescaled to it)")
+    parser.add_argument(
+        "--frames",
+        default=None,
+        help="frames to fit: 'train' (default: the scene's training split), comma-separated "
+        "names, or @FILE / FILE.txt with one name per line",
+    )
+    parser.add_argument(
+        "--preset",
+        default="default",
+        choices=("tiny", "default", "large", "standard"),
+        help="schedule: a synthetic preset's fit, or 'standard' (Inria 30k iterations)",
+    )
+    parser.add_argument(
+        "--iterations",
+        type=int,
+        default=None,
+        help="override the number of iterations (the schedule is rescaled to it)",
+    )
     add_device_argument(parser, "cpu fits with the torch rasteriser, cuda with gsplat")
     parser.add_argument("--seed", type=int, default=0, help="random seed (view order, splits)")
-    parser.add_argument("--checkpoint", type=Path, default=None, help="checkpoint folder (resumed if present)")
+    parser.add_argument(
+        "--checkpoint", type=Path, default=None, help="checkpoint folder (resumed if present)"
+    )
     parser.add_argument("--checkpoint-every", type=int, default=100, help="iterations between checkpoints")
     add_progress_argument(parser)
 
@@ -90,13 +125,25 @@ def run(args: argparse.Namespace) -> int:
     if args.dataset is not None and args.root is None:
         raise UsageError("--dataset needs --root (the dataset folder)", "--root")
     source = Path(args.scene) if args.dataset is None else args.root
-    result = fit_scene(source, args.out, config, frames=frames, device=device, checkpoint_dir=args.checkpoint,
-                       checkpoint_every=args.checkpoint_every if args.checkpoint else 0,
-                       progress=not args.no_progress, dataset=args.dataset,
-                       scene_name=args.scene if args.dataset else None, loader_options=options,
-                       downscale=args.downscale, init=args.init)
+    result = fit_scene(
+        source,
+        args.out,
+        config,
+        frames=frames,
+        device=device,
+        checkpoint_dir=args.checkpoint,
+        checkpoint_every=args.checkpoint_every if args.checkpoint else 0,
+        progress=not args.no_progress,
+        dataset=args.dataset,
+        scene_name=args.scene if args.dataset else None,
+        loader_options=options,
+        downscale=args.downscale,
+        init=args.init,
+    )
     elapsed = time.perf_counter() - start
     final = sum(result.losses[-10:]) / max(1, len(result.losses[-10:])) if result.losses else float("nan")
-    print(f"fitted {len(result.model)} Gaussians in {config.iterations} iterations ({elapsed:.1f} s, "
-          f"final loss {final:.4f}) -> {args.out}")
+    print(
+        f"fitted {len(result.model)} Gaussians in {config.iterations} iterations ({elapsed:.1f} s, "
+        f"final loss {final:.4f}) -> {args.out}"
+    )
     return 0

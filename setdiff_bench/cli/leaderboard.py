@@ -23,29 +23,61 @@ DESCRIPTION = __doc__
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--dataset", required=True, help="dataset key (euvs, paralane, nuscenes, dl3dv, synthetic, ...)")
+    parser.add_argument(
+        "--dataset", required=True, help="dataset key (euvs, paralane, nuscenes, dl3dv, synthetic, ...)"
+    )
     parser.add_argument("--runs", type=Path, default=Path("results/runs"), help="folder searched for runs")
     parser.add_argument("--format", default="parquet,latex,md", help="comma list of parquet, latex, md")
     parser.add_argument("--out", type=Path, default=Path("results/leaderboards"), help="output folder")
-    parser.add_argument("--with-reported", action="store_true",
-                        help="add the paper's reported rows (marked '(paper)' / dagger, source=reported)")
+    parser.add_argument(
+        "--with-reported",
+        action="store_true",
+        help="add the paper's reported rows (marked '(paper)' / dagger, source=reported)",
+    )
     parser.add_argument("--split", default="test", help="split of the targets to tabulate (train, test, all)")
     parser.add_argument("--methods", default=None, help="comma list of methods, in row order (default all)")
-    parser.add_argument("--metrics", default=None,
-                        help="comma list of metric columns (default psnr,ssim,lpips; e.g. psnr_euvs,ssim_euvs,lpips_euvs)")
-    parser.add_argument("--profile", default="paper",
-                        help="evaluation profile to tabulate (paper = plain runs; others come from "
-                             "`setdiff-bench evaluate`); named in every caption")
+    parser.add_argument(
+        "--metrics",
+        default=None,
+        help="comma list of metric columns (default psnr,ssim,lpips; e.g. psnr_euvs,ssim_euvs,lpips_euvs)",
+    )
+    parser.add_argument(
+        "--profile",
+        default="paper",
+        help="evaluation profile to tabulate (paper = plain runs; others come from "
+        "`setdiff-bench evaluate`); named in every caption",
+    )
     parser.add_argument("--plots", action="store_true", help="also write the dataset's metric plots (PNG)")
-    parser.add_argument("--grids", type=int, default=0, metavar="K",
-                        help="also write a qualitative grid of K targets (needs --packets)")
-    parser.add_argument("--packets", type=Path, default=None, help="packet store the runs were made on (for --grids)")
+    parser.add_argument(
+        "--grids",
+        type=int,
+        default=0,
+        metavar="K",
+        help="also write a qualitative grid of K targets (needs --packets)",
+    )
+    parser.add_argument(
+        "--packets", type=Path, default=None, help="packet store the runs were made on (for --grids)"
+    )
 
 
 def _command(args: argparse.Namespace) -> str:
     """The command line that reproduces this table (recorded in the outputs)."""
-    parts = ["setdiff-bench", "leaderboard", "--dataset", args.dataset, "--runs", str(args.runs), "--format",
-             args.format, "--out", str(args.out), "--split", args.split, "--profile", args.profile]
+    parts = [
+        "setdiff-bench",
+        "leaderboard",
+        "--dataset",
+        args.dataset,
+        "--runs",
+        str(args.runs),
+        "--format",
+        args.format,
+        "--out",
+        str(args.out),
+        "--split",
+        args.split,
+        "--profile",
+        args.profile,
+    ]
     for flag, value in (("--methods", args.methods), ("--metrics", args.metrics)):
         if value:
             parts += [flag, value]
@@ -71,14 +103,22 @@ def run(args: argparse.Namespace) -> int:
     metrics = [m.strip() for m in args.metrics.split(",")] if args.metrics else None
     images, sequences = load_runs(args.runs)
     if len(images):
-        images = profile_rows(images, args.profile)   # plots and grids see the tabulated profile's rows only
+        images = profile_rows(images, args.profile)  # plots and grids see the tabulated profile's rows only
     reported = None
     if args.with_reported:
         reported = reported_for(args.dataset)
         if reported.empty:
             print(f"note: the paper reports no numbers for dataset {args.dataset!r}", file=sys.stderr)
-    board = build_leaderboard(args.dataset, images, sequences, split=split, reported=reported, metrics=metrics,
-                              methods=methods, profile=args.profile)
+    board = build_leaderboard(
+        args.dataset,
+        images,
+        sequences,
+        split=split,
+        reported=reported,
+        metrics=metrics,
+        methods=methods,
+        profile=args.profile,
+    )
     command = _command(args)
     for fmt, path in write_leaderboard(board, args.out, formats, command).items():
         print(f"{fmt}: {path}")
@@ -95,10 +135,16 @@ def run(args: argparse.Namespace) -> int:
 
         store = PacketStore(args.packets)
         chosen = images[(images["dataset"] == args.dataset) & ((images["split"] == split) if split else True)]
-        folders = {m: Path(r) for m, r in chosen.drop_duplicates("method")[["method", "run"]].itertuples(index=False)}
+        folders = {
+            m: Path(r) for m, r in chosen.drop_duplicates("method")[["method", "run"]].itertuples(index=False)
+        }
         order = methods or sorted(folders)
         frames = pick_frames(store.index[store.index["dataset"] == args.dataset], args.grids, split=split)
-        path = qualitative_grid(store, {m: folders[m] for m in order if m in folders}, frames,
-                                args.out / f"{args.dataset}_grid.png")
+        path = qualitative_grid(
+            store,
+            {m: folders[m] for m in order if m in folders},
+            frames,
+            args.out / f"{args.dataset}_grid.png",
+        )
         print(f"grid: {path}")
     return 0

@@ -25,8 +25,9 @@ from setdiff_bench.errors import UsageError
 
 VERB = "list"
 HELP = "list datasets, methods, or the scenes of a dataset on disk"
-DESCRIPTION = ("List what the toolkit can see: `list datasets`, `list methods`, "
-               "`list scenes --dataset D --root R`.")
+DESCRIPTION = (
+    "List what the toolkit can see: `list datasets`, `list methods`, `list scenes --dataset D --root R`."
+)
 
 
 @dataclass(frozen=True)
@@ -65,13 +66,29 @@ def _methods_run(args: argparse.Namespace) -> int:
     methods = available_methods()
     if args.json:
         for spec in methods.values():
-            print(json.dumps({"name": spec.name, "description": spec.description, "needs_weights": spec.needs_weights,
-                              "needs_gpu": spec.needs_gpu, "source": spec.source}, sort_keys=True))
+            print(
+                json.dumps(
+                    {
+                        "name": spec.name,
+                        "description": spec.description,
+                        "needs_weights": spec.needs_weights,
+                        "needs_gpu": spec.needs_gpu,
+                        "source": spec.source,
+                    },
+                    sort_keys=True,
+                )
+            )
         return 0
     headers = ["METHOD", "WEIGHTS", "GPU", "DESCRIPTION"]
-    table = [[spec.name, "yes" if spec.needs_weights else "no", "yes" if spec.needs_gpu else "no",
-              spec.description if spec.source == "builtin" else f"{spec.description} [plugin: {spec.source}]"]
-             for spec in methods.values()]
+    table = [
+        [
+            spec.name,
+            "yes" if spec.needs_weights else "no",
+            "yes" if spec.needs_gpu else "no",
+            spec.description if spec.source == "builtin" else f"{spec.description} [plugin: {spec.source}]",
+        ]
+        for spec in methods.values()
+    ]
     widths = [max(len(h), *(len(r[i]) for r in table)) for i, h in enumerate(headers)]
     for line in [headers, *table]:
         print("  ".join(cell.ljust(widths[i]) for i, cell in enumerate(line[:-1])) + "  " + line[-1])
@@ -101,10 +118,21 @@ def _scenes_arguments(parser: argparse.ArgumentParser) -> None:
 
     parser.add_argument("--dataset", required=True, choices=list(DATASETS), help="dataset key")
     parser.add_argument("--root", required=True, help="dataset folder as downloaded (see docs/datasets.md)")
-    parser.add_argument("--scene", action="append", dest="scenes", metavar="NAME",
-                        help="only this scene (repeatable); default all")
-    parser.add_argument("-o", "--option", action="append", default=[], metavar="KEY=VALUE",
-                        help="loader option, value parsed as JSON when valid (e.g. -o level=1, -o version=v1.0-mini)")
+    parser.add_argument(
+        "--scene",
+        action="append",
+        dest="scenes",
+        metavar="NAME",
+        help="only this scene (repeatable); default all",
+    )
+    parser.add_argument(
+        "-o",
+        "--option",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="loader option, value parsed as JSON when valid (e.g. -o level=1, -o version=v1.0-mini)",
+    )
     parser.add_argument("--names-only", action="store_true", help="print scene names without loading them")
     parser.add_argument("--json", action="store_true", help="one JSON object per scene instead of a table")
 
@@ -129,12 +157,26 @@ def _scenes_run(args: argparse.Namespace) -> int:
             print(json.dumps(row, sort_keys=True))
         return 0
     headers = ["SCENE", "FRAMES", "CAMERAS", "TRAVERSALS", "TRAIN", "TEST", "SIZE"]
-    table = [[row["scene"], str(row["frames"]), str(row["cameras"]), str(row["traversals"]),
-              _count(row["train"]), _count(row["test"]), ",".join(row["sizes"])] for row in rows]
+    table = [
+        [
+            row["scene"],
+            str(row["frames"]),
+            str(row["cameras"]),
+            str(row["traversals"]),
+            _count(row["train"]),
+            _count(row["test"]),
+            ",".join(row["sizes"]),
+        ]
+        for row in rows
+    ]
     widths = [max(len(h), *(len(r[i]) for r in table)) if table else len(h) for i, h in enumerate(headers)]
     print(f"{args.dataset}: {len(rows)} scene{'s' if len(rows) != 1 else ''} under {args.root}")
     for line in [headers, *table]:
-        print("  ".join(cell.ljust(widths[i]) if i == 0 else cell.rjust(widths[i]) for i, cell in enumerate(line)))
+        print(
+            "  ".join(
+                cell.ljust(widths[i]) if i == 0 else cell.rjust(widths[i]) for i, cell in enumerate(line)
+            )
+        )
     return 0
 
 
@@ -147,16 +189,25 @@ def _summary(scene: Any) -> dict[str, Any]:
     splits = Counter(frame.split for frame in scene.frames)
     has_split = any(split is not None for split in splits)
     sizes = Counter(f"{frame.camera.width}x{frame.camera.height}" for frame in scene.frames)
-    return {"scene": scene.name, "frames": len(scene.frames), "cameras": len(scene.sensors),
-            "traversals": len(scene.traversals), "train": splits.get("train", 0) if has_split else None,
-            "test": splits.get("test", 0) if has_split else None,
-            "sizes": [size for size, _ in sizes.most_common()]}
+    return {
+        "scene": scene.name,
+        "frames": len(scene.frames),
+        "cameras": len(scene.sensors),
+        "traversals": len(scene.traversals),
+        "train": splits.get("train", 0) if has_split else None,
+        "test": splits.get("test", 0) if has_split else None,
+        "sizes": [size for size, _ in sizes.most_common()],
+    }
 
 
 TARGETS: dict[str, ListTarget] = {
     "datasets": ListTarget("dataset keys known to the loaders", _datasets_arguments, _datasets_run),
-    "methods": ListTarget("enhancers for `run --method` (built-in and plugins)", _methods_arguments, _methods_run),
-    "scenes": ListTarget("scenes of a dataset on disk, with frame and camera counts", _scenes_arguments, _scenes_run),
+    "methods": ListTarget(
+        "enhancers for `run --method` (built-in and plugins)", _methods_arguments, _methods_run
+    ),
+    "scenes": ListTarget(
+        "scenes of a dataset on disk, with frame and camera counts", _scenes_arguments, _scenes_run
+    ),
 }
 
 

@@ -63,8 +63,11 @@ class ParagraphHelpFormatter(argparse.HelpFormatter):
             if all(line.startswith((" ", "\t")) or not line.strip() for line in lines):
                 blocks.append("\n".join(indent + line.rstrip() for line in lines))
             else:
-                blocks.append(textwrap.fill(" ".join(paragraph.split()), width, initial_indent=indent,
-                                            subsequent_indent=indent))
+                blocks.append(
+                    textwrap.fill(
+                        " ".join(paragraph.split()), width, initial_indent=indent, subsequent_indent=indent
+                    )
+                )
         return "\n\n".join(blocks)
 
 
@@ -76,9 +79,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"setdiff-bench {__version__}")
     sub = parser.add_subparsers(dest="verb", metavar="VERB", required=True)
     for module in verb_modules():
-        verb_parser = sub.add_parser(module.VERB, help=module.HELP, description=getattr(module, "DESCRIPTION",
-                                                                                            module.HELP),
-                                     formatter_class=ParagraphHelpFormatter)
+        verb_parser = sub.add_parser(
+            module.VERB,
+            help=module.HELP,
+            description=getattr(module, "DESCRIPTION", module.HELP),
+            formatter_class=ParagraphHelpFormatter,
+        )
         module.add_arguments(verb_parser)
         verb_parser.set_defaults(_run=module.run)
     return parser

@@ -31,26 +31,56 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     fits.add_argument("--fits", type=Path, help="folder of 3DGS PLYs: <fits>/<scene>/<fit_key>.ply")
     fits.add_argument("--fit", action="store_true", help="fit each 3DGS here (written to <out>/fits/)")
     parser.add_argument("--out", required=True, type=Path, help="packet store folder")
-    parser.add_argument("--split", choices=("train", "test", "all"), default="all",
-                        help="which scenes of the protocol's scene split (default: all)")
-    parser.add_argument("--test-scene", action="append", dest="test_scenes", metavar="NAME",
-                        help="declare this scene a test scene (repeatable); every scene not named is then a "
-                             "train scene, in place of the protocol's scene split")
-    parser.add_argument("--scene", action="append", dest="scenes", metavar="NAME",
-                        help="only this scene (repeatable)")
-    parser.add_argument("--group", action="append", dest="groups", metavar="NAME",
-                        help="only this protocol group (repeatable), e.g. --group holdout8; default all")
+    parser.add_argument(
+        "--split",
+        choices=("train", "test", "all"),
+        default="all",
+        help="which scenes of the protocol's scene split (default: all)",
+    )
+    parser.add_argument(
+        "--test-scene",
+        action="append",
+        dest="test_scenes",
+        metavar="NAME",
+        help="declare this scene a test scene (repeatable); every scene not named is then a "
+        "train scene, in place of the protocol's scene split",
+    )
+    parser.add_argument(
+        "--scene", action="append", dest="scenes", metavar="NAME", help="only this scene (repeatable)"
+    )
+    parser.add_argument(
+        "--group",
+        action="append",
+        dest="groups",
+        metavar="NAME",
+        help="only this protocol group (repeatable), e.g. --group holdout8; default all",
+    )
     parser.add_argument("--workers", type=int, default=1, metavar="K", help="render processes (default 1)")
-    parser.add_argument("--shard", default="0/1", metavar="i/n", help="process work units i, i+n, ... (default 0/1)")
+    parser.add_argument(
+        "--shard", default="0/1", metavar="i/n", help="process work units i, i+n, ... (default 0/1)"
+    )
     parser.add_argument("--threads", type=int, default=1, help="torch threads per render process (default 1)")
-    parser.add_argument("--backend", choices=("auto", "torch", "gsplat"), default="auto",
-                        help="renderer (auto: gsplat on CUDA when installed, else torch)")
+    parser.add_argument(
+        "--backend",
+        choices=("auto", "torch", "gsplat"),
+        default="auto",
+        help="renderer (auto: gsplat on CUDA when installed, else torch)",
+    )
     add_device_argument(parser, "the torch backend's device")
-    parser.add_argument("--loader-option", action="append", default=[], metavar="KEY=VALUE",
-                        help="override a loader option of the protocol (value parsed as JSON when it parses, "
-                             "e.g. level=1, version=\"v1.0-mini\")")
-    parser.add_argument("--cmap-precision", choices=("float32", "half"), default="float32",
-                        help="C-map EXR precision (float32: exact geometry; half: ~3.5x smaller files)")
+    parser.add_argument(
+        "--loader-option",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a loader option of the protocol (value parsed as JSON when it parses, "
+        'e.g. level=1, version="v1.0-mini")',
+    )
+    parser.add_argument(
+        "--cmap-precision",
+        choices=("float32", "half"),
+        default="float32",
+        help="C-map EXR precision (float32: exact geometry; half: ~3.5x smaller files)",
+    )
     parser.add_argument("--fit-iterations", type=int, default=30_000, help="3DGS iterations with --fit")
     add_progress_argument(parser, "--quiet")  # --quiet: the older name, hidden, kept for one release
 
@@ -63,12 +93,26 @@ def run(args: argparse.Namespace) -> int:
     from setdiff_bench.runtime.devices import resolve_device
 
     loader_options = dict(parse_option(text, "--loader-option") for text in args.loader_option)
-    summary = prepare(args.dataset, args.root, args.out, protocol=args.protocol, fits=args.fits, fit=args.fit,
-                      split=args.split, scenes=args.scenes, workers=args.workers, shard=Shard.parse(args.shard),
-                      backend=args.backend, device=resolve_device(args.device), threads=args.threads,
-                      cmap_precision=args.cmap_precision,
-                      loader_options=loader_options, fit_iterations=args.fit_iterations,
-                      progress=not args.no_progress, groups=args.groups,
-                      test_scenes=args.test_scenes)
+    summary = prepare(
+        args.dataset,
+        args.root,
+        args.out,
+        protocol=args.protocol,
+        fits=args.fits,
+        fit=args.fit,
+        split=args.split,
+        scenes=args.scenes,
+        workers=args.workers,
+        shard=Shard.parse(args.shard),
+        backend=args.backend,
+        device=resolve_device(args.device),
+        threads=args.threads,
+        cmap_precision=args.cmap_precision,
+        loader_options=loader_options,
+        fit_iterations=args.fit_iterations,
+        progress=not args.no_progress,
+        groups=args.groups,
+        test_scenes=args.test_scenes,
+    )
     print(summary.line())
     return 0

@@ -20,15 +20,27 @@ OUTPUT_FILES = ("rgb.png", "cmap.exr", "depth.exr", "alpha.png")
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--ply", required=True, type=Path, help="3DGS model (standard PLY)")
-    parser.add_argument("--colmap", required=True, type=Path, help="COLMAP sparse folder (cameras/images .bin or .txt)")
+    parser.add_argument(
+        "--colmap", required=True, type=Path, help="COLMAP sparse folder (cameras/images .bin or .txt)"
+    )
     parser.add_argument("--out", required=True, type=Path, help="output folder")
-    parser.add_argument("--images", nargs="+", metavar="NAME", help="only these COLMAP image names (default: all)")
+    parser.add_argument(
+        "--images", nargs="+", metavar="NAME", help="only these COLMAP image names (default: all)"
+    )
     parser.add_argument("--backend", choices=("torch", "gsplat"), default="torch")
     add_device_argument(parser, "the torch backend's device (gsplat renders on cuda)")
-    parser.add_argument("--downscale", type=int, default=1,
-                        help="render at the image size divided by this integer (as fit --downscale)")
-    parser.add_argument("--cmap-bound", type=float, default=None,
-                        help="clip Gaussian centres to ±BOUND around the origin in the C-map")
+    parser.add_argument(
+        "--downscale",
+        type=int,
+        default=1,
+        help="render at the image size divided by this integer (as fit --downscale)",
+    )
+    parser.add_argument(
+        "--cmap-bound",
+        type=float,
+        default=None,
+        help="clip Gaussian centres to ±BOUND around the origin in the C-map",
+    )
     add_progress_argument(parser)
 
 
@@ -63,14 +75,18 @@ def run(args: argparse.Namespace) -> int:
     for name in names:
         camera = pinhole_camera(model.cameras[name])
         if args.downscale > 1:
-            camera = camera.resized(max(1, round(camera.width / args.downscale)),
-                                    max(1, round(camera.height / args.downscale)))
+            camera = camera.resized(
+                max(1, round(camera.width / args.downscale)), max(1, round(camera.height / args.downscale))
+            )
         cameras[name] = camera
     distorted = [n for n in names if is_distorted(model.cameras[n])]
     if distorted:  # said once, never silent: the renderer is pinhole
-        print(f"note: {len(distorted)} of {len(names)} camera(s) have lens distortion (first {distorted[0]!r}); "
-              "rendered as the undistorted pinhole camera with the same K (fit and prepare undistort the "
-              "captures to match)", file=sys.stderr)
+        print(
+            f"note: {len(distorted)} of {len(names)} camera(s) have lens distortion (first {distorted[0]!r}); "
+            "rendered as the undistorted pinhole camera with the same K (fit and prepare undistort the "
+            "captures to match)",
+            file=sys.stderr,
+        )
     gaussians = read_ply(args.ply).to(device)
     args.out.mkdir(parents=True, exist_ok=True)
     todo = [n for n in names if not all((args.out / view_folder_name(n) / f).is_file() for f in OUTPUT_FILES)]

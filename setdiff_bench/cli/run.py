@@ -28,30 +28,66 @@ DESCRIPTION = __doc__
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--method", required=True, help="method name (`setdiff-bench list methods`)")
-    parser.add_argument("--packets", required=True, type=Path, help="packet store (`setdiff-bench prepare --out`)")
-    parser.add_argument("--split", default="test", help="packets of this split: train, test or all (default test)")
-    parser.add_argument("--out", type=Path, default=None,
-                        help="run folder (default results/runs/<store name>/<method>)")
-    parser.add_argument("--shard", default="0/1", help="i/n: enhance packets i, i+n, ... (0 <= i < n); default 0/1")
+    parser.add_argument(
+        "--packets", required=True, type=Path, help="packet store (`setdiff-bench prepare --out`)"
+    )
+    parser.add_argument(
+        "--split", default="test", help="packets of this split: train, test or all (default test)"
+    )
+    parser.add_argument(
+        "--out", type=Path, default=None, help="run folder (default results/runs/<store name>/<method>)"
+    )
+    parser.add_argument(
+        "--shard", default="0/1", help="i/n: enhance packets i, i+n, ... (0 <= i < n); default 0/1"
+    )
     add_device_argument(parser, "where the method and the metrics run")
     parser.add_argument("--batch-size", type=int, default=8, help="images per metric call (memory bound)")
-    parser.add_argument("--checkpoint", default=None, help="trained model for learned methods (setdiff, difix)")
-    parser.add_argument("--from", dest="source", default=None, help="folder of images for --method precomputed")
-    parser.add_argument("-o", "--option", action="append", default=[], metavar="KEY=VALUE",
-                        help="method option, value parsed as JSON when valid (e.g. -o tolerance=0.05)")
-    parser.add_argument("--metrics", default="standard",
-                        help="metric preset (standard, gaussian_splatting, euvs_official) or comma list")
-    parser.add_argument("--warp", choices=("auto", "on", "off"), default="auto",
-                        help="warp error per camera sequence (auto: on for nuScenes)")
-    parser.add_argument("--flow", choices=("deepflow", "dis"), default="deepflow", help="optical flow for warp error")
-    parser.add_argument("--warp-cache", default="auto", metavar="DIR",
-                        help="cache of ground-truth flows for warp error, shared by methods (auto: the user cache; "
-                             "none: off)")
-    parser.add_argument("--merge", action="store_true",
-                        help="enhance nothing: merge the fragments every shard wrote (refused while one is missing)")
-    parser.add_argument("--no-verify", action="store_true",
-                        help="skip the up-front SHA-256 check of the packets' files (each file is still checked "
-                             "when it is read)")
+    parser.add_argument(
+        "--checkpoint", default=None, help="trained model for learned methods (setdiff, difix)"
+    )
+    parser.add_argument(
+        "--from", dest="source", default=None, help="folder of images for --method precomputed"
+    )
+    parser.add_argument(
+        "-o",
+        "--option",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="method option, value parsed as JSON when valid (e.g. -o tolerance=0.05)",
+    )
+    parser.add_argument(
+        "--metrics",
+        default="standard",
+        help="metric preset (standard, gaussian_splatting, euvs_official) or comma list",
+    )
+    parser.add_argument(
+        "--warp",
+        choices=("auto", "on", "off"),
+        default="auto",
+        help="warp error per camera sequence (auto: on for nuScenes)",
+    )
+    parser.add_argument(
+        "--flow", choices=("deepflow", "dis"), default="deepflow", help="optical flow for warp error"
+    )
+    parser.add_argument(
+        "--warp-cache",
+        default="auto",
+        metavar="DIR",
+        help="cache of ground-truth flows for warp error, shared by methods (auto: the user cache; "
+        "none: off)",
+    )
+    parser.add_argument(
+        "--merge",
+        action="store_true",
+        help="enhance nothing: merge the fragments every shard wrote (refused while one is missing)",
+    )
+    parser.add_argument(
+        "--no-verify",
+        action="store_true",
+        help="skip the up-front SHA-256 check of the packets' files (each file is still checked "
+        "when it is read)",
+    )
     add_progress_argument(parser)
 
 
@@ -78,18 +114,37 @@ def run(args: argparse.Namespace) -> int:
             path = Path(value).expanduser()
             options[key] = str(path.resolve()) if path.exists() else value
     metrics = tuple(spec.name for spec in resolve_metrics(args.metrics))
-    settings = RunSettings(method=args.method, options=options, split=None if args.split == "all" else args.split,
-                           metrics=metrics, warp=args.warp, flow_method=args.flow, device=device,
-                           batch_size=args.batch_size,
-                           warp_cache=None if args.warp_cache == "none" else args.warp_cache)
+    settings = RunSettings(
+        method=args.method,
+        options=options,
+        split=None if args.split == "all" else args.split,
+        metrics=metrics,
+        warp=args.warp,
+        flow_method=args.flow,
+        device=device,
+        batch_size=args.batch_size,
+        warp_cache=None if args.warp_cache == "none" else args.warp_cache,
+    )
     out = args.out or Path("results") / "runs" / Path(args.packets).resolve().name / args.method
-    result = run_method(args.packets, out, settings, shard=shard, progress=False if args.no_progress else None,
-                        verify=not args.no_verify, merge_only=args.merge)
+    result = run_method(
+        args.packets,
+        out,
+        settings,
+        shard=shard,
+        progress=False if args.no_progress else None,
+        verify=not args.no_verify,
+        merge_only=args.merge,
+    )
     if not args.merge:
-        print(f"{args.method} [{shard}]: enhanced {result.enhanced} packets, {result.skipped} already done → {out}")
+        print(
+            f"{args.method} [{shard}]: enhanced {result.enhanced} packets, {result.skipped} already done → {out}"
+        )
     if result.merged:
         print(f"complete: {out / METRICS_FILE}, {out / MANIFEST_FILE}")
     else:
-        print(f"{result.remaining} packets of the selection remain for other shards; "
-              "the last shard to finish merges the results (or run the same command with --merge)", file=sys.stderr)
+        print(
+            f"{result.remaining} packets of the selection remain for other shards; "
+            "the last shard to finish merges the results (or run the same command with --merge)",
+            file=sys.stderr,
+        )
     return 0

@@ -12,9 +12,11 @@ from setdiff_bench.serve.settings import DEFAULT_HOST, ServeSettings
 
 VERB = "serve"
 HELP = "serve a SetDiff/DiFix checkpoint over gRPC (start_session / enhance / close_session, health)"
-DESCRIPTION = ("Serve a trained enhancer over gRPC for closed-loop simulation: a client opens a session with a "
-               "scene's recorded references, then sends each tick's rendered frames and gets them enhanced. "
-               f"Binds to {DEFAULT_HOST} by default. SIGTERM finishes in-flight requests and exits.")
+DESCRIPTION = (
+    "Serve a trained enhancer over gRPC for closed-loop simulation: a client opens a session with a "
+    "scene's recorded references, then sends each tick's rendered frames and gets them enhanced. "
+    f"Binds to {DEFAULT_HOST} by default. SIGTERM finishes in-flight requests and exits."
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -22,18 +24,39 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--checkpoint", required=True, help="checkpoint folder (or training output folder)")
     parser.add_argument("--method", default="setdiff", choices=("setdiff", "difix"))
     parser.add_argument("--host", default=defaults.host, help="interface to bind (default %(default)s)")
-    parser.add_argument("--port", type=int, default=defaults.port, help="TCP port; 0 = a free one (default %(default)s)")
-    parser.add_argument("--workers", type=int, default=defaults.workers, help="RPC threads (default %(default)s)")
-    parser.add_argument("--max-queue", type=int, default=defaults.max_queue,
-                        help="most RPCs in the server at once; more get RESOURCE_EXHAUSTED (default %(default)s)")
-    parser.add_argument("--max-sessions", type=int, default=defaults.max_sessions, help="(default %(default)s)")
-    parser.add_argument("--max-cameras", type=int, default=defaults.max_cameras,
-                        help="most frames per tick (default %(default)s)")
-    parser.add_argument("--grace", type=float, default=defaults.grace,
-                        help="seconds in-flight requests get on shutdown (default %(default)s)")
-    parser.add_argument("--cache-reference-latents", action="store_true",
-                        help="encode each session's references once (faster; outputs may differ from "
-                             "`run --method setdiff` by one 8-bit level)")
+    parser.add_argument(
+        "--port", type=int, default=defaults.port, help="TCP port; 0 = a free one (default %(default)s)"
+    )
+    parser.add_argument(
+        "--workers", type=int, default=defaults.workers, help="RPC threads (default %(default)s)"
+    )
+    parser.add_argument(
+        "--max-queue",
+        type=int,
+        default=defaults.max_queue,
+        help="most RPCs in the server at once; more get RESOURCE_EXHAUSTED (default %(default)s)",
+    )
+    parser.add_argument(
+        "--max-sessions", type=int, default=defaults.max_sessions, help="(default %(default)s)"
+    )
+    parser.add_argument(
+        "--max-cameras",
+        type=int,
+        default=defaults.max_cameras,
+        help="most frames per tick (default %(default)s)",
+    )
+    parser.add_argument(
+        "--grace",
+        type=float,
+        default=defaults.grace,
+        help="seconds in-flight requests get on shutdown (default %(default)s)",
+    )
+    parser.add_argument(
+        "--cache-reference-latents",
+        action="store_true",
+        help="encode each session's references once (faster; outputs may differ from "
+        "`run --method setdiff` by one 8-bit level)",
+    )
     add_device_argument(parser, "where the enhancer runs")
     parser.add_argument("--dtype", default=None, help="float32 / bfloat16 / float16")
 
@@ -50,10 +73,19 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError(f"must be >= 1, got {getattr(args, name)}", f"--{name.replace('_', '-')}")
     if not 0 <= args.port <= 65535:
         raise UsageError(f"must be 0..65535, got {args.port}", "--port")
-    enhancer = load_enhancer(args.method, args.checkpoint, device=resolve_device(args.device), dtype=args.dtype)
-    settings = ServeSettings(host=args.host, port=args.port, workers=args.workers, max_queue=args.max_queue,
-                             max_sessions=args.max_sessions, max_cameras=args.max_cameras, grace=args.grace,
-                             cache_reference_latents=args.cache_reference_latents)
+    enhancer = load_enhancer(
+        args.method, args.checkpoint, device=resolve_device(args.device), dtype=args.dtype
+    )
+    settings = ServeSettings(
+        host=args.host,
+        port=args.port,
+        workers=args.workers,
+        max_queue=args.max_queue,
+        max_sessions=args.max_sessions,
+        max_cameras=args.max_cameras,
+        grace=args.grace,
+        cache_reference_latents=args.cache_reference_latents,
+    )
     running = start_server(enhancer, settings)
     print(pid_line(running, args.host), flush=True)
     serve_until_signalled(running, args.grace)

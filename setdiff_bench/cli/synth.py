@@ -22,19 +22,31 @@ FIT_NAME = "lane0"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, type=Path, help="output folder (one sub-folder per scene)")
-    parser.add_argument("--preset", default="default", choices=("tiny", "default", "large"),
-                        help="tiny: seconds, for tests; default: ~10 min on 2 CPU cores; large: for a GPU")
+    parser.add_argument(
+        "--preset",
+        default="default",
+        choices=("tiny", "default", "large"),
+        help="tiny: seconds, for tests; default: ~10 min on 2 CPU cores; large: for a GPU",
+    )
     parser.add_argument("--seed", type=int, default=0, help="base seed; scene i uses (seed, i)")
     parser.add_argument("--scenes", type=int, default=None, help="number of scenes (default: the preset's)")
-    parser.add_argument("--indices", metavar="I,J,...", default=None,
-                        help="generate only these scene indices (0-based, comma-separated; scene i is the same "
-                             "whichever others are made), e.g. a preset's test scenes")
+    parser.add_argument(
+        "--indices",
+        metavar="I,J,...",
+        default=None,
+        help="generate only these scene indices (0-based, comma-separated; scene i is the same "
+        "whichever others are made), e.g. a preset's test scenes",
+    )
     parser.add_argument("--no-fit", action="store_true", help="only generate the scenes")
     add_device_argument(parser, "rendering and fitting")
     parser.add_argument("--overwrite", action="store_true", help="regenerate and refit existing scenes")
-    parser.add_argument("--jobs", type=int, default=0,
-                        help="scenes processed in parallel, one torch thread each (default: one per CPU core, "
-                             "1 on CUDA); the CPU rasteriser's many small ops scale better across processes")
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        default=0,
+        help="scenes processed in parallel, one torch thread each (default: one per CPU core, "
+        "1 on CUDA); the CPU rasteriser's many small ops scale better across processes",
+    )
     add_progress_argument(parser)
 
 
@@ -77,10 +89,17 @@ class SceneProgress:
             if index in self.open:
                 self.open.pop(index).close()
             if self.bars:
-                self.open[index] = tqdm(total=total, desc=label, unit="frame" if kind == "render" else "it",
-                                        leave=False, dynamic_ncols=True)
+                self.open[index] = tqdm(
+                    total=total,
+                    desc=label,
+                    unit="frame" if kind == "render" else "it",
+                    leave=False,
+                    dynamic_ncols=True,
+                )
             else:
-                print(f"{label}: started ({total} {'frames' if kind == 'render' else 'iterations'})", flush=True)
+                print(
+                    f"{label}: started ({total} {'frames' if kind == 'render' else 'iterations'})", flush=True
+                )
         if index in self.open:
             self.open[index].update(done - self.open[index].n)
         elif kind == "fit" and total and 4 * done // total > self.quarter.get(index, 0) and done < total:
@@ -96,8 +115,19 @@ class SceneProgress:
             self.finish(index)
 
 
-def make_scene(out: Path, preset_name: str, seed: int, index: int, count: int, *, fit: bool, device: str,
-               overwrite: bool, report: Any = None, threads: int | None = None) -> str:
+def make_scene(
+    out: Path,
+    preset_name: str,
+    seed: int,
+    index: int,
+    count: int,
+    *,
+    fit: bool,
+    device: str,
+    overwrite: bool,
+    report: Any = None,
+    threads: int | None = None,
+) -> str:
     """Generate (and fit) scene ``index``; returns a one-line summary.  Runs in a worker process with ``--jobs``.
 
     ``report(kind, index, done, total)`` receives render and fit progress (:class:`ProgressEvents`).
@@ -121,7 +151,9 @@ def make_scene(out: Path, preset_name: str, seed: int, index: int, count: int, *
         if report is not None:
             report("render", index, done, total)
 
-    scene_dir = generate_scene(out, preset, seed, index, overwrite=overwrite, progress=rendered, device=device)
+    scene_dir = generate_scene(
+        out, preset, seed, index, overwrite=overwrite, progress=rendered, device=device
+    )
     t1 = time.perf_counter()
     message = f"{scene_dir.name}: generated in {t1 - t0:.1f} s"
     if fit:
@@ -138,8 +170,16 @@ def make_scene(out: Path, preset_name: str, seed: int, index: int, count: int, *
                 if report is not None and (iteration % every == 0 or iteration == iterations):
                     report("fit", index, iteration, iterations)
 
-            result = fit_scene(scene_dir, ply, preset.fit, device=device, checkpoint_dir=checkpoint,
-                               checkpoint_every=max(1, iterations // 5), progress=False, on_iteration=fitted)
+            result = fit_scene(
+                scene_dir,
+                ply,
+                preset.fit,
+                device=device,
+                checkpoint_dir=checkpoint,
+                checkpoint_every=max(1, iterations // 5),
+                progress=False,
+                on_iteration=fitted,
+            )
             shutil.rmtree(checkpoint, ignore_errors=True)
             message += f", fitted {len(result.model)} Gaussians in {time.perf_counter() - t1:.1f} s"
         else:
@@ -194,18 +234,33 @@ def run(args: argparse.Namespace) -> int:
     try:
         if jobs == 1:
             for index in indices:
-                message = make_scene(args.out, preset.name, args.seed, index, count, report=progress.update,
-                                     **options)
+                message = make_scene(
+                    args.out, preset.name, args.seed, index, count, report=progress.update, **options
+                )
                 progress.finish(index)
                 print(message, flush=True)
         else:
             threads = max(1, cores // jobs)
             context = multiprocessing.get_context("spawn")
-            with context.Manager() as manager, ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+            with (
+                context.Manager() as manager,
+                ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool,
+            ):
                 events = manager.Queue()
-                futures = {pool.submit(make_scene, args.out, preset.name, args.seed, index, count,
-                                       report=ProgressEvents(events), threads=threads, **options): index
-                           for index in indices}
+                futures = {
+                    pool.submit(
+                        make_scene,
+                        args.out,
+                        preset.name,
+                        args.seed,
+                        index,
+                        count,
+                        report=ProgressEvents(events),
+                        threads=threads,
+                        **options,
+                    ): index
+                    for index in indices
+                }
                 pending = dict(futures)
                 while pending:
                     with contextlib.suppress(queues.Empty):

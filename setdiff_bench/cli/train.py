@@ -29,29 +29,52 @@ DESCRIPTION = __doc__.split("\n\n", 1)[1] if __doc__ else HELP
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("model", nargs="?", default="enhancer", choices=("enhancer", "autoencoder"),
-                        help="what to train: an enhancer (default; needs --config) or the tiny autoencoder")
-    parser.add_argument("--config", metavar="FILE",
-                        help="TOML config, or a packaged name: tiny_setdiff, tiny_difix, sd_turbo_setdiff, "
-                             "sd_turbo_difix")
-    parser.add_argument("--packets", required=True, metavar="DIR", type=Path, help="packet store (setdiff-bench prepare)")
-    parser.add_argument("--out", required=True, metavar="CKPT_DIR", type=Path, help="output folder for checkpoints")
+    parser.add_argument(
+        "model",
+        nargs="?",
+        default="enhancer",
+        choices=("enhancer", "autoencoder"),
+        help="what to train: an enhancer (default; needs --config) or the tiny autoencoder",
+    )
+    parser.add_argument(
+        "--config",
+        metavar="FILE",
+        help="TOML config, or a packaged name: tiny_setdiff, tiny_difix, sd_turbo_setdiff, sd_turbo_difix",
+    )
+    parser.add_argument(
+        "--packets", required=True, metavar="DIR", type=Path, help="packet store (setdiff-bench prepare)"
+    )
+    parser.add_argument(
+        "--out", required=True, metavar="CKPT_DIR", type=Path, help="output folder for checkpoints"
+    )
     parser.add_argument("--steps", type=int, help="override [train] steps")
     parser.add_argument("--seed", type=int, help="override [train] seed")
-    parser.add_argument("--pretrained", metavar="DIR", help="local diffusers SD-Turbo folder (overrides [model])")
+    parser.add_argument(
+        "--pretrained", metavar="DIR", help="local diffusers SD-Turbo folder (overrides [model])"
+    )
     parser.add_argument("--validation-split", default="test", help="packet split scored during training")
-    parser.add_argument("--no-resume", action="store_true", help="refuse to continue an existing run in CKPT_DIR")
-    add_device_argument(parser, "where the enhancer trains (several GPUs: accelerate launch; the tiny "
-                                "autoencoder trains on the CPU)", "auto (cuda when available, else cpu), cpu or cuda")
-    parser.add_argument("--cpu", dest="device", action="store_const", const="cpu",
-                        help=argparse.SUPPRESS)  # the older spelling of --device cpu, kept for one release
+    parser.add_argument(
+        "--no-resume", action="store_true", help="refuse to continue an existing run in CKPT_DIR"
+    )
+    add_device_argument(
+        parser,
+        "where the enhancer trains (several GPUs: accelerate launch; the tiny autoencoder trains on the CPU)",
+        "auto (cuda when available, else cpu), cpu or cuda",
+    )
+    parser.add_argument(
+        "--cpu", dest="device", action="store_const", const="cpu", help=argparse.SUPPRESS
+    )  # the older spelling of --device cpu, kept for one release
     add_progress_argument(parser)
     autoencoder = parser.add_argument_group("autoencoder options")
     defaults = _autoencoder_defaults()
     for name, value in defaults.items():
         if name not in ("seed", "steps"):
-            autoencoder.add_argument("--" + name.replace("_", "-"), type=type(value), default=value,
-                                     help=f"autoencoder {name.replace('_', ' ')} (default {value})")
+            autoencoder.add_argument(
+                "--" + name.replace("_", "-"),
+                type=type(value),
+                default=value,
+                help=f"autoencoder {name.replace('_', ' ')} (default {value})",
+            )
 
 
 def _autoencoder_defaults() -> dict[str, int | float]:
@@ -68,13 +91,17 @@ def run_autoencoder(args: argparse.Namespace) -> int:
 
     values = {name: getattr(args, name) for name in _autoencoder_defaults() if name not in ("seed", "steps")}
     defaults = AutoencoderTraining()
-    settings = AutoencoderTraining(**values, steps=args.steps or defaults.steps,
-                                   seed=defaults.seed if args.seed is None else args.seed)
+    settings = AutoencoderTraining(
+        **values, steps=args.steps or defaults.steps, seed=defaults.seed if args.seed is None else args.seed
+    )
     manifest = train_autoencoder(args.packets, args.out, settings, progress=not args.no_progress)
     test = manifest["reconstruction_test"] or {}
-    print(f"trained autoencoder ({manifest['train_frames']} frames, {settings.steps} steps, "
-          f"{manifest['wall_seconds']:.0f} s): {args.out}; reconstruction PSNR train "
-          f"{manifest['reconstruction_train']['psnr']:.2f} dB" + (f", test {test['psnr']:.2f} dB" if test else ""))
+    print(
+        f"trained autoencoder ({manifest['train_frames']} frames, {settings.steps} steps, "
+        f"{manifest['wall_seconds']:.0f} s): {args.out}; reconstruction PSNR train "
+        f"{manifest['reconstruction_train']['psnr']:.2f} dB"
+        + (f", test {test['psnr']:.2f} dB" if test else "")
+    )
     return 0
 
 
@@ -92,29 +119,56 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("training an enhancer needs --config (a TOML file or a packaged name)", "--config")
     config = with_overrides(load_config(args.config), steps=args.steps, seed=args.seed)
     if args.pretrained:
-        config = dataclasses.replace(config, model=dataclasses.replace(config.model, pretrained=str(args.pretrained)))
+        config = dataclasses.replace(
+            config, model=dataclasses.replace(config.model, pretrained=str(args.pretrained))
+        )
     if args.no_resume and (args.out / "latest").exists():
-        raise UsageError("output folder already holds a training run (drop --no-resume to continue it)", args.out)
+        raise UsageError(
+            "output folder already holds a training run (drop --no-resume to continue it)", args.out
+        )
     store = PacketStore(args.packets)
     tc = config.train
-    dataset = store.training_dataset(split="train", min_views=tc.min_views, max_views=tc.max_views, seed=tc.seed)
+    dataset = store.training_dataset(
+        split="train", min_views=tc.min_views, max_views=tc.max_views, seed=tc.seed
+    )
     validation = []
     if tc.validation_packets > 0:
         for packet_id in list(store.packet_ids(args.validation_split))[: tc.validation_packets]:
             gt, masks = store.load_ground_truth(packet_id)
-            validation.append(TrainingSample(packet=store.load_packet(packet_id), target_gt=gt, target_masks=masks))
+            validation.append(
+                TrainingSample(packet=store.load_packet(packet_id), target_gt=gt, target_masks=masks)
+            )
     began, start_step = time.perf_counter(), _latest_step(args.out)
     try:
         with stop_at_safe_point():  # Ctrl-C / SIGTERM: checkpoint at the current step, then exit 130
-            result = train(config, dataset, args.out, validation=validation, resume=not args.no_resume,
-                           cpu=_on_cpu(args.device), progress=not args.no_progress)
+            result = train(
+                config,
+                dataset,
+                args.out,
+                validation=validation,
+                resume=not args.no_resume,
+                cpu=_on_cpu(args.device),
+                progress=not args.no_progress,
+            )
     except Interrupted:
-        _record_session(args, config, store, start_step, _latest_step(args.out), time.perf_counter() - began, None)
+        _record_session(
+            args, config, store, start_step, _latest_step(args.out), time.perf_counter() - began, None
+        )
         raise
-    _record_session(args, config, store, start_step, result.step, time.perf_counter() - began,
-                    result.validation[-1] if result.validation else None)
+    _record_session(
+        args,
+        config,
+        store,
+        start_step,
+        result.step,
+        time.perf_counter() - began,
+        result.validation[-1] if result.validation else None,
+    )
     losses = ", ".join(f"{k} {v:.4f}" for k, v in result.losses.items())
-    print(f"trained {config.model.method} to step {result.step}: {result.checkpoint}" + (f" ({losses})" if losses else ""))
+    print(
+        f"trained {config.model.method} to step {result.step}: {result.checkpoint}"
+        + (f" ({losses})" if losses else "")
+    )
     if result.validation:
         last = result.validation[-1]
         print("validation: " + ", ".join(f"{k} {v:.4f}" for k, v in last.items() if k != "step"))
@@ -132,8 +186,11 @@ def _on_cpu(device: str) -> bool:
 
     resolved = resolve_device(device)
     if resolved not in ("cpu", "cuda"):
-        raise UsageError(f"train runs where accelerate puts it: pick GPUs with CUDA_VISIBLE_DEVICES or "
-                         f"`accelerate launch`, not --device {device}", "--device")
+        raise UsageError(
+            f"train runs where accelerate puts it: pick GPUs with CUDA_VISIBLE_DEVICES or "
+            f"`accelerate launch`, not --device {device}",
+            "--device",
+        )
     return resolved == "cpu"
 
 
@@ -148,15 +205,30 @@ def _latest_step(out: Path) -> int:
         return 0
 
 
-def _record_session(args: argparse.Namespace, config: object, store: object, start_step: int, end_step: int,
-                    wall_seconds: float, validation: dict[str, float] | None) -> None:
+def _record_session(
+    args: argparse.Namespace,
+    config: object,
+    store: object,
+    start_step: int,
+    end_step: int,
+    wall_seconds: float,
+    validation: dict[str, float] | None,
+) -> None:
     """Add this session to ``<out>/manifest.json`` (main process only; see :mod:`~setdiff_bench.models.setdiff.manifest`)."""
     from setdiff_bench.models.setdiff.manifest import record_training_session, training_data_record
 
     if int(os.environ.get("RANK", "0")) != 0:
         return
-    record_training_session(args.out, command=args.command_line,
-                            method=config.model.method, config_name=str(args.config), seed=config.train.seed,
-                            steps=config.train.steps, start_step=start_step, end_step=end_step,
-                            wall_seconds=wall_seconds, data=training_data_record(store, "train"),
-                            validation=validation)
+    record_training_session(
+        args.out,
+        command=args.command_line,
+        method=config.model.method,
+        config_name=str(args.config),
+        seed=config.train.seed,
+        steps=config.train.steps,
+        start_step=start_step,
+        end_step=end_step,
+        wall_seconds=wall_seconds,
+        data=training_data_record(store, "train"),
+        validation=validation,
+    )

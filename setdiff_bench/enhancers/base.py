@@ -103,26 +103,46 @@ class MethodSpec:
 
     def load_factory(self) -> Callable[..., Enhancer]:
         """Import the factory (this is where a method's heavy imports happen)."""
-        return load_attribute(self.factory, f"method {self.name!r} factory", error=UsageError, path=self.source)
+        return load_attribute(
+            self.factory, f"method {self.name!r} factory", error=UsageError, path=self.source
+        )
 
 
 def _builtin(name: str, module: str, description: str, **flags: bool) -> MethodSpec:
-    return MethodSpec(name=name, factory=f"setdiff_bench.enhancers.{module}:create", description=description, **flags)
+    return MethodSpec(
+        name=name, factory=f"setdiff_bench.enhancers.{module}:create", description=description, **flags
+    )
 
 
 #: The built-in methods, declared as data (nothing is imported to list them).
-BUILTIN_METHODS: dict[str, MethodSpec] = {spec.name: spec for spec in (
-    _builtin("identity", "identity", "the raw 3DGS render unchanged (the paper's '3DGS' / 'OmniRe' row)"),
-    _builtin("reproject", "reproject",
-             "geometry-only baseline: reference colours reprojected through C-maps with a depth test, Eq. 2 blend"),
-    _builtin("precomputed", "precomputed",
-             "score images produced by external code (--from DIR, matched by frame name)"),
-    _builtin("setdiff", "setdiff",
-             "SetDiff: geometry-grounded set diffusion over all references + targets (--checkpoint CKPT)",
-             needs_weights=True),
-    _builtin("difix", "difix", "DiFix3D-style baseline: nearest-pose reference + one target, RGB only (--checkpoint CKPT)",
-             needs_weights=True),
-)}
+BUILTIN_METHODS: dict[str, MethodSpec] = {
+    spec.name: spec
+    for spec in (
+        _builtin("identity", "identity", "the raw 3DGS render unchanged (the paper's '3DGS' / 'OmniRe' row)"),
+        _builtin(
+            "reproject",
+            "reproject",
+            "geometry-only baseline: reference colours reprojected through C-maps with a depth test, Eq. 2 blend",
+        ),
+        _builtin(
+            "precomputed",
+            "precomputed",
+            "score images produced by external code (--from DIR, matched by frame name)",
+        ),
+        _builtin(
+            "setdiff",
+            "setdiff",
+            "SetDiff: geometry-grounded set diffusion over all references + targets (--checkpoint CKPT)",
+            needs_weights=True,
+        ),
+        _builtin(
+            "difix",
+            "difix",
+            "DiFix3D-style baseline: nearest-pose reference + one target, RGB only (--checkpoint CKPT)",
+            needs_weights=True,
+        ),
+    )
+}
 
 
 def register_builtin(spec: MethodSpec) -> None:
@@ -140,8 +160,15 @@ def _plugin_spec(entry: metadata.EntryPoint) -> MethodSpec:
         raise UsageError(f"cannot load plugin method: {type(error).__name__}: {error}", where) from None
     if not isinstance(spec, MethodSpec):
         raise UsageError(f"plugin method is a {type(spec).__name__}, expected a MethodSpec", where)
-    return MethodSpec(spec.name, spec.factory, spec.description, spec.needs_weights, spec.needs_gpu,
-                      MappingProxyType(dict(spec.options)), f"{entry.name} = {entry.value}")
+    return MethodSpec(
+        spec.name,
+        spec.factory,
+        spec.description,
+        spec.needs_weights,
+        spec.needs_gpu,
+        MappingProxyType(dict(spec.options)),
+        f"{entry.name} = {entry.value}",
+    )
 
 
 def available_methods() -> dict[str, MethodSpec]:
@@ -155,8 +182,12 @@ def available_methods() -> dict[str, MethodSpec]:
     for entry in entries:
         spec = _plugin_spec(entry)
         if spec.name in methods:
-            warnings.warn(f"plugin {spec.source!r} defines method {spec.name!r}, already defined by "
-                          f"{methods[spec.name].source!r}; ignored", RegistryWarning, stacklevel=2)
+            warnings.warn(
+                f"plugin {spec.source!r} defines method {spec.name!r}, already defined by "
+                f"{methods[spec.name].source!r}; ignored",
+                RegistryWarning,
+                stacklevel=2,
+            )
             continue
         methods[spec.name] = spec
     return methods
@@ -168,8 +199,11 @@ def factory_parameters(factory: Callable[..., Any]) -> tuple[set[str], bool]:
         signature = inspect.signature(factory)
     except (TypeError, ValueError):
         return set(), True
-    names = {p.name for p in signature.parameters.values()
-             if p.kind in (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)}
+    names = {
+        p.name
+        for p in signature.parameters.values()
+        if p.kind in (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+    }
     var_kw = any(p.kind == inspect.Parameter.VAR_KEYWORD for p in signature.parameters.values())
     return names, var_kw
 
@@ -198,11 +232,16 @@ def create_enhancer(name: str, *, optional: Mapping[str, Any] | None = None, **o
     unknown = sorted(k for k in given if k not in accepted and not var_kw)
     if unknown:
         flags = ", ".join(OPTION_FLAGS.get(k, f"--{k.replace('_', '-')}") for k in unknown)
-        takes = ", ".join(OPTION_FLAGS.get(k, f"--{k.replace('_', '-')}") for k in sorted(accepted)) or "no options"
+        takes = (
+            ", ".join(OPTION_FLAGS.get(k, f"--{k.replace('_', '-')}") for k in sorted(accepted))
+            or "no options"
+        )
         raise UsageError(f"method {name!r} does not take {flags} (it takes: {takes})", "--method")
     extra = {k: v for k, v in (optional or {}).items() if v is not None and (k in accepted or var_kw)}
     merged = {**spec.options, **extra, **given}
     enhancer = factory(**merged)
     if not isinstance(enhancer, Enhancer):
-        raise UsageError(f"method {name!r} did not build an Enhancer (got {type(enhancer).__name__})", spec.factory)
+        raise UsageError(
+            f"method {name!r} did not build an Enhancer (got {type(enhancer).__name__})", spec.factory
+        )
     return enhancer

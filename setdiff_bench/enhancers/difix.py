@@ -45,10 +45,13 @@ def rotation_angle(r_a: np.ndarray, r_b: np.ndarray) -> float:
     return float(np.arccos(np.clip(cosine, -1.0, 1.0)))
 
 
-def pose_distance(a: Camera, b: Camera, translation_weight: float = 1.0, rotation_weight: float = 1.0) -> float:
+def pose_distance(
+    a: Camera, b: Camera, translation_weight: float = 1.0, rotation_weight: float = 1.0
+) -> float:
     """Difix3D's pose distance: weighted camera-centre distance plus weighted rotation angle (radians)."""
-    return (translation_weight * float(np.linalg.norm(a.center - b.center))
-            + rotation_weight * rotation_angle(a.R, b.R))
+    return translation_weight * float(np.linalg.norm(a.center - b.center)) + rotation_weight * rotation_angle(
+        a.R, b.R
+    )
 
 
 def nearest_pose_assignments(references: Sequence[Camera], targets: Sequence[Camera]) -> list[int]:
@@ -62,8 +65,16 @@ class DifixEnhancer(ModelEnhancer):
     """A DiFix checkpoint with a per-target reference rule (module docstring)."""
 
     def __init__(self, base: ModelEnhancer, references: str) -> None:
-        super().__init__(base.name, base.model, base.config, base.checkpoint, guidance_scale=base.guidance_scale,
-                         sets_per_call=base.sets_per_call, max_references=1, targets_per_set=1)
+        super().__init__(
+            base.name,
+            base.model,
+            base.config,
+            base.checkpoint,
+            guidance_scale=base.guidance_scale,
+            sets_per_call=base.sets_per_call,
+            max_references=1,
+            targets_per_set=1,
+        )
         self.references = references
         self.options = {**self.options, "references": references}
 
@@ -75,17 +86,24 @@ class DifixEnhancer(ModelEnhancer):
         output = torch.empty((len(packet.targets), 3, packet.height, packet.width), dtype=torch.float32)
         for reference in sorted(set(choice)):
             ids = [i for i, r in enumerate(choice) if r == reference]
-            part = dataclasses.replace(packet, references=packet.references.subset([reference]),
-                                       targets=packet.targets.subset(ids))
+            part = dataclasses.replace(
+                packet, references=packet.references.subset([reference]), targets=packet.targets.subset(ids)
+            )
             output[ids] = super().enhance(part)
         return output
 
 
-def create(checkpoint: str | None = None, device: str | None = None, dtype: str | None = None,
-           sets_per_call: int | None = None, references: str = DEFAULT_REFERENCE_RULE) -> DifixEnhancer:
+def create(
+    checkpoint: str | None = None,
+    device: str | None = None,
+    dtype: str | None = None,
+    sets_per_call: int | None = None,
+    references: str = DEFAULT_REFERENCE_RULE,
+) -> DifixEnhancer:
     """Factory of ``--method difix`` (``-o references=nearest_pose|eq2``)."""
     if references not in REFERENCE_RULES:
-        raise UsageError(f"references must be one of {', '.join(REFERENCE_RULES)}, got {references!r}",
-                         "-o references")
+        raise UsageError(
+            f"references must be one of {', '.join(REFERENCE_RULES)}, got {references!r}", "-o references"
+        )
     base = load_enhancer("difix", checkpoint, device=device, dtype=dtype, sets_per_call=sets_per_call)
     return DifixEnhancer(base, references)

@@ -88,7 +88,9 @@ class PrecomputedEnhancer:
             found = self._files_at(folder, stem)
             if len(found) > 1:
                 names = ", ".join(p.name for p in found)
-                raise UsageError(f"frame {ref.frame!r} of scene {ref.scene!r} has several images ({names})", folder)
+                raise UsageError(
+                    f"frame {ref.frame!r} of scene {ref.scene!r} has several images ({names})", folder
+                )
             if found:
                 return found[0]
         return None
@@ -99,8 +101,10 @@ class PrecomputedEnhancer:
         if missing:
             shown = ", ".join(f"{r.scene}/{r.frame} ({r.group})" for r in missing[:SHOW_MISSING])
             more = f" and {len(missing) - SHOW_MISSING} more" if len(missing) > SHOW_MISSING else ""
-            raise UsageError(f"{len(missing)} of {len(targets)} target frames have no precomputed image: "
-                             f"{shown}{more}", self.root)
+            raise UsageError(
+                f"{len(missing)} of {len(targets)} target frames have no precomputed image: {shown}{more}",
+                self.root,
+            )
 
     def enhance(self, packet: Packet) -> torch.Tensor:
         """``(M, 3, H, W)`` float32 in [0, 1] read from disk, packet order."""
@@ -113,7 +117,9 @@ class PrecomputedEnhancer:
             try:
                 pixels = read_rgb(path, expected_size=(packet.height, packet.width))
             except ImageError as error:
-                raise ImageError(f"precomputed image for {packet.scene}/{frame}: {error.problem}", path) from None
+                raise ImageError(
+                    f"precomputed image for {packet.scene}/{frame}: {error.problem}", path
+                ) from None
             images.append(torch.from_numpy(np.ascontiguousarray(pixels.transpose(2, 0, 1))))
         return torch.stack(images)
 

@@ -78,7 +78,9 @@ class ReprojectConfig:
             raise UsageError(f"pixel_chunk must be >= 1, got {self.pixel_chunk}", "reproject")
 
 
-def cmap_points(cmaps: torch.Tensor, alphas: torch.Tensor, alpha_threshold: float) -> tuple[torch.Tensor, torch.Tensor]:
+def cmap_points(
+    cmaps: torch.Tensor, alphas: torch.Tensor, alpha_threshold: float
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Expected surface points from Eq. 1 maps.
 
     Args:
@@ -152,8 +154,13 @@ def blend_weights(packet: Packet, config: ReprojectConfig) -> torch.Tensor:
     """``(M, N)`` float64 Eq. 2 weights of every (target, reference) pair, floored at ``min_weight``."""
     cameras = (*packet.targets.cameras, *packet.references.cameras)
     d_max = max_pairwise_distance(np.stack([c.center for c in cameras]))
-    scores = overlap_score_matrix(packet.targets.cameras, packet.references.cameras, d_max,
-                                  alpha=config.overlap_alpha, beta=config.overlap_beta)
+    scores = overlap_score_matrix(
+        packet.targets.cameras,
+        packet.references.cameras,
+        d_max,
+        alpha=config.overlap_alpha,
+        beta=config.overlap_beta,
+    )
     return torch.from_numpy(np.maximum(scores, config.min_weight))
 
 
@@ -175,15 +182,21 @@ class ReprojectEnhancer:
             return render.cpu().clone()
         cfg = self.config
         refs = packet.references
-        ref_points, ref_valid = cmap_points(refs.cmaps.to(self.device, torch.float32),
-                                            refs.alphas.to(self.device, torch.float32), cfg.alpha_threshold)
+        ref_points, ref_valid = cmap_points(
+            refs.cmaps.to(self.device, torch.float32),
+            refs.alphas.to(self.device, torch.float32),
+            cfg.alpha_threshold,
+        )
         if cfg.surface == "ray":
             ref_points = snap_to_rays(ref_points, ref_valid, refs.cameras)
         # (N, 4, Hr, Wr): point xyz + validity, sampled together with nearest-neighbour lookups
         ref_geometry = torch.cat([ref_points, ref_valid.float()], dim=1)
         ref_images = refs.images.to(self.device, torch.float32)
-        tgt_points, tgt_valid = cmap_points(packet.targets.cmaps.to(self.device, torch.float32),
-                                            packet.targets.alphas.to(self.device, torch.float32), cfg.alpha_threshold)
+        tgt_points, tgt_valid = cmap_points(
+            packet.targets.cmaps.to(self.device, torch.float32),
+            packet.targets.alphas.to(self.device, torch.float32),
+            cfg.alpha_threshold,
+        )
         if cfg.surface == "ray":
             tgt_points = snap_to_rays(tgt_points, tgt_valid, packet.targets.cameras)
         weights = blend_weights(packet, cfg).to(self.device, torch.float32)
@@ -194,24 +207,36 @@ class ReprojectEnhancer:
             flat = output[m].reshape(3, -1)  # a view: writes go to output
             for start in range(0, points.shape[0], cfg.pixel_chunk):
                 stop = min(start + cfg.pixel_chunk, points.shape[0])
-                colour, found = self._gather(points[start:stop], refs.cameras, ref_geometry, ref_images, weights[m])
+                colour, found = self._gather(
+                    points[start:stop], refs.cameras, ref_geometry, ref_images, weights[m]
+                )
                 keep = found & valid[start:stop]
                 flat[:, start:stop] = torch.where(keep[None], colour, flat[:, start:stop])
         return output.clamp(0.0, 1.0).cpu()
 
-    def _gather(self, points: torch.Tensor, cameras: tuple[Camera, ...], ref_geometry: torch.Tensor,
-                ref_images: torch.Tensor, weights: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    def _gather(
+        self,
+        points: torch.Tensor,
+        cameras: tuple[Camera, ...],
+        ref_geometry: torch.Tensor,
+        ref_images: torch.Tensor,
+        weights: torch.Tensor,
+    ) -> tuple[torch.Tensor, torch.Tensor]:
         """Blend of accepted reference colours for ``P`` points → ``(3, P)`` colours, ``(P,)`` found mask."""
         ref_h, ref_w = ref_images.shape[-2:]
         uv, z = project(cameras, points)  # (N, P, 2), (N, P)
         inside = (z > 0) & (uv[..., 0] >= 0) & (uv[..., 0] < ref_w) & (uv[..., 1] >= 0) & (uv[..., 1] < ref_h)
         grid = torch.stack([uv[..., 0] * (2.0 / ref_w) - 1.0, uv[..., 1] * (2.0 / ref_h) - 1.0], dim=-1)
         grid = torch.where(inside[..., None], grid, torch.full_like(grid, -2.0))[:, None]  # (N, 1, P, 2)
-        seen = F.grid_sample(ref_geometry, grid, mode="nearest", padding_mode="zeros", align_corners=False)[:, :, 0]
+        seen = F.grid_sample(ref_geometry, grid, mode="nearest", padding_mode="zeros", align_corners=False)[
+            :, :, 0
+        ]
         seen_points, seen_valid = seen[:, :3], seen[:, 3] > 0.5  # (N, 3, P), (N, P)
         distance = (seen_points - points.T[None]).norm(dim=1)
         accept = inside & seen_valid & (distance <= self.config.tolerance * z)
-        colours = F.grid_sample(ref_images, grid, mode="bilinear", padding_mode="border", align_corners=False)[:, :, 0]
+        colours = F.grid_sample(
+            ref_images, grid, mode="bilinear", padding_mode="border", align_corners=False
+        )[:, :, 0]
         w = weights[:, None] * accept  # (N, P)
         total = w.sum(dim=0)
         blended = (colours * w[:, None]).sum(dim=0) / total.clamp_min(1e-12)
@@ -225,8 +250,11 @@ def _check(packet: Packet) -> None:
     expected = {"targets.images": (m, 3, h, w), "targets.cmaps": (m, 3, h, w), "targets.alphas": (m, 1, h, w)}
     if len(refs):
         n, rh, rw = len(refs), int(refs.images.shape[-2]), int(refs.images.shape[-1])
-        expected |= {"references.images": (n, 3, rh, rw), "references.cmaps": (n, 3, rh, rw),
-                     "references.alphas": (n, 1, rh, rw)}
+        expected |= {
+            "references.images": (n, 3, rh, rw),
+            "references.cmaps": (n, 3, rh, rw),
+            "references.alphas": (n, 1, rh, rw),
+        }
     for key, shape in expected.items():
         role, attr = key.split(".")
         actual = tuple(getattr(getattr(packet, role), attr).shape)
@@ -234,10 +262,15 @@ def _check(packet: Packet) -> None:
             raise PacketError(f"reproject: {key} has shape {actual}, expected {shape}", where)
 
 
-def create(alpha_threshold: float = ReprojectConfig.alpha_threshold, tolerance: float = ReprojectConfig.tolerance,
-           min_weight: float = ReprojectConfig.min_weight, surface: str = ReprojectConfig.surface,
-           device: str | None = None) -> ReprojectEnhancer:
+def create(
+    alpha_threshold: float = ReprojectConfig.alpha_threshold,
+    tolerance: float = ReprojectConfig.tolerance,
+    min_weight: float = ReprojectConfig.min_weight,
+    surface: str = ReprojectConfig.surface,
+    device: str | None = None,
+) -> ReprojectEnhancer:
     """Factory of ``--method reproject`` (``device`` defaults to the CPU)."""
-    config = ReprojectConfig(alpha_threshold=alpha_threshold, tolerance=tolerance, min_weight=min_weight,
-                             surface=surface)
+    config = ReprojectConfig(
+        alpha_threshold=alpha_threshold, tolerance=tolerance, min_weight=min_weight, surface=surface
+    )
     return ReprojectEnhancer(config, device=device or "cpu")

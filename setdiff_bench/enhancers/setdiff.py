@@ -31,9 +31,18 @@ class ModelEnhancer:
         options: the inference options in effect (for run manifests).
     """
 
-    def __init__(self, name: str, model: Any, config: Any, checkpoint: Path, *, guidance_scale: float | None,
-                 sets_per_call: int | None, max_references: int | None = None,
-                 targets_per_set: int | None = None) -> None:
+    def __init__(
+        self,
+        name: str,
+        model: Any,
+        config: Any,
+        checkpoint: Path,
+        *,
+        guidance_scale: float | None,
+        sets_per_call: int | None,
+        max_references: int | None = None,
+        targets_per_set: int | None = None,
+    ) -> None:
         self.name = name
         self.model = model
         self.config = config
@@ -43,23 +52,39 @@ class ModelEnhancer:
         self.max_references = max_references
         self.targets_per_set = targets_per_set
         parameter = next(model.parameters())
-        self.options = {"checkpoint": str(checkpoint), "device": str(parameter.device),
-                        "dtype": str(parameter.dtype).removeprefix("torch."),
-                        "guidance_scale": config.model.guidance_scale if guidance_scale is None else guidance_scale,
-                        "sets_per_call": sets_per_call,
-                        "max_references": config.model.max_references if max_references is None else max_references,
-                        "targets_per_set": config.model.targets_per_set if targets_per_set is None else targets_per_set}
+        self.options = {
+            "checkpoint": str(checkpoint),
+            "device": str(parameter.device),
+            "dtype": str(parameter.dtype).removeprefix("torch."),
+            "guidance_scale": config.model.guidance_scale if guidance_scale is None else guidance_scale,
+            "sets_per_call": sets_per_call,
+            "max_references": config.model.max_references if max_references is None else max_references,
+            "targets_per_set": config.model.targets_per_set if targets_per_set is None else targets_per_set,
+        }
 
     def enhance(self, packet: Packet) -> torch.Tensor:
         """``(M, 3, H, W)`` float32 images in [0, 1], packet order (H, W divisible by 8)."""
-        return inference.enhance_packet(self.model, packet, guidance_scale=self.guidance_scale,
-                                        sets_per_call=self.sets_per_call, max_references=self.max_references,
-                                        targets_per_set=self.targets_per_set)
+        return inference.enhance_packet(
+            self.model,
+            packet,
+            guidance_scale=self.guidance_scale,
+            sets_per_call=self.sets_per_call,
+            max_references=self.max_references,
+            targets_per_set=self.targets_per_set,
+        )
 
 
-def load_enhancer(method: str, checkpoint: str | None, *, device: str | None = None, dtype: str | None = None,
-                  guidance_scale: float | None = None, sets_per_call: int | None = None,
-                  max_references: int | None = None, targets_per_set: int | None = None) -> ModelEnhancer:
+def load_enhancer(
+    method: str,
+    checkpoint: str | None,
+    *,
+    device: str | None = None,
+    dtype: str | None = None,
+    guidance_scale: float | None = None,
+    sets_per_call: int | None = None,
+    max_references: int | None = None,
+    targets_per_set: int | None = None,
+) -> ModelEnhancer:
     """Load ``checkpoint`` (a checkpoint folder or a training output folder) for ``method``.
 
     Args:
@@ -72,25 +97,54 @@ def load_enhancer(method: str, checkpoint: str | None, *, device: str | None = N
         CheckpointError: the checkpoint is missing, broken, or was trained as another method.
     """
     if not checkpoint:
-        raise UsageError(f"method {method!r} needs a trained model: pass --checkpoint CKPT "
-                         "(train one with `setdiff-bench train`)", "--checkpoint")
+        raise UsageError(
+            f"method {method!r} needs a trained model: pass --checkpoint CKPT "
+            "(train one with `setdiff-bench train`)",
+            "--checkpoint",
+        )
     device = resolve_device(None if device is None else str(device))
     dtype = dtype or ("bfloat16" if str(device).startswith("cuda") else "float32")
     for name, value in (("max_references", max_references), ("targets_per_set", targets_per_set)):
-        if value is not None and (not isinstance(value, int) or value < (0 if name == "max_references" else 1)):
-            raise UsageError(f"{name} must be an integer >= {0 if name == 'max_references' else 1}, got {value!r}",
-                             f"-o {name}")
+        if value is not None and (
+            not isinstance(value, int) or value < (0 if name == "max_references" else 1)
+        ):
+            raise UsageError(
+                f"{name} must be an integer >= {0 if name == 'max_references' else 1}, got {value!r}",
+                f"-o {name}",
+            )
     if dtype not in DTYPES:
         raise UsageError(f"dtype must be one of {', '.join(DTYPES)}, got {dtype!r}", "--dtype")
     folder = resolve_checkpoint(checkpoint)
     model, config = load_model(folder, method=method, device=device, dtype=DTYPES[dtype])
-    return ModelEnhancer(method, model, config, folder, guidance_scale=guidance_scale, sets_per_call=sets_per_call,
-                         max_references=max_references, targets_per_set=targets_per_set)
+    return ModelEnhancer(
+        method,
+        model,
+        config,
+        folder,
+        guidance_scale=guidance_scale,
+        sets_per_call=sets_per_call,
+        max_references=max_references,
+        targets_per_set=targets_per_set,
+    )
 
 
-def create(checkpoint: str | None = None, device: str | None = None, dtype: str | None = None,
-           guidance_scale: float | None = None, sets_per_call: int | None = None,
-           max_references: int | None = None, targets_per_set: int | None = None) -> ModelEnhancer:
+def create(
+    checkpoint: str | None = None,
+    device: str | None = None,
+    dtype: str | None = None,
+    guidance_scale: float | None = None,
+    sets_per_call: int | None = None,
+    max_references: int | None = None,
+    targets_per_set: int | None = None,
+) -> ModelEnhancer:
     """Factory of ``--method setdiff`` (``-o max_references=N -o targets_per_set=M`` set the set sizes)."""
-    return load_enhancer("setdiff", checkpoint, device=device, dtype=dtype, guidance_scale=guidance_scale,
-                         sets_per_call=sets_per_call, max_references=max_references, targets_per_set=targets_per_set)
+    return load_enhancer(
+        "setdiff",
+        checkpoint,
+        device=device,
+        dtype=dtype,
+        guidance_scale=guidance_scale,
+        sets_per_call=sets_per_call,
+        max_references=max_references,
+        targets_per_set=targets_per_set,
+    )

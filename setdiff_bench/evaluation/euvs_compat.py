@@ -96,8 +96,10 @@ def mask_name_disagreements(frames: Sequence[str]) -> list[tuple[str, str, str, 
 def compat_report(scenes: dict[str, Sequence[str]]) -> str:
     """A plain-text report over ``{scene: evaluated frame names}``: positional mispairings and mask-name
     disagreements, one line per frame, and a per-scene count (empty scenes are listed as clean)."""
-    lines = ["EUVS compatibility report: frames where the official script's numbers must differ from ours",
-             "(we pair render and mask by name; metrics_with_dyn_masks.py pairs them by position)"]
+    lines = [
+        "EUVS compatibility report: frames where the official script's numbers must differ from ours",
+        "(we pair render and mask by name; metrics_with_dyn_masks.py pairs them by position)",
+    ]
     total_mis = total_names = 0
     for scene in sorted(scenes):
         frames = list(scenes[scene])
@@ -105,10 +107,14 @@ def compat_report(scenes: dict[str, Sequence[str]]) -> str:
         names = mask_name_disagreements(frames)
         total_mis += len(mis)
         total_names += len(names)
-        lines.append(f"scene {scene}: {len(frames)} frames, {len(mis)} positional mispairings, "
-                     f"{len(names)} mask-name disagreements")
-        lines += [f"  mispaired: {m.frame} -> official mask {m.official_mask or '(none)'} (own: {m.own_mask})"
-                  for m in mis]
+        lines.append(
+            f"scene {scene}: {len(frames)} frames, {len(mis)} positional mispairings, "
+            f"{len(names)} mask-name disagreements"
+        )
+        lines += [
+            f"  mispaired: {m.frame} -> official mask {m.official_mask or '(none)'} (own: {m.own_mask})"
+            for m in mis
+        ]
         lines += [f"  mask name: {f}: metric script {a}, loader {b}, extractor {c}" for f, a, b, c in names]
     lines.append(f"total: {total_mis} positional mispairings, {total_names} mask-name disagreements")
     return "\n".join(lines) + "\n"

@@ -34,8 +34,15 @@ EUVS_COMPAT_FILE = "euvs_compat.txt"
 #: The columns that name one row of a run's (or an evaluation profile's) ``metrics.parquet``, in file
 #: order: where the packet comes from (the :class:`~setdiff_bench.types.PacketKey` fields but its id),
 #: the target view, the packet id, the view's position in it, and the method.
-KEY_COLUMNS: tuple[str, ...] = (*(name for name in PACKET_KEY_FIELDS if name != "packet_id"),
-                                "frame", "sensor", "timestamp_us", "packet_id", "view", "method")
+KEY_COLUMNS: tuple[str, ...] = (
+    *(name for name in PACKET_KEY_FIELDS if name != "packet_id"),
+    "frame",
+    "sensor",
+    "timestamp_us",
+    "packet_id",
+    "view",
+    "method",
+)
 
 
 def safe_component(text: str) -> str:

@@ -74,8 +74,13 @@ def to_uint8(image: np.ndarray) -> np.ndarray:
     return np.round(np.clip(image, 0.0, 1.0) * 255.0).astype(np.uint8)
 
 
-def profile_pair(profile: EvaluationProfile, prediction: np.ndarray, original: np.ndarray,
-                 original_mask: np.ndarray, window: tuple[int, int, int, int]) -> ScoredPair:
+def profile_pair(
+    profile: EvaluationProfile,
+    prediction: np.ndarray,
+    original: np.ndarray,
+    original_mask: np.ndarray,
+    window: tuple[int, int, int, int],
+) -> ScoredPair:
     """Bring one target to the profile's size.
 
     Args:
@@ -96,25 +101,32 @@ def profile_pair(profile: EvaluationProfile, prediction: np.ndarray, original: n
     else:
         size = (width, height)
     ground_truth = pil_resize(original, size)
-    mask = nearest_resize_mask(original_mask, size) if original_mask.shape != (size[1], size[0]) else original_mask
+    mask = (
+        nearest_resize_mask(original_mask, size)
+        if original_mask.shape != (size[1], size[0])
+        else original_mask
+    )
     sx, sy = size[0] / width, size[1] / height
     left, top, crop_w, crop_h = window
     box = (round(left * sx), round(top * sy), round((left + crop_w) * sx), round((top + crop_h) * sy))
-    ground_truth = ground_truth[box[1]:box[3], box[0]:box[2]]
-    mask = mask[box[1]:box[3], box[0]:box[2]]
+    ground_truth = ground_truth[box[1] : box[3], box[0] : box[2]]
+    mask = mask[box[1] : box[3], box[0] : box[2]]
     prediction = pil_resize(prediction, (box[2] - box[0], box[3] - box[1]))
     if profile.crop is not None:
-        c_left, c_top, c_right, c_bottom = centre_crop_box(ground_truth.shape[1], ground_truth.shape[0],
-                                                          profile.crop[1], profile.crop[0])
+        c_left, c_top, c_right, c_bottom = centre_crop_box(
+            ground_truth.shape[1], ground_truth.shape[0], profile.crop[1], profile.crop[0]
+        )
         ground_truth = ground_truth[c_top:c_bottom, c_left:c_right]
         prediction = prediction[c_top:c_bottom, c_left:c_right]
         mask = mask[c_top:c_bottom, c_left:c_right]
-    return ScoredPair(np.ascontiguousarray(prediction), np.ascontiguousarray(ground_truth),
-                      np.ascontiguousarray(mask))
+    return ScoredPair(
+        np.ascontiguousarray(prediction), np.ascontiguousarray(ground_truth), np.ascontiguousarray(mask)
+    )
 
 
 def image_metrics(profile: EvaluationProfile, pair: ScoredPair, device: str = "cpu") -> dict[str, float]:
     """The profile's image metrics of one pair."""
+
     def tensor(image: np.ndarray) -> torch.Tensor:
         return torch.from_numpy(image.astype(np.float32) / 255.0).permute(2, 0, 1)[None].to(device)
 
@@ -124,9 +136,16 @@ def image_metrics(profile: EvaluationProfile, pair: ScoredPair, device: str = "c
         return {name: float(METRICS[name].compute(pred, target, mask)[0]) for name in profile.metrics}
 
 
-def score_run(run: str | Path, profile: EvaluationProfile, *, packets: str | Path | None = None,
-              data: str | Path | None = None, dinov2: Any = None, device: str = "cpu",
-              progress: bool | None = None) -> Path:
+def score_run(
+    run: str | Path,
+    profile: EvaluationProfile,
+    *,
+    packets: str | Path | None = None,
+    data: str | Path | None = None,
+    dinov2: Any = None,
+    device: str = "cpu",
+    progress: bool | None = None,
+) -> Path:
     """Score the finished run in ``run`` under ``profile``; returns the output folder (module docstring).
 
     Args:
@@ -148,19 +167,27 @@ def score_run(run: str | Path, profile: EvaluationProfile, *, packets: str | Pat
     if not metrics_path.is_file():
         raise UsageError("not a finished run (no metrics.parquet)", run)
     rows = pd.read_parquet(metrics_path).drop_duplicates(["method", "group", "scene", "frame"], keep="first")
-    if profile.scenes == "split":      # the protocol's test scenes only (a --split all run holds train scenes too)
+    if (
+        profile.scenes == "split"
+    ):  # the protocol's test scenes only (a --split all run holds train scenes too)
         rows = rows[rows["split"] == "test"]
         if not len(rows):
             raise UsageError(f"profile {profile.name} scores the test scenes; this run has none", run)
     if packets is None:
-        raise UsageError("scoring under a profile needs the packet store the run was made on (--packets)", run)
+        raise UsageError(
+            "scoring under a profile needs the packet store the run was made on (--packets)", run
+        )
     store = PacketStore(packets)
     if profile.needs_dataset and data is None:
         raise UsageError(f"profile {profile.name} scores the original images: pass the dataset root (--data)")
     originals = _Originals(data) if profile.needs_dataset else None
     records = []
-    for row in tqdm(rows.to_dict("records"), desc=f"profile {profile.name}", unit="image",
-                    disable=None if progress is None else not progress):
+    for row in tqdm(
+        rows.to_dict("records"),
+        desc=f"profile {profile.name}",
+        unit="image",
+        disable=None if progress is None else not progress,
+    ):
         prediction = to_uint8(read_rgb(run / row["image"]))
         if originals is None:
             gt, mask = store.load_ground_truth(row["packet_id"], targets=[int(row["view"])])
@@ -174,8 +201,9 @@ def score_run(run: str | Path, profile: EvaluationProfile, *, packets: str | Pat
         if profile.dinov2 and dinov2 is not None:
             record["cos_dinov2"] = masked_cosine(dinov2, pair.prediction, pair.ground_truth, pair.mask)
             # linear in the four metrics, so its mean over images equals the score of the means
-            record["final_score"] = final_score(record["ssim_euvs"], record["psnr_euvs"], record["lpips_euvs"],
-                                                record["cos_dinov2"])
+            record["final_score"] = final_score(
+                record["ssim_euvs"], record["psnr_euvs"], record["lpips_euvs"], record["cos_dinov2"]
+            )
         records.append(record)
     frame = pd.DataFrame.from_records(records)
     extra = [name for name, spec in METRICS.items() if spec.scope == "profile" and name in frame.columns]
@@ -186,9 +214,15 @@ def score_run(run: str | Path, profile: EvaluationProfile, *, packets: str | Pat
         with atomic_path(out / name) as tmp:
             table.to_parquet(tmp, index=False)
     notes = _coverage_notes(profile, rows, store)
-    info = {"profile": _jsonable(asdict(profile)), "run": str(run.resolve()),
-            "packets": str(Path(packets).resolve()), "data": str(Path(data).resolve()) if data else None,
-            "dinov2": dinov2 is not None, "images": len(frame), "notes": notes}
+    info = {
+        "profile": _jsonable(asdict(profile)),
+        "run": str(run.resolve()),
+        "packets": str(Path(packets).resolve()),
+        "data": str(Path(data).resolve()) if data else None,
+        "dinov2": dinov2 is not None,
+        "images": len(frame),
+        "notes": notes,
+    }
     write_text_atomic(out / PROFILE_FILE, json.dumps(info, indent=2, sort_keys=True) + "\n")
     if profile.name.startswith("euvs"):
         by_scene: dict[str, list[str]] = {}
@@ -206,8 +240,10 @@ def _coverage_notes(profile: EvaluationProfile, rows: pd.DataFrame, store: Any) 
         scored = set(rows["scene"])
         missing = sorted(stored - scored)
         if missing:
-            notes.append(f"{profile.name} averages over every scene; {len(missing)} scene(s) of the store were "
-                         f"not in this run (run it with --split all): {', '.join(missing[:10])}")
+            notes.append(
+                f"{profile.name} averages over every scene; {len(missing)} scene(s) of the store were "
+                f"not in this run (run it with --split all): {', '.join(missing[:10])}"
+            )
     return notes
 
 
@@ -222,8 +258,9 @@ class _Originals:
         protocol = load_protocol(str(row["protocol"]))
         key = (str(row["protocol"]), str(row["scene"]))
         if key not in self.scenes:
-            self.scenes[key] = load_scenes(str(row["dataset"]), self.data, [str(row["scene"])],
-                                           **dict(protocol.loader_options))[0]
+            self.scenes[key] = load_scenes(
+                str(row["dataset"]), self.data, [str(row["scene"])], **dict(protocol.loader_options)
+            )[0]
         frame = self.scenes[key].frame(str(row["frame"]))
         original = to_uint8(read_rgb(frame.image_path))
         height, width = original.shape[:2]

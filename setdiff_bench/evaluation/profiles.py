@@ -87,22 +87,42 @@ class EvaluationProfile:
         return f"evaluation profile: {self.name} ({self.description})"
 
 
-PROFILES: Mapping[str, EvaluationProfile] = MappingProxyType({p.name: p for p in (
-    EvaluationProfile(
-        "paper", "576x1024 working resolution, per-image values pooled per group, test-split scenes", "",
-        ("psnr", "ssim", "lpips")),
-    EvaluationProfile(
-        "euvs_official", "EUVS metrics_with_dyn_masks.py: 3DGS render size (width <= 1600, PIL bicubic GT, "
-        "nearest masks), mean per scene, every scene",
-        "ai4ce/EUVS-Benchmark@f3b2d907 baselines/3DGS/metrics_with_dyn_masks.py, utils/image_utils.py",
-        ("psnr_euvs", "ssim_euvs", "lpips_euvs"), size="render_capped", max_width=1600,
-        aggregation="scene_mean", scenes="all", dinov2=True),
-    EvaluationProfile(
-        "dl3dv_3dgs_enhancer", "3DGS-Enhancer eval.py: PSNR on a 960x512 centre crop of 960x540, "
-        "mean of scene means per view count",
-        "xiliu8006/SVDFor3D@743a1b31 eval.py", ("psnr",), size="native", crop=(512, 960),
-        aggregation="scene_mean", scenes="split"),
-)})
+PROFILES: Mapping[str, EvaluationProfile] = MappingProxyType(
+    {
+        p.name: p
+        for p in (
+            EvaluationProfile(
+                "paper",
+                "576x1024 working resolution, per-image values pooled per group, test-split scenes",
+                "",
+                ("psnr", "ssim", "lpips"),
+            ),
+            EvaluationProfile(
+                "euvs_official",
+                "EUVS metrics_with_dyn_masks.py: 3DGS render size (width <= 1600, PIL bicubic GT, "
+                "nearest masks), mean per scene, every scene",
+                "ai4ce/EUVS-Benchmark@f3b2d907 baselines/3DGS/metrics_with_dyn_masks.py, utils/image_utils.py",
+                ("psnr_euvs", "ssim_euvs", "lpips_euvs"),
+                size="render_capped",
+                max_width=1600,
+                aggregation="scene_mean",
+                scenes="all",
+                dinov2=True,
+            ),
+            EvaluationProfile(
+                "dl3dv_3dgs_enhancer",
+                "3DGS-Enhancer eval.py: PSNR on a 960x512 centre crop of 960x540, "
+                "mean of scene means per view count",
+                "xiliu8006/SVDFor3D@743a1b31 eval.py",
+                ("psnr",),
+                size="native",
+                crop=(512, 960),
+                aggregation="scene_mean",
+                scenes="split",
+            ),
+        )
+    }
+)
 
 
 def get_profile(name: str) -> EvaluationProfile:
@@ -110,7 +130,9 @@ def get_profile(name: str) -> EvaluationProfile:
     try:
         return PROFILES[name]
     except KeyError:
-        raise UsageError(f"unknown evaluation profile {name!r}; known: {', '.join(PROFILES)}", "--profile") from None
+        raise UsageError(
+            f"unknown evaluation profile {name!r}; known: {', '.join(PROFILES)}", "--profile"
+        ) from None
 
 
 # ---------------------------------------------------------------------- sizes
@@ -135,7 +157,10 @@ def centre_crop_box(width: int, height: int, crop_width: int, crop_height: int) 
     from 14 to 526.
     """
     left, top = max(0.0, (width - crop_width) / 2), max(0.0, (height - crop_height) / 2)
-    right, bottom = min(float(width), (width + crop_width) / 2), min(float(height), (height + crop_height) / 2)
+    right, bottom = (
+        min(float(width), (width + crop_width) / 2),
+        min(float(height), (height + crop_height) / 2),
+    )
     return round(left), round(top), round(right), round(bottom)
 
 
@@ -162,8 +187,12 @@ def nearest_resize_mask(mask: np.ndarray, size: tuple[int, int]) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------- averaging
-def aggregate(frame: pd.DataFrame, metrics: Sequence[str], aggregation: Aggregation,
-              keys: Sequence[str] = ("method", "group")) -> tuple[pd.DataFrame, pd.DataFrame]:
+def aggregate(
+    frame: pd.DataFrame,
+    metrics: Sequence[str],
+    aggregation: Aggregation,
+    keys: Sequence[str] = ("method", "group"),
+) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Group table and per-scene table of per-image rows.
 
     Args:
@@ -188,6 +217,8 @@ def aggregate(frame: pd.DataFrame, metrics: Sequence[str], aggregation: Aggregat
         groups = frame.groupby(keys, sort=True)[metrics].mean().reset_index()
     else:
         raise UsageError(f"unknown aggregation {aggregation!r}; expected pooled or scene_mean")
-    counts = scenes.groupby(keys, sort=True).agg(scenes=("scene", "size"), images=("images", "sum")).reset_index()
+    counts = (
+        scenes.groupby(keys, sort=True).agg(scenes=("scene", "size"), images=("images", "sum")).reset_index()
+    )
     groups = groups.merge(counts, on=keys, how="left")
     return groups[[*keys, "scenes", "images", *metrics]], scenes

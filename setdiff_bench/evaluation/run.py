@@ -143,9 +143,17 @@ class RunSettings:
 
     def identity(self, index_sha256: str) -> dict[str, Any]:
         """The ``run.json`` content: what must not change between a run and its resumption."""
-        return {"format": RUN_FORMAT, "method": self.method, "options": _jsonable(dict(self.options)),
-                "split": self.split, "metrics": list(self.metrics), "warp": self.warp, "flow_method": self.flow_method,
-                "device": self.device, "index_sha256": index_sha256}
+        return {
+            "format": RUN_FORMAT,
+            "method": self.method,
+            "options": _jsonable(dict(self.options)),
+            "split": self.split,
+            "metrics": list(self.metrics),
+            "warp": self.warp,
+            "flow_method": self.flow_method,
+            "device": self.device,
+            "index_sha256": index_sha256,
+        }
 
 
 @dataclass
@@ -180,9 +188,17 @@ def fragment_path(out: Path, packet_id: str) -> Path:
 
 
 # ---------------------------------------------------------------------- the run
-def run_method(packets: str | os.PathLike[str] | PacketStore, out: str | os.PathLike[str], settings: RunSettings, *,
-               shard: Shard = Shard(), progress: bool | None = None, enhancer: Enhancer | None = None,
-               verify: bool = True, merge_only: bool = False) -> RunResult:
+def run_method(
+    packets: str | os.PathLike[str] | PacketStore,
+    out: str | os.PathLike[str],
+    settings: RunSettings,
+    *,
+    shard: Shard = Shard(),
+    progress: bool | None = None,
+    enhancer: Enhancer | None = None,
+    verify: bool = True,
+    merge_only: bool = False,
+) -> RunResult:
     """Enhance and score every packet of ``settings.split`` in this shard; merge when all are done.
 
     Args:
@@ -211,11 +227,15 @@ def run_method(packets: str | os.PathLike[str] | PacketStore, out: str | os.Path
     selection = store.packet_ids(settings.split)
     if not selection:
         splits = sorted(set(store.index["split"]))
-        raise UsageError(f"no packets of split {settings.split or 'any'!r} in the store; splits: {', '.join(splits)}",
-                         store.root)
+        raise UsageError(
+            f"no packets of split {settings.split or 'any'!r} in the store; splits: {', '.join(splits)}",
+            store.root,
+        )
     if settings.method not in available_methods() and enhancer is None:
-        raise UsageError(f"unknown method {settings.method!r}; available: {', '.join(sorted(available_methods()))}",
-                         "--method")
+        raise UsageError(
+            f"unknown method {settings.method!r}; available: {', '.join(sorted(available_methods()))}",
+            "--method",
+        )
     index_sha256 = sha256_file(Path(store.root) / INDEX_FILE)
     identity = settings.identity(index_sha256)
     _check_folder(out, identity)
@@ -232,11 +252,16 @@ def run_method(packets: str | os.PathLike[str] | PacketStore, out: str | os.Path
             _, relative, what = problems[0].split(": ", 2)
             what = "packet file missing" if what == "missing" else what
             more = f", {len(problems) - 1} more problem(s) in other files" if len(problems) > 1 else ""
-            raise PacketError(f"{what} (found by the check before any work{more}); run `setdiff-bench prepare` "
-                              "again to rewrite the packets, or pass --no-verify", Path(store.root) / relative)
+            raise PacketError(
+                f"{what} (found by the check before any work{more}); run `setdiff-bench prepare` "
+                "again to rewrite the packets, or pass --no-verify",
+                Path(store.root) / relative,
+            )
     if todo:
         if enhancer is None:
-            enhancer = create_enhancer(settings.method, optional={"device": settings.device}, **settings.options)
+            enhancer = create_enhancer(
+                settings.method, optional={"device": settings.device}, **settings.options
+            )
         elif enhancer.name != settings.method:
             raise UsageError(f"enhancer {enhancer.name!r} given for method {settings.method!r}")
         if isinstance(enhancer, ChecksTargets):
@@ -254,8 +279,12 @@ def run_method(packets: str | os.PathLike[str] | PacketStore, out: str | os.Path
                 _record_enhancer(out, built)
                 claimed = True
 
-        bar = tqdm(todo, desc=f"{settings.method} [{shard}]", unit="packet", disable=None if progress is None
-                   else not progress)
+        bar = tqdm(
+            todo,
+            desc=f"{settings.method} [{shard}]",
+            unit="packet",
+            disable=None if progress is None else not progress,
+        )
         for packet_id in bar:
             _run_packet(store, out, packet_id, enhancer, specs, settings, claim)
     remaining = sum(not fragment_path(out, pid).is_file() for pid in selection)
@@ -266,16 +295,24 @@ def run_method(packets: str | os.PathLike[str] | PacketStore, out: str | os.Path
     return RunResult(out, len(todo), len(mine) - len(todo), remaining, merged)
 
 
-def _merge_finished(store: PacketStore, out: Path, settings: RunSettings, specs: Sequence[MetricSpec],
-                    selection: Sequence[str]) -> RunResult:
+def _merge_finished(
+    store: PacketStore,
+    out: Path,
+    settings: RunSettings,
+    specs: Sequence[MetricSpec],
+    selection: Sequence[str],
+) -> RunResult:
     """``--merge``: merge a run whose shards have all finished; one line naming what is missing otherwise."""
     if not (out / RUN_FILE).is_file():
         raise UsageError("no run here to merge (no run.json): run the shards first", out)
     missing = [pid for pid in selection if not fragment_path(out, pid).is_file()]
     if missing:
         shown = ", ".join(missing[:3]) + (", ..." if len(missing) > 3 else "")
-        raise UsageError(f"run incomplete: {len(missing)} of {len(selection)} packets have no fragment ({shown}); "
-                         "rerun the shards that hold them (the same command resumes), then merge again", out)
+        raise UsageError(
+            f"run incomplete: {len(missing)} of {len(selection)} packets have no fragment ({shown}); "
+            "rerun the shards that hold them (the same command resumes), then merge again",
+            out,
+        )
     merge_run(store, out, settings, specs, selection)
     return RunResult(out, 0, len(selection), 0, True)
 
@@ -323,8 +360,11 @@ def _compare_settings(out: Path, identity: dict[str, Any]) -> None:
         raise UsageError(f"unreadable run settings ({error})", run_file) from None
     if existing != identity:
         changed = sorted(k for k in set(existing) | set(identity) if existing.get(k) != identity.get(k))
-        raise UsageError(f"this folder holds a run with other settings ({', '.join(changed)} differ); "
-                         "resume with the same command or choose another --out", out)
+        raise UsageError(
+            f"this folder holds a run with other settings ({', '.join(changed)} differ); "
+            "resume with the same command or choose another --out",
+            out,
+        )
 
 
 def _has_visible_files(folder: Path) -> bool:
@@ -333,8 +373,11 @@ def _has_visible_files(folder: Path) -> bool:
 
 
 def _record_enhancer(out: Path, enhancer: Enhancer) -> None:
-    info = {"name": enhancer.name, "class": f"{type(enhancer).__module__}.{type(enhancer).__qualname__}",
-            "options": _jsonable(dict(getattr(enhancer, "options", {}) or {}))}
+    info = {
+        "name": enhancer.name,
+        "class": f"{type(enhancer).__module__}.{type(enhancer).__qualname__}",
+        "options": _jsonable(dict(getattr(enhancer, "options", {}) or {})),
+    }
     path = out / ENHANCER_FILE
     text = json.dumps(info, indent=2, sort_keys=True) + "\n"
     if not path.is_file() or path.read_text() != text:
@@ -351,8 +394,15 @@ def _target_ref(row: Mapping[str, Any]) -> TargetRef:
     return TargetRef.from_row(row, frame=str(row["frame"]))
 
 
-def _run_packet(store: PacketStore, out: Path, packet_id: str, enhancer: Enhancer, specs: Sequence[MetricSpec],
-                settings: RunSettings, claim: Callable[[], None]) -> None:
+def _run_packet(
+    store: PacketStore,
+    out: Path,
+    packet_id: str,
+    enhancer: Enhancer,
+    specs: Sequence[MetricSpec],
+    settings: RunSettings,
+    claim: Callable[[], None],
+) -> None:
     """Enhance and score one packet, then write its images and (last) its fragment.
 
     Everything that can fail on bad input (reading, enhancing, checking, scoring) happens before the
@@ -379,10 +429,16 @@ def _run_packet(store: PacketStore, out: Path, packet_id: str, enhancer: Enhance
         ref = _target_ref(row)
         relative = image_relative(ref)
         write_png(out / relative, to_uint8_hwc(enhanced[position]))
-        records.append({**{key: row[key] for key in KEY_COLUMNS if key in row}, "method": settings.method,
-                        "timestamp_us": timestamp_or_none(row.get("timestamp_us")),
-                        "sensor": str(row.get("sensor") or ""), "image": relative,
-                        "image_sha256": sha256_file(out / relative)})
+        records.append(
+            {
+                **{key: row[key] for key in KEY_COLUMNS if key in row},
+                "method": settings.method,
+                "timestamp_us": timestamp_or_none(row.get("timestamp_us")),
+                "sensor": str(row.get("sensor") or ""),
+                "image": relative,
+                "image_sha256": sha256_file(out / relative),
+            }
+        )
     per_frame = elapsed_ms / max(1, len(targets))
     for position, record in enumerate(records):
         for spec in specs:
@@ -395,9 +451,13 @@ def _checked(output: Any, packet: Packet, name: str) -> torch.Tensor:
     where = f"method {name}, packet {packet.packet_id}"
     expected = (len(packet.targets), 3, packet.height, packet.width)
     if not isinstance(output, torch.Tensor):
-        raise EnhancerOutputError(f"enhance() returned {type(output).__name__}, expected a tensor {expected}", where)
+        raise EnhancerOutputError(
+            f"enhance() returned {type(output).__name__}, expected a tensor {expected}", where
+        )
     if tuple(output.shape) != expected:
-        raise EnhancerOutputError(f"enhance() returned shape {tuple(output.shape)}, expected {expected}", where)
+        raise EnhancerOutputError(
+            f"enhance() returned shape {tuple(output.shape)}, expected {expected}", where
+        )
     if not output.is_floating_point():
         raise EnhancerOutputError(f"enhance() returned dtype {output.dtype}, expected float in [0, 1]", where)
     if not torch.isfinite(output).all():
@@ -408,13 +468,25 @@ def _checked(output: Any, packet: Packet, name: str) -> torch.Tensor:
 # ---------------------------------------------------------------------- tables
 def row_schema(metric_names: Sequence[str]) -> pa.Schema:
     """Arrow schema of ``metrics.parquet`` and of fragments."""
-    return pa.schema([
-        ("dataset", pa.string()), ("protocol", pa.string()), ("group", pa.string()), ("split", pa.string()),
-        ("scene", pa.string()), ("frame", pa.string()), ("sensor", pa.string()), ("timestamp_us", pa.int64()),
-        ("packet_id", pa.string()), ("view", pa.int32()), ("method", pa.string()),
-        *[(name, pa.float64()) for name in metric_names],
-        ("ms_per_frame", pa.float64()), ("image", pa.string()), ("image_sha256", pa.string()),
-    ])
+    return pa.schema(
+        [
+            ("dataset", pa.string()),
+            ("protocol", pa.string()),
+            ("group", pa.string()),
+            ("split", pa.string()),
+            ("scene", pa.string()),
+            ("frame", pa.string()),
+            ("sensor", pa.string()),
+            ("timestamp_us", pa.int64()),
+            ("packet_id", pa.string()),
+            ("view", pa.int32()),
+            ("method", pa.string()),
+            *[(name, pa.float64()) for name in metric_names],
+            ("ms_per_frame", pa.float64()),
+            ("image", pa.string()),
+            ("image_sha256", pa.string()),
+        ]
+    )
 
 
 def _write_rows(path: Path, records: Sequence[Mapping[str, Any]], metric_names: Sequence[str]) -> None:
@@ -443,8 +515,13 @@ def warp_enabled(settings: RunSettings, protocols: Sequence[str]) -> bool:
     return settings.warp == "on"
 
 
-def merge_run(store: PacketStore, out: Path, settings: RunSettings, specs: Sequence[MetricSpec],
-              selection: Sequence[str]) -> None:
+def merge_run(
+    store: PacketStore,
+    out: Path,
+    settings: RunSettings,
+    specs: Sequence[MetricSpec],
+    selection: Sequence[str],
+) -> None:
     """Merge every fragment into ``metrics.parquet`` (+ ``sequences.parquet``) and write ``manifest.json``.
 
     Idempotent: nothing is rewritten when the manifest already records the same fragments.  Lock-free:
@@ -468,8 +545,9 @@ def merge_run(store: PacketStore, out: Path, settings: RunSettings, specs: Seque
         try:
             tables.append(pq.read_table(path).cast(row_schema(names)))
         except (OSError, pa.ArrowException) as error:
-            raise PacketError(f"unreadable run fragment ({type(error).__name__}); delete it to redo the packet",
-                              path) from None
+            raise PacketError(
+                f"unreadable run fragment ({type(error).__name__}); delete it to redo the packet", path
+            ) from None
     merged = pa.concat_tables(tables).sort_by([("packet_id", "ascending"), ("view", "ascending")])
     with atomic_path(out / METRICS_FILE) as tmp:
         pq.write_table(merged, tmp, compression="zstd")
@@ -495,11 +573,19 @@ def _remove_stale_temporaries(out: Path) -> None:
                         stale.unlink()
 
 
-SEQUENCE_SCHEMA = pa.schema([
-    ("dataset", pa.string()), ("protocol", pa.string()), ("scene", pa.string()), ("sensor", pa.string()),
-    ("method", pa.string()), ("frames", pa.int32()), ("first_frame", pa.string()), ("last_frame", pa.string()),
-    ("warp", pa.float64()),
-])
+SEQUENCE_SCHEMA = pa.schema(
+    [
+        ("dataset", pa.string()),
+        ("protocol", pa.string()),
+        ("scene", pa.string()),
+        ("sensor", pa.string()),
+        ("method", pa.string()),
+        ("frames", pa.int32()),
+        ("first_frame", pa.string()),
+        ("last_frame", pa.string()),
+        ("warp", pa.float64()),
+    ]
+)
 
 
 def _sequence_table(store: PacketStore, out: Path, frame: pd.DataFrame, settings: RunSettings) -> pa.Table:
@@ -510,13 +596,20 @@ def _sequence_table(store: PacketStore, out: Path, frame: pd.DataFrame, settings
         cache = default_warp_cache() if settings.warp_cache == "auto" else Path(settings.warp_cache)
     index = store.index
     targets = index[index["role"] == "target"]
-    gt_hashes = dict(zip(zip(targets["packet_id"], targets["view"].astype(int)), targets["gt_sha256"])) \
-        if "gt_sha256" in targets.columns else {}
-    for (protocol, scene, sensor), rows in frame.groupby(["protocol", "scene", "sensor"], sort=True, dropna=False):
+    gt_hashes = (
+        dict(zip(zip(targets["packet_id"], targets["view"].astype(int)), targets["gt_sha256"]))
+        if "gt_sha256" in targets.columns
+        else {}
+    )
+    for (protocol, scene, sensor), rows in frame.groupby(
+        ["protocol", "scene", "sensor"], sort=True, dropna=False
+    ):
         if rows["timestamp_us"].isna().any():
             if settings.warp == "on":
-                raise PacketError(f"warp error needs timestamps; scene {scene!r} sensor {sensor!r} has targets "
-                                  "without one", store.root)
+                raise PacketError(
+                    f"warp error needs timestamps; scene {scene!r} sensor {sensor!r} has targets without one",
+                    store.root,
+                )
             continue
         rows = rows.sort_values(["timestamp_us", "frame", "packet_id"])
         if len(rows) < 2:
@@ -530,17 +623,39 @@ def _sequence_table(store: PacketStore, out: Path, frame: pd.DataFrame, settings
             frames.append(to_tensor_chw(read_rgb(out / row.image, size)))
             gts.append(gt[0])
             masks.append(mask[0])
-        value = sequence_warp_error(torch.stack(frames), torch.stack(gts), torch.stack(masks),
-                                    flow_method=settings.flow_method, cache=cache,
-                                    gt_key=",".join(hashes) if all(hashes) else None)
-        records.append({"dataset": rows["dataset"].iloc[0], "protocol": protocol, "scene": scene, "sensor": sensor,
-                        "method": settings.method, "frames": len(rows), "first_frame": rows["frame"].iloc[0],
-                        "last_frame": rows["frame"].iloc[-1], "warp": value})
+        value = sequence_warp_error(
+            torch.stack(frames),
+            torch.stack(gts),
+            torch.stack(masks),
+            flow_method=settings.flow_method,
+            cache=cache,
+            gt_key=",".join(hashes) if all(hashes) else None,
+        )
+        records.append(
+            {
+                "dataset": rows["dataset"].iloc[0],
+                "protocol": protocol,
+                "scene": scene,
+                "sensor": sensor,
+                "method": settings.method,
+                "frames": len(rows),
+                "first_frame": rows["frame"].iloc[0],
+                "last_frame": rows["frame"].iloc[-1],
+                "warp": value,
+            }
+        )
     return pa.Table.from_pylist(records, schema=SEQUENCE_SCHEMA)
 
 
-def _manifest(store: PacketStore, out: Path, settings: RunSettings, specs: Sequence[MetricSpec], frame: pd.DataFrame,
-              sequences: pa.Table | None, fragments_sha256: str) -> dict[str, Any]:
+def _manifest(
+    store: PacketStore,
+    out: Path,
+    settings: RunSettings,
+    specs: Sequence[MetricSpec],
+    frame: pd.DataFrame,
+    sequences: pa.Table | None,
+    fragments_sha256: str,
+) -> dict[str, Any]:
     methods = available_methods()
     spec = methods.get(settings.method)
     enhancer_info: dict[str, Any] = {}
@@ -551,36 +666,63 @@ def _manifest(store: PacketStore, out: Path, settings: RunSettings, specs: Seque
     per_packet_ms = (frame.groupby("packet_id")["ms_per_frame"].sum()).to_numpy(dtype=np.float64)
     return {
         "format": RUN_FORMAT,
-        "method": {"name": settings.method, "factory": spec.factory if spec else None,
-                   "source": spec.source if spec else None, "options": _jsonable(dict(settings.options)),
-                   "enhancer": enhancer_info},
-        "packets": {"root": str(Path(store.root).resolve()), "index_sha256": sha256_file(Path(store.root) / INDEX_FILE),
-                    "split": settings.split, "packets": int(frame["packet_id"].nunique()), "targets": len(frame),
-                    "datasets": sorted(frame["dataset"].unique().tolist()),
-                    "protocols": sorted(frame["protocol"].unique().tolist()),
-                    "groups": sorted(frame["group"].unique().tolist())},
-        "metrics": {"image": {s.name: {"function": s.function, "kwargs": _jsonable(dict(s.kwargs)),
-                                       "higher_is_better": s.higher_is_better} for s in specs},
-                    "quantization": "8-bit, rint(clip(x, 0, 1) * 255) / 255, as the written PNG",
-                    "masks": "protocol masks from the packet store (True = evaluate)",
-                    "warp": None if sequences is None else {
-                        "sequences": sequences.num_rows, "flow_method": settings.flow_method,
-                        "scale": "MSE on the 0-255 scale (setdiff_bench.metrics.warp.PAPER_SCALE)",
-                        "grouping": "(protocol, scene, sensor), targets sorted by timestamp across groups"}},
+        "method": {
+            "name": settings.method,
+            "factory": spec.factory if spec else None,
+            "source": spec.source if spec else None,
+            "options": _jsonable(dict(settings.options)),
+            "enhancer": enhancer_info,
+        },
+        "packets": {
+            "root": str(Path(store.root).resolve()),
+            "index_sha256": sha256_file(Path(store.root) / INDEX_FILE),
+            "split": settings.split,
+            "packets": int(frame["packet_id"].nunique()),
+            "targets": len(frame),
+            "datasets": sorted(frame["dataset"].unique().tolist()),
+            "protocols": sorted(frame["protocol"].unique().tolist()),
+            "groups": sorted(frame["group"].unique().tolist()),
+        },
+        "metrics": {
+            "image": {
+                s.name: {
+                    "function": s.function,
+                    "kwargs": _jsonable(dict(s.kwargs)),
+                    "higher_is_better": s.higher_is_better,
+                }
+                for s in specs
+            },
+            "quantization": "8-bit, rint(clip(x, 0, 1) * 255) / 255, as the written PNG",
+            "masks": "protocol masks from the packet store (True = evaluate)",
+            "warp": None
+            if sequences is None
+            else {
+                "sequences": sequences.num_rows,
+                "flow_method": settings.flow_method,
+                "scale": "MSE on the 0-255 scale (setdiff_bench.metrics.warp.PAPER_SCALE)",
+                "grouping": "(protocol, scene, sensor), targets sorted by timestamp across groups",
+            },
+        },
         "device": {**device_description(settings.device), "requested": settings.device},
         "batch_size": settings.batch_size,
         "versions": package_versions(),
         "git": git_revision(),
-        "timing": {"frames": len(frame), "packets": len(timing),
-                   "enhance_ms_total": float(per_packet_ms.sum()),
-                   "ms_per_frame_mean": float(per_frame.mean()) if len(per_frame) else None,
-                   "ms_per_frame_median": float(np.median(per_frame)) if len(per_frame) else None,
-                   "ms_per_frame_max": float(per_frame.max()) if len(per_frame) else None,
-                   "note": "enhancer wall time only (no I/O, no scoring); the first packet of each call includes "
-                           "one-off warm-up (the median is robust to it); timing differs between runs"},
+        "timing": {
+            "frames": len(frame),
+            "packets": len(timing),
+            "enhance_ms_total": float(per_packet_ms.sum()),
+            "ms_per_frame_mean": float(per_frame.mean()) if len(per_frame) else None,
+            "ms_per_frame_median": float(np.median(per_frame)) if len(per_frame) else None,
+            "ms_per_frame_max": float(per_frame.max()) if len(per_frame) else None,
+            "note": "enhancer wall time only (no I/O, no scoring); the first packet of each call includes "
+            "one-off warm-up (the median is robust to it); timing differs between runs",
+        },
         "fragments_sha256": fragments_sha256,
-        "outputs": {"metrics": METRICS_FILE, "sequences": SEQUENCES_FILE if sequences is not None else None,
-                    "images": f"{IMAGES_DIR}/<protocol>/<group>/<scene>/<frame stem>.png"},
+        "outputs": {
+            "metrics": METRICS_FILE,
+            "sequences": SEQUENCES_FILE if sequences is not None else None,
+            "images": f"{IMAGES_DIR}/<protocol>/<group>/<scene>/<frame stem>.png",
+        },
     }
 
 

@@ -34,7 +34,13 @@ def quantize(images: torch.Tensor) -> torch.Tensor:
 
 def to_uint8_hwc(image: torch.Tensor) -> np.ndarray:
     """``(3, H, W)`` float in [0, 1] → ``(H, W, 3)`` uint8 (round to nearest)."""
-    return torch.round(image.detach().float().clamp(0.0, 1.0) * 255.0).to(torch.uint8).permute(1, 2, 0).cpu().numpy()
+    return (
+        torch.round(image.detach().float().clamp(0.0, 1.0) * 255.0)
+        .to(torch.uint8)
+        .permute(1, 2, 0)
+        .cpu()
+        .numpy()
+    )
 
 
 def resolve_metrics(names: str | Sequence[str]) -> tuple[MetricSpec, ...]:
@@ -45,26 +51,39 @@ def resolve_metrics(names: str | Sequence[str]) -> tuple[MetricSpec, ...]:
             metric (``setdiff-bench evaluate`` computes it).
     """
     if isinstance(names, str):
-        names = list(PRESETS[names]) if names in PRESETS else [n.strip() for n in names.split(",") if n.strip()]
+        names = (
+            list(PRESETS[names]) if names in PRESETS else [n.strip() for n in names.split(",") if n.strip()]
+        )
     specs = []
     for name in names:
         if name not in METRICS:
-            raise UsageError(f"unknown metric {name!r}; presets: {', '.join(PRESETS)}; metrics: {', '.join(METRICS)}",
-                             "--metrics")
+            raise UsageError(
+                f"unknown metric {name!r}; presets: {', '.join(PRESETS)}; metrics: {', '.join(METRICS)}",
+                "--metrics",
+            )
         spec = METRICS[name]
         if spec.scope == "sequence":
-            raise UsageError(f"{name} is a sequence metric; it is enabled with --warp, not --metrics", "--metrics")
+            raise UsageError(
+                f"{name} is a sequence metric; it is enabled with --warp, not --metrics", "--metrics"
+            )
         if spec.scope != "image":
-            raise UsageError(f"{name} is a {spec.scope} metric; `setdiff-bench evaluate` computes it, not --metrics",
-                             "--metrics")
+            raise UsageError(
+                f"{name} is a {spec.scope} metric; `setdiff-bench evaluate` computes it, not --metrics",
+                "--metrics",
+            )
         specs.append(spec)
     if not specs:
         raise UsageError("no metrics selected", "--metrics")
     return tuple(specs)
 
 
-def score_images(specs: Sequence[MetricSpec], pred: torch.Tensor, target: torch.Tensor, masks: torch.Tensor,
-                 batch_size: int) -> dict[str, np.ndarray]:
+def score_images(
+    specs: Sequence[MetricSpec],
+    pred: torch.Tensor,
+    target: torch.Tensor,
+    masks: torch.Tensor,
+    batch_size: int,
+) -> dict[str, np.ndarray]:
     """Every image metric for ``V`` pairs, ``batch_size`` images per call.
 
     Args:
@@ -87,8 +106,15 @@ def score_images(specs: Sequence[MetricSpec], pred: torch.Tensor, target: torch.
     return {name: np.concatenate(parts) if parts else np.zeros(0) for name, parts in values.items()}
 
 
-def sequence_warp_error(frames: torch.Tensor, ground_truth: torch.Tensor, masks: torch.Tensor | None, *,
-                        flow_method: str = "deepflow", cache: Path | None = None, gt_key: str | None = None) -> float:
+def sequence_warp_error(
+    frames: torch.Tensor,
+    ground_truth: torch.Tensor,
+    masks: torch.Tensor | None,
+    *,
+    flow_method: str = "deepflow",
+    cache: Path | None = None,
+    gt_key: str | None = None,
+) -> float:
     """Warp error of one time-ordered sequence (paper units: MSE on the 0–255 scale).
 
     Args:
@@ -109,7 +135,11 @@ def sequence_warp_error(frames: torch.Tensor, ground_truth: torch.Tensor, masks:
         if path.is_file():
             with contextlib.suppress(ImageError):
                 reference = WarpReference.load(path)
-            if reference is not None and tuple(reference.flow.shape) != (frames.shape[0] - 1, 2, *frames.shape[-2:]):
+            if reference is not None and tuple(reference.flow.shape) != (
+                frames.shape[0] - 1,
+                2,
+                *frames.shape[-2:],
+            ):
                 reference = None
     if reference is None:
         reference = warp_reference(ground_truth.float().cpu(), method=flow_method)  # type: ignore[arg-type]

@@ -67,24 +67,30 @@ def _as_float(images: torch.Tensor) -> torch.Tensor:
 def _check_views(views: Views, role: str, size: tuple[int, int] | None) -> tuple[int, int]:
     images = views.images
     if not isinstance(images, torch.Tensor) or images.ndim != 4 or images.shape[1] != 3:
-        raise StreamInputError(f"{role} images must be (V, 3, H, W), got {tuple(getattr(images, 'shape', ()))}", role)
+        raise StreamInputError(
+            f"{role} images must be (V, 3, H, W), got {tuple(getattr(images, 'shape', ()))}", role
+        )
     count, _, height, width = images.shape
     if count != len(views.cameras):
         raise StreamInputError(f"{role}: {count} images but {len(views.cameras)} cameras", role)
     if size is not None and (height, width) != size:
-        raise StreamInputError(f"{role} images are {width}x{height}, the session expects {size[1]}x{size[0]}", role)
+        raise StreamInputError(
+            f"{role} images are {width}x{height}, the session expects {size[1]}x{size[0]}", role
+        )
     if height % 8 or width % 8:
         raise StreamInputError(f"{role} images are {width}x{height}; both sides must be divisible by 8", role)
     if images.is_floating_point() and not torch.isfinite(images).all():
         raise StreamInputError(f"{role} images contain NaN or infinite values", role)
     for i, camera in enumerate(views.cameras):
         if (camera.height, camera.width) != (height, width):
-            raise StreamInputError(f"{role} camera {i} is {camera.width}x{camera.height}, image is {width}x{height}",
-                                   role)
+            raise StreamInputError(
+                f"{role} camera {i} is {camera.width}x{camera.height}, image is {width}x{height}", role
+            )
     for name, tensor, channels in (("C-maps", views.cmaps, 3), ("alphas", views.alphas, 1)):
         if tensor is not None and tuple(tensor.shape) != (count, channels, height, width):
-            raise StreamInputError(f"{role} {name} must be {(count, channels, height, width)}, "
-                                   f"got {tuple(tensor.shape)}", role)
+            raise StreamInputError(
+                f"{role} {name} must be {(count, channels, height, width)}, got {tuple(tensor.shape)}", role
+            )
         if tensor is not None and not torch.isfinite(tensor).all():
             raise StreamInputError(f"{role} {name} contain NaN or infinite values", role)
     return int(height), int(width)
@@ -93,7 +99,10 @@ def _check_views(views: Views, role: str, size: tuple[int, int] | None) -> tuple
 def _image_key(image: torch.Tensor) -> str:
     """Content key of one ``(3, H, W)`` model input (exact bytes, so only identical inputs share latents)."""
     data = image.detach().to("cpu", torch.float32).contiguous()
-    return f"{image.dtype}{tuple(data.shape)}" + hashlib.blake2b(data.numpy().tobytes(), digest_size=16).hexdigest()
+    return (
+        f"{image.dtype}{tuple(data.shape)}"
+        + hashlib.blake2b(data.numpy().tobytes(), digest_size=16).hexdigest()
+    )
 
 
 class ReferenceLatentCache:
@@ -125,9 +134,15 @@ class ReferenceLatentCache:
             else:
                 fresh = [i for i in range(len(images)) if i not in set(cached)]
                 position = {i: j for j, i in enumerate(fresh)}
-                fresh_keep = (None if keep_skips is None else
-                              torch.tensor([position[int(i)] for i in keep_skips.tolist()], device=keep_skips.device,
-                                           dtype=keep_skips.dtype))
+                fresh_keep = (
+                    None
+                    if keep_skips is None
+                    else torch.tensor(
+                        [position[int(i)] for i in keep_skips.tolist()],
+                        device=keep_skips.device,
+                        dtype=keep_skips.dtype,
+                    )
+                )
                 encoded_fresh = encode(images[fresh], fresh_keep)
                 rows = [None] * len(images)
                 for i in cached:
@@ -169,9 +184,17 @@ class StreamSession:
         StreamInputError: malformed references, or C-maps missing with no PLY to render them.
     """
 
-    def __init__(self, enhancer: Any, references: Views, *, ply: str | os.PathLike[str] | None = None,
-                 max_references: int | None = None, max_cameras: int = MAX_CAMERAS_PER_TICK,
-                 device: str = "cpu", cache_reference_latents: bool = False) -> None:
+    def __init__(
+        self,
+        enhancer: Any,
+        references: Views,
+        *,
+        ply: str | os.PathLike[str] | None = None,
+        max_references: int | None = None,
+        max_cameras: int = MAX_CAMERAS_PER_TICK,
+        device: str = "cpu",
+        cache_reference_latents: bool = False,
+    ) -> None:
         self.enhancer = enhancer
         self.size = _check_views(references, "references", None)
         if len(references.cameras) == 0:
@@ -186,10 +209,17 @@ class StreamSession:
         cmaps, alphas = self._geometry(references)
         self.references = ViewSet(
             names=tuple(references.names or (f"ref{i}" for i in range(len(references.cameras)))),
-            images=_as_float(references.images), cmaps=cmaps, alphas=alphas, cameras=tuple(references.cameras))
+            images=_as_float(references.images),
+            cmaps=cmaps,
+            alphas=alphas,
+            cameras=tuple(references.cameras),
+        )
         options = getattr(enhancer, "options", {})
-        self.max_references = int(max_references if max_references is not None
-                                  else options.get("max_references", len(self.references)))
+        self.max_references = int(
+            max_references
+            if max_references is not None
+            else options.get("max_references", len(self.references))
+        )
         self.max_cameras = max_cameras
         self.latent_cache = ReferenceLatentCache() if cache_reference_latents else None
         self.ticks = 0
@@ -210,31 +240,46 @@ class StreamSession:
 
     def select(self, cameras: Sequence[Camera]) -> list[int]:
         """Indices of the references used for a tick with these cameras (Eq. 2), in recorded order."""
-        chosen = select_references(cameras, self.references.cameras, self.max_references,
-                                   d_max=max_pairwise_distance(np.stack(
-                                       [c.center for c in (*cameras, *self.references.cameras)])))
+        chosen = select_references(
+            cameras,
+            self.references.cameras,
+            self.max_references,
+            d_max=max_pairwise_distance(np.stack([c.center for c in (*cameras, *self.references.cameras)])),
+        )
         return sorted(chosen)
 
     def packet(self, frames: Views) -> Packet:
         """The packet one tick is enhanced as (references chosen, everything normalised)."""
         if len(frames.cameras) > self.max_cameras:
-            raise StreamInputError(f"{len(frames.cameras)} cameras in one tick; at most {self.max_cameras}", "frames")
+            raise StreamInputError(
+                f"{len(frames.cameras)} cameras in one tick; at most {self.max_cameras}", "frames"
+            )
         if len(frames.cameras) == 0:
             raise StreamInputError("a tick needs at least one frame", "frames")
         _check_views(frames, "frames", self.size)
         refs = self.references.subset(self.select(frames.cameras))
         cmaps, alphas = self._geometry(frames)
         cameras = (*refs.cameras, *frames.cameras)
-        normalised = normalize_packet(cameras, torch.cat([refs.cmaps, cmaps]), len(refs),
-                                      alphas=torch.cat([refs.alphas, alphas]))
+        normalised = normalize_packet(
+            cameras, torch.cat([refs.cmaps, cmaps]), len(refs), alphas=torch.cat([refs.alphas, alphas])
+        )
         n = len(refs)
         names = tuple(frames.names or (f"view{i}" for i in range(len(frames.cameras))))
         return Packet(
-            packet_id=f"tick{self.ticks:06d}", dataset="stream", protocol="stream", group="stream", split="test",
+            packet_id=f"tick{self.ticks:06d}",
+            dataset="stream",
+            protocol="stream",
+            group="stream",
+            split="test",
             scene="stream",
-            references=ViewSet(refs.names, refs.images, normalised.cmaps[:n], refs.alphas, normalised.cameras[:n]),
-            targets=ViewSet(names, _as_float(frames.images), normalised.cmaps[n:], alphas, normalised.cameras[n:]),
-            scale=normalised.scale)
+            references=ViewSet(
+                refs.names, refs.images, normalised.cmaps[:n], refs.alphas, normalised.cameras[:n]
+            ),
+            targets=ViewSet(
+                names, _as_float(frames.images), normalised.cmaps[n:], alphas, normalised.cameras[n:]
+            ),
+            scale=normalised.scale,
+        )
 
     def enhance(self, frames: Views) -> torch.Tensor:
         """Enhance one tick: ``(M, 3, H, W)`` float32 in [0, 1], in the order of ``frames``."""

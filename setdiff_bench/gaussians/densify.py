@@ -59,14 +59,18 @@ class DensityStats:
 
     @classmethod
     def zeros(cls, n: int, device: torch.device | str = "cpu") -> DensityStats:
-        return cls(torch.zeros(n, device=device), torch.zeros(n, device=device), torch.zeros(n, device=device))
+        return cls(
+            torch.zeros(n, device=device), torch.zeros(n, device=device), torch.zeros(n, device=device)
+        )
 
     def tensors(self) -> dict[str, torch.Tensor]:
         return {"grad_sum": self.grad_sum, "count": self.count, "max_radius": self.max_radius}
 
     def mean_grad(self) -> torch.Tensor:
         """``(N,)`` average gradient norm per visible view (0 where never visible)."""
-        return torch.where(self.count > 0, self.grad_sum / self.count.clamp_min(1), torch.zeros_like(self.grad_sum))
+        return torch.where(
+            self.count > 0, self.grad_sum / self.count.clamp_min(1), torch.zeros_like(self.grad_sum)
+        )
 
     def accumulate(self, meta: dict[str, torch.Tensor], width: int, height: int) -> None:
         """Add one view's statistics from a render's ``meta`` (``means2d`` with ``.grad``, ``radii``, ``visible``)."""
@@ -143,28 +147,41 @@ class DensificationStrategy:
     max_gaussians: int | None = None
 
     #: the fields counted in steps, which change with the length of a run
-    SCHEDULE_FIELDS: ClassVar[tuple[str, ...]] = ("densify_from", "densify_until", "densify_every",
-                                                  "opacity_reset_every")
+    SCHEDULE_FIELDS: ClassVar[tuple[str, ...]] = (
+        "densify_from",
+        "densify_until",
+        "densify_every",
+        "opacity_reset_every",
+    )
 
     @classmethod
     def schedule(cls, iterations: int, *, densify_every: int, **overrides: object) -> DensificationStrategy:
         """The standard schedule compressed to ``iterations``: densify from 10 % to 60 % of the run every
         ``densify_every`` steps, reset opacities every 30 %; ``overrides`` replace any field."""
         values: dict[str, object] = {
-            "densify_every": densify_every, "densify_from": max(1, round(0.1 * iterations)),
+            "densify_every": densify_every,
+            "densify_from": max(1, round(0.1 * iterations)),
             "densify_until": round(0.6 * iterations),
             "opacity_reset_every": max(densify_every, round(0.3 * iterations)),
         }
         values.update(overrides)
         return cls(**values)  # type: ignore[arg-type]
 
-    def initialize_state(self, n: int, *, extent: float, generator: torch.Generator,
-                         device: torch.device | str = "cpu") -> DensityState:
+    def initialize_state(
+        self, n: int, *, extent: float, generator: torch.Generator, device: torch.device | str = "cpu"
+    ) -> DensityState:
         """The state of a fit starting with ``n`` Gaussians in a scene of radius ``extent``."""
         return DensityState(DensityStats.zeros(n, device), extent, generator)
 
-    def step_post_backward(self, params: GaussianParameters, state: DensityState, step: int,
-                           meta: Mapping[str, torch.Tensor], width: int, height: int) -> DensifyResult | None:
+    def step_post_backward(
+        self,
+        params: GaussianParameters,
+        state: DensityState,
+        step: int,
+        meta: Mapping[str, torch.Tensor],
+        width: int,
+        height: int,
+    ) -> DensifyResult | None:
         """Density control after step ``step``'s backward pass and optimiser step, on ``params`` in place.
 
         Gathers the statistics of the rendered view (``meta``: a render's per-camera ``means2d`` with
@@ -180,16 +197,20 @@ class DensificationStrategy:
         result = None
         if step > self.densify_from and step % self.densify_every == 0:
             if not bool((state.stats.count > 0).any()) and not state.warned_no_grad:
-                warnings.warn("densification found no view-space gradient statistics (the render backend's "
-                              "meta['means2d'] had no .grad); no Gaussians were added", stacklevel=2)
+                warnings.warn(
+                    "densification found no view-space gradient statistics (the render backend's "
+                    "meta['means2d'] had no .grad); no Gaussians were added",
+                    stacklevel=2,
+                )
                 state.warned_no_grad = True
             result = self.densify_and_prune(params, state, prune_large=step > self.opacity_reset_every)
         if step % self.opacity_reset_every == 0:
             reset_opacity(params)
         return result
 
-    def densify_and_prune(self, params: GaussianParameters, state: DensityState, *,
-                          prune_large: bool) -> DensifyResult:
+    def densify_and_prune(
+        self, params: GaussianParameters, state: DensityState, *, prune_large: bool
+    ) -> DensifyResult:
         """One Inria ``densify_and_prune`` on ``params`` (in place) from ``state``'s statistics, which then
         restart from zero; ``prune_large`` also prunes by screen radius and world scale."""
         with torch.no_grad():
@@ -231,8 +252,12 @@ class DensificationStrategy:
             prune = opacity < self.min_opacity
             prune[:n] |= split  # split originals are replaced by their samples
             if prune_large:
-                big_screen = torch.cat([stats.max_radius > self.max_screen_size,
-                                        torch.zeros(rows.numel() - n, dtype=torch.bool, device=device)])
+                big_screen = torch.cat(
+                    [
+                        stats.max_radius > self.max_screen_size,
+                        torch.zeros(rows.numel() - n, dtype=torch.bool, device=device),
+                    ]
+                )
                 big_world = torch.exp(values["log_scales"]).amax(dim=1) > self.max_world_fraction * extent
                 prune |= big_screen | big_world
             keep = ~prune

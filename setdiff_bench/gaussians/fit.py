@@ -91,8 +91,12 @@ class FitConfig:
         ``densify_every`` iterations, reset opacities every 30 %.  ``overrides`` name fields of the
         configuration or of its strategy (e.g. ``opacity_reset_every``, ``max_gaussians``)."""
         values, density = split_settings(overrides)
-        values = {"iterations": iterations, "sh_increase_every": max(1, round(0.1 * iterations)), **values,
-                  "strategy": DensificationStrategy.schedule(iterations, densify_every=densify_every, **density)}
+        values = {
+            "iterations": iterations,
+            "sh_increase_every": max(1, round(0.1 * iterations)),
+            **values,
+            "strategy": DensificationStrategy.schedule(iterations, densify_every=densify_every, **density),
+        }
         return cls(**values)  # type: ignore[arg-type]
 
     def rescaled(self, iterations: int) -> FitConfig:
@@ -107,12 +111,19 @@ class FitConfig:
 
         names = DensificationStrategy.SCHEDULE_FIELDS
         strategy = dataclasses.replace(self.strategy, **{n: scale(getattr(self.strategy, n)) for n in names})
-        return dataclasses.replace(self, iterations=iterations, sh_increase_every=scale(self.sh_increase_every),
-                                   strategy=strategy)
+        return dataclasses.replace(
+            self, iterations=iterations, sh_increase_every=scale(self.sh_increase_every), strategy=strategy
+        )
 
     def learning_rates(self, extent: float) -> dict[str, float]:
-        return {"means": self.lr_means * extent, "sh_dc": self.lr_sh_dc, "sh_rest": self.lr_sh_rest,
-                "opacity_logits": self.lr_opacity, "log_scales": self.lr_scales, "quats": self.lr_quats}
+        return {
+            "means": self.lr_means * extent,
+            "sh_dc": self.lr_sh_dc,
+            "sh_rest": self.lr_sh_rest,
+            "opacity_logits": self.lr_opacity,
+            "log_scales": self.lr_scales,
+            "quats": self.lr_quats,
+        }
 
     def to_json(self) -> dict[str, object]:
         """The configuration as JSON values; the strategy's settings nested under ``"strategy"``."""
@@ -182,8 +193,9 @@ def scene_extent(views: Sequence[FitView]) -> tuple[np.ndarray, float]:
     return center, radius if radius > 1e-6 else 1.0
 
 
-def initial_model(views: Sequence[FitView], points: np.ndarray | None, colors: np.ndarray | None,
-                  config: FitConfig) -> GaussianModel:
+def initial_model(
+    views: Sequence[FitView], points: np.ndarray | None, colors: np.ndarray | None, config: FitConfig
+) -> GaussianModel:
     """Gaussians at the sparse points, or random ones in the camera box grown by the scene radius; plus
     ``config.background_points`` image-coloured points on a far sphere."""
     if points is not None and len(points) > 0:
@@ -200,10 +212,16 @@ def initial_model(views: Sequence[FitView], points: np.ndarray | None, colors: n
         unit = torch.rand(count, 3, generator=generator, dtype=torch.float64).numpy()
         xyz, rgb = low + unit * (high - low), np.full((count, 3), 128, np.uint8)
     if config.background_points > 0:
-        far_xyz, far_rgb = background_sphere(views, config.background_points, config.background_radius, config.seed)
-        xyz, rgb = np.concatenate([xyz, far_xyz]), np.concatenate([rgb if rgb is not None else
-                                                                   np.full((len(xyz), 3), 128, np.uint8), far_rgb])
-    return GaussianModel.from_points(xyz, rgb, sh_degree=config.sh_degree, initial_opacity=config.initial_opacity)
+        far_xyz, far_rgb = background_sphere(
+            views, config.background_points, config.background_radius, config.seed
+        )
+        xyz, rgb = (
+            np.concatenate([xyz, far_xyz]),
+            np.concatenate([rgb if rgb is not None else np.full((len(xyz), 3), 128, np.uint8), far_rgb]),
+        )
+    return GaussianModel.from_points(
+        xyz, rgb, sh_degree=config.sh_degree, initial_opacity=config.initial_opacity
+    )
 
 
 def random_init_count(views: Sequence[FitView], config: FitConfig) -> int:
@@ -220,8 +238,9 @@ def random_init_count(views: Sequence[FitView], config: FitConfig) -> int:
     return count
 
 
-def background_sphere(views: Sequence[FitView], count: int, radius_factor: float, seed: int
-                      ) -> tuple[np.ndarray, np.ndarray]:
+def background_sphere(
+    views: Sequence[FitView], count: int, radius_factor: float, seed: int
+) -> tuple[np.ndarray, np.ndarray]:
     """``count`` points on a Fibonacci sphere of ``radius_factor`` × extent around the camera centres, each
     coloured with the pixel it projects to in the first training view that sees it.  Points below 5° under
     the cameras' horizon (mean camera up = −y axis) and points no view sees are dropped.
@@ -232,7 +251,7 @@ def background_sphere(views: Sequence[FitView], count: int, radius_factor: float
     center, extent = scene_extent(views)
     k = np.arange(count) + 0.5
     polar = np.arccos(1 - 2 * k / count)
-    azimuth = np.pi * (1 + 5 ** 0.5) * k + 2 * np.pi * (seed % 997) / 997
+    azimuth = np.pi * (1 + 5**0.5) * k + 2 * np.pi * (seed % 997) / 997
     unit = np.stack([np.sin(polar) * np.cos(azimuth), np.sin(polar) * np.sin(azimuth), np.cos(polar)], axis=1)
     up = -np.mean([v.camera.R[1] for v in views], axis=0)
     up /= max(float(np.linalg.norm(up)), 1e-12)
@@ -252,8 +271,9 @@ def background_sphere(views: Sequence[FitView], count: int, radius_factor: float
     return xyz[seen], rgb[seen]
 
 
-def photometric_loss(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None,
-                     lambda_dssim: float) -> tuple[torch.Tensor, torch.Tensor]:
+def photometric_loss(
+    pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None, lambda_dssim: float
+) -> tuple[torch.Tensor, torch.Tensor]:
     """``(loss, l1)`` for ``(1, 3, H, W)`` images; masked-out pixels take the target value."""
     from setdiff_bench.metrics.ssim import ssim
 
@@ -267,7 +287,9 @@ def photometric_loss(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tenso
 class _Trainer:
     """The mutable state of one fit (kept together so that it can be checkpointed as a whole)."""
 
-    def __init__(self, views: Sequence[FitView], init: GaussianModel, config: FitConfig, device: torch.device) -> None:
+    def __init__(
+        self, views: Sequence[FitView], init: GaussianModel, config: FitConfig, device: torch.device
+    ) -> None:
         self.views = list(views)
         self.config = config
         self.device = device
@@ -275,8 +297,9 @@ class _Trainer:
         _, self.extent = scene_extent(views)
         self.params = GaussianParameters(init.to(device, torch.float32), config.learning_rates(self.extent))
         self.generator = torch.Generator().manual_seed(config.seed)
-        self.density = config.strategy.initialize_state(len(self.params), extent=self.extent,
-                                                        generator=self.generator, device=device)
+        self.density = config.strategy.initialize_state(
+            len(self.params), extent=self.extent, generator=self.generator, device=device
+        )
         self.order = torch.randperm(len(self.views), generator=self.generator)
         self.position = 0
         self.iteration = 0  # iterations completed
@@ -295,24 +318,40 @@ class _Trainer:
     def step(self) -> tuple[float, float, dict[str, int] | None]:
         c = self.config
         it = self.iteration + 1
-        self.params.set_lr("means", exponential_lr(it, c.lr_means * self.extent, c.lr_means_final * self.extent,
-                                                   c.iterations, delay_mult=c.lr_means_delay_mult))
+        self.params.set_lr(
+            "means",
+            exponential_lr(
+                it,
+                c.lr_means * self.extent,
+                c.lr_means_final * self.extent,
+                c.iterations,
+                delay_mult=c.lr_means_delay_mult,
+            ),
+        )
         if it % c.sh_increase_every == 0:
             self.active_sh = min(self.active_sh + 1, c.sh_degree)
         index = self.next_view()
         view = self.views[index]
         model = self.params.model()
         kwargs = {"tile_size": c.tile_size} if self.backend == "torch" else {}
-        out = render(model, [view.camera], self.backend, with_geometry=False, sh_degree=self.active_sh,
-                     background=c.background, **kwargs)
+        out = render(
+            model,
+            [view.camera],
+            self.backend,
+            with_geometry=False,
+            sh_degree=self.active_sh,
+            background=c.background,
+            **kwargs,
+        )
         loss, l1 = photometric_loss(out.rgb, self.images[index], self.masks[index], c.lambda_dssim)
         if loss.requires_grad:  # False only when no Gaussian is visible in the view
             loss.backward()
         with torch.no_grad():
             self.params.optimizer.step()
             self.params.optimizer.zero_grad(set_to_none=True)  # parameters only: means2d keeps its .grad
-            result = c.strategy.step_post_backward(self.params, self.density, it, out.meta[0],
-                                                   view.camera.width, view.camera.height)
+            result = c.strategy.step_post_backward(
+                self.params, self.density, it, out.meta[0], view.camera.width, view.camera.height
+            )
         event = None if result is None else {"iteration": it, **dataclasses.asdict(result)}
         self.iteration = it
         return float(loss.detach()), float(l1.detach()), event
@@ -323,15 +362,23 @@ class _Trainer:
 
         folder.mkdir(parents=True, exist_ok=True)
         tensors = {k: v.detach().cpu().contiguous() for k, v in self.params.state_tensors().items()}
-        tensors.update({f"stats/{k}": v.detach().cpu().contiguous()
-                        for k, v in self.density.stats.tensors().items()})
+        tensors.update(
+            {f"stats/{k}": v.detach().cpu().contiguous() for k, v in self.density.stats.tensors().items()}
+        )
         tensors["rng/generator"] = self.generator.get_state().clone()
         tensors["rng/order"] = self.order.clone()
         with atomic_path(folder / STATE_TENSORS) as tmp:
             save_file(tensors, str(tmp))
-        state = {"format": CHECKPOINT_FORMAT, "iteration": self.iteration, "position": self.position,
-                 "active_sh": self.active_sh, "extent": self.extent, "config": self.config.to_json(),
-                 "views": list(view_names), "tensors_sha256": sha256_file(folder / STATE_TENSORS)}
+        state = {
+            "format": CHECKPOINT_FORMAT,
+            "iteration": self.iteration,
+            "position": self.position,
+            "active_sh": self.active_sh,
+            "extent": self.extent,
+            "config": self.config.to_json(),
+            "views": list(view_names),
+            "tensors_sha256": sha256_file(folder / STATE_TENSORS),
+        }
         write_text_atomic(folder / STATE_JSON, json.dumps(state, indent=1, sort_keys=True) + "\n")
 
     def load(self, folder: Path, view_names: Sequence[str]) -> None:
@@ -342,9 +389,13 @@ class _Trainer:
         try:
             state = json.loads(json_path.read_text(encoding="utf-8"))
         except (OSError, json.JSONDecodeError) as exc:
-            raise CheckpointError(f"cannot read checkpoint state ({exc.__class__.__name__})", json_path) from exc
+            raise CheckpointError(
+                f"cannot read checkpoint state ({exc.__class__.__name__})", json_path
+            ) from exc
         if state.get("format") != CHECKPOINT_FORMAT:
-            raise CheckpointError(f"format is {state.get('format')!r}, expected {CHECKPOINT_FORMAT!r}", json_path)
+            raise CheckpointError(
+                f"format is {state.get('format')!r}, expected {CHECKPOINT_FORMAT!r}", json_path
+            )
         if saved_config(state, json_path) != self.config:
             raise CheckpointError("checkpoint was written with a different fit configuration", json_path)
         if state.get("views") != list(view_names):
@@ -355,10 +406,12 @@ class _Trainer:
             tensors = load_file(str(tensor_path))
         except (SafetensorError, OSError) as exc:
             raise CheckpointError(f"cannot read tensors ({exc})", tensor_path) from exc
-        self.params.load_state_tensors({k: v.to(self.device) for k, v in tensors.items()
-                                        if k.startswith(("param/", "adam/"))})
-        self.density.stats = DensityStats(*(tensors[f"stats/{k}"].to(self.device)
-                                            for k in ("grad_sum", "count", "max_radius")))
+        self.params.load_state_tensors(
+            {k: v.to(self.device) for k, v in tensors.items() if k.startswith(("param/", "adam/"))}
+        )
+        self.density.stats = DensityStats(
+            *(tensors[f"stats/{k}"].to(self.device) for k in ("grad_sum", "count", "max_radius"))
+        )
         self.generator.set_state(tensors["rng/generator"])
         self.order = tensors["rng/order"]
         self.iteration = int(state["iteration"])
@@ -377,11 +430,20 @@ def saved_config(state: Mapping[str, object], json_path: Path) -> FitConfig:
         raise CheckpointError(f"cannot read the checkpoint's fit configuration ({exc})", json_path) from None
 
 
-def fit_gaussians(views: Sequence[FitView], config: FitConfig, *, points: np.ndarray | None = None,
-                  colors: np.ndarray | None = None, device: str | torch.device = "cpu",
-                  checkpoint_dir: str | os.PathLike[str] | None = None, checkpoint_every: int = 0,
-                  resume: bool = True, stop_after: int | None = None, progress: bool = True,
-                  on_iteration: Callable[[int, float], None] | None = None) -> FitResult:
+def fit_gaussians(
+    views: Sequence[FitView],
+    config: FitConfig,
+    *,
+    points: np.ndarray | None = None,
+    colors: np.ndarray | None = None,
+    device: str | torch.device = "cpu",
+    checkpoint_dir: str | os.PathLike[str] | None = None,
+    checkpoint_every: int = 0,
+    resume: bool = True,
+    stop_after: int | None = None,
+    progress: bool = True,
+    on_iteration: Callable[[int, float], None] | None = None,
+) -> FitResult:
     """Fit 3D Gaussians to posed images.
 
     Args:
@@ -413,8 +475,15 @@ def fit_gaussians(views: Sequence[FitView], config: FitConfig, *, points: np.nda
     last = config.iterations if stop_after is None else min(config.iterations, stop_after)
     from tqdm.auto import tqdm
 
-    bar = tqdm(total=config.iterations, initial=trainer.iteration, disable=not progress, desc="fit", unit="it",
-               dynamic_ncols=True, leave=False)
+    bar = tqdm(
+        total=config.iterations,
+        initial=trainer.iteration,
+        disable=not progress,
+        desc="fit",
+        unit="it",
+        dynamic_ncols=True,
+        leave=False,
+    )
     try:
         while trainer.iteration < last:
             loss, l1, event = trainer.step()
@@ -437,12 +506,24 @@ def fit_gaussians(views: Sequence[FitView], config: FitConfig, *, points: np.nda
     return result
 
 
-def fit_scene(scene_dir: str | os.PathLike[str], out_ply: str | os.PathLike[str], config: FitConfig, *,
-              frames: Sequence[str] | None = None, device: str | torch.device = "cpu",
-              checkpoint_dir: str | os.PathLike[str] | None = None, checkpoint_every: int = 0, resume: bool = True,
-              progress: bool = True, dataset: str | None = None, scene_name: str | None = None,
-              loader_options: dict[str, object] | None = None, downscale: int = 1, init: str = "auto",
-              on_iteration: Callable[[int, float], None] | None = None) -> FitResult:
+def fit_scene(
+    scene_dir: str | os.PathLike[str],
+    out_ply: str | os.PathLike[str],
+    config: FitConfig,
+    *,
+    frames: Sequence[str] | None = None,
+    device: str | torch.device = "cpu",
+    checkpoint_dir: str | os.PathLike[str] | None = None,
+    checkpoint_every: int = 0,
+    resume: bool = True,
+    progress: bool = True,
+    dataset: str | None = None,
+    scene_name: str | None = None,
+    loader_options: dict[str, object] | None = None,
+    downscale: int = 1,
+    init: str = "auto",
+    on_iteration: Callable[[int, float], None] | None = None,
+) -> FitResult:
     """Fit a scene folder's training frames (or ``frames``) and write the standard 3DGS PLY to ``out_ply``.
 
     The scene is read through the loaders (:func:`setdiff_bench.gaussians.fit_data.load_fit_scene`;
@@ -461,8 +542,17 @@ def fit_scene(scene_dir: str | os.PathLike[str], out_ply: str | os.PathLike[str]
     from setdiff_bench.gaussians.triangulate import initial_points
 
     points, colors = initial_points(scene, views, init)
-    result = fit_gaussians(views, config, points=points, colors=colors, device=device,
-                           checkpoint_dir=checkpoint_dir, checkpoint_every=checkpoint_every, resume=resume,
-                           progress=progress, on_iteration=on_iteration)
+    result = fit_gaussians(
+        views,
+        config,
+        points=points,
+        colors=colors,
+        device=device,
+        checkpoint_dir=checkpoint_dir,
+        checkpoint_every=checkpoint_every,
+        resume=resume,
+        progress=progress,
+        on_iteration=on_iteration,
+    )
     write_ply(out_ply, result.model)
     return result

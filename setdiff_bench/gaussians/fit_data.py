@@ -46,8 +46,13 @@ class FitView:
     mask: torch.Tensor | None
 
 
-def load_fit_scene(scene_dir: str | os.PathLike[str], *, dataset: str | None = None, scene: str | None = None,
-                   options: Mapping[str, Any] | None = None) -> Scene:
+def load_fit_scene(
+    scene_dir: str | os.PathLike[str],
+    *,
+    dataset: str | None = None,
+    scene: str | None = None,
+    options: Mapping[str, Any] | None = None,
+) -> Scene:
     """Load the scene folder with the loader the registry recognises it as (see the module docstring);
     with ``dataset``, ``scene_dir`` is that dataset's root and ``scene`` picks one of its scenes.
 
@@ -67,8 +72,11 @@ def load_fit_scene(scene_dir: str | os.PathLike[str], *, dataset: str | None = N
     key = detect_dataset(folder)
     if key is None:
         layouts = ", ".join(name for name, _ in SCENE_DETECTORS)
-        raise DatasetError(f"no loader recognises this folder as a scene (layouts: {layouts}); "
-                           "for a dataset root pass --dataset and --root", folder)
+        raise DatasetError(
+            f"no loader recognises this folder as a scene (layouts: {layouts}); "
+            "for a dataset root pass --dataset and --root",
+            folder,
+        )
     scenes = load_scenes(key, folder, **({"masks": "optional"} if "masks" in loader_options(key) else {}))
     if len(scenes) != 1:
         raise DatasetError(f"expected one scene in the folder, found {len(scenes)}", folder)

@@ -40,7 +40,9 @@ class GaussianModel:
         expected = {"means": (n, 3), "quats": (n, 4), "log_scales": (n, 3), "opacity_logits": (n,)}
         for name, shape in expected.items():
             if tuple(getattr(self, name).shape) != shape:
-                raise ValueError(f"GaussianModel.{name} must have shape {shape}, got {tuple(getattr(self, name).shape)}")
+                raise ValueError(
+                    f"GaussianModel.{name} must have shape {shape}, got {tuple(getattr(self, name).shape)}"
+                )
         if self.sh.ndim != 3 or self.sh.shape[0] != n or self.sh.shape[2] != 3:
             raise ValueError(f"GaussianModel.sh must be (N, K, 3), got {tuple(self.sh.shape)}")
         if self.sh.shape[1] not in (1, 4, 9, 16):
@@ -86,7 +88,9 @@ class GaussianModel:
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
     def to(self, device: torch.device | str, dtype: torch.dtype | None = None) -> GaussianModel:
-        return GaussianModel(**{k: v.to(device=device, dtype=dtype or v.dtype) for k, v in self.tensors().items()})
+        return GaussianModel(
+            **{k: v.to(device=device, dtype=dtype or v.dtype) for k, v in self.tensors().items()}
+        )
 
     def detach(self) -> GaussianModel:
         return GaussianModel(**{k: v.detach() for k, v in self.tensors().items()})
@@ -106,9 +110,16 @@ class GaussianModel:
                 raise PlyError(f"{bad} Gaussians have NaN or infinite {name}", source)
 
     @classmethod
-    def from_points(cls, points: np.ndarray | torch.Tensor, colors: np.ndarray | torch.Tensor | None = None, *,
-                    sh_degree: int = 3, initial_opacity: float = 0.1, scale_neighbours: int = 3,
-                    min_scale: float = 1e-4) -> GaussianModel:
+    def from_points(
+        cls,
+        points: np.ndarray | torch.Tensor,
+        colors: np.ndarray | torch.Tensor | None = None,
+        *,
+        sh_degree: int = 3,
+        initial_opacity: float = 0.1,
+        scale_neighbours: int = 3,
+        min_scale: float = 1e-4,
+    ) -> GaussianModel:
         """Isotropic Gaussians at ``points`` ``(P, 3)``, the standard 3DGS initialisation.
 
         Scale = RMS distance to the ``scale_neighbours`` nearest points (the Inria ``distCUDA2``
@@ -139,9 +150,9 @@ def knn_mean_distance(points: torch.Tensor, k: int, chunk: int = 4096) -> torch.
     k = min(k, n - 1)
     out = torch.empty(n)
     for start in range(0, n, chunk):
-        block = points[start:start + chunk]
+        block = points[start : start + chunk]
         d2 = torch.cdist(block, points).pow(2)
         d2[torch.arange(block.shape[0]), torch.arange(start, start + block.shape[0])] = float("inf")
         nearest = torch.topk(d2, k, dim=1, largest=False).values
-        out[start:start + block.shape[0]] = nearest.clamp_min(0).mean(dim=1).sqrt()
+        out[start : start + block.shape[0]] = nearest.clamp_min(0).mean(dim=1).sqrt()
     return out

@@ -20,14 +20,23 @@ from setdiff_bench.gaussians.model import GaussianModel
 PARAM_NAMES = ("means", "sh_dc", "sh_rest", "opacity_logits", "log_scales", "quats")
 
 
-def exponential_lr(step: int, lr_init: float, lr_final: float, max_steps: int, *, delay_steps: int = 0,
-                   delay_mult: float = 1.0) -> float:
+def exponential_lr(
+    step: int,
+    lr_init: float,
+    lr_final: float,
+    max_steps: int,
+    *,
+    delay_steps: int = 0,
+    delay_mult: float = 1.0,
+) -> float:
     """Inria's ``get_expon_lr_func``: log-linear interpolation from ``lr_init`` to ``lr_final`` over
     ``max_steps``, optionally warmed up over ``delay_steps`` with a cosine ramp starting at ``delay_mult``."""
     if step < 0 or (lr_init == 0.0 and lr_final == 0.0):
         return 0.0
     if delay_steps > 0:
-        delay_rate = delay_mult + (1 - delay_mult) * math.sin(0.5 * math.pi * min(max(step / delay_steps, 0.0), 1.0))
+        delay_rate = delay_mult + (1 - delay_mult) * math.sin(
+            0.5 * math.pi * min(max(step / delay_steps, 0.0), 1.0)
+        )
     else:
         delay_rate = 1.0
     t = min(max(step / max(max_steps, 1), 0.0), 1.0)
@@ -46,13 +55,19 @@ class GaussianParameters:
     def __init__(self, model: GaussianModel, learning_rates: Mapping[str, float]) -> None:
         m = model.detach()
         tensors = {
-            "means": m.means, "sh_dc": m.sh[:, :1, :], "sh_rest": m.sh[:, 1:, :],
-            "opacity_logits": m.opacity_logits, "log_scales": m.log_scales, "quats": m.quats,
+            "means": m.means,
+            "sh_dc": m.sh[:, :1, :],
+            "sh_rest": m.sh[:, 1:, :],
+            "opacity_logits": m.opacity_logits,
+            "log_scales": m.log_scales,
+            "quats": m.quats,
         }
         self.params = {k: v.clone().contiguous().requires_grad_(True) for k, v in tensors.items()}
         self.optimizer = torch.optim.Adam(
             [{"params": [self.params[k]], "lr": float(learning_rates[k]), "name": k} for k in PARAM_NAMES],
-            lr=0.0, eps=1e-15)
+            lr=0.0,
+            eps=1e-15,
+        )
 
     def __len__(self) -> int:
         return int(self.params["means"].shape[0])
@@ -101,7 +116,9 @@ class GaussianParameters:
                 shape = (-1,) + (1,) * (old.dim() - 1)
                 keep = has_source.view(shape)
                 for key in ("exp_avg", "exp_avg_sq"):
-                    state[key] = torch.where(keep, state[key][safe], torch.zeros_like(state[key][safe])).contiguous()
+                    state[key] = torch.where(
+                        keep, state[key][safe], torch.zeros_like(state[key][safe])
+                    ).contiguous()
                 self.optimizer.state[fresh] = state
             group["params"][0] = fresh
             self.params[name] = fresh

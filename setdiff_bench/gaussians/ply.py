@@ -23,15 +23,41 @@ from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.io.atomic import atomic_path
 
 _PLY_TYPES = {
-    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
-    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
-    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
-    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+    "char": "i1",
+    "int8": "i1",
+    "uchar": "u1",
+    "uint8": "u1",
+    "short": "i2",
+    "int16": "i2",
+    "ushort": "u2",
+    "uint16": "u2",
+    "int": "i4",
+    "int32": "i4",
+    "uint": "u4",
+    "uint32": "u4",
+    "float": "f4",
+    "float32": "f4",
+    "double": "f8",
+    "float64": "f8",
 }
 _MAX_HEADER_BYTES = 1 << 16
 _REST_NAME = re.compile(r"^f_rest_[0-9]{1,4}$")
-_REQUIRED = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
-             "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+_REQUIRED = [
+    "x",
+    "y",
+    "z",
+    "f_dc_0",
+    "f_dc_1",
+    "f_dc_2",
+    "opacity",
+    "scale_0",
+    "scale_1",
+    "scale_2",
+    "rot_0",
+    "rot_1",
+    "rot_2",
+    "rot_3",
+]
 
 
 def read_ply(path: str | os.PathLike[str]) -> GaussianModel:
@@ -54,8 +80,8 @@ def read_ply(path: str | os.PathLike[str]) -> GaussianModel:
     malformed = next((n for n in rest_names if not _REST_NAME.match(n)), None)
     if malformed is not None:
         raise PlyError(f"malformed property name {malformed!r} (expected f_rest_<number>)", path)
-    rest = sorted(rest_names, key=lambda n: int(n[len("f_rest_"):]))
-    if [int(n[len("f_rest_"):]) for n in rest] != list(range(len(rest))):
+    rest = sorted(rest_names, key=lambda n: int(n[len("f_rest_") :]))
+    if [int(n[len("f_rest_") :]) for n in rest] != list(range(len(rest))):
         raise PlyError("f_rest_* properties are not numbered 0..n-1", path)
     bases = len(rest) // 3 + 1
     if len(rest) % 3 or bases not in (1, 4, 9, 16):
@@ -69,11 +95,17 @@ def read_ply(path: str | os.PathLike[str]) -> GaussianModel:
         needed = dtype.itemsize * count
         available = len(raw) - body_offset
         if available < needed:
-            raise PlyError(f"header declares {count} vertices ({needed} bytes) but only {available} bytes follow "
-                           f"({available // max(dtype.itemsize, 1)} vertices)", path)
+            raise PlyError(
+                f"header declares {count} vertices ({needed} bytes) but only {available} bytes follow "
+                f"({available // max(dtype.itemsize, 1)} vertices)",
+                path,
+            )
         if available > needed:
-            raise PlyError(f"{available - needed} bytes after the {count} declared vertices "
-                           "(vertex count wrong, or unsupported extra elements)", path)
+            raise PlyError(
+                f"{available - needed} bytes after the {count} declared vertices "
+                "(vertex count wrong, or unsupported extra elements)",
+                path,
+            )
         data = np.frombuffer(raw, dtype=dtype, count=count, offset=body_offset)
         columns = {name: _as_float32(data[name]) for name, _ in props}
 
@@ -164,7 +196,9 @@ def _parse_header(raw: bytes, path: Path) -> tuple[str, int, list[tuple[str, str
     if not vertex:
         raise PlyError("no 'element vertex' in header", path)
     if elements[0][0] != "vertex" or any(e[1] > 0 for e in elements[1:]):
-        raise PlyError("only a single leading vertex element is supported (other elements must be empty)", path)
+        raise PlyError(
+            "only a single leading vertex element is supported (other elements must be empty)", path
+        )
     _, count, props = vertex[0]
     if any(kind == "list" for _, kind in props):
         raise PlyError("list properties are not supported in the vertex element", path)

@@ -25,10 +25,21 @@ Backend = Literal["torch", "gsplat"]
 __all__ = ["Backend", "RenderOutput", "camera_tensors", "clip_centres", "render"]
 
 
-def render(gaussians: GaussianModel, cameras: Sequence[Camera] | Camera, backend: Backend = "torch", *,
-           with_geometry: bool = True, sh_degree: int | None = None, background: Sequence[float] | None = None,
-           cmap_bound: float | None = None, cmap_center: Sequence[float] = (0.0, 0.0, 0.0),
-           near: float = 0.01, far: float = 1e10, eps2d: float = 0.3, tile_size: int = 8) -> RenderOutput:
+def render(
+    gaussians: GaussianModel,
+    cameras: Sequence[Camera] | Camera,
+    backend: Backend = "torch",
+    *,
+    with_geometry: bool = True,
+    sh_degree: int | None = None,
+    background: Sequence[float] | None = None,
+    cmap_bound: float | None = None,
+    cmap_center: Sequence[float] = (0.0, 0.0, 0.0),
+    near: float = 0.01,
+    far: float = 1e10,
+    eps2d: float = 0.3,
+    tile_size: int = 8,
+) -> RenderOutput:
     """Render Gaussians from one or more cameras of the same size.
 
     Args:
@@ -52,24 +63,59 @@ def render(gaussians: GaussianModel, cameras: Sequence[Camera] | Camera, backend
     if len(sizes) != 1:
         raise UsageError(f"all cameras of one render call must share a size, got {sorted(sizes)}")
     if backend == "gsplat":
-        return gsplat_backend.render(gaussians, cams, with_geometry=with_geometry, sh_degree=sh_degree,
-                                     background=background, cmap_bound=cmap_bound, cmap_center=cmap_center,
-                                     near=near, far=far, eps2d=eps2d, tile_size=tile_size)
+        return gsplat_backend.render(
+            gaussians,
+            cams,
+            with_geometry=with_geometry,
+            sh_degree=sh_degree,
+            background=background,
+            cmap_bound=cmap_bound,
+            cmap_center=cmap_center,
+            near=near,
+            far=far,
+            eps2d=eps2d,
+            tile_size=tile_size,
+        )
     if backend != "torch":
         raise UsageError(f"unknown render backend {backend!r}; use 'torch' or 'gsplat'")
-    return _render_torch(gaussians, cams, with_geometry, sh_degree, background, cmap_bound, cmap_center,
-                         near, far, eps2d, tile_size)
+    return _render_torch(
+        gaussians,
+        cams,
+        with_geometry,
+        sh_degree,
+        background,
+        cmap_bound,
+        cmap_center,
+        near,
+        far,
+        eps2d,
+        tile_size,
+    )
 
 
-def camera_tensors(camera: Camera, device: torch.device, dtype: torch.dtype) -> tuple[torch.Tensor, torch.Tensor]:
+def camera_tensors(
+    camera: Camera, device: torch.device, dtype: torch.dtype
+) -> tuple[torch.Tensor, torch.Tensor]:
     """``(w2c (4, 4), K (3, 3))`` of a camera as tensors (pinhole; distortion is not rendered)."""
-    return (torch.tensor(np.array(camera.w2c), device=device, dtype=dtype),
-            torch.tensor(np.array(camera.K), device=device, dtype=dtype))
+    return (
+        torch.tensor(np.array(camera.w2c), device=device, dtype=dtype),
+        torch.tensor(np.array(camera.K), device=device, dtype=dtype),
+    )
 
 
-def _render_torch(g: GaussianModel, cams: list[Camera], with_geometry: bool, sh_degree: int | None,
-                  background: Sequence[float] | None, cmap_bound: float | None, cmap_center: Sequence[float],
-                  near: float, far: float, eps2d: float, tile_size: int) -> RenderOutput:
+def _render_torch(
+    g: GaussianModel,
+    cams: list[Camera],
+    with_geometry: bool,
+    sh_degree: int | None,
+    background: Sequence[float] | None,
+    cmap_bound: float | None,
+    cmap_center: Sequence[float],
+    near: float,
+    far: float,
+    eps2d: float,
+    tile_size: int,
+) -> RenderOutput:
     device, dtype = g.means.device, g.means.dtype
     height, width = cams[0].height, cams[0].width
     scales, opacities, quats = g.scales, g.opacities, g.quats
@@ -77,8 +123,9 @@ def _render_torch(g: GaussianModel, cams: list[Camera], with_geometry: bool, sh_
     rgbs, cmaps, depths, alphas, meta = [], [], [], [], []
     for cam in cams:
         w2c, K = camera_tensors(cam, device, dtype)
-        proj = torch_ref.project(g.means, quats, scales, opacities, w2c, K, width, height,
-                                 near=near, far=far, eps2d=eps2d)
+        proj = torch_ref.project(
+            g.means, quats, scales, opacities, w2c, K, width, height, near=near, far=far, eps2d=eps2d
+        )
         center = -w2c[:3, :3].T @ w2c[:3, 3]
         colors = g.colors(center, sh_degree)
         if with_geometry:

@@ -10,9 +10,22 @@ import torch
 
 SH_C0 = 0.28209479177387814
 SH_C1 = 0.4886025119029199
-SH_C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396)
-SH_C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
-         -0.4570457994644658, 1.445305721320277, -0.5900435899266435)
+SH_C2 = (
+    1.0925484305920792,
+    -1.0925484305920792,
+    0.31539156525252005,
+    -1.0925484305920792,
+    0.5462742152960396,
+)
+SH_C3 = (
+    -0.5900435899266435,
+    2.890611442640554,
+    -0.4570457994644658,
+    0.3731763325901154,
+    -0.4570457994644658,
+    1.445305721320277,
+    -0.5900435899266435,
+)
 
 
 def num_sh_bases(degree: int) -> int:
@@ -45,23 +58,29 @@ def eval_sh(degree: int, coeffs: torch.Tensor, dirs: torch.Tensor) -> torch.Tens
     if degree < 1:
         return result
     x, y, z = dirs[..., 0:1], dirs[..., 1:2], dirs[..., 2:3]
-    result = result - SH_C1 * y * coeffs[..., 1, :] + SH_C1 * z * coeffs[..., 2, :] - SH_C1 * x * coeffs[..., 3, :]
+    result = (
+        result - SH_C1 * y * coeffs[..., 1, :] + SH_C1 * z * coeffs[..., 2, :] - SH_C1 * x * coeffs[..., 3, :]
+    )
     if degree < 2:
         return result
     xx, yy, zz, xy, yz, xz = x * x, y * y, z * z, x * y, y * z, x * z
-    result = (result
-              + SH_C2[0] * xy * coeffs[..., 4, :]
-              + SH_C2[1] * yz * coeffs[..., 5, :]
-              + SH_C2[2] * (2.0 * zz - xx - yy) * coeffs[..., 6, :]
-              + SH_C2[3] * xz * coeffs[..., 7, :]
-              + SH_C2[4] * (xx - yy) * coeffs[..., 8, :])
+    result = (
+        result
+        + SH_C2[0] * xy * coeffs[..., 4, :]
+        + SH_C2[1] * yz * coeffs[..., 5, :]
+        + SH_C2[2] * (2.0 * zz - xx - yy) * coeffs[..., 6, :]
+        + SH_C2[3] * xz * coeffs[..., 7, :]
+        + SH_C2[4] * (xx - yy) * coeffs[..., 8, :]
+    )
     if degree < 3:
         return result
-    return (result
-            + SH_C3[0] * y * (3 * xx - yy) * coeffs[..., 9, :]
-            + SH_C3[1] * xy * z * coeffs[..., 10, :]
-            + SH_C3[2] * y * (4 * zz - xx - yy) * coeffs[..., 11, :]
-            + SH_C3[3] * z * (2 * zz - 3 * xx - 3 * yy) * coeffs[..., 12, :]
-            + SH_C3[4] * x * (4 * zz - xx - yy) * coeffs[..., 13, :]
-            + SH_C3[5] * z * (xx - yy) * coeffs[..., 14, :]
-            + SH_C3[6] * x * (xx - 3 * yy) * coeffs[..., 15, :])
+    return (
+        result
+        + SH_C3[0] * y * (3 * xx - yy) * coeffs[..., 9, :]
+        + SH_C3[1] * xy * z * coeffs[..., 10, :]
+        + SH_C3[2] * y * (4 * zz - xx - yy) * coeffs[..., 11, :]
+        + SH_C3[3] * z * (2 * zz - 3 * xx - 3 * yy) * coeffs[..., 12, :]
+        + SH_C3[4] * x * (4 * zz - xx - yy) * coeffs[..., 13, :]
+        + SH_C3[5] * z * (xx - yy) * coeffs[..., 14, :]
+        + SH_C3[6] * x * (xx - 3 * yy) * coeffs[..., 15, :]
+    )

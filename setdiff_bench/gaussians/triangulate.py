@@ -45,7 +45,9 @@ def triangulate_views(views: Sequence[FitView]) -> tuple[np.ndarray, np.ndarray]
     if any(v.camera.distortion is not None and not v.camera.distortion.is_zero() for v in views):
         raise DatasetError("triangulation needs pinhole views; undistort them first (load_fit_views does)")
     previous_level = pycolmap.logging.minloglevel
-    pycolmap.logging.minloglevel = 2  # COLMAP's per-image INFO lines would flood the progress bar; errors stay
+    pycolmap.logging.minloglevel = (
+        2  # COLMAP's per-image INFO lines would flood the progress bar; errors stay
+    )
     try:
         return _triangulate(views, pycolmap)
     finally:
@@ -61,8 +63,12 @@ def _triangulate(views: Sequence[FitView], pycolmap) -> tuple[np.ndarray, np.nda
             pixels = np.rint(view.image.permute(1, 2, 0).clamp(0, 1).numpy() * 255).astype(np.uint8)
             cv2.imwrite(str(work / "images" / name), np.ascontiguousarray(pixels[..., ::-1]))
         database_path = work / "database.db"
-        pycolmap.extract_features(database_path, work / "images", camera_mode=pycolmap.CameraMode.PER_IMAGE,
-                                  device=pycolmap.Device.cpu)
+        pycolmap.extract_features(
+            database_path,
+            work / "images",
+            camera_mode=pycolmap.CameraMode.PER_IMAGE,
+            device=pycolmap.Device.cpu,
+        )
         pycolmap.match_exhaustive(database_path, device=pycolmap.Device.cpu)
         reconstruction = pycolmap.Reconstruction()
         database = pycolmap.Database.open(str(database_path))
@@ -70,18 +76,26 @@ def _triangulate(views: Sequence[FitView], pycolmap) -> tuple[np.ndarray, np.nda
             for image in database.read_all_images():
                 camera = views[names.index(image.name)].camera
                 K = camera.K
-                colmap_camera = pycolmap.Camera(camera_id=image.camera_id, model="PINHOLE", width=camera.width,
-                                                height=camera.height, params=[K[0, 0], K[1, 1], K[0, 2], K[1, 2]])
+                colmap_camera = pycolmap.Camera(
+                    camera_id=image.camera_id,
+                    model="PINHOLE",
+                    width=camera.width,
+                    height=camera.height,
+                    params=[K[0, 0], K[1, 1], K[0, 2], K[1, 2]],
+                )
                 database.update_camera(colmap_camera)
                 reconstruction.add_camera_with_trivial_rig(colmap_camera)
                 rotation = pycolmap.Rotation3d(matrix_to_quaternion(camera.w2c[:3, :3], order="xyzw"))
                 reconstruction.add_image_with_trivial_frame(
                     pycolmap.Image(name=image.name, camera_id=image.camera_id, image_id=image.image_id),
-                    pycolmap.Rigid3d(rotation, camera.w2c[:3, 3]))
+                    pycolmap.Rigid3d(rotation, camera.w2c[:3, 3]),
+                )
         finally:
             database.close()
         (work / "model").mkdir()
-        reconstruction = pycolmap.triangulate_points(reconstruction, database_path, work / "images", work / "model")
+        reconstruction = pycolmap.triangulate_points(
+            reconstruction, database_path, work / "images", work / "model"
+        )
     points = list(reconstruction.points3D.values())
     if not points:
         return np.zeros((0, 3)), np.zeros((0, 3), np.uint8)
@@ -90,8 +104,9 @@ def _triangulate(views: Sequence[FitView], pycolmap) -> tuple[np.ndarray, np.nda
     return xyz, rgb
 
 
-def initial_points(scene: Scene, views: Sequence[FitView], mode: str = "auto"
-                   ) -> tuple[np.ndarray | None, np.ndarray | None]:
+def initial_points(
+    scene: Scene, views: Sequence[FitView], mode: str = "auto"
+) -> tuple[np.ndarray | None, np.ndarray | None]:
     """``(xyz, rgb)`` to start a fit from, or ``(None, None)`` for a random start (module docstring)."""
     if mode not in INIT_MODES:
         raise UsageError(f"unknown init {mode!r}; use one of {', '.join(INIT_MODES)}", "--init")
@@ -100,15 +115,19 @@ def initial_points(scene: Scene, views: Sequence[FitView], mode: str = "auto"
         return None, None
     if mode == "sparse" or (mode == "auto" and has_sparse):
         if not has_sparse:
-            raise DatasetError("the scene has no sparse points (points3D); use --init triangulate or random",
-                               scene.root)
+            raise DatasetError(
+                "the scene has no sparse points (points3D); use --init triangulate or random", scene.root
+            )
         return scene.points3d, scene.points_rgb
     xyz, rgb = triangulate_views(views)
     if len(xyz) < MIN_TRIANGULATED:
         if mode == "triangulate":
-            raise DatasetError(f"triangulation from the known poses gave {len(xyz)} points (< {MIN_TRIANGULATED})",
-                               scene.root)
-        warnings.warn(f"{scene.root}: triangulation gave {len(xyz)} points; starting from random points",
-                      stacklevel=2)
+            raise DatasetError(
+                f"triangulation from the known poses gave {len(xyz)} points (< {MIN_TRIANGULATED})",
+                scene.root,
+            )
+        warnings.warn(
+            f"{scene.root}: triangulation gave {len(xyz)} points; starting from random points", stacklevel=2
+        )
         return None, None
     return xyz, rgb

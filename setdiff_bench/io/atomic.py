@@ -67,8 +67,9 @@ def _temporary_beside(destination: Path, ext: str) -> Path:
     the name keeps the extension (libraries such as OpenImageIO pick the format from it) and the writer's
     tag (:func:`is_stale_temporary`)."""
     destination.parent.mkdir(parents=True, exist_ok=True)
-    fd, name = tempfile.mkstemp(prefix=f".{destination.stem}.{writer_tag()}.", suffix=f".tmp{ext}",
-                                dir=destination.parent)
+    fd, name = tempfile.mkstemp(
+        prefix=f".{destination.stem}.{writer_tag()}.", suffix=f".tmp{ext}", dir=destination.parent
+    )
     os.close(fd)
     return Path(name)
 

@@ -56,7 +56,9 @@ def read_image_raw(path: PathLike, dtype: str = "float") -> np.ndarray:
     if pixels.ndim == 2:
         pixels = pixels[:, :, None]
     if pixels.shape[:2] != (spec.height, spec.width) or pixels.shape[2] != spec.nchannels:
-        raise ImageError(f"decoded shape {pixels.shape} does not match header {spec.height}x{spec.width}", path)
+        raise ImageError(
+            f"decoded shape {pixels.shape} does not match header {spec.height}x{spec.width}", path
+        )
     return np.ascontiguousarray(pixels)
 
 
@@ -135,8 +137,15 @@ def write_png(path: PathLike, image: np.ndarray, *, atomic: bool = True) -> None
     _write(path, np.ascontiguousarray(array), oiio.UINT8, None, {"png:compressionLevel": 6}, atomic)
 
 
-def write_exr(path: PathLike, image: np.ndarray, channel_names: tuple[str, ...] | None = None,
-              half: bool = False, attributes: dict[str, object] | None = None, *, atomic: bool = True) -> None:
+def write_exr(
+    path: PathLike,
+    image: np.ndarray,
+    channel_names: tuple[str, ...] | None = None,
+    half: bool = False,
+    attributes: dict[str, object] | None = None,
+    *,
+    atomic: bool = True,
+) -> None:
     """Write a float EXR atomically (ZIP compression, float32 unless ``half``; ``atomic`` as :func:`write_png`).
 
     ``attributes`` are extra header attributes; OpenEXR stamps the write time as ``DateTime`` unless one
@@ -145,8 +154,14 @@ def write_exr(path: PathLike, image: np.ndarray, channel_names: tuple[str, ...] 
     array = np.ascontiguousarray(np.asarray(image, dtype=np.float32))
     if array.ndim == 2:
         array = array[:, :, None]
-    _write(path, array, oiio.HALF if half else oiio.FLOAT, channel_names,
-           {"compression": "zip", **(attributes or {})}, atomic)
+    _write(
+        path,
+        array,
+        oiio.HALF if half else oiio.FLOAT,
+        channel_names,
+        {"compression": "zip", **(attributes or {})},
+        atomic,
+    )
 
 
 def to_tensor_chw(image: np.ndarray) -> torch.Tensor:
@@ -159,8 +174,14 @@ def to_numpy_hwc(tensor: torch.Tensor) -> np.ndarray:
     return tensor.detach().to("cpu", torch.float32).permute(1, 2, 0).contiguous().numpy()
 
 
-def _write(path: PathLike, array: np.ndarray, fmt: object, channel_names: tuple[str, ...] | None,
-           attributes: dict[str, object], atomic: bool = True) -> None:
+def _write(
+    path: PathLike,
+    array: np.ndarray,
+    fmt: object,
+    channel_names: tuple[str, ...] | None,
+    attributes: dict[str, object],
+    atomic: bool = True,
+) -> None:
     height, width, channels = array.shape
     spec = oiio.ImageSpec(width, height, channels, fmt)
     if channel_names is not None:
@@ -169,7 +190,7 @@ def _write(path: PathLike, array: np.ndarray, fmt: object, channel_names: tuple[
         spec.channelnames = tuple(channel_names)
     for key, value in attributes.items():
         spec.attribute(key, value)
-    with (atomic_path(path) if atomic else contextlib.nullcontext(Path(path))) as tmp:
+    with atomic_path(path) if atomic else contextlib.nullcontext(Path(path)) as tmp:
         out = oiio.ImageOutput.create(str(tmp))
         if out is None or not out.open(str(tmp), spec):
             raise ImageError(f"cannot write image ({_first_line(oiio.geterror())})", path)
@@ -182,7 +203,9 @@ def _write(path: PathLike, array: np.ndarray, fmt: object, channel_names: tuple[
 def _check_size(path: PathLike, pixels: np.ndarray, expected: tuple[int, int] | None) -> None:
     if expected is not None and tuple(pixels.shape[:2]) != tuple(expected):
         raise ImageError(
-            f"image is {pixels.shape[1]}x{pixels.shape[0]} (WxH) but its camera is {expected[1]}x{expected[0]}", path)
+            f"image is {pixels.shape[1]}x{pixels.shape[0]} (WxH) but its camera is {expected[1]}x{expected[0]}",
+            path,
+        )
 
 
 def _first_line(text: str) -> str:

@@ -27,8 +27,14 @@ def resolve_inside(root: str | os.PathLike[str], relative: str, *, source: str |
     if not isinstance(relative, str) or not relative or "\x00" in relative:
         raise DatasetError(f"invalid path entry {relative!r}", source)
     root_path = Path(os.path.abspath(root))
-    if os.path.isabs(relative) or relative.startswith(("/", "\\")) or (len(relative) > 1 and relative[1] == ":"):
-        raise DatasetError(f"path {relative!r} is absolute; dataset paths must be relative to {root_path}", source)
+    if (
+        os.path.isabs(relative)
+        or relative.startswith(("/", "\\"))
+        or (len(relative) > 1 and relative[1] == ":")
+    ):
+        raise DatasetError(
+            f"path {relative!r} is absolute; dataset paths must be relative to {root_path}", source
+        )
     candidate = Path(os.path.normpath(root_path / relative.replace("\\", "/")))
     if candidate != root_path and root_path not in candidate.parents:
         raise DatasetError(f"path {relative!r} escapes the dataset root {root_path}", source)

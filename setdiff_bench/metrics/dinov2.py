@@ -45,7 +45,7 @@ def preprocess_image(image: np.ndarray) -> torch.Tensor:
         size = (int(INPUT_SIZE * width / height), INPUT_SIZE)
     resized = np.asarray(Image.fromarray(np.ascontiguousarray(image)).resize(size, Image.Resampling.BILINEAR))
     top, left = _crop_offsets(resized.shape[0], resized.shape[1])
-    window = resized[top:top + INPUT_SIZE, left:left + INPUT_SIZE].astype(np.float32) / 255.0
+    window = resized[top : top + INPUT_SIZE, left : left + INPUT_SIZE].astype(np.float32) / 255.0
     tensor = torch.from_numpy(np.ascontiguousarray(window.transpose(2, 0, 1)))[None]
     return (tensor - 0.5) / 0.5
 
@@ -60,7 +60,7 @@ def preprocess_mask(mask: np.ndarray) -> torch.Tensor:
     tensor = torch.from_numpy(np.ascontiguousarray(mask).astype(np.float32))[None, None]
     resized = F.interpolate(tensor, size=(out_h, out_w), mode="nearest")[0, 0]
     top, left = _crop_offsets(out_h, out_w)
-    return resized[top:top + INPUT_SIZE, left:left + INPUT_SIZE] > 0.5
+    return resized[top : top + INPUT_SIZE, left : left + INPUT_SIZE] > 0.5
 
 
 def _crop_offsets(height: int, width: int) -> tuple[int, int]:
@@ -87,8 +87,10 @@ def masked_cosine(model: Any, render: np.ndarray, ground_truth: np.ndarray, mask
     device = parameter.device if parameter is not None else torch.device("cpu")
     dtype = parameter.dtype if parameter is not None else torch.float32
     with torch.no_grad():
-        feats = [model.get_intermediate_layers(preprocess_image(x).to(device, dtype), n=1)[0][:, 1:, :]
-                 for x in (render, ground_truth)]
+        feats = [
+            model.get_intermediate_layers(preprocess_image(x).to(device, dtype), n=1)[0][:, 1:, :]
+            for x in (render, ground_truth)
+        ]
     return float(F.cosine_similarity(feats[0].float(), feats[1].float(), dim=2).mean())
 
 
@@ -114,7 +116,7 @@ class TransformersDinov2(torch.nn.Module):
             raise ValueError("only the last layer (n=1) is supported")
         tokens = self.model(pixel_values=x).last_hidden_state
         registers = int(getattr(self.model.config, "num_register_tokens", 0) or 0)
-        return (tokens[:, 1 + registers:, :],)
+        return (tokens[:, 1 + registers :, :],)
 
 
 def load_dinov2(folder: str | Path, device: str = "cpu") -> TransformersDinov2:
@@ -125,12 +127,18 @@ def load_dinov2(folder: str | Path, device: str = "cpu") -> TransformersDinov2:
     """
     path = Path(folder)
     if not path.is_dir():
-        raise WeightsError("DINOv2 weights folder not found (pass --dinov2 DIR: a transformers folder with "
-                           "config.json and model.safetensors, e.g. facebook/dinov2-base)", path)
+        raise WeightsError(
+            "DINOv2 weights folder not found (pass --dinov2 DIR: a transformers folder with "
+            "config.json and model.safetensors, e.g. facebook/dinov2-base)",
+            path,
+        )
     for name in ("config.json", "model.safetensors"):
         if not (path / name).is_file():
-            raise WeightsError(f"DINOv2 folder has no {name} (expected a transformers Dinov2Model folder; "
-                               "weights are read from safetensors only)", path)
+            raise WeightsError(
+                f"DINOv2 folder has no {name} (expected a transformers Dinov2Model folder; "
+                "weights are read from safetensors only)",
+                path,
+            )
     import json
 
     from transformers import Dinov2Model
@@ -140,6 +148,8 @@ def load_dinov2(folder: str | Path, device: str = "cpu") -> TransformersDinov2:
     except (OSError, UnicodeDecodeError, json.JSONDecodeError, AttributeError) as error:
         raise WeightsError(f"unreadable config.json ({type(error).__name__})", path / "config.json") from None
     if model_type != "dinov2":
-        raise WeightsError(f"config.json has model_type {model_type!r}, expected 'dinov2'", path / "config.json")
+        raise WeightsError(
+            f"config.json has model_type {model_type!r}, expected 'dinov2'", path / "config.json"
+        )
     model = Dinov2Model.from_pretrained(path, local_files_only=True, use_safetensors=True)
     return TransformersDinov2(model.eval().to(device))

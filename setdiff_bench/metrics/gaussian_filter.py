@@ -81,8 +81,9 @@ def blur_torch(maps: torch.Tensor, window_size: int, sigma: float, border: Borde
     return F.conv2d(out, cols, padding=(pad, 0), groups=channels)
 
 
-def blur_opencv(plane: np.ndarray, window_size: int, sigma: float, border: Border,
-                dst: np.ndarray | None = None) -> np.ndarray:
+def blur_opencv(
+    plane: np.ndarray, window_size: int, sigma: float, border: Border, dst: np.ndarray | None = None
+) -> np.ndarray:
     """OpenCV separable Gaussian filter of one ``(H, W)`` float32/float64 plane.
 
     Zero padding (``BORDER_CONSTANT``) for ``"same"``, ``BORDER_REFLECT_101`` for ``"reflect"``; for
@@ -98,5 +99,5 @@ def blur_opencv(plane: np.ndarray, window_size: int, sigma: float, border: Borde
     out = cv2.sepFilter2D(plane, depth, taps, taps, dst=dst, borderType=border_type)
     if border == "valid":
         half = window_size // 2
-        out = out[half: out.shape[0] - half, half: out.shape[1] - half]
+        out = out[half : out.shape[0] - half, half : out.shape[1] - half]
     return out

@@ -57,11 +57,16 @@ class LPIPS(nn.Module):
         self.specs = TRUNKS[self.net]
         self.convs = nn.ModuleList(
             nn.Conv2d(s.in_channels, s.out_channels, s.kernel, stride=s.stride, padding=s.padding)
-            for s in self.specs)
+            for s in self.specs
+        )
         self.lins = nn.ModuleList(nn.Conv2d(c, 1, 1, bias=False) for c in tap_channels(self.net))
         # float64 constants, cast to the weights' dtype in forward (exact in a float64 module too)
-        self.register_buffer("shift", torch.tensor(SHIFT, dtype=torch.float64).view(1, 3, 1, 1), persistent=False)
-        self.register_buffer("scale", torch.tensor(SCALE, dtype=torch.float64).view(1, 3, 1, 1), persistent=False)
+        self.register_buffer(
+            "shift", torch.tensor(SHIFT, dtype=torch.float64).view(1, 3, 1, 1), persistent=False
+        )
+        self.register_buffer(
+            "scale", torch.tensor(SCALE, dtype=torch.float64).view(1, 3, 1, 1), persistent=False
+        )
         self.requires_grad_(False)
         self.eval()
 
@@ -95,8 +100,10 @@ class LPIPS(nn.Module):
         if pred.shape[1] != 3:
             raise ImageError(f"lpips: images must have 3 channels, got {pred.shape[1]}")
         if min(pred.shape[-2:]) < MIN_SIZE[self.net]:
-            raise ImageError(f"lpips: images {tuple(pred.shape[-2:])} are smaller than "
-                             f"{MIN_SIZE[self.net]} pixels, too small for the {self.net} trunk")
+            raise ImageError(
+                f"lpips: images {tuple(pred.shape[-2:])} are smaller than "
+                f"{MIN_SIZE[self.net]} pixels, too small for the {self.net} trunk"
+            )
         dtype = self.convs[0].weight.dtype
         batch = torch.cat([pred, target]).to(dtype)
         if self.rescale_input:
@@ -110,8 +117,13 @@ class LPIPS(nn.Module):
         return total
 
 
-def load_lpips(net: Net = "alex", weights: str | os.PathLike[str] | None = None, device: str | torch.device = "cpu",
-               *, rescale_input: bool = True) -> LPIPS:
+def load_lpips(
+    net: Net = "alex",
+    weights: str | os.PathLike[str] | None = None,
+    device: str | torch.device = "cpu",
+    *,
+    rescale_input: bool = True,
+) -> LPIPS:
     """An :class:`LPIPS` module with real v0.1 weights (see :mod:`.weights` for the resolution order).
 
     Args:
@@ -142,8 +154,16 @@ def _model_for_file(net: str, device: str, rescale_input: bool, path: str, mtime
     return load_lpips(net, weights=path, device=device, rescale_input=rescale_input)  # type: ignore[arg-type]
 
 
-def lpips(pred: torch.Tensor, target: torch.Tensor, *, net: Net = "alex", mask: torch.Tensor | None = None,
-          rescale_input: bool = True, chunk: int = 4, model: LPIPS | None = None) -> torch.Tensor:
+def lpips(
+    pred: torch.Tensor,
+    target: torch.Tensor,
+    *,
+    net: Net = "alex",
+    mask: torch.Tensor | None = None,
+    rescale_input: bool = True,
+    chunk: int = 4,
+    model: LPIPS | None = None,
+) -> torch.Tensor:
     """LPIPS per image with a cached model (weights resolved the default way) unless ``model`` is given.
 
     Args:
@@ -162,17 +182,25 @@ def lpips(pred: torch.Tensor, target: torch.Tensor, *, net: Net = "alex", mask: 
         ImageError: inputs outside [0, 1] (e.g. 8-bit values or [-1, 1] tensors), shape mismatches.
     """
     check_pair(pred, target, "lpips")
-    low, high = torch.aminmax(torch.stack([pred.detach().amin(), pred.detach().amax(),
-                                           target.detach().amin(), target.detach().amax()]))
+    low, high = torch.aminmax(
+        torch.stack(
+            [pred.detach().amin(), pred.detach().amax(), target.detach().amin(), target.detach().amax()]
+        )
+    )
     if low < -RANGE_TOLERANCE or high > 1 + RANGE_TOLERANCE:
-        raise ImageError(f"lpips: images must be in [0, 1] (got values in [{float(low):.3g}, {float(high):.3g}]); "
-                         "divide 8-bit images by 255")
+        raise ImageError(
+            f"lpips: images must be in [0, 1] (got values in [{float(low):.3g}, {float(high):.3g}]); "
+            "divide 8-bit images by 255"
+        )
     if mask is not None:
         weights = check_mask(mask, pred, "lpips")
         pred, target = pred * weights, target * weights
     if model is None:
         model = _cached_model(canonical_net(net), str(pred.device), rescale_input)
-    parts = [model(pred[start:start + chunk], target[start:start + chunk]) for start in range(0, pred.shape[0], chunk)]
+    parts = [
+        model(pred[start : start + chunk], target[start : start + chunk])
+        for start in range(0, pred.shape[0], chunk)
+    ]
     return torch.cat(parts) if parts else pred.new_zeros(0)
 
 

@@ -51,9 +51,15 @@ def _vgg16() -> tuple[ConvSpec, ...]:
     specs = []
     for block, (c_in, c_out, count) in enumerate(blocks):
         for index in range(count):
-            specs.append(ConvSpec(c_in if index == 0 else c_out, c_out, 3,
-                                  pool_before=(2, 2) if block > 0 and index == 0 else None,
-                                  tap=index == count - 1))
+            specs.append(
+                ConvSpec(
+                    c_in if index == 0 else c_out,
+                    c_out,
+                    3,
+                    pool_before=(2, 2) if block > 0 and index == 0 else None,
+                    tap=index == count - 1,
+                )
+            )
     return tuple(specs)
 
 

@@ -59,7 +59,9 @@ def flow_gray(first: np.ndarray, second: np.ndarray, method: FlowMethod = DEFAUL
     return _estimator(method).calc(first, second, None)
 
 
-def sequence_flows(frames: torch.Tensor, method: FlowMethod = DEFAULT_FLOW_METHOD) -> tuple[torch.Tensor, torch.Tensor]:
+def sequence_flows(
+    frames: torch.Tensor, method: FlowMethod = DEFAULT_FLOW_METHOD
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Forward and backward flows between consecutive frames.
 
     Args:
@@ -77,8 +79,10 @@ def sequence_flows(frames: torch.Tensor, method: FlowMethod = DEFAULT_FLOW_METHO
     for first, second in itertools.pairwise(gray):
         forward.append(flow_gray(first, second, method))
         backward.append(flow_gray(second, first, method))
+
     def stack(flows: list[np.ndarray]) -> torch.Tensor:
         return torch.from_numpy(np.stack(flows)).permute(0, 3, 1, 2).contiguous().to(frames.device)
+
     return stack(forward), stack(backward)
 
 
@@ -97,10 +101,16 @@ class SyntheticPair(NamedTuple):
     valid: np.ndarray
 
 
-def synthetic_scene_pair(texture: np.ndarray, size: tuple[int, int], rotation: float, zoom: float,
-                         shift: tuple[float, float], object_texture: np.ndarray | None = None,
-                         object_origin: tuple[int, int] = (0, 0),
-                         object_motion: tuple[int, int] = (0, 0)) -> SyntheticPair:
+def synthetic_scene_pair(
+    texture: np.ndarray,
+    size: tuple[int, int],
+    rotation: float,
+    zoom: float,
+    shift: tuple[float, float],
+    object_texture: np.ndarray | None = None,
+    object_origin: tuple[int, int] = (0, 0),
+    object_motion: tuple[int, int] = (0, 0),
+) -> SyntheticPair:
     """A photographed background under a known similarity motion, plus an optional moving object.
 
     Frame 0 samples ``texture`` at ``x + o``; frame 1 at ``A (x − c) + c + b + o`` with ``A = zoom·R(rotation)``,
@@ -125,29 +135,45 @@ def synthetic_scene_pair(texture: np.ndarray, size: tuple[int, int], rotation: f
     image = texture.astype(np.float32) / 255
 
     def sample(map_x: np.ndarray, map_y: np.ndarray) -> np.ndarray:
-        out = cv2.remap(image, map_x.astype(np.float32), map_y.astype(np.float32), cv2.INTER_CUBIC,
-                        borderMode=cv2.BORDER_REFLECT_101)
+        out = cv2.remap(
+            image,
+            map_x.astype(np.float32),
+            map_y.astype(np.float32),
+            cv2.INTER_CUBIC,
+            borderMode=cv2.BORDER_REFLECT_101,
+        )
         return np.clip(out, 0, 1)
 
     frame0 = sample(xs + offset[0], ys + offset[1])
     local_x, local_y = xs - centre[0], ys - centre[1]
-    frame1 = sample(matrix[0, 0] * local_x + matrix[0, 1] * local_y + centre[0] + shift[0] + offset[0],
-                    matrix[1, 0] * local_x + matrix[1, 1] * local_y + centre[1] + shift[1] + offset[1])
+    frame1 = sample(
+        matrix[0, 0] * local_x + matrix[0, 1] * local_y + centre[0] + shift[0] + offset[0],
+        matrix[1, 0] * local_x + matrix[1, 1] * local_y + centre[1] + shift[1] + offset[1],
+    )
     # frame-0 pixel x shows texture point x + o; frame 1 shows it at y with A (y − c) + c + b = x
     inverse = np.linalg.inv(matrix)
     rel_x, rel_y = xs - centre[0] - shift[0], ys - centre[1] - shift[1]
-    flow = np.stack([inverse[0, 0] * rel_x + inverse[0, 1] * rel_y + centre[0] - xs,
-                     inverse[1, 0] * rel_x + inverse[1, 1] * rel_y + centre[1] - ys], axis=-1)
+    flow = np.stack(
+        [
+            inverse[0, 0] * rel_x + inverse[0, 1] * rel_y + centre[0] - xs,
+            inverse[1, 0] * rel_x + inverse[1, 1] * rel_y + centre[1] - ys,
+        ],
+        axis=-1,
+    )
     covered = np.zeros((height, width), dtype=bool)
     if object_texture is not None:
         patch = object_texture.astype(np.float32) / 255
         (x0, y0), (dx, dy), (oh, ow) = object_origin, object_motion, patch.shape[:2]
-        frame0[y0:y0 + oh, x0:x0 + ow] = patch
-        frame1[y0 + dy:y0 + dy + oh, x0 + dx:x0 + dx + ow] = patch
+        frame0[y0 : y0 + oh, x0 : x0 + ow] = patch
+        frame1[y0 + dy : y0 + dy + oh, x0 + dx : x0 + dx + ow] = patch
         on_object = (xs >= x0) & (xs < x0 + ow) & (ys >= y0) & (ys < y0 + oh)
         target_x, target_y = xs + flow[..., 0], ys + flow[..., 1]
-        under_object = ((target_x >= x0 + dx) & (target_x < x0 + dx + ow)
-                        & (target_y >= y0 + dy) & (target_y < y0 + dy + oh))
+        under_object = (
+            (target_x >= x0 + dx)
+            & (target_x < x0 + dx + ow)
+            & (target_y >= y0 + dy)
+            & (target_y < y0 + dy + oh)
+        )
         covered = under_object & ~on_object
         flow[on_object] = (dx, dy)
     target_x, target_y = xs + flow[..., 0], ys + flow[..., 1]

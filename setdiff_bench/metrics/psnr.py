@@ -36,8 +36,9 @@ def mse(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = No
     return (squared * weights).flatten(1).sum(dim=1) / valid
 
 
-def psnr(pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = None, *,
-         data_range: float = 1.0) -> torch.Tensor:
+def psnr(
+    pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = None, *, data_range: float = 1.0
+) -> torch.Tensor:
     """PSNR per image in dB.
 
     Args:

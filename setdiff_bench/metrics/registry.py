@@ -72,22 +72,47 @@ class MetricSpec:
         """Import and return the implementation."""
         return load_attribute(self.function, f"metric {self.name!r}")
 
-    def compute(self, pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
+    def compute(
+        self, pred: torch.Tensor, target: torch.Tensor, mask: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """Image metric on ``(V, 3, H, W)`` batches with an optional ``(V, 1, H, W)`` mask → ``(V,)``."""
         if self.scope != "image":
-            raise UsageError(f"metric {self.name} is a {self.scope} metric, not an image metric; "
-                             + ("call its function per sequence" if self.scope == "sequence"
-                                else "setdiff-bench evaluate computes it"))
+            raise UsageError(
+                f"metric {self.name} is a {self.scope} metric, not an image metric; "
+                + (
+                    "call its function per sequence"
+                    if self.scope == "sequence"
+                    else "setdiff-bench evaluate computes it"
+                )
+            )
         if mask is None and self.needs_mask:
             mask = torch.ones(pred.shape[0], 1, *pred.shape[-2:], dtype=torch.bool, device=pred.device)
         return self.load()(pred, target, mask=mask, **self.kwargs)
 
 
-def _spec(name: str, higher: bool, label: str, decimals: int, function: str, unit: str, description: str,
-          **kwargs: Any) -> MetricSpec:
+def _spec(
+    name: str,
+    higher: bool,
+    label: str,
+    decimals: int,
+    function: str,
+    unit: str,
+    description: str,
+    **kwargs: Any,
+) -> MetricSpec:
     needs_mask = name.endswith("_euvs")
-    return MetricSpec(name, higher, function, "image", MappingProxyType(kwargs), unit, needs_mask, description,
-                      label=label, decimals=decimals)
+    return MetricSpec(
+        name,
+        higher,
+        function,
+        "image",
+        MappingProxyType(kwargs),
+        unit,
+        needs_mask,
+        description,
+        label=label,
+        decimals=decimals,
+    )
 
 
 _PSNR = "setdiff_bench.metrics.psnr:psnr"
@@ -95,35 +120,138 @@ _SSIM = "setdiff_bench.metrics.ssim:ssim"
 _LPIPS = "setdiff_bench.metrics.lpips:lpips"
 _DINOV2 = "setdiff_bench.metrics.dinov2"
 
-METRICS: Mapping[str, MetricSpec] = MappingProxyType({spec.name: spec for spec in (
-    _spec("psnr", True, "PSNR", 2, _PSNR, "dB", "per-image PSNR, data range 1; masked: MSE over valid pixels"),
-    _spec("ssim", True, "SSIM", 3, _SSIM, "", "SSIM, Gaussian 11/1.5, valid border (tf/dm_pix/skimage)",
-          border="valid"),
-    _spec("ssim_same", True, "SSIM", 3, _SSIM, "", "SSIM with zero-padded same border (3DGS)", border="same"),
-    _spec("lpips", False, "LPIPS", 3, _LPIPS, "", "LPIPS v0.1 AlexNet, input [0,1] mapped to [-1,1]", net="alex"),
-    _spec("lpips_vgg", False, "LPIPS", 3, _LPIPS, "", "LPIPS v0.1 VGG16, input [0,1] mapped to [-1,1]", net="vgg"),
-    _spec("lpips_vgg_unscaled", False, "LPIPS", 3, _LPIPS, "", "LPIPS v0.1 VGG16 fed [0,1] unscaled (3DGS metrics.py)",
-          net="vgg", rescale_input=False),
-    _spec("psnr_euvs", True, "PSNR", 2, "setdiff_bench.metrics.psnr:psnr_euvs", "dB", "EUVS psnr_mask"),
-    _spec("ssim_euvs", True, "SSIM", 3, "setdiff_bench.metrics.ssim:ssim_euvs", "",
-          "EUVS ssim_mask (mask-multiplied, same border)"),
-    _spec("lpips_euvs", False, "LPIPS", 3, "setdiff_bench.metrics.lpips:lpips_euvs", "",
-          "EUVS lpips_mask (alex, [0,1] unscaled)"),
-    MetricSpec("warp", False, "setdiff_bench.metrics.warp:warp_error", "sequence",
-               MappingProxyType({"scale": 255.0**2}), "MSE on 0-255 scale", False,
-               "warp error (Lai et al. 2018), flow+occlusion from ground truth, DeepFlow", label="Warp", decimals=1),
-    MetricSpec("cos_dinov2", True, f"{_DINOV2}:masked_cosine", "profile", MappingProxyType({}), "", False,
-               "EUVS Cos_Similarity: mean DINOv2 ViT-B/14 patch cosine (evaluate --dinov2)", label="Cos", decimals=3),
-    MetricSpec("final_score", True, f"{_DINOV2}:final_score", "profile", MappingProxyType({}), "", False,
-               "EUVS Final_Score: 0.25 SSIM + 0.15 PSNR + 0.35 (1 - LPIPS) + 0.25 Cos (evaluate --dinov2)",
-               label="Final", decimals=3),
-)})
+METRICS: Mapping[str, MetricSpec] = MappingProxyType(
+    {
+        spec.name: spec
+        for spec in (
+            _spec(
+                "psnr",
+                True,
+                "PSNR",
+                2,
+                _PSNR,
+                "dB",
+                "per-image PSNR, data range 1; masked: MSE over valid pixels",
+            ),
+            _spec(
+                "ssim",
+                True,
+                "SSIM",
+                3,
+                _SSIM,
+                "",
+                "SSIM, Gaussian 11/1.5, valid border (tf/dm_pix/skimage)",
+                border="valid",
+            ),
+            _spec(
+                "ssim_same",
+                True,
+                "SSIM",
+                3,
+                _SSIM,
+                "",
+                "SSIM with zero-padded same border (3DGS)",
+                border="same",
+            ),
+            _spec(
+                "lpips",
+                False,
+                "LPIPS",
+                3,
+                _LPIPS,
+                "",
+                "LPIPS v0.1 AlexNet, input [0,1] mapped to [-1,1]",
+                net="alex",
+            ),
+            _spec(
+                "lpips_vgg",
+                False,
+                "LPIPS",
+                3,
+                _LPIPS,
+                "",
+                "LPIPS v0.1 VGG16, input [0,1] mapped to [-1,1]",
+                net="vgg",
+            ),
+            _spec(
+                "lpips_vgg_unscaled",
+                False,
+                "LPIPS",
+                3,
+                _LPIPS,
+                "",
+                "LPIPS v0.1 VGG16 fed [0,1] unscaled (3DGS metrics.py)",
+                net="vgg",
+                rescale_input=False,
+            ),
+            _spec(
+                "psnr_euvs", True, "PSNR", 2, "setdiff_bench.metrics.psnr:psnr_euvs", "dB", "EUVS psnr_mask"
+            ),
+            _spec(
+                "ssim_euvs",
+                True,
+                "SSIM",
+                3,
+                "setdiff_bench.metrics.ssim:ssim_euvs",
+                "",
+                "EUVS ssim_mask (mask-multiplied, same border)",
+            ),
+            _spec(
+                "lpips_euvs",
+                False,
+                "LPIPS",
+                3,
+                "setdiff_bench.metrics.lpips:lpips_euvs",
+                "",
+                "EUVS lpips_mask (alex, [0,1] unscaled)",
+            ),
+            MetricSpec(
+                "warp",
+                False,
+                "setdiff_bench.metrics.warp:warp_error",
+                "sequence",
+                MappingProxyType({"scale": 255.0**2}),
+                "MSE on 0-255 scale",
+                False,
+                "warp error (Lai et al. 2018), flow+occlusion from ground truth, DeepFlow",
+                label="Warp",
+                decimals=1,
+            ),
+            MetricSpec(
+                "cos_dinov2",
+                True,
+                f"{_DINOV2}:masked_cosine",
+                "profile",
+                MappingProxyType({}),
+                "",
+                False,
+                "EUVS Cos_Similarity: mean DINOv2 ViT-B/14 patch cosine (evaluate --dinov2)",
+                label="Cos",
+                decimals=3,
+            ),
+            MetricSpec(
+                "final_score",
+                True,
+                f"{_DINOV2}:final_score",
+                "profile",
+                MappingProxyType({}),
+                "",
+                False,
+                "EUVS Final_Score: 0.25 SSIM + 0.15 PSNR + 0.35 (1 - LPIPS) + 0.25 Cos (evaluate --dinov2)",
+                label="Final",
+                decimals=3,
+            ),
+        )
+    }
+)
 
-PRESETS: Mapping[str, tuple[str, ...]] = MappingProxyType({
-    "standard": ("psnr", "ssim", "lpips"),
-    "gaussian_splatting": ("psnr", "ssim_same", "lpips_vgg_unscaled"),
-    "euvs_official": ("psnr_euvs", "ssim_euvs", "lpips_euvs"),
-})
+PRESETS: Mapping[str, tuple[str, ...]] = MappingProxyType(
+    {
+        "standard": ("psnr", "ssim", "lpips"),
+        "gaussian_splatting": ("psnr", "ssim_same", "lpips_vgg_unscaled"),
+        "euvs_official": ("psnr_euvs", "ssim_euvs", "lpips_euvs"),
+    }
+)
 
 
 def get_metric(name: str) -> MetricSpec:

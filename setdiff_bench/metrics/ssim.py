@@ -52,8 +52,9 @@ def to_luma(images: torch.Tensor) -> torch.Tensor:
     return (images * weights).sum(dim=1, keepdim=True)
 
 
-def _combine(mu_x: torch.Tensor, mu_y: torch.Tensor, squares: torch.Tensor, cross: torch.Tensor,
-             c1: float, c2: float) -> torch.Tensor:
+def _combine(
+    mu_x: torch.Tensor, mu_y: torch.Tensor, squares: torch.Tensor, cross: torch.Tensor, c1: float, c2: float
+) -> torch.Tensor:
     """SSIM map from the local means of x, y, x² + y² and x·y (any equal shapes).
 
     Filtering ``x² + y²`` once is enough because only ``σx² + σy²`` enters the formula (the filter is
@@ -66,9 +67,18 @@ def _combine(mu_x: torch.Tensor, mu_y: torch.Tensor, squares: torch.Tensor, cros
     return numerator / denominator
 
 
-def ssim_map(pred: torch.Tensor, target: torch.Tensor, *, border: Border = "valid", window_size: int = 11,
-             sigma: float = 1.5, k1: float = 0.01, k2: float = 0.03, data_range: float = 1.0,
-             backend: Backend = "auto") -> torch.Tensor:
+def ssim_map(
+    pred: torch.Tensor,
+    target: torch.Tensor,
+    *,
+    border: Border = "valid",
+    window_size: int = 11,
+    sigma: float = 1.5,
+    k1: float = 0.01,
+    k2: float = 0.03,
+    data_range: float = 1.0,
+    backend: Backend = "auto",
+) -> torch.Tensor:
     """Per-pixel, per-channel SSIM map.
 
     Args:
@@ -86,7 +96,9 @@ def ssim_map(pred: torch.Tensor, target: torch.Tensor, *, border: Border = "vali
     if border not in BORDERS:
         raise UsageError(f"ssim: border must be one of {', '.join(BORDERS)}; got {border!r}")
     if border != "same" and min(pred.shape[-2:]) < window_size:
-        raise ImageError(f"ssim: images {tuple(pred.shape[-2:])} are smaller than the {window_size}-pixel window")
+        raise ImageError(
+            f"ssim: images {tuple(pred.shape[-2:])} are smaller than the {window_size}-pixel window"
+        )
     c1, c2 = (k1 * data_range) ** 2, (k2 * data_range) ** 2
     dtype = torch.promote_types(pred.dtype, target.dtype)
     pred, target = pred.to(dtype), target.to(dtype)
@@ -98,8 +110,15 @@ def ssim_map(pred: torch.Tensor, target: torch.Tensor, *, border: Border = "vali
     return _combine(*means, c1, c2)
 
 
-def _ssim_map_opencv(pred: torch.Tensor, target: torch.Tensor, border: Border, window_size: int,
-                     sigma: float, c1: float, c2: float) -> torch.Tensor:
+def _ssim_map_opencv(
+    pred: torch.Tensor,
+    target: torch.Tensor,
+    border: Border,
+    window_size: int,
+    sigma: float,
+    c1: float,
+    c2: float,
+) -> torch.Tensor:
     """SSIM map with OpenCV filtering and in-place numpy arithmetic, one ``(H, W)`` plane at a time.
 
     Same algebra as :func:`_combine`.  Five plane-sized work buffers are allocated once per call and
@@ -140,7 +159,9 @@ def _ssim_map_opencv(pred: torch.Tensor, target: torch.Tensor, border: Border, w
     return torch.from_numpy(out)
 
 
-def reduce_map(values: torch.Tensor, mask: torch.Tensor | None, border: Border, window_size: int) -> torch.Tensor:
+def reduce_map(
+    values: torch.Tensor, mask: torch.Tensor | None, border: Border, window_size: int
+) -> torch.Tensor:
     """Mean of a ``(V, C, H', W')`` SSIM map per image, optionally over the valid pixels of a mask.
 
     Args:
@@ -156,14 +177,25 @@ def reduce_map(values: torch.Tensor, mask: torch.Tensor | None, border: Border, 
         return values.flatten(1).mean(dim=1)
     if border == "valid":
         half = window_size // 2
-        mask = mask[:, :, half: mask.shape[2] - half, half: mask.shape[3] - half]
+        mask = mask[:, :, half : mask.shape[2] - half, half : mask.shape[3] - half]
     per_pixel = values.mean(dim=1, keepdim=True)
     return (per_pixel * mask).flatten(1).sum(dim=1) / mask.flatten(1).sum(dim=1)
 
 
-def ssim(pred: torch.Tensor, target: torch.Tensor, *, border: Border = "valid", grayscale: bool = False,
-         mask: torch.Tensor | None = None, window_size: int = 11, sigma: float = 1.5, k1: float = 0.01,
-         k2: float = 0.03, data_range: float = 1.0, backend: Backend = "auto") -> torch.Tensor:
+def ssim(
+    pred: torch.Tensor,
+    target: torch.Tensor,
+    *,
+    border: Border = "valid",
+    grayscale: bool = False,
+    mask: torch.Tensor | None = None,
+    window_size: int = 11,
+    sigma: float = 1.5,
+    k1: float = 0.01,
+    k2: float = 0.03,
+    data_range: float = 1.0,
+    backend: Backend = "auto",
+) -> torch.Tensor:
     """Mean SSIM per image (see the module docstring for every convention).
 
     Args:
@@ -182,8 +214,17 @@ def ssim(pred: torch.Tensor, target: torch.Tensor, *, border: Border = "valid", 
     weights = None if mask is None else check_mask(mask, pred, "ssim")
     if grayscale:
         pred, target = to_luma(pred), to_luma(target)
-    values = ssim_map(pred, target, border=border, window_size=window_size, sigma=sigma, k1=k1, k2=k2,
-                      data_range=data_range, backend=backend)
+    values = ssim_map(
+        pred,
+        target,
+        border=border,
+        window_size=window_size,
+        sigma=sigma,
+        k1=k1,
+        k2=k2,
+        data_range=data_range,
+        backend=backend,
+    )
     return reduce_map(values, weights, border, window_size)
 
 

@@ -84,10 +84,15 @@ class WarpReference:
         """Write flow, mask, method and thresholds to one ``.safetensors`` file (atomically)."""
         from safetensors.torch import save_file
 
-        meta = {"format": "setdiff-bench-warp-reference", "method": self.method,
-                "thresholds": json.dumps(asdict(self.thresholds), sort_keys=True)}
-        tensors = {"flow": self.flow.detach().float().cpu().contiguous(),
-                   "valid": self.valid.detach().to(torch.uint8).cpu().contiguous()}
+        meta = {
+            "format": "setdiff-bench-warp-reference",
+            "method": self.method,
+            "thresholds": json.dumps(asdict(self.thresholds), sort_keys=True),
+        }
+        tensors = {
+            "flow": self.flow.detach().float().cpu().contiguous(),
+            "valid": self.valid.detach().to(torch.uint8).cpu().contiguous(),
+        }
         with atomic_path(path) as tmp:
             save_file(tensors, str(tmp), metadata=meta)
 
@@ -103,16 +108,23 @@ class WarpReference:
             thresholds = OcclusionThresholds(**json.loads(meta["thresholds"]))
         except (SafetensorError, OSError, KeyError, TypeError, ValueError) as error:
             raise ImageError(f"not a warp reference file: {error}", path) from None
-        if meta.get("format") != "setdiff-bench-warp-reference" or flow.ndim != 4 or flow.shape[1] != 2 \
-                or tuple(valid.shape) != (flow.shape[0], 1, *flow.shape[-2:]):
+        if (
+            meta.get("format") != "setdiff-bench-warp-reference"
+            or flow.ndim != 4
+            or flow.shape[1] != 2
+            or tuple(valid.shape) != (flow.shape[0], 1, *flow.shape[-2:])
+        ):
             raise ImageError("not a warp reference file (wrong format tag or tensor shapes)", path)
         return cls(flow, valid, meta.get("method", "unknown"), thresholds)
 
 
 def pixel_grid(height: int, width: int, device: torch.device, dtype: torch.dtype) -> torch.Tensor:
     """``(1, 2, H, W)`` pixel coordinates ``(x, y)``."""
-    ys, xs = torch.meshgrid(torch.arange(height, device=device, dtype=dtype),
-                            torch.arange(width, device=device, dtype=dtype), indexing="ij")
+    ys, xs = torch.meshgrid(
+        torch.arange(height, device=device, dtype=dtype),
+        torch.arange(width, device=device, dtype=dtype),
+        indexing="ij",
+    )
     return torch.stack([xs, ys])[None]
 
 
@@ -129,8 +141,12 @@ def backward_warp(image: torch.Tensor, flow: torch.Tensor) -> torch.Tensor:
     _, _, height, width = image.shape
     coords = pixel_grid(height, width, flow.device, flow.dtype) + flow
     # align_corners=True maps pixel index 0 → -1 and W-1 → +1 exactly (pixel centres on integers)
-    grid = torch.stack([coords[:, 0] * (2 / max(width - 1, 1)) - 1, coords[:, 1] * (2 / max(height - 1, 1)) - 1], dim=-1)
-    return F.grid_sample(image, grid.to(image.dtype), mode="bilinear", padding_mode="border", align_corners=True)
+    grid = torch.stack(
+        [coords[:, 0] * (2 / max(width - 1, 1)) - 1, coords[:, 1] * (2 / max(height - 1, 1)) - 1], dim=-1
+    )
+    return F.grid_sample(
+        image, grid.to(image.dtype), mode="bilinear", padding_mode="border", align_corners=True
+    )
 
 
 def squared_magnitude(flow: torch.Tensor) -> torch.Tensor:
@@ -138,8 +154,9 @@ def squared_magnitude(flow: torch.Tensor) -> torch.Tensor:
     return flow.square().sum(dim=1, keepdim=True)
 
 
-def occlusion_mask(forward: torch.Tensor, backward: torch.Tensor,
-                   thresholds: OcclusionThresholds = OcclusionThresholds()) -> torch.Tensor:
+def occlusion_mask(
+    forward: torch.Tensor, backward: torch.Tensor, thresholds: OcclusionThresholds = OcclusionThresholds()
+) -> torch.Tensor:
     """Occluded pixels of the first frame of each pair (forward–backward check + motion boundaries).
 
     Args:
@@ -153,7 +170,8 @@ def occlusion_mask(forward: torch.Tensor, backward: torch.Tensor,
     backward_at_target = backward_warp(backward, forward)
     inconsistent = squared_magnitude(forward + backward_at_target) > (
         thresholds.consistency_ratio * (squared_magnitude(backward_at_target) + squared_magnitude(forward))
-        + thresholds.consistency_offset)
+        + thresholds.consistency_offset
+    )
     # forward differences, zero in the last column / row (utils.compute_flow_gradients)
     du = torch.zeros_like(forward)
     dv = torch.zeros_like(forward)
@@ -165,14 +183,21 @@ def occlusion_mask(forward: torch.Tensor, backward: torch.Tensor,
     if thresholds.exclude_out_of_frame:
         height, width = forward.shape[-2:]
         target = pixel_grid(height, width, forward.device, forward.dtype) + forward
-        outside = ((target[:, :1] < 0) | (target[:, :1] > width - 1)
-                   | (target[:, 1:] < 0) | (target[:, 1:] > height - 1))
+        outside = (
+            (target[:, :1] < 0)
+            | (target[:, :1] > width - 1)
+            | (target[:, 1:] < 0)
+            | (target[:, 1:] > height - 1)
+        )
         occluded = occluded | outside
     return occluded
 
 
-def warp_reference(ground_truth: torch.Tensor, method: FlowMethod = DEFAULT_FLOW_METHOD,
-                   thresholds: OcclusionThresholds = OcclusionThresholds()) -> WarpReference:
+def warp_reference(
+    ground_truth: torch.Tensor,
+    method: FlowMethod = DEFAULT_FLOW_METHOD,
+    thresholds: OcclusionThresholds = OcclusionThresholds(),
+) -> WarpReference:
     """Flow and non-occlusion mask of a ground-truth sequence (compute once, score many methods).
 
     Args:
@@ -188,8 +213,13 @@ def warp_reference(ground_truth: torch.Tensor, method: FlowMethod = DEFAULT_FLOW
     return WarpReference(forward, valid, method, thresholds)
 
 
-def warp_error_pairs(frames: torch.Tensor, reference: WarpReference, mask: torch.Tensor | None = None,
-                     *, scale: float = PAPER_SCALE) -> torch.Tensor:
+def warp_error_pairs(
+    frames: torch.Tensor,
+    reference: WarpReference,
+    mask: torch.Tensor | None = None,
+    *,
+    scale: float = PAPER_SCALE,
+) -> torch.Tensor:
     """Warp error of each consecutive pair.
 
     Args:
@@ -206,13 +236,17 @@ def warp_error_pairs(frames: torch.Tensor, reference: WarpReference, mask: torch
         raise ImageError(f"warp error needs a (T ≥ 2, C, H, W) sequence, got {tuple(frames.shape)}")
     expected = (frames.shape[0] - 1, 2, *frames.shape[-2:])
     if tuple(reference.flow.shape) != expected:
-        raise ImageError(f"warp error: frames {tuple(frames.shape)} do not match the reference flow "
-                         f"{tuple(reference.flow.shape)}")
+        raise ImageError(
+            f"warp error: frames {tuple(frames.shape)} do not match the reference flow "
+            f"{tuple(reference.flow.shape)}"
+        )
     flow = reference.flow.to(frames.device)
     valid = reference.valid.to(frames.device, frames.dtype)
     if mask is not None:
         if tuple(mask.shape) != (frames.shape[0], 1, *frames.shape[-2:]):
-            raise ImageError(f"warp error: mask {tuple(mask.shape)} does not match frames {tuple(frames.shape)}")
+            raise ImageError(
+                f"warp error: mask {tuple(mask.shape)} does not match frames {tuple(frames.shape)}"
+            )
         valid = valid * mask[:-1].to(frames.device, frames.dtype)
     warped = backward_warp(frames[1:], flow.to(frames.dtype))
     squared = ((warped - frames[:-1]).square() * valid).flatten(1).sum(dim=1)
@@ -220,7 +254,12 @@ def warp_error_pairs(frames: torch.Tensor, reference: WarpReference, mask: torch
     return scale * squared / count.clamp(min=1)
 
 
-def warp_error(frames: torch.Tensor, reference: WarpReference, mask: torch.Tensor | None = None,
-               *, scale: float = PAPER_SCALE) -> torch.Tensor:
+def warp_error(
+    frames: torch.Tensor,
+    reference: WarpReference,
+    mask: torch.Tensor | None = None,
+    *,
+    scale: float = PAPER_SCALE,
+) -> torch.Tensor:
     """Warp error of one sequence: mean of :func:`warp_error_pairs` (0-dim tensor)."""
     return warp_error_pairs(frames, reference, mask, scale=scale).mean()

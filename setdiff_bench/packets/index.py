@@ -47,17 +47,39 @@ TEMP_PREFIX = ".tmp-"
 ROLES = ("ref", "target")
 FILE_COLUMNS = ("image", "cmap", "gt", "mask")
 
-SCHEMA = pa.schema([
-    ("packet_id", pa.string()), ("role", pa.string()), ("view", pa.int32()),
-    ("dataset", pa.string()), ("protocol", pa.string()), ("group", pa.string()), ("split", pa.string()),
-    ("scene", pa.string()), ("fit_key", pa.string()), ("frame", pa.string()), ("sensor", pa.string()),
-    ("traversal", pa.string()), ("timestamp_us", pa.int64()), ("width", pa.int32()), ("height", pa.int32()),
-    ("K", pa.list_(pa.float64(), 9)), ("w2c", pa.list_(pa.float64(), 16)),
-    ("w2c_world", pa.list_(pa.float64(), 16)), ("scale", pa.float64()), ("overlap_score", pa.float64()),
-    ("image", pa.string()), ("image_sha256", pa.string()), ("cmap", pa.string()), ("cmap_sha256", pa.string()),
-    ("gt", pa.string()), ("gt_sha256", pa.string()), ("mask", pa.string()), ("mask_sha256", pa.string()),
-    ("recipe", pa.string()),
-])
+SCHEMA = pa.schema(
+    [
+        ("packet_id", pa.string()),
+        ("role", pa.string()),
+        ("view", pa.int32()),
+        ("dataset", pa.string()),
+        ("protocol", pa.string()),
+        ("group", pa.string()),
+        ("split", pa.string()),
+        ("scene", pa.string()),
+        ("fit_key", pa.string()),
+        ("frame", pa.string()),
+        ("sensor", pa.string()),
+        ("traversal", pa.string()),
+        ("timestamp_us", pa.int64()),
+        ("width", pa.int32()),
+        ("height", pa.int32()),
+        ("K", pa.list_(pa.float64(), 9)),
+        ("w2c", pa.list_(pa.float64(), 16)),
+        ("w2c_world", pa.list_(pa.float64(), 16)),
+        ("scale", pa.float64()),
+        ("overlap_score", pa.float64()),
+        ("image", pa.string()),
+        ("image_sha256", pa.string()),
+        ("cmap", pa.string()),
+        ("cmap_sha256", pa.string()),
+        ("gt", pa.string()),
+        ("gt_sha256", pa.string()),
+        ("mask", pa.string()),
+        ("mask_sha256", pa.string()),
+        ("recipe", pa.string()),
+    ]
+)
 
 _UNSAFE = re.compile(r"[^A-Za-z0-9.+-]+")
 
@@ -84,7 +106,7 @@ def write_rows(path: Path, rows: Sequence[dict[str, Any]], *, atomic: bool = Tru
     ``atomic``: through a temporary file and rename (off inside a folder that is renamed as a whole).
     """
     table = pa.Table.from_pylist(list(rows), schema=SCHEMA)
-    with (atomic_path(path) if atomic else contextlib.nullcontext(path)) as tmp:
+    with atomic_path(path) if atomic else contextlib.nullcontext(path) as tmp:
         pq.write_table(table, tmp, compression="zstd")
 
 
@@ -93,8 +115,9 @@ def read_rows(path: Path) -> pa.Table:
     try:
         table = pq.read_table(path)
     except (OSError, pa.ArrowException) as exc:
-        raise PacketError(f"cannot read packet index ({exc.__class__.__name__}: {str(exc).splitlines()[0]})",
-                          path) from exc
+        raise PacketError(
+            f"cannot read packet index ({exc.__class__.__name__}: {str(exc).splitlines()[0]})", path
+        ) from exc
     if table.schema.names != SCHEMA.names:
         missing = sorted(set(SCHEMA.names) - set(table.schema.names))
         raise PacketError(f"not a packet index of this version (missing columns {missing[:5]})", path)
@@ -111,8 +134,11 @@ def fragment_paths(root: Path) -> list[Path]:
     folder = root / PACKETS_DIR
     if not folder.is_dir():
         return []
-    return sorted(p / INDEX_FILE for p in folder.iterdir()
-                  if p.is_dir() and not p.name.startswith(".") and (p / INDEX_FILE).is_file())
+    return sorted(
+        p / INDEX_FILE
+        for p in folder.iterdir()
+        if p.is_dir() and not p.name.startswith(".") and (p / INDEX_FILE).is_file()
+    )
 
 
 def merge_index(root: Path) -> bool:

@@ -133,8 +133,11 @@ def scene_resolution(protocol: Protocol, scene: Scene) -> tuple[int, int]:
         return protocol.images.resolution
     sizes = sorted({(f.camera.height, f.camera.width) for f in scene.frames})
     if len(sizes) != 1:
-        raise ProtocolError(f"resolution = \"native\" needs one image size per scene; scene {scene.name!r} has "
-                            f"{', '.join(f'{w}x{h}' for h, w in sizes)}", protocol.path)
+        raise ProtocolError(
+            f'resolution = "native" needs one image size per scene; scene {scene.name!r} has '
+            f"{', '.join(f'{w}x{h}' for h, w in sizes)}",
+            protocol.path,
+        )
     height, width = sizes[0]
     scale = protocol.images.downscale
     return max(1, round(height / scale)), max(1, round(width / scale))
@@ -150,14 +153,23 @@ def mask_source(protocol: Protocol, frame: Frame) -> tuple[Path | None, bool]:
     return None, False
 
 
-def view_job(protocol: Protocol, frame: Frame, resolution: tuple[int, int], *, target: bool,
-             score: float | None = None) -> ViewJob:
+def view_job(
+    protocol: Protocol, frame: Frame, resolution: tuple[int, int], *, target: bool, score: float | None = None
+) -> ViewJob:
     crop = crop_window(frame.camera.width, frame.camera.height, resolution, protocol.images.resize)
     mask, invert = mask_source(protocol, frame) if target else (None, False)
-    return ViewJob(frame=frame.name, sensor=frame.sensor, traversal=frame.traversal,
-                   timestamp_us=frame.timestamp_us, image_path=frame.image_path, mask_path=mask,
-                   invert_mask=invert, crop=crop, camera=working_camera(frame.camera, crop, resolution),
-                   overlap_score=score)
+    return ViewJob(
+        frame=frame.name,
+        sensor=frame.sensor,
+        traversal=frame.traversal,
+        timestamp_us=frame.timestamp_us,
+        image_path=frame.image_path,
+        mask_path=mask,
+        invert_mask=invert,
+        crop=crop,
+        camera=working_camera(frame.camera, crop, resolution),
+        overlap_score=score,
+    )
 
 
 def chunk_sizes(total: int, per_packet: int) -> list[int]:
@@ -174,13 +186,23 @@ def applicable_groups(protocol: Protocol, scene: Scene) -> list[GroupSpec]:
     if not groups:
         wanted = "; ".join(f"{g.name}: {dict(g.scenes)}" for g in protocol.groups)
         found = {k: scene.metadata.get(k) for g in protocol.groups for k in g.scenes}
-        raise ProtocolError(f"scene {scene.name!r} matches no group of protocol {protocol.name!r} (scene has "
-                            f"{found}; groups need {wanted})", protocol.path)
+        raise ProtocolError(
+            f"scene {scene.name!r} matches no group of protocol {protocol.name!r} (scene has "
+            f"{found}; groups need {wanted})",
+            protocol.path,
+        )
     return groups
 
 
-def plan_scene(protocol: Protocol, scene: Scene, split: str, fit_path_for: Any, *,
-               backend: str = "torch", cmap_half: bool = False) -> list[GroupPlan]:
+def plan_scene(
+    protocol: Protocol,
+    scene: Scene,
+    split: str,
+    fit_path_for: Any,
+    *,
+    backend: str = "torch",
+    cmap_half: bool = False,
+) -> list[GroupPlan]:
     """Plan every packet of ``scene`` under ``protocol``.
 
     Args:
@@ -205,14 +227,37 @@ def plan_scene(protocol: Protocol, scene: Scene, split: str, fit_path_for: Any, 
     bound = protocol.cmap_clip * d_max if protocol.cmap_clip > 0 and d_max > 0 else None
     plans = []
     for group in groups:
-        plans.append(_plan_group(protocol, scene, split, group, resolution, d_max, bound, center, fit_path_for,
-                                 backend, cmap_half))
+        plans.append(
+            _plan_group(
+                protocol,
+                scene,
+                split,
+                group,
+                resolution,
+                d_max,
+                bound,
+                center,
+                fit_path_for,
+                backend,
+                cmap_half,
+            )
+        )
     return plans
 
 
-def _plan_group(protocol: Protocol, scene: Scene, split: str, group: GroupSpec, resolution: tuple[int, int],
-                d_max: float, bound: float | None, center: tuple[float, float, float], fit_path_for: Any,
-                backend: str, cmap_half: bool) -> GroupPlan:
+def _plan_group(
+    protocol: Protocol,
+    scene: Scene,
+    split: str,
+    group: GroupSpec,
+    resolution: tuple[int, int],
+    d_max: float,
+    bound: float | None,
+    center: tuple[float, float, float],
+    fit_path_for: Any,
+    backend: str,
+    cmap_half: bool,
+) -> GroupPlan:
     frames = group.select(scene)
     where = f"protocol {protocol.name!r} group {group.name!r} ({group.rule}) in scene {scene.name!r}"
     if not frames.fit:
@@ -221,7 +266,9 @@ def _plan_group(protocol: Protocol, scene: Scene, split: str, group: GroupSpec, 
         raise ProtocolError(f"{where} selects no target frames", protocol.path)
     overlap = {f.name for f in frames.fit} & {f.name for f in frames.targets}
     if overlap:
-        raise ProtocolError(f"{where}: frame {sorted(overlap)[0]!r} is both a fit frame and a target", protocol.path)
+        raise ProtocolError(
+            f"{where}: frame {sorted(overlap)[0]!r} is both a fit frame and a target", protocol.path
+        )
     fit_path, fit_sha = fit_path_for(scene.name, group.fit_key)
     n_ref = min(protocol.references_for(split), len(frames.fit))
     per_packet = protocol.views_for(split) - n_ref
@@ -229,43 +276,88 @@ def _plan_group(protocol: Protocol, scene: Scene, split: str, group: GroupSpec, 
     refs_spec = protocol.references
     jobs, start = [], 0
     for index, size in enumerate(chunk_sizes(len(frames.targets), per_packet)):
-        targets = frames.targets[start:start + size]
+        targets = frames.targets[start : start + size]
         start += size
         target_cameras = [f.camera for f in targets]
-        chosen = select_references(target_cameras, fit_cameras, n_ref, d_max=d_max, alpha=refs_spec.alpha,
-                                   beta=refs_spec.beta, aggregate=refs_spec.aggregate)
-        scores = overlap_score_matrix(target_cameras, fit_cameras, d_max, alpha=refs_spec.alpha, beta=refs_spec.beta)
+        chosen = select_references(
+            target_cameras,
+            fit_cameras,
+            n_ref,
+            d_max=d_max,
+            alpha=refs_spec.alpha,
+            beta=refs_spec.beta,
+            aggregate=refs_spec.aggregate,
+        )
+        scores = overlap_score_matrix(
+            target_cameras, fit_cameras, d_max, alpha=refs_spec.alpha, beta=refs_spec.beta
+        )
         aggregated = scores.mean(axis=0) if refs_spec.aggregate == "mean" else scores.max(axis=0)
         job = PacketJob(
-            packet_id=packet_id(protocol.name, scene.name, group.name, index), dataset=scene.dataset,
-            protocol=protocol.name, group=group.name, split=split, scene=scene.name, fit_key=group.fit_key,
+            packet_id=packet_id(protocol.name, scene.name, group.name, index),
+            dataset=scene.dataset,
+            protocol=protocol.name,
+            group=group.name,
+            split=split,
+            scene=scene.name,
+            fit_key=group.fit_key,
             fit_path=fit_path,
-            references=tuple(view_job(protocol, frames.fit[i], resolution, target=False,
-                                      score=float(aggregated[i])) for i in chosen),
+            references=tuple(
+                view_job(protocol, frames.fit[i], resolution, target=False, score=float(aggregated[i]))
+                for i in chosen
+            ),
             targets=tuple(view_job(protocol, f, resolution, target=True) for f in targets),
-            resolution=resolution, cmap_bound=bound, cmap_center=center, cmap_half=cmap_half)
+            resolution=resolution,
+            cmap_bound=bound,
+            cmap_center=center,
+            cmap_half=cmap_half,
+        )
         jobs.append(_with_recipe(job, protocol, fit_sha, backend))
-    return GroupPlan(scene=scene.name, group=group.name, fit_key=group.fit_key, fit_frames=frames.fit,
-                     jobs=tuple(jobs))
+    return GroupPlan(
+        scene=scene.name, group=group.name, fit_key=group.fit_key, fit_frames=frames.fit, jobs=tuple(jobs)
+    )
 
 
 def _with_recipe(job: PacketJob, protocol: Protocol, fit_sha: str, backend: str) -> PacketJob:
     def view(v: ViewJob) -> dict[str, Any]:
-        return {"frame": v.frame, "sensor": v.sensor, "traversal": v.traversal, "timestamp_us": v.timestamp_us,
-                "image": v.image_path.name, "image_bytes": _size(v.image_path),
-                "mask": None if v.mask_path is None else v.mask_path.name,
-                "mask_bytes": None if v.mask_path is None else _size(v.mask_path), "invert_mask": v.invert_mask,
-                "crop": [v.crop.left, v.crop.top, v.crop.width, v.crop.height],
-                "K": _floats(v.camera.K), "w2c": _floats(v.camera.w2c), "score": v.overlap_score}
+        return {
+            "frame": v.frame,
+            "sensor": v.sensor,
+            "traversal": v.traversal,
+            "timestamp_us": v.timestamp_us,
+            "image": v.image_path.name,
+            "image_bytes": _size(v.image_path),
+            "mask": None if v.mask_path is None else v.mask_path.name,
+            "mask_bytes": None if v.mask_path is None else _size(v.mask_path),
+            "invert_mask": v.invert_mask,
+            "crop": [v.crop.left, v.crop.top, v.crop.width, v.crop.height],
+            "K": _floats(v.camera.K),
+            "w2c": _floats(v.camera.w2c),
+            "score": v.overlap_score,
+        }
 
-    content = {"format": PACKET_FORMAT, "packet_id": job.packet_id, "dataset": job.dataset,
-               "protocol": job.protocol, "group": job.group, "split": job.split, "scene": job.scene,
-               "fit_key": job.fit_key, "fit_sha256": fit_sha, "resolution": list(job.resolution),
-               "resize": protocol.images.resize, "masks": protocol.images.masks,
-               "cmap_bound": job.cmap_bound, "cmap_center": list(job.cmap_center), "backend": backend,
-               "cmap_precision": "half" if job.cmap_half else "float32",
-               "references": [view(v) for v in job.references], "targets": [view(v) for v in job.targets]}
-    digest = hashlib.sha256(json.dumps(content, sort_keys=True, separators=(",", ":")).encode("utf-8")).hexdigest()
+    content = {
+        "format": PACKET_FORMAT,
+        "packet_id": job.packet_id,
+        "dataset": job.dataset,
+        "protocol": job.protocol,
+        "group": job.group,
+        "split": job.split,
+        "scene": job.scene,
+        "fit_key": job.fit_key,
+        "fit_sha256": fit_sha,
+        "resolution": list(job.resolution),
+        "resize": protocol.images.resize,
+        "masks": protocol.images.masks,
+        "cmap_bound": job.cmap_bound,
+        "cmap_center": list(job.cmap_center),
+        "backend": backend,
+        "cmap_precision": "half" if job.cmap_half else "float32",
+        "references": [view(v) for v in job.references],
+        "targets": [view(v) for v in job.targets],
+    }
+    digest = hashlib.sha256(
+        json.dumps(content, sort_keys=True, separators=(",", ":")).encode("utf-8")
+    ).hexdigest()
     return replace(job, recipe=digest)
 
 

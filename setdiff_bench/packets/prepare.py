@@ -98,9 +98,11 @@ class PrepareSummary:
 
     def line(self) -> str:
         fits = f"{self.fits_trained} fit(s) trained, " if self.fits_trained else ""
-        return (f"{fits}{self.planned} packet(s) planned in {self.scenes} scene(s): {self.written} written "
-                f"({self.views_written} views), {self.skipped} already complete, {self.removed} outdated removed; "
-                f"index {'updated' if self.index_written else 'unchanged'}; {self.wall_s:.1f} s")
+        return (
+            f"{fits}{self.planned} packet(s) planned in {self.scenes} scene(s): {self.written} written "
+            f"({self.views_written} views), {self.skipped} already complete, {self.removed} outdated removed; "
+            f"index {'updated' if self.index_written else 'unchanged'}; {self.wall_s:.1f} s"
+        )
 
 
 @dataclass
@@ -116,10 +118,21 @@ class JobStats:
 class FitSource:
     """Finds (or trains) the PLY of each (scene, fit key) and hashes it once."""
 
-    def __init__(self, *, fits_dir: Path | None, fit: bool, out: Path, fit_iterations: int = 30_000,
-                 fit_device: str = "auto", progress: bool = True, downscale: int = 1) -> None:
+    def __init__(
+        self,
+        *,
+        fits_dir: Path | None,
+        fit: bool,
+        out: Path,
+        fit_iterations: int = 30_000,
+        fit_device: str = "auto",
+        progress: bool = True,
+        downscale: int = 1,
+    ) -> None:
         if (fits_dir is None) == (not fit):
-            raise UsageError("give exactly one of --fits DIR (your 3DGS PLYs) or --fit (fit them here)", "--fits")
+            raise UsageError(
+                "give exactly one of --fits DIR (your 3DGS PLYs) or --fit (fit them here)", "--fits"
+            )
         self.fits_dir, self.fit, self.out = fits_dir, fit, out
         self.fit_iterations, self.fit_device, self.progress = fit_iterations, fit_device, progress
         self.downscale = downscale  # fit at the protocol's working scale ([images] downscale)
@@ -144,14 +157,23 @@ class FitSource:
         if self.fit_iterations == FitConfig().iterations:
             config = FitConfig()
         else:
-            config = FitConfig.schedule(self.fit_iterations, densify_every=min(100, max(1, self.fit_iterations // 50)))
+            config = FitConfig.schedule(
+                self.fit_iterations, densify_every=min(100, max(1, self.fit_iterations // 50))
+            )
         device = resolve_device(self.fit_device)
         views = load_fit_views(scene, [f.name for f in fit_frames], downscale=self.downscale)
 
         points, colors = initial_points(scene, views)  # sparse points, else triangulated from the poses
-        result = fit_gaussians(views, config, points=points, colors=colors, device=device,
-                               checkpoint_dir=target.with_suffix(".ckpt"), checkpoint_every=1000,
-                               progress=self.progress)
+        result = fit_gaussians(
+            views,
+            config,
+            points=points,
+            colors=colors,
+            device=device,
+            checkpoint_dir=target.with_suffix(".ckpt"),
+            checkpoint_every=1000,
+            progress=self.progress,
+        )
         write_ply(target, result.model)
         shutil.rmtree(target.with_suffix(".ckpt"), ignore_errors=True)
         self.trained += 1
@@ -160,9 +182,11 @@ class FitSource:
         path = self.existing(scene, fit_key)
         if path is None:
             expected = self.candidates(scene, fit_key)[0]
-            raise DatasetError(f"missing 3DGS fit for scene {scene!r}, fit {fit_key!r} (expected this PLY, or "
-                               f"{self.candidates(scene, fit_key)[-1].name} under <scene>/fits/; or pass --fit)",
-                               expected)
+            raise DatasetError(
+                f"missing 3DGS fit for scene {scene!r}, fit {fit_key!r} (expected this PLY, or "
+                f"{self.candidates(scene, fit_key)[-1].name} under <scene>/fits/; or pass --fit)",
+                expected,
+            )
         if path not in self._hashes:
             self._hashes[path] = sha256_file(path)
         return path, self._hashes[path]
@@ -186,16 +210,25 @@ def _model(path: Path, device: str) -> Any:
     return _MODELS[key]
 
 
-def _reference_geometry(model: Any, references: Sequence[Any], options: dict[str, Any], height: int,
-                        width: int) -> tuple[torch.Tensor, torch.Tensor]:
+def _reference_geometry(
+    model: Any, references: Sequence[Any], options: dict[str, Any], height: int, width: int
+) -> tuple[torch.Tensor, torch.Tensor]:
     """World-frame C-maps ``(N, 3, H, W)`` and alphas ``(N, 1, H, W)`` of the references, cached per process.
 
     A scene's fit frames serve as references of many packets; their renders do not depend on the
     packet (normalisation is applied afterwards), so each is rendered once per process and model.
     """
-    keys = [(id(model), v.frame, repr(v.camera.K.tolist()), repr(v.camera.w2c.tolist()),
-             repr(options["cmap_bound"]), repr(tuple(np.asarray(options["cmap_center"]).tolist())))
-            for v in references]
+    keys = [
+        (
+            id(model),
+            v.frame,
+            repr(v.camera.K.tolist()),
+            repr(v.camera.w2c.tolist()),
+            repr(options["cmap_bound"]),
+            repr(tuple(np.asarray(options["cmap_center"]).tolist())),
+        )
+        for v in references
+    ]
     missing = [i for i, key in enumerate(keys) if key not in _REFERENCE_RENDERS]
     if missing:
         out = render(model, [references[i].camera for i in missing], **options)
@@ -207,13 +240,17 @@ def _reference_geometry(model: Any, references: Sequence[Any], options: dict[str
         return torch.zeros(0, 3, height, width), torch.zeros(0, 1, height, width)
     for key in keys:
         _REFERENCE_RENDERS.move_to_end(key)
-    return (torch.stack([_REFERENCE_RENDERS[key][0] for key in keys]),
-            torch.stack([_REFERENCE_RENDERS[key][1] for key in keys]))
+    return (
+        torch.stack([_REFERENCE_RENDERS[key][0] for key in keys]),
+        torch.stack([_REFERENCE_RENDERS[key][1] for key in keys]),
+    )
 
 
-def resample(image: np.ndarray, crop: Crop, resolution: tuple[int, int], *, nearest: bool = False) -> np.ndarray:
+def resample(
+    image: np.ndarray, crop: Crop, resolution: tuple[int, int], *, nearest: bool = False
+) -> np.ndarray:
     """Crop ``image`` ``(H, W[, C])`` to ``crop`` and resize to ``resolution`` (H, W) (rules in packets.plan)."""
-    window = image[crop.top:crop.top + crop.height, crop.left:crop.left + crop.width]
+    window = image[crop.top : crop.top + crop.height, crop.left : crop.left + crop.width]
     out_h, out_w = resolution
     if window.shape[:2] == (out_h, out_w):
         return np.ascontiguousarray(window)
@@ -235,7 +272,9 @@ def _capture(view: ViewJob, resolution: tuple[int, int]) -> np.ndarray:
 
 
 def _mask(view: ViewJob, resolution: tuple[int, int]) -> np.ndarray:
-    covered = undistortion_maps(view.camera)[2] if is_distorted(view.camera) else np.ones(resolution, dtype=bool)
+    covered = (
+        undistortion_maps(view.camera)[2] if is_distorted(view.camera) else np.ones(resolution, dtype=bool)
+    )
     if view.mask_path is None:
         return covered
     keep = read_mask(view.mask_path)
@@ -243,7 +282,11 @@ def _mask(view: ViewJob, resolution: tuple[int, int]) -> np.ndarray:
         keep = ~keep
     keep = resample(keep.astype(np.uint8), view.crop, resolution, nearest=True)
     if is_distorted(view.camera):
-        keep = undistort_image(keep, view.camera)[0][..., 0] if keep.ndim == 3 else undistort_image(keep, view.camera)[0]
+        keep = (
+            undistort_image(keep, view.camera)[0][..., 0]
+            if keep.ndim == 3
+            else undistort_image(keep, view.camera)[0]
+        )
     return keep.astype(bool) & covered
 
 
@@ -266,16 +309,32 @@ def build_packet(job: PacketJob, root: Path, backend: str, device: str) -> JobSt
     contents = []
     for i, view in enumerate(views):
         is_target = i >= len(job.references)
-        contents.append(ViewContent(
-            frame=view.frame, sensor=view.sensor, traversal=view.traversal, timestamp_us=view.timestamp_us,
-            camera=normalised.cameras[i], camera_world=view.camera,
-            image=to_numpy_hwc(rgb[i - len(job.references)]) if is_target else _capture(view, job.resolution),
-            cmap=to_numpy_hwc(normalised.cmaps[i]), alpha=alpha[i, 0].numpy(),
-            gt=_capture(view, job.resolution) if is_target else None,
-            mask=_mask(view, job.resolution) if is_target else None, overlap_score=view.overlap_score))
+        contents.append(
+            ViewContent(
+                frame=view.frame,
+                sensor=view.sensor,
+                traversal=view.traversal,
+                timestamp_us=view.timestamp_us,
+                camera=normalised.cameras[i],
+                camera_world=view.camera,
+                image=to_numpy_hwc(rgb[i - len(job.references)])
+                if is_target
+                else _capture(view, job.resolution),
+                cmap=to_numpy_hwc(normalised.cmaps[i]),
+                alpha=alpha[i, 0].numpy(),
+                gt=_capture(view, job.resolution) if is_target else None,
+                mask=_mask(view, job.resolution) if is_target else None,
+                overlap_score=view.overlap_score,
+            )
+        )
     read = time.perf_counter()
-    header = PacketHeader(**key_fields(job), fit_key=job.fit_key, scale=normalised.scale, recipe=job.recipe,
-                          cmap_half=job.cmap_half)
+    header = PacketHeader(
+        **key_fields(job),
+        fit_key=job.fit_key,
+        scale=normalised.scale,
+        recipe=job.recipe,
+        cmap_half=job.cmap_half,
+    )
     n = len(job.references)
     write_packet(root, header, contents[:n], contents[n:])
     done = time.perf_counter()
@@ -296,8 +355,10 @@ def declared_split(assignment: Mapping[str, str], test_scenes: Sequence[str]) ->
     """
     unknown = sorted(set(test_scenes) - set(assignment))
     if unknown:
-        raise UsageError(f"no scene {unknown[0]!r} in the dataset root; scenes: {', '.join(sorted(assignment))}",
-                         "--test-scene")
+        raise UsageError(
+            f"no scene {unknown[0]!r} in the dataset root; scenes: {', '.join(sorted(assignment))}",
+            "--test-scene",
+        )
     return {name: "test" if name in test_scenes else "train" for name in assignment}
 
 
@@ -318,13 +379,28 @@ def resolve_backend(backend: str, device: str) -> tuple[str, str]:
     return backend, device
 
 
-def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[str], *,
-            protocol: str | os.PathLike[str] | None = None, fits: str | os.PathLike[str] | None = None,
-            fit: bool = False, split: str = "all", scenes: Sequence[str] | None = None,
-            workers: int = 1, shard: Shard = Shard(), backend: str = "auto", device: str = "auto",
-            loader_options: Mapping[str, Any] | None = None, fit_iterations: int = 30_000, threads: int = 1,
-            cmap_precision: str = "float32", progress: bool = True,
-            groups: Sequence[str] | None = None, test_scenes: Sequence[str] | None = None) -> PrepareSummary:
+def prepare(
+    dataset: str,
+    root: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    *,
+    protocol: str | os.PathLike[str] | None = None,
+    fits: str | os.PathLike[str] | None = None,
+    fit: bool = False,
+    split: str = "all",
+    scenes: Sequence[str] | None = None,
+    workers: int = 1,
+    shard: Shard = Shard(),
+    backend: str = "auto",
+    device: str = "auto",
+    loader_options: Mapping[str, Any] | None = None,
+    fit_iterations: int = 30_000,
+    threads: int = 1,
+    cmap_precision: str = "float32",
+    progress: bool = True,
+    groups: Sequence[str] | None = None,
+    test_scenes: Sequence[str] | None = None,
+) -> PrepareSummary:
     """Prepare the packets of ``dataset`` under ``protocol`` into the store ``out`` (module docstring).
 
     Args:
@@ -356,30 +432,68 @@ def prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[s
     if threads < 1:
         raise UsageError(f"threads must be >= 1, got {threads}", "--threads")
     if cmap_precision not in ("float32", "half"):
-        raise UsageError(f"cmap precision must be float32 or half, got {cmap_precision!r}", "--cmap-precision")
+        raise UsageError(
+            f"cmap precision must be float32 or half, got {cmap_precision!r}", "--cmap-precision"
+        )
     with torch_threads(threads):
-        return _prepare(dataset, root, out, protocol=protocol, fits=fits, fit=fit, split=split, scenes=scenes,
-                        workers=workers, shard=shard, backend=backend, device=device, loader_options=loader_options,
-                        fit_iterations=fit_iterations, threads=threads, cmap_half=cmap_precision == "half",
-                        progress=progress, groups=groups, test_scenes=test_scenes)
+        return _prepare(
+            dataset,
+            root,
+            out,
+            protocol=protocol,
+            fits=fits,
+            fit=fit,
+            split=split,
+            scenes=scenes,
+            workers=workers,
+            shard=shard,
+            backend=backend,
+            device=device,
+            loader_options=loader_options,
+            fit_iterations=fit_iterations,
+            threads=threads,
+            cmap_half=cmap_precision == "half",
+            progress=progress,
+            groups=groups,
+            test_scenes=test_scenes,
+        )
 
 
-def _prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[str], *,
-             protocol: str | os.PathLike[str] | None, fits: str | os.PathLike[str] | None, fit: bool, split: str,
-             scenes: Sequence[str] | None, workers: int, shard: Shard, backend: str, device: str,
-             loader_options: Mapping[str, Any] | None, fit_iterations: int, threads: int, cmap_half: bool,
-             progress: bool, groups: Sequence[str] | None = None,
-             test_scenes: Sequence[str] | None = None) -> PrepareSummary:
+def _prepare(
+    dataset: str,
+    root: str | os.PathLike[str],
+    out: str | os.PathLike[str],
+    *,
+    protocol: str | os.PathLike[str] | None,
+    fits: str | os.PathLike[str] | None,
+    fit: bool,
+    split: str,
+    scenes: Sequence[str] | None,
+    workers: int,
+    shard: Shard,
+    backend: str,
+    device: str,
+    loader_options: Mapping[str, Any] | None,
+    fit_iterations: int,
+    threads: int,
+    cmap_half: bool,
+    progress: bool,
+    groups: Sequence[str] | None = None,
+    test_scenes: Sequence[str] | None = None,
+) -> PrepareSummary:
     started = time.perf_counter()
     spec = load_protocol(protocol or dataset)
     if spec.dataset != dataset:
-        raise ProtocolError(f"protocol {spec.name!r} is for dataset {spec.dataset!r}, not {dataset!r}", spec.path)
+        raise ProtocolError(
+            f"protocol {spec.name!r} is for dataset {spec.dataset!r}, not {dataset!r}", spec.path
+        )
     if groups:
         known = [g.name for g in spec.groups]
         unknown = [name for name in groups if name not in known]
         if unknown:
-            raise UsageError(f"protocol {spec.name!r} has no group {unknown[0]!r}; groups: {', '.join(known)}",
-                             "--group")
+            raise UsageError(
+                f"protocol {spec.name!r} has no group {unknown[0]!r}; groups: {', '.join(known)}", "--group"
+            )
         spec = replace(spec, groups=tuple(g for g in spec.groups if g.name in groups))
     if split not in SPLIT_CHOICES:
         raise UsageError(f"split must be one of {', '.join(SPLIT_CHOICES)}, got {split!r}", "--split")
@@ -388,13 +502,23 @@ def _prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[
     backend, device = resolve_backend(backend, device)
     out = Path(out)
     options = {**spec.loader_options, **(loader_options or {})}
-    source = FitSource(fits_dir=None if fits is None else Path(fits), fit=fit, out=out,
-                       fit_iterations=fit_iterations, progress=progress, downscale=spec.images.downscale)
+    source = FitSource(
+        fits_dir=None if fits is None else Path(fits),
+        fit=fit,
+        out=out,
+        fit_iterations=fit_iterations,
+        progress=progress,
+        downscale=spec.images.downscale,
+    )
 
     assignment = spec.split.assign(list_scenes(dataset, root, **options))
     if test_scenes is not None:
         assignment = declared_split(assignment, test_scenes)
-    chosen = sorted(assignment) if scenes is None else select_scenes(sorted(assignment), scenes, Path(root), dataset)
+    chosen = (
+        sorted(assignment)
+        if scenes is None
+        else select_scenes(sorted(assignment), scenes, Path(root), dataset)
+    )
     chosen = [name for name in chosen if split == "all" or assignment[name] == split]
     summary = PrepareSummary()
     summary.split_counts = {s: sum(1 for n in chosen if assignment[n] == s) for s in ("train", "test")}
@@ -410,12 +534,21 @@ def _prepare(dataset: str, root: str | os.PathLike[str], out: str | os.PathLike[
         groups = [g for g in applicable_groups(spec, scene) if g.fit_key == fit_key]
         fit_frames = [tuple(f.name for f in g.select(scene).fit) for g in groups]
         if len(set(fit_frames)) > 1:
-            raise ProtocolError(f"groups {', '.join(g.name for g in groups)} share fit_key {fit_key!r} but select "
-                                f"different fit frames in scene {scene_name!r}", spec.path)
+            raise ProtocolError(
+                f"groups {', '.join(g.name for g in groups)} share fit_key {fit_key!r} but select "
+                f"different fit frames in scene {scene_name!r}",
+                spec.path,
+            )
         if source.fit:
             source.ensure(scene, fit_key, groups[0].select(scene).fit)
-        plans = plan_scene(replace(spec, groups=tuple(groups)), scene, assignment[scene_name], source,
-                           backend=backend, cmap_half=cmap_half)
+        plans = plan_scene(
+            replace(spec, groups=tuple(groups)),
+            scene,
+            assignment[scene_name],
+            source,
+            backend=backend,
+            cmap_half=cmap_half,
+        )
         summary.removed += _remove_outdated(out, spec, plans)
         jobs += [job for plan in plans for job in plan.jobs]
     summary.fits_trained = source.trained
@@ -454,18 +587,30 @@ def _remove_outdated(root: Path, protocol: Protocol, plans: Sequence[GroupPlan])
         prefix = group_prefix(protocol.name, plan.scene, plan.group)
         keep = {job.packet_id for job in plan.jobs}
         for path in folder.glob(f"{prefix}*"):
-            if path.is_dir() and path.name not in keep and path.name[len(prefix):].isdigit():
+            if path.is_dir() and path.name not in keep and path.name[len(prefix) :].isdigit():
                 shutil.rmtree(path)
                 removed += 1
     return removed
 
 
-def _execute(jobs: Sequence[PacketJob], root: Path, backend: str, device: str, workers: int, threads: int,
-             progress: bool) -> Iterable[JobStats]:
+def _execute(
+    jobs: Sequence[PacketJob],
+    root: Path,
+    backend: str,
+    device: str,
+    workers: int,
+    threads: int,
+    progress: bool,
+) -> Iterable[JobStats]:
     from tqdm.auto import tqdm
 
-    bar = tqdm(total=len(jobs), desc="prepare", unit="packet", disable=True if not progress or not jobs else None,
-               dynamic_ncols=True)  # None: tqdm hides itself when stderr is not a terminal
+    bar = tqdm(
+        total=len(jobs),
+        desc="prepare",
+        unit="packet",
+        disable=True if not progress or not jobs else None,
+        dynamic_ncols=True,
+    )  # None: tqdm hides itself when stderr is not a terminal
     try:
         if workers == 1 or len(jobs) <= 1:
             for job in jobs:
@@ -474,11 +619,17 @@ def _execute(jobs: Sequence[PacketJob], root: Path, backend: str, device: str, w
                 yield stats
             return
         context = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=min(workers, len(jobs)), mp_context=context,
-                                 initializer=_init_worker, initargs=(threads,)) as pool:
+        with ProcessPoolExecutor(
+            max_workers=min(workers, len(jobs)),
+            mp_context=context,
+            initializer=_init_worker,
+            initargs=(threads,),
+        ) as pool:
             chunk = math.ceil(len(jobs) / (4 * workers))
-            futures = [pool.submit(_build_many, jobs[i:i + chunk], root, backend, device)
-                       for i in range(0, len(jobs), chunk)]
+            futures = [
+                pool.submit(_build_many, jobs[i : i + chunk], root, backend, device)
+                for i in range(0, len(jobs), chunk)
+            ]
             pending = set(futures)
             try:
                 while pending:

@@ -32,7 +32,7 @@ class Shard:
 
     def select(self, items: Sequence[T]) -> list[T]:
         """This shard's items: ``items[i::n]``."""
-        return list(items[self.index::self.count])
+        return list(items[self.index :: self.count])
 
     def __str__(self) -> str:
         return f"{self.index}/{self.count}"

@@ -111,8 +111,9 @@ def remove_temporaries(root: Path, packet_id: str) -> None:
             shutil.rmtree(stale, ignore_errors=True)
 
 
-def write_packet(root: Path, header: PacketHeader, references: Sequence[ViewContent],
-                 targets: Sequence[ViewContent]) -> list[dict[str, Any]]:
+def write_packet(
+    root: Path, header: PacketHeader, references: Sequence[ViewContent], targets: Sequence[ViewContent]
+) -> list[dict[str, Any]]:
     """Write one packet folder atomically; returns its index rows.
 
     The folder is built under ``packets/.tmp-<id>-<random>`` (files, then the fragment ``index.parquet``)
@@ -136,16 +137,23 @@ def write_packet(root: Path, header: PacketHeader, references: Sequence[ViewCont
     return rows
 
 
-def _write_view(root: Path, folder: Path, header: PacketHeader, role: str, position: int,
-                view: ViewContent) -> dict[str, Any]:
+def _write_view(
+    root: Path, folder: Path, header: PacketHeader, role: str, position: int, view: ViewContent
+) -> dict[str, Any]:
     stem = f"{'ref' if role == 'ref' else 'tgt'}_{position:02d}"
     relative = Path(PACKETS_DIR) / header.packet_id
     files: dict[str, str | None] = dict.fromkeys(FILE_COLUMNS)
     write_png(folder / f"{stem}_rgb.png", view.image, atomic=False)
     files["image"] = f"{stem}_rgb.png"
     cmap = np.concatenate([view.cmap, view.alpha[:, :, None]], axis=2).astype(np.float32)
-    write_exr(folder / f"{stem}_cmap.exr", cmap, CMAP_CHANNELS, half=header.cmap_half, attributes=EXR_ATTRIBUTES,
-              atomic=False)
+    write_exr(
+        folder / f"{stem}_cmap.exr",
+        cmap,
+        CMAP_CHANNELS,
+        half=header.cmap_half,
+        attributes=EXR_ATTRIBUTES,
+        atomic=False,
+    )
     files["cmap"] = f"{stem}_cmap.exr"
     if role == "target":
         if view.gt is None or view.mask is None:
@@ -154,13 +162,27 @@ def _write_view(root: Path, folder: Path, header: PacketHeader, role: str, posit
         write_png(folder / f"{stem}_mask.png", view.mask.astype(bool), atomic=False)
         files["gt"], files["mask"] = f"{stem}_gt.png", f"{stem}_mask.png"
     row: dict[str, Any] = {
-        "packet_id": header.packet_id, "role": role, "view": position, "dataset": header.dataset,
-        "protocol": header.protocol, "group": header.group, "split": header.split, "scene": header.scene,
-        "fit_key": header.fit_key, "frame": view.frame, "sensor": view.sensor, "traversal": view.traversal,
-        "timestamp_us": view.timestamp_us, "width": view.camera.width, "height": view.camera.height,
-        "K": [float(v) for v in view.camera.K.reshape(-1)], "w2c": [float(v) for v in view.camera.w2c.reshape(-1)],
-        "w2c_world": [float(v) for v in view.camera_world.w2c.reshape(-1)], "scale": float(header.scale),
-        "overlap_score": None if view.overlap_score is None else float(view.overlap_score), "recipe": header.recipe,
+        "packet_id": header.packet_id,
+        "role": role,
+        "view": position,
+        "dataset": header.dataset,
+        "protocol": header.protocol,
+        "group": header.group,
+        "split": header.split,
+        "scene": header.scene,
+        "fit_key": header.fit_key,
+        "frame": view.frame,
+        "sensor": view.sensor,
+        "traversal": view.traversal,
+        "timestamp_us": view.timestamp_us,
+        "width": view.camera.width,
+        "height": view.camera.height,
+        "K": [float(v) for v in view.camera.K.reshape(-1)],
+        "w2c": [float(v) for v in view.camera.w2c.reshape(-1)],
+        "w2c_world": [float(v) for v in view.camera_world.w2c.reshape(-1)],
+        "scale": float(header.scale),
+        "overlap_score": None if view.overlap_score is None else float(view.overlap_score),
+        "recipe": header.recipe,
     }
     for column, name in files.items():
         row[column] = None if name is None else (relative / name).as_posix()
@@ -212,9 +234,13 @@ class PacketStore:
         self.root = Path(root)
         index_file = self.root / INDEX_FILE
         if not index_file.is_file():
-            raise PacketError("no index.parquet here; create the store with `setdiff-bench prepare`", self.root)
+            raise PacketError(
+                "no index.parquet here; create the store with `setdiff-bench prepare`", self.root
+            )
         self.index: pd.DataFrame = read_rows(index_file).to_pandas()
-        self._rows: dict[str, pd.DataFrame] = {pid: rows for pid, rows in self.index.groupby("packet_id", sort=True)}
+        self._rows: dict[str, pd.DataFrame] = {
+            pid: rows for pid, rows in self.index.groupby("packet_id", sort=True)
+        }
 
     def __len__(self) -> int:
         return len(self._rows)
@@ -236,8 +262,9 @@ class PacketStore:
         return self._rows[packet_id]
 
     # ------------------------------------------------------------------ loading
-    def load_packet(self, packet_id: str, references: Sequence[int] | None = None,
-                    targets: Sequence[int] | None = None) -> Packet:
+    def load_packet(
+        self, packet_id: str, references: Sequence[int] | None = None, targets: Sequence[int] | None = None
+    ) -> Packet:
         """A packet without ground truth: references (clean) and targets (renders) with C-maps and cameras.
 
         Args:
@@ -249,13 +276,19 @@ class PacketStore:
         first = rows.iloc[0]
         return Packet.from_key(
             PacketKey.from_row(first),
-            references=self._view_set(_pick(refs, references)), targets=self._view_set(_pick(tgts, targets)),
+            references=self._view_set(_pick(refs, references)),
+            targets=self._view_set(_pick(tgts, targets)),
             scale=float(first["scale"]),
-            metadata={"fit_key": first["fit_key"], "recipe": first["recipe"],
-                      "reference_scores": tuple(float(s) for s in _pick(refs, references)["overlap_score"])})
+            metadata={
+                "fit_key": first["fit_key"],
+                "recipe": first["recipe"],
+                "reference_scores": tuple(float(s) for s in _pick(refs, references)["overlap_score"]),
+            },
+        )
 
-    def load_ground_truth(self, packet_id: str, targets: Sequence[int] | None = None
-                          ) -> tuple[torch.Tensor, torch.Tensor]:
+    def load_ground_truth(
+        self, packet_id: str, targets: Sequence[int] | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
         """``(gt (M, 3, H, W) float32 in [0, 1], masks (M, 1, H, W) bool)`` of the packet's targets."""
         rows = _pick(self.rows(packet_id)[lambda r: r["role"] == "target"], targets)
         gts, masks = [], []
@@ -270,17 +303,19 @@ class PacketStore:
         for packet_id in self.packet_ids(split):
             yield self.load_packet(packet_id)
 
-    def training_dataset(self, split: str = "train", min_views: int = 8, max_views: int = 12,
-                         seed: int = 0) -> PacketTrainingDataset:
+    def training_dataset(
+        self, split: str = "train", min_views: int = 8, max_views: int = 12, seed: int = 0
+    ) -> PacketTrainingDataset:
         """A torch ``Dataset`` of :class:`TrainingSample` over the packets of ``split`` (see the class)."""
-        return PacketTrainingDataset(self, self.packet_ids(split), min_views=min_views, max_views=max_views,
-                                     seed=seed)
+        return PacketTrainingDataset(
+            self, self.packet_ids(split), min_views=min_views, max_views=max_views, seed=seed
+        )
 
     # ------------------------------------------------------------------ integrity
     def verify(self, packet_ids: Sequence[str] | None = None) -> list[str]:
         """Re-hash every file of the given packets (default all); returns one line per problem (empty = OK)."""
         problems = []
-        for pid in (self.packet_ids() if packet_ids is None else packet_ids):
+        for pid in self.packet_ids() if packet_ids is None else packet_ids:
             problems += [f"{pid}: {p}" for p in _file_problems(self.root, self.rows(pid).to_dict("records"))]
         return problems
 
@@ -301,8 +336,11 @@ class PacketStore:
             raise PacketError("packet file missing (run `setdiff-bench prepare` again to rewrite it)", path)
         expected = row[f"{column}_sha256"]
         if sha256_file(path) != expected:
-            raise PacketError(f"SHA-256 mismatch: the file changed since the index recorded {str(expected)[:12]}… "
-                              "(run `setdiff-bench prepare` again to rewrite it)", path)
+            raise PacketError(
+                f"SHA-256 mismatch: the file changed since the index recorded {str(expected)[:12]}… "
+                "(run `setdiff-bench prepare` again to rewrite it)",
+                path,
+            )
         return path
 
     def _view_set(self, rows: pd.DataFrame) -> ViewSet:
@@ -313,17 +351,23 @@ class PacketStore:
             exr_path = self._file(row, "cmap")
             cmap = read_exr(exr_path, channels=4)
             if cmap.shape[:2] != size:
-                raise PacketError(f"C-map is {cmap.shape[1]}x{cmap.shape[0]}, expected {size[1]}x{size[0]}", exr_path)
+                raise PacketError(
+                    f"C-map is {cmap.shape[1]}x{cmap.shape[0]}, expected {size[1]}x{size[0]}", exr_path
+                )
             chw = to_tensor_chw(cmap)
             cmaps.append(chw[:3])
             alphas.append(chw[3:4])
             cameras.append(row_camera(row, str(self.root / INDEX_FILE)))
         height, width = (int(rows["height"].iloc[0]), int(rows["width"].iloc[0])) if len(rows) else (0, 0)
         empty = torch.zeros(0, 3, height, width)
-        return ViewSet(names=tuple(rows["frame"]), images=torch.stack(images) if images else empty,
-                       cmaps=torch.stack(cmaps) if cmaps else empty,
-                       alphas=torch.stack(alphas) if alphas else torch.zeros(0, 1, height, width),
-                       cameras=tuple(cameras), timestamps_us=tuple(timestamp_or_none(t) for t in rows["timestamp_us"]))
+        return ViewSet(
+            names=tuple(rows["frame"]),
+            images=torch.stack(images) if images else empty,
+            cmaps=torch.stack(cmaps) if cmaps else empty,
+            alphas=torch.stack(alphas) if alphas else torch.zeros(0, 1, height, width),
+            cameras=tuple(cameras),
+            timestamps_us=tuple(timestamp_or_none(t) for t in rows["timestamp_us"]),
+        )
 
 
 def row_camera(row: pd.Series | dict[str, Any], source: str = "", world: bool = False) -> Camera:
@@ -333,7 +377,9 @@ def row_camera(row: pd.Series | dict[str, Any], source: str = "", world: bool = 
     try:
         return Camera(K, w2c, int(row["width"]), int(row["height"]), source=f"{source} ({row['frame']!r})")
     except SetDiffBenchError as exc:
-        raise PacketError(f"packet {row['packet_id']!r} view {row['frame']!r}: {exc.problem}", source) from exc
+        raise PacketError(
+            f"packet {row['packet_id']!r} view {row['frame']!r}: {exc.problem}", source
+        ) from exc
 
 
 def _pick(rows: pd.DataFrame, positions: Sequence[int] | None) -> pd.DataFrame:
@@ -367,8 +413,15 @@ class PacketTrainingDataset(torch.utils.data.Dataset):
     Only the chosen views' files are read.  ``Packet.scale`` composes both normalisations.
     """
 
-    def __init__(self, store: PacketStore, packet_ids: Sequence[str], *, min_views: int = 8, max_views: int = 12,
-                 seed: int = 0) -> None:
+    def __init__(
+        self,
+        store: PacketStore,
+        packet_ids: Sequence[str],
+        *,
+        min_views: int = 8,
+        max_views: int = 12,
+        seed: int = 0,
+    ) -> None:
         if not 2 <= min_views <= max_views:
             raise ValueError(f"need 2 <= min_views <= max_views, got {min_views}, {max_views}")
         self.store, self.packet_ids = store, list(packet_ids)
@@ -391,7 +444,10 @@ class PacketTrainingDataset(torch.utils.data.Dataset):
         refs = min(max(round(size * n_ref / total), 1 if n_ref else 0), n_ref, size - 1)
         targets = min(size - refs, n_tgt)
         refs = min(size - targets, n_ref)
-        return ([int(i) for i in rng.permutation(n_ref)[:refs]], [int(i) for i in rng.permutation(n_tgt)[:targets]])
+        return (
+            [int(i) for i in rng.permutation(n_ref)[:refs]],
+            [int(i) for i in rng.permutation(n_tgt)[:targets]],
+        )
 
     def __getitem__(self, index: int) -> TrainingSample:
         packet_id = self.packet_ids[index]
@@ -399,8 +455,12 @@ class PacketTrainingDataset(torch.utils.data.Dataset):
         packet = self.store.load_packet(packet_id, ref_ids, tgt_ids)
         gt, masks = self.store.load_ground_truth(packet_id, tgt_ids)
         packet = renormalize(packet)
-        packet.metadata = {**packet.metadata, "reference_positions": tuple(ref_ids),
-                           "target_positions": tuple(tgt_ids), "epoch": self.epoch}
+        packet.metadata = {
+            **packet.metadata,
+            "reference_positions": tuple(ref_ids),
+            "target_positions": tuple(tgt_ids),
+            "epoch": self.epoch,
+        }
         return TrainingSample(packet=packet, target_gt=gt, target_masks=masks)
 
 
@@ -412,6 +472,9 @@ def renormalize(packet: Packet) -> Packet:
     alphas = torch.cat([refs.alphas, tgts.alphas])
     moved = normalize_packet(cameras, cmaps, len(refs), alphas=alphas)
     n = len(refs)
-    return replace(packet, scale=packet.scale * moved.scale,
-                   references=replace(refs, cmaps=moved.cmaps[:n], cameras=moved.cameras[:n]),
-                   targets=replace(tgts, cmaps=moved.cmaps[n:], cameras=moved.cameras[n:]))
+    return replace(
+        packet,
+        scale=packet.scale * moved.scale,
+        references=replace(refs, cmaps=moved.cmaps[:n], cameras=moved.cameras[:n]),
+        targets=replace(tgts, cmaps=moved.cmaps[n:], cameras=moved.cameras[n:]),
+    )

@@ -90,13 +90,40 @@ class DemoPreset:
 
 
 DEMO_PRESETS: dict[str, DemoPreset] = {
-    "tiny": DemoPreset("tiny", "smoke test: tiny 80x48 scenes (with --train: 3 scenes, a few steps)",
-                       "tiny", 3, "tiny_setdiff", "tiny_difix", 20, 20, 2),
-    "default": DemoPreset("default", "the 2 test scenes at 256x144 with the shipped models (about 8 minutes "
-                          "on 2 CPU cores); with --train all 6 scenes and short CPU training",
-                          "default", None, "tiny_setdiff", "tiny_difix", 230, 200, 6),
-    "full": DemoPreset("full", "8 scenes at 512x288; with --train long training, for a GPU", "large", None,
-                       "tiny_setdiff", "tiny_difix", 20000, 20000, 8),
+    "tiny": DemoPreset(
+        "tiny",
+        "smoke test: tiny 80x48 scenes (with --train: 3 scenes, a few steps)",
+        "tiny",
+        3,
+        "tiny_setdiff",
+        "tiny_difix",
+        20,
+        20,
+        2,
+    ),
+    "default": DemoPreset(
+        "default",
+        "the 2 test scenes at 256x144 with the shipped models (about 8 minutes "
+        "on 2 CPU cores); with --train all 6 scenes and short CPU training",
+        "default",
+        None,
+        "tiny_setdiff",
+        "tiny_difix",
+        230,
+        200,
+        6,
+    ),
+    "full": DemoPreset(
+        "full",
+        "8 scenes at 512x288; with --train long training, for a GPU",
+        "large",
+        None,
+        "tiny_setdiff",
+        "tiny_difix",
+        20000,
+        20000,
+        8,
+    ),
 }
 
 
@@ -155,20 +182,36 @@ def check_unseen(test_scenes: list[tuple[int, int]]) -> dict[str, dict[str, Any]
     manifests = {}
     for method, name in SHIPPED_MODELS.items():
         if name not in shipped:
-            raise UsageError(f"the shipped model {name!r} is not in this installation; run the demo with --train",
-                             "--train")
+            raise UsageError(
+                f"the shipped model {name!r} is not in this installation; run the demo with --train",
+                "--train",
+            )
         manifest = shipped[name].manifest
         seen = {tuple(pair) for pair in manifest["data"]["synthetic_seeds"]} & set(test_scenes)
         if seen:
-            raise UsageError(f"shipped model {name!r} was trained on scene (seed, index) {sorted(seen)[0]}, one of "
-                             "this demo's test scenes: pick another --seed or use --train", "--seed")
+            raise UsageError(
+                f"shipped model {name!r} was trained on scene (seed, index) {sorted(seen)[0]}, one of "
+                "this demo's test scenes: pick another --seed or use --train",
+                "--seed",
+            )
         manifests[method] = manifest
     return manifests
 
 
-def run_demo(preset: DemoPreset, paths: DemoPaths, *, seed: int = 0, jobs: int = 2, device: str | None = None,
-             train: bool = False, setdiff_steps: int | None = None, difix_steps: int | None = None,
-             ablations: bool = False, progress: bool = True, invocation: str = "") -> dict[str, Any]:
+def run_demo(
+    preset: DemoPreset,
+    paths: DemoPaths,
+    *,
+    seed: int = 0,
+    jobs: int = 2,
+    device: str | None = None,
+    train: bool = False,
+    setdiff_steps: int | None = None,
+    difix_steps: int | None = None,
+    ablations: bool = False,
+    progress: bool = True,
+    invocation: str = "",
+) -> dict[str, Any]:
     """Run every stage of the demo; returns the summary also written to ``<out>/demo.json``.
 
     Args:
@@ -181,7 +224,9 @@ def run_demo(preset: DemoPreset, paths: DemoPaths, *, seed: int = 0, jobs: int =
         StageFailed: a stage exited non-zero (it printed its own error line).
     """
     if not train and (setdiff_steps or difix_steps or ablations):
-        raise UsageError("--setdiff-steps, --difix-steps and --ablations train models: add --train", "--train")
+        raise UsageError(
+            "--setdiff-steps, --difix-steps and --ablations train models: add --train", "--train"
+        )
     from setdiff_bench.synthetic.generate import scene_name
 
     test_indices = evaluation_scene_indices(preset, seed)
@@ -194,50 +239,142 @@ def run_demo(preset: DemoPreset, paths: DemoPaths, *, seed: int = 0, jobs: int =
     steps = {"setdiff": setdiff_steps or preset.setdiff_steps, "difix": difix_steps or preset.difix_steps}
     configs = {"setdiff": preset.setdiff_config, "difix": preset.difix_config}
 
-    synth = ["synth", "--out", rel(paths.scenes), "--preset", preset.synth_preset, "--seed", seed, "--jobs", jobs]
+    synth = [
+        "synth",
+        "--out",
+        rel(paths.scenes),
+        "--preset",
+        preset.synth_preset,
+        "--seed",
+        seed,
+        "--jobs",
+        jobs,
+    ]
     if train:
         synth += ["--scenes", preset.scenes] if preset.scenes else []
     else:
         synth += ["--indices", ",".join(str(i) for i in test_indices)]
     synth += ["--device", device] if device else []
     pipeline.run("synth", synth + quiet)
-    prepare = ["prepare", "synthetic", "--root", rel(paths.scenes), "--fits", rel(paths.scenes),
-               "--out", rel(paths.packets), "--split", "all" if train else "test", "--workers", jobs]
+    prepare = [
+        "prepare",
+        "synthetic",
+        "--root",
+        rel(paths.scenes),
+        "--fits",
+        rel(paths.scenes),
+        "--out",
+        rel(paths.packets),
+        "--split",
+        "all" if train else "test",
+        "--workers",
+        jobs,
+    ]
     if not train:
         prepare += [part for index in test_indices for part in ("--test-scene", scene_name(seed, index))]
     pipeline.run("prepare", prepare + quiet)
-    checkpoints = {method: rel(paths.checkpoints(method)) for method in configs} if train else dict(SHIPPED_MODELS)
+    checkpoints = (
+        {method: rel(paths.checkpoints(method)) for method in configs} if train else dict(SHIPPED_MODELS)
+    )
     for method in configs if train else ():
-        command = ["train", "--config", configs[method], "--packets", rel(paths.packets),
-                   "--out", checkpoints[method], "--steps", steps[method], "--seed", seed]
+        command = [
+            "train",
+            "--config",
+            configs[method],
+            "--packets",
+            rel(paths.packets),
+            "--out",
+            checkpoints[method],
+            "--steps",
+            steps[method],
+            "--seed",
+            seed,
+        ]
         command += ["--device", "cpu"] if device == "cpu" else []
         pipeline.run(f"train {method}", command + quiet)
     for method in METHODS:
-        run = ["run", "--method", method, "--packets", rel(paths.packets), "--split", "test",
-               "--out", rel(paths.runs / method)]
+        run = [
+            "run",
+            "--method",
+            method,
+            "--packets",
+            rel(paths.packets),
+            "--split",
+            "test",
+            "--out",
+            rel(paths.runs / method),
+        ]
         run += ["--checkpoint", checkpoints[method]] if method in checkpoints else []
         run += ["--device", device] if device else []
         pipeline.run(f"run {method}", run + quiet)
-    pipeline.run("leaderboard", ["leaderboard", "--dataset", "synthetic", "--runs", rel(paths.runs),
-                                 "--out", rel(paths.out), "--methods", ",".join(METHODS), "--plots",
-                                 "--grids", preset.grid_frames, "--packets", rel(paths.packets)])
+    pipeline.run(
+        "leaderboard",
+        [
+            "leaderboard",
+            "--dataset",
+            "synthetic",
+            "--runs",
+            rel(paths.runs),
+            "--out",
+            rel(paths.out),
+            "--methods",
+            ",".join(METHODS),
+            "--plots",
+            "--grids",
+            preset.grid_frames,
+            "--packets",
+            rel(paths.packets),
+        ],
+    )
     if ablations:
-        ablate_common = ["--packets", rel(paths.packets), "--out", rel(paths.out), "--work", rel(paths.work), *quiet]
+        ablate_common = [
+            "--packets",
+            rel(paths.packets),
+            "--out",
+            rel(paths.out),
+            "--work",
+            rel(paths.work),
+            *quiet,
+        ]
         ablate_common += ["--device", device] if device else []
-        pipeline.run("ablate geometry", ["ablate", "geometry", "--config", configs["setdiff"],
-                                         "--steps", steps["setdiff"], *ablate_common])
-        pipeline.run("ablate setsize", ["ablate", "setsize", "--checkpoint", rel(paths.checkpoints("setdiff")),
-                                        *ablate_common])
+        pipeline.run(
+            "ablate geometry",
+            [
+                "ablate",
+                "geometry",
+                "--config",
+                configs["setdiff"],
+                "--steps",
+                steps["setdiff"],
+                *ablate_common,
+            ],
+        )
+        pipeline.run(
+            "ablate setsize",
+            ["ablate", "setsize", "--checkpoint", rel(paths.checkpoints("setdiff")), *ablate_common],
+        )
     summary = summarize(paths, preset, steps if train else {}, pipeline, invocation)
-    summary["models"] = ({method: {"checkpoint": checkpoints[method]} for method in configs} if train else
-                         {method: {"shipped": SHIPPED_MODELS[method], "files": m["files"],
-                                   "trained_on": m["data"]["scenes"], "training_seeds": m["data"]["synthetic_seeds"]}
-                          for method, m in shipped.items()})
+    summary["models"] = (
+        {method: {"checkpoint": checkpoints[method]} for method in configs}
+        if train
+        else {
+            method: {
+                "shipped": SHIPPED_MODELS[method],
+                "files": m["files"],
+                "trained_on": m["data"]["scenes"],
+                "training_seeds": m["data"]["synthetic_seeds"],
+            }
+            for method, m in shipped.items()
+        }
+    )
     summary["test_scenes"] = [scene_name(seed, index) for index in test_indices]
     summary["provenance"] = run_provenance(seed)
     write_text_atomic(paths.out / REPORT_FILE, report_markdown(summary, paths))
-    summary["files"] = {p.name: sha256_file(p) for p in sorted(paths.out.iterdir())
-                        if p.is_file() and not p.name.startswith(".") and p.name != SUMMARY_FILE}
+    summary["files"] = {
+        p.name: sha256_file(p)
+        for p in sorted(paths.out.iterdir())
+        if p.is_file() and not p.name.startswith(".") and p.name != SUMMARY_FILE
+    }
     write_text_atomic(paths.out / SUMMARY_FILE, json.dumps(summary, indent=2, sort_keys=True) + "\n")
     return summary
 
@@ -249,10 +386,17 @@ def run_provenance(seed: int) -> dict[str, Any]:
     leaderboards; another thread count, CPU instruction set, torch build or a GPU changes the last bits
     of every float sum, and training amplifies them (README "Reproducibility").
     """
-    return {"git": git_revision(), "seed": seed, "torch_threads": compute_threads(),
-            "machine": {"cpu": platform.processor() or platform.machine(), "cpu_count": os.cpu_count(),
-                        "system": platform.system()},
-            "versions": package_versions()}
+    return {
+        "git": git_revision(),
+        "seed": seed,
+        "torch_threads": compute_threads(),
+        "machine": {
+            "cpu": platform.processor() or platform.machine(),
+            "cpu_count": os.cpu_count(),
+            "system": platform.system(),
+        },
+        "versions": package_versions(),
+    }
 
 
 def better(metric: str, value: float, other: float) -> bool:
@@ -268,54 +412,81 @@ def lane_shift_verdict(metrics: pd.DataFrame, group: str = "lane+2") -> dict[str
     """
     rows = metrics[metrics["group"] == group]
     means = rows.groupby("method")[list(VERDICT_METRICS)].mean()
-    verdict: dict[str, Any] = {"group": group, "targets": int((rows["method"] == "setdiff").sum()),
-                               "means": {m: {k: float(v) for k, v in means.loc[m].items()} for m in means.index}}
+    verdict: dict[str, Any] = {
+        "group": group,
+        "targets": int((rows["method"] == "setdiff").sum()),
+        "means": {m: {k: float(v) for k, v in means.loc[m].items()} for m in means.index},
+    }
     if "setdiff" in means.index:
         for other in ("identity", "difix"):
             if other in means.index:
-                verdict[f"setdiff_beats_{other}"] = {name: bool(better(name, means.loc["setdiff", name],
-                                                                       means.loc[other, name]))
-                                                     for name in VERDICT_METRICS}
+                verdict[f"setdiff_beats_{other}"] = {
+                    name: bool(better(name, means.loc["setdiff", name], means.loc[other, name]))
+                    for name in VERDICT_METRICS
+                }
     return verdict
 
 
-def summarize(paths: DemoPaths, preset: DemoPreset, steps: dict[str, int], pipeline: Pipeline,
-              invocation: str) -> dict[str, Any]:
+def summarize(
+    paths: DemoPaths, preset: DemoPreset, steps: dict[str, int], pipeline: Pipeline, invocation: str
+) -> dict[str, Any]:
     """The demo's machine-readable summary: preset, stage commands and times, the +2-lane verdict."""
-    frames = [pd.read_parquet(paths.runs / m / METRICS_FILE) for m in METHODS
-              if (paths.runs / m / METRICS_FILE).is_file()]
+    frames = [
+        pd.read_parquet(paths.runs / m / METRICS_FILE)
+        for m in METHODS
+        if (paths.runs / m / METRICS_FILE).is_file()
+    ]
     metrics = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
     return {
         "invocation": invocation,
         "preset": asdict(preset),
         "training_steps": steps,
-        "stages": [{"name": r.name, "command": r.command, "seconds": round(r.seconds, 1), "resumed": r.resumed,
-                    "rerun_seconds": None if r.rerun_seconds is None else round(r.rerun_seconds, 1)}
-                   for r in pipeline.records],
+        "stages": [
+            {
+                "name": r.name,
+                "command": r.command,
+                "seconds": round(r.seconds, 1),
+                "resumed": r.resumed,
+                "rerun_seconds": None if r.rerun_seconds is None else round(r.rerun_seconds, 1),
+            }
+            for r in pipeline.records
+        ],
         "total_seconds": round(sum(r.seconds for r in pipeline.records), 1),
         "lane_plus_2": lane_shift_verdict(metrics) if len(metrics) else {},
-        "outputs": sorted(p.name for p in paths.out.iterdir()
-                          if p.is_file() and not p.name.startswith(".") and p.name not in (REPORT_FILE, SUMMARY_FILE))
-        if paths.out.is_dir() else [],
+        "outputs": sorted(
+            p.name
+            for p in paths.out.iterdir()
+            if p.is_file() and not p.name.startswith(".") and p.name not in (REPORT_FILE, SUMMARY_FILE)
+        )
+        if paths.out.is_dir()
+        else [],
     }
 
 
 def report_markdown(summary: dict[str, Any], paths: DemoPaths) -> str:
     """``<out>/README.md``: what ran, how long, the leaderboard, the +2-lane verdict and the files."""
     lines = ["# Synthetic benchmark: SetDiff against the baselines", ""]
-    lines += [f"Produced by `{summary['invocation']}` (preset `{summary['preset']['name']}`: "
-              f"{summary['preset']['description']}); total stage time {summary['total_seconds'] / 60:.1f} min.", ""]
+    lines += [
+        f"Produced by `{summary['invocation']}` (preset `{summary['preset']['name']}`: "
+        f"{summary['preset']['description']}); total stage time {summary['total_seconds'] / 60:.1f} min.",
+        "",
+    ]
     provenance = summary.get("provenance") or {}
     if provenance:
         git = provenance["git"]
         revision = (git["revision"] or "unknown")[:12] + (" with uncommitted changes" if git["dirty"] else "")
-        lines += [f"Code revision {revision}; seed {provenance['seed']}; {provenance['torch_threads']} torch "
-                  f"threads on {provenance['machine']['cpu']} (set `SETDIFF_THREADS` to repeat it elsewhere).", ""]
+        lines += [
+            f"Code revision {revision}; seed {provenance['seed']}; {provenance['torch_threads']} torch "
+            f"threads on {provenance['machine']['cpu']} (set `SETDIFF_THREADS` to repeat it elsewhere).",
+            "",
+        ]
     models = summary.get("models") or {}
     for method, model in models.items():
         if "shipped" in model:
-            lines.append(f"- `{method}`: the shipped model `{model['shipped']}`, trained on "
-                         f"{', '.join(model['trained_on'])} (none of them a test scene here).")
+            lines.append(
+                f"- `{method}`: the shipped model `{model['shipped']}`, trained on "
+                f"{', '.join(model['trained_on'])} (none of them a test scene here)."
+            )
         else:
             lines.append(f"- `{method}`: trained by this demo ({summary['training_steps'][method]} steps).")
     if models:
@@ -327,20 +498,30 @@ def report_markdown(summary: dict[str, Any], paths: DemoPaths) -> str:
     verdict = summary.get("lane_plus_2") or {}
     if verdict.get("means"):
         specs = [get_metric(name) for name in VERDICT_METRICS]
-        lines += [f"## At +2 lanes ({verdict['targets']} targets)", "",
-                  "| method | " + " | ".join(f"{spec.label} {spec.arrow}" for spec in specs) + " |",
-                  "|---|" + "---:|" * len(specs)]
+        lines += [
+            f"## At +2 lanes ({verdict['targets']} targets)",
+            "",
+            "| method | " + " | ".join(f"{spec.label} {spec.arrow}" for spec in specs) + " |",
+            "|---|" + "---:|" * len(specs),
+        ]
         for method in METHODS:
             if method in verdict["means"]:
                 m = verdict["means"][method]
-                lines.append(f"| {method} | " + " | ".join(f"{m[spec.name]:.{spec.decimals}f}" for spec in specs) + " |")
+                lines.append(
+                    f"| {method} | "
+                    + " | ".join(f"{m[spec.name]:.{spec.decimals}f}" for spec in specs)
+                    + " |"
+                )
         for other in ("identity", "difix"):
             wins = verdict.get(f"setdiff_beats_{other}")
             if wins:
                 said = ", ".join(f"{k.upper()} {'yes' if v else 'no'}" for k, v in wins.items())
                 lines.append(f"\nSetDiff beats `{other}` at +2 lanes: {said}.")
         lines.append("")
-    for name, title in (("ablation_geometry.md", "Geometry ablation"), ("ablation_setsize.md", "Set-size ablation")):
+    for name, title in (
+        ("ablation_geometry.md", "Geometry ablation"),
+        ("ablation_setsize.md", "Set-size ablation"),
+    ):
         if (paths.out / name).is_file():
             lines += [f"- {title}: [{name}]({name})"]
     lines += ["", "## Commands, in order", ""]
@@ -351,5 +532,9 @@ def report_markdown(summary: dict[str, Any], paths: DemoPaths) -> str:
         lines.append(f"1. `{stage['command']}` ({stage['name']}, {timing})")
     lines += ["", "## Files", ""]
     lines += [f"- `{name}`" for name in summary["outputs"]]
-    lines += ["", f"Intermediate data (scenes, packets, checkpoints, runs): `{paths.work}` (not versioned).", ""]
+    lines += [
+        "",
+        f"Intermediate data (scenes, packets, checkpoints, runs): `{paths.work}` (not versioned).",
+        "",
+    ]
     return "\n".join(lines)

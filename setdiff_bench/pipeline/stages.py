@@ -97,17 +97,23 @@ class Pipeline:
             self._note(command, earlier, seconds, complete=False)
             raise StageFailed(name, result.returncode)
         if earlier.get("complete"):
-            record = StageRecord(name, command, float(earlier["seconds"]), resumed=True, rerun_seconds=seconds)
+            record = StageRecord(
+                name, command, float(earlier["seconds"]), resumed=True, rerun_seconds=seconds
+            )
         elif earlier:
-            record = StageRecord(name, command, float(earlier["seconds"]) + seconds, resumed=True,
-                                 rerun_seconds=seconds)
+            record = StageRecord(
+                name, command, float(earlier["seconds"]) + seconds, resumed=True, rerun_seconds=seconds
+            )
             self._note(command, earlier, seconds, complete=True)
         else:
             record = StageRecord(name, command, seconds)
             self._note(command, earlier, seconds, complete=True)
         self.records.append(record)
-        print(f"[{name}] done in {seconds:.1f} s" + (f" (work recorded: {record.timing()})" if record.resumed else ""),
-              flush=True)
+        print(
+            f"[{name}] done in {seconds:.1f} s"
+            + (f" (work recorded: {record.timing()})" if record.resumed else ""),
+            flush=True,
+        )
         return record
 
     def _read_ledger(self) -> dict[str, dict[str, object]]:
@@ -124,7 +130,10 @@ class Pipeline:
         if self.ledger is None or earlier.get("complete"):
             return
         ledger = self._read_ledger()
-        ledger[command] = {"seconds": round(float(earlier.get("seconds", 0.0)) + seconds, 1), "complete": complete}
+        ledger[command] = {
+            "seconds": round(float(earlier.get("seconds", 0.0)) + seconds, 1),
+            "complete": complete,
+        }
         write_text_atomic(self.ledger, json.dumps(ledger, indent=1, sort_keys=True) + "\n")
 
     def commands_markdown(self) -> str:

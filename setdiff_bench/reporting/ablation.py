@@ -68,7 +68,9 @@ def parse_sizes(text: str) -> tuple[tuple[int, int], ...]:
     for part in text.split(","):
         refs, sep, targets = part.strip().partition("+")
         if not sep or not refs.isdigit() or not targets.isdigit() or int(targets) < 1:
-            raise UsageError(f"set size {part.strip()!r} is not N+M (N >= 0 references, M >= 1 targets)", "--sizes")
+            raise UsageError(
+                f"set size {part.strip()!r} is not N+M (N >= 0 references, M >= 1 targets)", "--sizes"
+            )
         sizes.append((int(refs), int(targets)))
     return tuple(sizes)
 
@@ -90,8 +92,16 @@ def pooled_means(metrics_file: Path, split: str = "test") -> dict[str, float]:
 
 def geometry_frame(results: Mapping[str, Mapping[str, float]]) -> pd.DataFrame:
     """Table 5 shape: one row per variant (paper order), columns PSNR, SSIM, LPIPS."""
-    rows = [{"grounding": v.label, "variant": v.key, **{m: results[v.key][m] for m in METRICS},
-             "targets": int(results[v.key]["targets"])} for v in GEOMETRY_VARIANTS if v.key in results]
+    rows = [
+        {
+            "grounding": v.label,
+            "variant": v.key,
+            **{m: results[v.key][m] for m in METRICS},
+            "targets": int(results[v.key]["targets"]),
+        }
+        for v in GEOMETRY_VARIANTS
+        if v.key in results
+    ]
     return pd.DataFrame(rows)
 
 
@@ -99,7 +109,12 @@ def setsize_frame(results: Mapping[tuple[int, int], Mapping[str, float]]) -> pd.
     """Table 6 shape: one row per metric, one column per set size ``N + M``."""
     rows = []
     for metric in METRICS:
-        rows.append({"metric": get_metric(metric).label, **{size_label(size): results[size][metric] for size in results}})
+        rows.append(
+            {
+                "metric": get_metric(metric).label,
+                **{size_label(size): results[size][metric] for size in results},
+            }
+        )
     return pd.DataFrame(rows)
 
 
@@ -111,8 +126,10 @@ def ordering_geometry(frame: pd.DataFrame) -> list[str]:
         values, spec = by[metric], get_metric(metric)
         better = values.idxmax() if spec.higher_is_better else values.idxmin()
         worse = values.idxmin() if spec.higher_is_better else values.idxmax()
-        notes.append(f"{spec.label}: best {by.loc[better, 'grounding']}, worst {by.loc[worse, 'grounding']} "
-                     f"(paper: best Both, worst None)")
+        notes.append(
+            f"{spec.label}: best {by.loc[better, 'grounding']}, worst {by.loc[worse, 'grounding']} "
+            f"(paper: best Both, worst None)"
+        )
     return notes
 
 
@@ -125,14 +142,18 @@ def ordering_setsize(results: Mapping[tuple[int, int], Mapping[str, float]]) -> 
         one, three = results.get((1, 1)), results.get((3, 1))
         if one and three:
             gain = sign * (three[metric] - one[metric])
-            notes.append(f"{label}: 3+1 vs 1+1 {'better' if gain > 0 else 'not better'} "
-                         f"({three[metric]:.4f} vs {one[metric]:.4f}; paper: better)")
+            notes.append(
+                f"{label}: 3+1 vs 1+1 {'better' if gain > 0 else 'not better'} "
+                f"({three[metric]:.4f} vs {one[metric]:.4f}; paper: better)"
+            )
         small, large = results.get((3, 1)), results.get((3, 6))
         if small and large:
             gain = sign * (large[metric] - small[metric])
-            notes.append(f"{label}: 3+6 vs 3+1 {'better' if gain > 0 else 'not better'} "
-                         f"({large[metric]:.4f} vs {small[metric]:.4f}; paper: better for PSNR/SSIM, "
-                         f"LPIPS within 0.001)")
+            notes.append(
+                f"{label}: 3+6 vs 3+1 {'better' if gain > 0 else 'not better'} "
+                f"({large[metric]:.4f} vs {small[metric]:.4f}; paper: better for PSNR/SSIM, "
+                f"LPIPS within 0.001)"
+            )
     return notes
 
 
@@ -143,8 +164,14 @@ def paper_board(table: str, title: str) -> Leaderboard:
     key = "setting" if table.startswith("table6") else "method"
     rows, best = [], {}
     for index, (label, own) in enumerate(records.groupby(key, sort=False)):
-        rows.append(pooled_row(str(label), dict(zip(own["metric"], own["value"])), source="reported",
-                               decimals=dict(zip(own["metric"], own["decimals"]))))
+        rows.append(
+            pooled_row(
+                str(label),
+                dict(zip(own["metric"], own["value"])),
+                source="reported",
+                decimals=dict(zip(own["metric"], own["decimals"])),
+            )
+        )
         for cell in rows[-1].values:
             if own.loc[own["metric"] == cell[1], "bold"].any():
                 best.setdefault(cell, set()).add(index)
@@ -162,20 +189,33 @@ def geometry_board(frame: pd.DataFrame, caption: str) -> Leaderboard:
 def setsize_board(frame: pd.DataFrame, caption: str, notes: Sequence[str] = ()) -> Leaderboard:
     """Table 6 for the writers, from :func:`setsize_frame`: one row per set size, one column per metric."""
     sizes = [c for c in frame.columns if c != "metric"]
-    values = {size: {metric: row[size] for metric, (_, row) in zip(METRICS, frame.iterrows())} for size in sizes}
+    values = {
+        size: {metric: row[size] for metric, (_, row) in zip(METRICS, frame.iterrows())} for size in sizes
+    }
     rows = [pooled_row(size, values[size]) for size in sizes]
     return pooled_table(caption, rows, METRICS, row_header=SETSIZE_HEADER, notes=notes)
 
 
 def _document(board: Leaderboard, ordering: Sequence[str], paper: Leaderboard, commands: str) -> str:
     """Our table, the ordering against the paper, the paper's table and the commands, as Markdown."""
-    lines = [render_markdown(board), "Ordering against the paper:", *[f"- {n}" for n in ordering], "",
-             render_markdown(paper).rstrip("\n"), "", "Produced by:", "", commands]
+    lines = [
+        render_markdown(board),
+        "Ordering against the paper:",
+        *[f"- {n}" for n in ordering],
+        "",
+        render_markdown(paper).rstrip("\n"),
+        "",
+        "Produced by:",
+        "",
+        commands,
+    ]
     return "\n".join(lines)
 
 
 def geometry_markdown(frame: pd.DataFrame, notes: Sequence[str], commands: str, caption: str) -> str:
-    paper = paper_board("table5_geometry_ablation", "Paper, Table 5 (DL3DV; for orientation, not comparable numbers)")
+    paper = paper_board(
+        "table5_geometry_ablation", "Paper, Table 5 (DL3DV; for orientation, not comparable numbers)"
+    )
     return _document(geometry_board(frame, caption), notes, paper, commands)
 
 
@@ -183,8 +223,12 @@ def geometry_latex(frame: pd.DataFrame, caption: str) -> str:
     return render_latex(geometry_board(frame, caption))
 
 
-def setsize_markdown(frame: pd.DataFrame, notes: Sequence[str], commands: str, caption: str, targets: int) -> str:
-    paper = paper_board("table6_setsize_ablation", "Paper, Table 6 (DL3DV; for orientation, not comparable numbers)")
+def setsize_markdown(
+    frame: pd.DataFrame, notes: Sequence[str], commands: str, caption: str, targets: int
+) -> str:
+    paper = paper_board(
+        "table6_setsize_ablation", "Paper, Table 6 (DL3DV; for orientation, not comparable numbers)"
+    )
     board = setsize_board(frame, caption, [f"Every set size scores the same {targets} test targets."])
     return _document(board, notes, paper, commands)
 

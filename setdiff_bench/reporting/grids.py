@@ -38,8 +38,9 @@ class GridFrame:
     view: int
 
 
-def pick_frames(index: pd.DataFrame, count: int, *, split: str | None = "test",
-                groups: Sequence[str] | None = None) -> list[GridFrame]:
+def pick_frames(
+    index: pd.DataFrame, count: int, *, split: str | None = "test", groups: Sequence[str] | None = None
+) -> list[GridFrame]:
     """``count`` targets spread over groups (round robin, in natural group order), deterministic.
 
     Within a group the targets are taken from the middle of its sorted list outwards, so a grid shows
@@ -54,7 +55,9 @@ def pick_frames(index: pd.DataFrame, count: int, *, split: str | None = "test",
     for group, rows in targets.groupby("group", sort=False):
         rows = rows.sort_values(["scene", "packet_id", "view"])
         order = _middle_out(len(rows))
-        by_group[group] = [GridFrame(str(rows.iloc[i]["packet_id"]), int(rows.iloc[i]["view"])) for i in order]
+        by_group[group] = [
+            GridFrame(str(rows.iloc[i]["packet_id"]), int(rows.iloc[i]["view"])) for i in order
+        ]
     picked: list[GridFrame] = []
     names = sorted(by_group, key=natural_key)
     while len(picked) < count and any(by_group.values()):
@@ -82,13 +85,21 @@ def put_label(canvas: np.ndarray, text: str, x: int, y: int, width: int, *, scal
     cv2.putText(canvas, shown, (x, y), FONT, scale, (0, 0, 0), 1, cv2.LINE_AA)
 
 
-def compose(cells: Sequence[Sequence[np.ndarray]], column_labels: Sequence[str], row_labels: Sequence[str],
-            cell_notes: Sequence[Sequence[str]] | None = None, *, label_width: int = 150) -> np.ndarray:
+def compose(
+    cells: Sequence[Sequence[np.ndarray]],
+    column_labels: Sequence[str],
+    row_labels: Sequence[str],
+    cell_notes: Sequence[Sequence[str]] | None = None,
+    *,
+    label_width: int = 150,
+) -> np.ndarray:
     """Tile uint8 ``(h, w, 3)`` cells (all the same size) with labels → ``(H, W, 3)`` uint8 on white."""
     rows, cols = len(cells), len(column_labels)
     height, width = cells[0][0].shape[:2]
     note = BAND if cell_notes is not None else 0
-    canvas = np.full((BAND + rows * (height + note + GAP), label_width + cols * (width + GAP), 3), 255, np.uint8)
+    canvas = np.full(
+        (BAND + rows * (height + note + GAP), label_width + cols * (width + GAP), 3), 255, np.uint8
+    )
     for c, label in enumerate(column_labels):
         put_label(canvas, label, label_width + c * (width + GAP) + 2, BAND - 7, width - 4)
     for r in range(rows):
@@ -97,14 +108,21 @@ def compose(cells: Sequence[Sequence[np.ndarray]], column_labels: Sequence[str],
             put_label(canvas, text, 4, top + 16 + line * 16, label_width - 8, scale=0.38)
         for c in range(cols):
             left = label_width + c * (width + GAP)
-            canvas[top:top + height, left:left + width] = cells[r][c]
+            canvas[top : top + height, left : left + width] = cells[r][c]
             if cell_notes is not None and cell_notes[r][c]:
                 put_label(canvas, cell_notes[r][c], left + 2, top + height + BAND - 7, width - 4, scale=0.38)
     return canvas
 
 
-def qualitative_grid(store: object, runs: Mapping[str, str | Path], frames: Sequence[GridFrame], out: str | Path, *,
-                     cell_width: int = 256, metric: str = "psnr") -> Path:
+def qualitative_grid(
+    store: object,
+    runs: Mapping[str, str | Path],
+    frames: Sequence[GridFrame],
+    out: str | Path,
+    *,
+    cell_width: int = 256,
+    metric: str = "psnr",
+) -> Path:
     """Write a PNG grid: render | one column per run (label → run folder) | ground truth (a run whose
     images all equal the render replaces the render column, labelled "<run> = 3DGS render").
 
@@ -132,12 +150,17 @@ def qualitative_grid(store: object, runs: Mapping[str, str | Path], frames: Sequ
         for label, (folder, table) in tables.items():
             key = (frame.packet_id, frame.view)
             if key not in table.index:
-                raise UsageError(f"run {label!r} has no result for {packet.scene}/{packet.targets.names[0]} "
-                                 f"(packet {frame.packet_id})", folder)
+                raise UsageError(
+                    f"run {label!r} has no result for {packet.scene}/{packet.targets.names[0]} "
+                    f"(packet {frame.packet_id})",
+                    folder,
+                )
             record = table.loc[key]
             row_cells.append(quantize_uint8(read_rgb(folder / record["image"])))
             value = record.get(metric) if metric else None
-            row_notes.append(f"{metric.upper()} {value:.2f}" if value is not None and np.isfinite(value) else "")
+            row_notes.append(
+                f"{metric.upper()} {value:.2f}" if value is not None and np.isfinite(value) else ""
+            )
         row_cells.append(_to_uint8(gt[0]))
         row_notes.append("")
         cells.append(_resized(row_cells, cell_width))
@@ -151,8 +174,10 @@ def qualitative_grid(store: object, runs: Mapping[str, str | Path], frames: Sequ
     sizes = {cell.shape for row in cells for cell in row}
     if len(sizes) > 1:  # rows of different aspect ratios: pad to the largest
         height = max(s[0] for s in sizes)
-        cells = [[np.pad(c, ((0, height - c.shape[0]), (0, 0), (0, 0)), constant_values=255) for c in row]
-                 for row in cells]
+        cells = [
+            [np.pad(c, ((0, height - c.shape[0]), (0, 0), (0, 0)), constant_values=255) for c in row]
+            for row in cells
+        ]
     grid = compose(cells, columns, labels, notes if metric else None)
     write_png(out, grid)
     return Path(out)

@@ -101,8 +101,11 @@ def find_runs(runs: str | Path) -> list[Path]:
         raise UsageError("runs folder not found", root)
     for claimed in sorted(root.rglob(RUN_FILE)):
         if not (claimed.parent / METRICS_FILE).is_file():
-            raise LeaderboardError(f"run incomplete: no {METRICS_FILE} yet (shards unfinished or not merged); finish "
-                                   "them, or run the same `setdiff-bench run` command with --merge", claimed.parent)
+            raise LeaderboardError(
+                f"run incomplete: no {METRICS_FILE} yet (shards unfinished or not merged); finish "
+                "them, or run the same `setdiff-bench run` command with --merge",
+                claimed.parent,
+            )
     return sorted(p.parent for p in root.rglob(METRICS_FILE) if not p.name.startswith("."))
 
 
@@ -207,10 +210,18 @@ def _present(what: str, names: Sequence[str]) -> str:
     return f"; {what}: {', '.join(names)}" if len(names) else ""
 
 
-def build_leaderboard(dataset: str, images: pd.DataFrame, sequences: pd.DataFrame | None = None, *,
-                      split: str | None = "test", reported: pd.DataFrame | None = None,
-                      metrics: Sequence[str] | None = None, methods: Sequence[str] | None = None,
-                      layout: Layout | None = None, profile: str = DEFAULT_PROFILE) -> Leaderboard:
+def build_leaderboard(
+    dataset: str,
+    images: pd.DataFrame,
+    sequences: pd.DataFrame | None = None,
+    *,
+    split: str | None = "test",
+    reported: pd.DataFrame | None = None,
+    metrics: Sequence[str] | None = None,
+    methods: Sequence[str] | None = None,
+    layout: Layout | None = None,
+    profile: str = DEFAULT_PROFILE,
+) -> Leaderboard:
     """Aggregate runs (and optional reported rows) of ``dataset`` into a :class:`Leaderboard`.
 
     Args:
@@ -235,38 +246,58 @@ def build_leaderboard(dataset: str, images: pd.DataFrame, sequences: pd.DataFram
     present = sorted(set(frame["dataset"]))
     no_reported = reported is None or not len(reported)
     if dataset not in present and dataset not in DATASETS and no_reported:
-        raise UsageError(f"unknown dataset {dataset!r}; choose from {', '.join(DATASETS)}"
-                         + _present("runs found for", present), "--dataset")
+        raise UsageError(
+            f"unknown dataset {dataset!r}; choose from {', '.join(DATASETS)}"
+            + _present("runs found for", present),
+            "--dataset",
+        )
     frame = frame[frame["dataset"] == dataset]
     spec = get_profile(profile)
     frame = profile_rows(frame, profile)
-    if metrics is None and profile != DEFAULT_PROFILE:   # the profile's metrics (+ the DINOv2 columns when scored)
-        metric_names = spec.metrics + tuple(m for m, s in METRICS.items() if s.scope == "profile"
-                                            and m in frame.columns and frame[m].notna().any())
+    if (
+        metrics is None and profile != DEFAULT_PROFILE
+    ):  # the profile's metrics (+ the DINOv2 columns when scored)
+        metric_names = spec.metrics + tuple(
+            m
+            for m, s in METRICS.items()
+            if s.scope == "profile" and m in frame.columns and frame[m].notna().any()
+        )
     unknown_metrics = [m for m in metric_names if m not in METRICS]
     if unknown_metrics:
-        raise UsageError(f"unknown metric(s) {', '.join(unknown_metrics)}; known: {', '.join(METRICS)}", "--metrics")
+        raise UsageError(
+            f"unknown metric(s) {', '.join(unknown_metrics)}; known: {', '.join(METRICS)}", "--metrics"
+        )
     if profile != DEFAULT_PROFILE and reported is not None and len(reported):
-        raise LeaderboardError(f"the paper's reported numbers use the {DEFAULT_PROFILE} profile; they cannot share "
-                               f"a table with profile {profile} (drop --with-reported)")
-    if split is not None and len(frame) and spec.scenes == "split":   # "all": the profile averages every scene
+        raise LeaderboardError(
+            f"the paper's reported numbers use the {DEFAULT_PROFILE} profile; they cannot share "
+            f"a table with profile {profile} (drop --with-reported)"
+        )
+    if split is not None and len(frame) and spec.scenes == "split":  # "all": the profile averages every scene
         splits = sorted(set(frame["split"]))
         frame = frame[frame["split"] == split]
         if not len(frame) and no_reported:
-            raise LeaderboardError(f"no {dataset} results of split {split!r}" + _present("splits with results", splits))
+            raise LeaderboardError(
+                f"no {dataset} results of split {split!r}" + _present("splits with results", splits)
+            )
     if methods is not None and len(frame):
         unknown = sorted(set(methods) - set(frame["method"]))
         if unknown:
-            raise LeaderboardError(f"no {dataset} runs of method(s) {', '.join(unknown)}"
-                                   + _present("methods with runs", sorted(set(frame["method"]))))
+            raise LeaderboardError(
+                f"no {dataset} runs of method(s) {', '.join(unknown)}"
+                + _present("methods with runs", sorted(set(frame["method"])))
+            )
         frame = frame[frame["method"].isin(list(methods))]
     if not len(frame) and no_reported:
-        raise LeaderboardError(f"no {dataset} results{f' of split {split}' if split else ''} to tabulate"
-                               + _present("runs found for", present))
+        raise LeaderboardError(
+            f"no {dataset} results{f' of split {split}' if split else ''} to tabulate"
+            + _present("runs found for", present)
+        )
     missing_columns = [m for m in metric_names if len(frame) and m not in frame.columns]
     if missing_columns:
-        raise LeaderboardError(f"runs have no column(s) {', '.join(missing_columns)} "
-                               f"(they were scored with other metrics; pass --metrics)")
+        raise LeaderboardError(
+            f"runs have no column(s) {', '.join(missing_columns)} "
+            f"(they were scored with other metrics; pass --metrics)"
+        )
     _check_duplicates(frame)
     groups = sorted(frame["group"].unique(), key=natural_key) if len(frame) else []
     blocks = list(layout.blocks) if layout.blocks is not None else [Block(g, g) for g in groups]
@@ -277,28 +308,48 @@ def build_leaderboard(dataset: str, images: pd.DataFrame, sequences: pd.DataFram
     seq = sequences if sequences is not None and len(sequences) else None
     if seq is not None:
         seq = seq[(seq["dataset"] == dataset) & seq["method"].isin(frame["method"].unique())]
-    seq_names = tuple(m for m in layout.sequence_metrics
-                      if (seq is not None and m in seq.columns and len(seq))
-                      or (reported is not None and len(reported) and m in set(reported["metric"])))
+    seq_names = tuple(
+        m
+        for m in layout.sequence_metrics
+        if (seq is not None and m in seq.columns and len(seq))
+        or (reported is not None and len(reported) and m in set(reported["metric"]))
+    )
     columns = [(b, metric_names + (seq_names if b.key == ALL else ())) for b in blocks]
-    rows = _reported_rows(reported, blocks, layout.reported_tables) if reported is not None and len(reported) else []
+    rows = (
+        _reported_rows(reported, blocks, layout.reported_tables)
+        if reported is not None and len(reported)
+        else []
+    )
     order = list(methods) if methods is not None else sorted(frame["method"].unique()) if len(frame) else []
     for method in order:
-        rows.append(_measured_row(method, frame, seq, blocks, metric_names, seq_names,
-                                  scene_mean=spec.aggregation == "scene_mean"))
+        rows.append(
+            _measured_row(
+                method,
+                frame,
+                seq,
+                blocks,
+                metric_names,
+                seq_names,
+                scene_mean=spec.aggregation == "scene_mean",
+            )
+        )
     _check_complete(frame, blocks)
     filled = {key for row in rows for key, _ in row.values}
     columns = [(block, metrics) for block, metrics in columns if block.key in filled]
     if not columns:
-        raise LeaderboardError(f"no {dataset} results fall in the table's blocks "
-                               f"({', '.join(b.label for b in blocks)})")
-    board = Leaderboard(dataset, columns, rows, {}, f"{layout.title or dataset}; {spec.caption()}", [],
-                        profile)
+        raise LeaderboardError(
+            f"no {dataset} results fall in the table's blocks ({', '.join(b.label for b in blocks)})"
+        )
+    board = Leaderboard(
+        dataset, columns, rows, {}, f"{layout.title or dataset}; {spec.caption()}", [], profile
+    )
     board.best = _best(board)
     board.notes = _notes(board, frame, seq)
     if spec.aggregation == "scene_mean":
-        board.notes[0] = board.notes[0].replace("Cells are means of per-image values over each block's targets",
-                                                "Cells are means over scenes of each scene's mean over its targets")
+        board.notes[0] = board.notes[0].replace(
+            "Cells are means of per-image values over each block's targets",
+            "Cells are means over scenes of each scene's mean over its targets",
+        )
     return board
 
 
@@ -321,9 +372,11 @@ def _check_duplicates(frame: pd.DataFrame) -> None:
     if len(duplicated):
         first = duplicated.iloc[0]
         runs = sorted(duplicated[(duplicated[keys] == first[keys]).all(axis=1)]["run"].unique())
-        raise LeaderboardError(f"method {first['method']!r} has {len(duplicated)} duplicate rows, e.g. "
-                               f"{first['scene']}/{first['frame']} ({first['group']}) in runs {', '.join(runs)}; "
-                               "keep one run per method")
+        raise LeaderboardError(
+            f"method {first['method']!r} has {len(duplicated)} duplicate rows, e.g. "
+            f"{first['scene']}/{first['frame']} ({first['group']}) in runs {', '.join(runs)}; "
+            "keep one run per method"
+        )
 
 
 def _block_rows(frame: pd.DataFrame, block: Block) -> pd.DataFrame:
@@ -348,11 +401,20 @@ def _check_complete(frame: pd.DataFrame, blocks: Sequence[Block]) -> None:
                 raise LeaderboardError(
                     f"method {method!r} lacks {len(missing)} of {len(universe)} targets of block "
                     f"{block.label!r} that other runs have ({shown}{', ...' if len(missing) > 5 else ''}); "
-                    "refusing to average it over a subset — finish or rerun it")
+                    "refusing to average it over a subset — finish or rerun it"
+                )
 
 
-def _measured_row(method: str, frame: pd.DataFrame, seq: pd.DataFrame | None, blocks: Sequence[Block],
-                  metric_names: Sequence[str], seq_names: Sequence[str], *, scene_mean: bool = False) -> Row:
+def _measured_row(
+    method: str,
+    frame: pd.DataFrame,
+    seq: pd.DataFrame | None,
+    blocks: Sequence[Block],
+    metric_names: Sequence[str],
+    seq_names: Sequence[str],
+    *,
+    scene_mean: bool = False,
+) -> Row:
     row = Row(label=method, method=method, source="measured", section="measured")
     own = frame[frame["method"] == method]
     for block in blocks:
@@ -390,7 +452,9 @@ def _reported_rows(reported: pd.DataFrame, blocks: Sequence[Block], tables: Sequ
             continue
         key = (record.section, record.method_id)
         if key not in rows:
-            rows[key] = Row(label=record.method, method=record.method_id, source="reported", section=record.section)
+            rows[key] = Row(
+                label=record.method, method=record.method_id, source="reported", section=record.section
+            )
         cell = (record.group, record.metric)
         rows[key].values[cell] = float(record.value)
         rows[key].decimals[cell] = int(record.decimals)
@@ -398,8 +462,15 @@ def _reported_rows(reported: pd.DataFrame, blocks: Sequence[Block], tables: Sequ
     return ordered
 
 
-def pooled_table(title: str, rows: Sequence[Row], metrics: Sequence[str], *, row_header: str = "Method",
-                 notes: Sequence[str] = (), best: dict[tuple[str, str], set[int]] | None = None) -> Leaderboard:
+def pooled_table(
+    title: str,
+    rows: Sequence[Row],
+    metrics: Sequence[str],
+    *,
+    row_header: str = "Method",
+    notes: Sequence[str] = (),
+    best: dict[tuple[str, str], set[int]] | None = None,
+) -> Leaderboard:
     """A one-block table for the writers: ``rows`` hold their values under ``(ALL, metric)``, one column per
     metric, no block header.
 
@@ -411,20 +482,31 @@ def pooled_table(title: str, rows: Sequence[Row], metrics: Sequence[str], *, row
         notes: lines printed under the table (LaTeX: comments).
         best: ``(ALL, metric)`` → bold row indices; default: the best displayed value per column.
     """
-    board = Leaderboard("", [(Block(ALL, "All"), tuple(metrics))], list(rows), {}, title, list(notes),
-                        row_header=row_header)
+    board = Leaderboard(
+        "", [(Block(ALL, "All"), tuple(metrics))], list(rows), {}, title, list(notes), row_header=row_header
+    )
     board.best = _best(board) if best is None else best
     return board
 
 
-def pooled_row(label: str, values: Mapping[str, float], *, source: str = "measured",
-               decimals: Mapping[str, int] | None = None) -> Row:
+def pooled_row(
+    label: str,
+    values: Mapping[str, float],
+    *,
+    source: str = "measured",
+    decimals: Mapping[str, int] | None = None,
+) -> Row:
     """A row of :func:`pooled_table`: metric → value; decimals are the metric's unless given (the printed
     precision of reported numbers); ``source="reported"`` marks it as the paper's."""
     decimals = decimals or {}
-    return Row(label=label, method=label, source=source, section=source,
-               values={(ALL, metric): float(value) for metric, value in values.items()},
-               decimals={(ALL, metric): decimals.get(metric, metric_decimals(metric)) for metric in values})
+    return Row(
+        label=label,
+        method=label,
+        source=source,
+        section=source,
+        values={(ALL, metric): float(value) for metric, value in values.items()},
+        decimals={(ALL, metric): decimals.get(metric, metric_decimals(metric)) for metric in values},
+    )
 
 
 def _best(board: Leaderboard) -> dict[tuple[str, str], set[int]]:
@@ -440,17 +522,24 @@ def _best(board: Leaderboard) -> dict[tuple[str, str], set[int]]:
 
 
 def _notes(board: Leaderboard, frame: pd.DataFrame, seq: pd.DataFrame | None) -> list[str]:
-    notes = ["Cells are means of per-image values over each block's targets; best per column in bold "
-             "(ties share it, compared as displayed)."]
+    notes = [
+        "Cells are means of per-image values over each block's targets; best per column in bold "
+        "(ties share it, compared as displayed)."
+    ]
     if len(frame):
         targets = frame.drop_duplicates(["protocol", "group", "scene", "frame"])
         counts = targets.groupby("group")["frame"].count()
-        notes.append("Targets per block: " + ", ".join(f"{g}: {int(counts[g])}" for g in
-                                                       sorted(counts.index, key=natural_key)) + ".")
+        notes.append(
+            "Targets per block: "
+            + ", ".join(f"{g}: {int(counts[g])}" for g in sorted(counts.index, key=natural_key))
+            + "."
+        )
     if seq is not None and len(seq):
         notes.append("Warp error: mean over per-camera sequences (MSE on the 0-255 scale).")
     if any(row.source == "reported" for row in board.rows):
-        notes.append("Rows marked (paper) / † are the numbers reported in the SetDiff paper, not measured here.")
+        notes.append(
+            "Rows marked (paper) / † are the numbers reported in the SetDiff paper, not measured here."
+        )
     return notes
 
 
@@ -464,18 +553,56 @@ def to_frame(board: Leaderboard) -> pd.DataFrame:
                 cell = (block.key, metric)
                 if cell not in row.values:
                     continue
-                records.append({"dataset": board.dataset, "profile": board.profile, "row_order": index, "source": row.source,
-                                "section": row.section, "method": row.method, "label": row.label,
-                                "block": block.key, "block_label": block.label, "metric": metric,
-                                "value": row.values[cell], "decimals": row.decimals.get(cell, metric_decimals(metric)),
-                                "count": row.counts.get(cell), "best": index in board.best.get(cell, set())})
-    return pd.DataFrame.from_records(records, columns=["dataset", "row_order", "source", "section", "method", "label",
-                                                       "block", "block_label", "metric", "value", "decimals",
-                                                       "count", "best"])
+                records.append(
+                    {
+                        "dataset": board.dataset,
+                        "profile": board.profile,
+                        "row_order": index,
+                        "source": row.source,
+                        "section": row.section,
+                        "method": row.method,
+                        "label": row.label,
+                        "block": block.key,
+                        "block_label": block.label,
+                        "metric": metric,
+                        "value": row.values[cell],
+                        "decimals": row.decimals.get(cell, metric_decimals(metric)),
+                        "count": row.counts.get(cell),
+                        "best": index in board.best.get(cell, set()),
+                    }
+                )
+    return pd.DataFrame.from_records(
+        records,
+        columns=[
+            "dataset",
+            "row_order",
+            "source",
+            "section",
+            "method",
+            "label",
+            "block",
+            "block_label",
+            "metric",
+            "value",
+            "decimals",
+            "count",
+            "best",
+        ],
+    )
 
 
-LATEX_SPECIALS = {"\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_",
-                  "{": r"\{", "}": r"\}", "~": r"\textasciitilde{}", "^": r"\textasciicircum{}"}
+LATEX_SPECIALS = {
+    "\\": r"\textbackslash{}",
+    "&": r"\&",
+    "%": r"\%",
+    "$": r"\$",
+    "#": r"\#",
+    "_": r"\_",
+    "{": r"\{",
+    "}": r"\}",
+    "~": r"\textasciitilde{}",
+    "^": r"\textasciicircum{}",
+}
 
 
 def latex_escape(text: str) -> str:
@@ -508,8 +635,11 @@ def render_latex(board: Leaderboard, command: str | None = None) -> str:
         lines.append(" & ".join(heads) + r" \\")
         lines.append(" ".join(rules))
     header = [rf"\textbf{{{latex_escape(board.row_header)}}}"]
-    header += [rf"\textbf{{{latex_escape(metric_header(m))}}}{_arrow(m, True)}"
-               for _, metrics in board.columns for m in metrics]
+    header += [
+        rf"\textbf{{{latex_escape(metric_header(m))}}}{_arrow(m, True)}"
+        for _, metrics in board.columns
+        for m in metrics
+    ]
     lines += [" & ".join(header) + r" \\", r"\midrule"]
     previous = None
     for index, row in enumerate(board.rows):
@@ -539,16 +669,25 @@ def _md_escape(text: str) -> str:
 def render_markdown(board: Leaderboard, command: str | None = None) -> str:
     """A GitHub Markdown table: one column per (block, metric), best in bold, paper rows suffixed."""
     multi = len(board.columns) > 1 or board.columns[0][0].key != ALL
-    header = [board.row_header] + [(f"{block.label} " if multi else "") + metric_header(m) + _arrow(m, False)
-                                   for block, metrics in board.columns for m in metrics]
-    lines = [f"**{_md_escape(board.title)}**", "", "| " + " | ".join(_md_escape(h) for h in header) + " |",
-             "|" + "---|" + "---:|" * (len(header) - 1)]
+    header = [board.row_header] + [
+        (f"{block.label} " if multi else "") + metric_header(m) + _arrow(m, False)
+        for block, metrics in board.columns
+        for m in metrics
+    ]
+    lines = [
+        f"**{_md_escape(board.title)}**",
+        "",
+        "| " + " | ".join(_md_escape(h) for h in header) + " |",
+        "|" + "---|" + "---:|" * (len(header) - 1),
+    ]
     for index, row in enumerate(board.rows):
         label = row.label + (" (paper)" if row.source == "reported" else "")
         cells = [_md_escape(label)]
         for cell in board.cells():
             text = board.display(row, cell)
-            cells.append("–" if text is None else f"**{text}**" if index in board.best.get(cell, set()) else text)
+            cells.append(
+                "–" if text is None else f"**{text}**" if index in board.best.get(cell, set()) else text
+            )
         lines.append("| " + " | ".join(cells) + " |")
     lines.append("")
     lines += [_md_escape(note) for note in board.notes]
@@ -557,12 +696,15 @@ def render_markdown(board: Leaderboard, command: str | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_leaderboard(board: Leaderboard, out: str | Path, formats: Sequence[str] = FORMATS,
-                      command: str | None = None) -> dict[str, Path]:
+def write_leaderboard(
+    board: Leaderboard, out: str | Path, formats: Sequence[str] = FORMATS, command: str | None = None
+) -> dict[str, Path]:
     """Write ``<out>/<stem>.{parquet,tex,md}`` atomically (:attr:`Leaderboard.stem`); returns format → path."""
     unknown = [f for f in formats if f not in FORMATS]
     if unknown:
-        raise UsageError(f"unknown format(s) {', '.join(unknown)}; choose from {', '.join(FORMATS)}", "--format")
+        raise UsageError(
+            f"unknown format(s) {', '.join(unknown)}; choose from {', '.join(FORMATS)}", "--format"
+        )
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     written: dict[str, Path] = {}
@@ -587,4 +729,3 @@ def reported_for(dataset: str, layout: Layout | None = None) -> pd.DataFrame:
     if not layout.reported_tables:
         return load_reported(dataset).iloc[0:0]
     return load_reported(dataset, layout.reported_tables)
-

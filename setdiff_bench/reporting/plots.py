@@ -44,8 +44,9 @@ def lane_shift(group: str) -> tuple[float, str] | None:
     return float(lanes), f"{lanes:+d}" if lanes else "0"
 
 
-def group_summary(images: pd.DataFrame, metric: str, position: Callable[[str], tuple[float, str] | None]
-                  ) -> pd.DataFrame:
+def group_summary(
+    images: pd.DataFrame, metric: str, position: Callable[[str], tuple[float, str] | None]
+) -> pd.DataFrame:
     """Per (method, group with a position): x, label, mean, standard error, count of ``metric``."""
     records = []
     for (method, group), rows in images.groupby(["method", "group"], sort=True):
@@ -55,21 +56,41 @@ def group_summary(images: pd.DataFrame, metric: str, position: Callable[[str], t
         values = rows[metric].to_numpy(dtype=np.float64)
         values = values[np.isfinite(values)]
         sem = float(values.std(ddof=1) / np.sqrt(len(values))) if len(values) > 1 else 0.0
-        records.append({"method": method, "group": group, "x": where[0], "label": where[1],
-                        "mean": float(values.mean()) if len(values) else np.nan, "sem": sem, "count": len(values)})
-    return pd.DataFrame.from_records(records, columns=["method", "group", "x", "label", "mean", "sem", "count"])
+        records.append(
+            {
+                "method": method,
+                "group": group,
+                "x": where[0],
+                "label": where[1],
+                "mean": float(values.mean()) if len(values) else np.nan,
+                "sem": sem,
+                "count": len(values),
+            }
+        )
+    return pd.DataFrame.from_records(
+        records, columns=["method", "group", "x", "label", "mean", "sem", "count"]
+    )
 
 
 def error_bar_caption(summary: pd.DataFrame) -> str:
     """What the points and bars of a plot are, with the number of targets behind each point."""
     counts = summary.loc[summary["count"] > 0, "count"]
     n = f"n = {counts.min()}" if counts.min() == counts.max() else f"n = {counts.min()}–{counts.max()}"
-    return f"points: mean over the targets of a group ({n} per point); error bars: ±1 standard error of the mean"
+    return (
+        f"points: mean over the targets of a group ({n} per point); error bars: ±1 standard error of the mean"
+    )
 
 
-def plot_metric_by_group(images: pd.DataFrame, out: str | Path, *, position: Callable[[str], tuple[float, str] | None],
-                         xlabel: str, metrics: Sequence[str] = ("psnr", "ssim", "lpips"), title: str = "",
-                         methods: Sequence[str] | None = None) -> Path:
+def plot_metric_by_group(
+    images: pd.DataFrame,
+    out: str | Path,
+    *,
+    position: Callable[[str], tuple[float, str] | None],
+    xlabel: str,
+    metrics: Sequence[str] = ("psnr", "ssim", "lpips"),
+    title: str = "",
+    methods: Sequence[str] | None = None,
+) -> Path:
     """One panel per metric, one line per method, x = group position; saved as PNG at ``out``.
 
     Args:
@@ -95,8 +116,10 @@ def plot_metric_by_group(images: pd.DataFrame, out: str | Path, *, position: Cal
     frame = images[images["method"].isin(methods)]
     summaries = {metric: group_summary(frame, metric, position) for metric in metrics}
     if all(s.empty for s in summaries.values()):
-        raise UsageError(f"no group of these runs has a position on the {xlabel!r} axis "
-                         f"(groups: {', '.join(sorted(images['group'].unique()))})")
+        raise UsageError(
+            f"no group of these runs has a position on the {xlabel!r} axis "
+            f"(groups: {', '.join(sorted(images['group'].unique()))})"
+        )
     figure, axes = plt.subplots(1, len(metrics), figsize=(4.2 * len(metrics), 3.4), squeeze=False)
     for axis, metric in zip(axes[0], metrics):
         summary = summaries[metric]
@@ -114,8 +137,14 @@ def plot_metric_by_group(images: pd.DataFrame, out: str | Path, *, position: Cal
     axes[0][0].legend(fontsize="small")
     if title:
         figure.suptitle(title)
-    figure.text(0.5, 0.01, error_bar_caption(pd.concat(list(summaries.values()))), ha="center", va="bottom",
-                fontsize="small")
+    figure.text(
+        0.5,
+        0.01,
+        error_bar_caption(pd.concat(list(summaries.values()))),
+        ha="center",
+        va="bottom",
+        fontsize="small",
+    )
     figure.tight_layout(rect=(0.0, 0.06, 1.0, 1.0))
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -127,8 +156,7 @@ def plot_metric_by_group(images: pd.DataFrame, out: str | Path, *, position: Cal
 
 def plot_time_buckets(images: pd.DataFrame, out: str | Path, **kwargs: object) -> Path:
     """Metric vs nuScenes time bucket (seconds after the start of the scene): the paper's per-offset figure."""
-    return plot_metric_by_group(images, out, position=time_bucket, xlabel="time after scene start",
-                                **kwargs)  # type: ignore[arg-type]
+    return plot_metric_by_group(images, out, position=time_bucket, xlabel="time after scene start", **kwargs)  # type: ignore[arg-type]
 
 
 def plot_lane_shift(images: pd.DataFrame, out: str | Path, **kwargs: object) -> Path:
@@ -144,8 +172,14 @@ PLOTS: dict[str, tuple[str, Callable[..., Path]]] = {
 }
 
 
-def write_plots(dataset: str, images: pd.DataFrame, out: str | Path, *, split: str | None = "test",
-                metrics: Sequence[str] = ("psnr", "ssim", "lpips")) -> list[Path]:
+def write_plots(
+    dataset: str,
+    images: pd.DataFrame,
+    out: str | Path,
+    *,
+    split: str | None = "test",
+    metrics: Sequence[str] = ("psnr", "ssim", "lpips"),
+) -> list[Path]:
     """The dataset's standard plots (:data:`PLOTS`) into ``out``; ``[]`` when it has none."""
     if dataset not in PLOTS:
         return []

@@ -43,14 +43,18 @@ def check_run(run: Path, *, allow_dirty: bool = False) -> dict[str, Any]:
     """
     summary_path = run / SUMMARY_FILE
     if not summary_path.is_file():
-        raise UsageError(f"no finished demo run here (no {SUMMARY_FILE}; it is written when the demo completes)", run)
+        raise UsageError(
+            f"no finished demo run here (no {SUMMARY_FILE}; it is written when the demo completes)", run
+        )
     try:
         summary = json.loads(summary_path.read_text(encoding="utf-8"))
         recorded: dict[str, str] = summary["files"]
         git = summary["provenance"]["git"]
     except (OSError, json.JSONDecodeError, KeyError, TypeError) as error:
-        raise UsageError(f"unreadable or pre-provenance demo summary ({type(error).__name__}); rerun the demo",
-                         summary_path) from None
+        raise UsageError(
+            f"unreadable or pre-provenance demo summary ({type(error).__name__}); rerun the demo",
+            summary_path,
+        ) from None
     for name, digest in recorded.items():
         path = run / name
         if not path.is_file():
@@ -60,24 +64,41 @@ def check_run(run: Path, *, allow_dirty: bool = False) -> dict[str, Any]:
     if git.get("revision") is None:
         raise UsageError("the run records no git revision (not run from a git checkout)", summary_path)
     if git.get("dirty") and not allow_dirty:
-        raise UsageError(f"the run was made with uncommitted changes on {git['revision'][:12]}; commit and rerun, "
-                         "or pass --allow-dirty (recorded as dirty)", summary_path)
+        raise UsageError(
+            f"the run was made with uncommitted changes on {git['revision'][:12]}; commit and rerun, "
+            "or pass --allow-dirty (recorded as dirty)",
+            summary_path,
+        )
     return summary
 
 
-def provenance_manifest(run: Path, summary: dict[str, Any], files: list[Path], command: str) -> dict[str, Any]:
+def provenance_manifest(
+    run: Path, summary: dict[str, Any], files: list[Path], command: str
+) -> dict[str, Any]:
     """``provenance.json``: the run's provenance and every published file with its SHA-256 and origin."""
     recorded = summary["files"]
     entries = {}
     for path in files:
-        origin = "demo" if path.name in recorded or path.name in (SUMMARY_FILE,) else "added to the run folder"
+        origin = (
+            "demo" if path.name in recorded or path.name in (SUMMARY_FILE,) else "added to the run folder"
+        )
         entries[path.name] = {"sha256": sha256_file(path), "origin": origin}
-    return {"run_command": summary["invocation"], "published_with": command, "published_from": str(run),
-            **summary["provenance"], "files": entries}
+    return {
+        "run_command": summary["invocation"],
+        "published_with": command,
+        "published_from": str(run),
+        **summary["provenance"],
+        "files": entries,
+    }
 
 
-def publish(run: str | os.PathLike[str], destination: str | os.PathLike[str], *, command: str,
-            allow_dirty: bool = False) -> dict[str, Any]:
+def publish(
+    run: str | os.PathLike[str],
+    destination: str | os.PathLike[str],
+    *,
+    command: str,
+    allow_dirty: bool = False,
+) -> dict[str, Any]:
     """Replace ``destination`` by the files of the finished demo run ``run``; returns the provenance written.
 
     Args:
@@ -92,8 +113,11 @@ def publish(run: str | os.PathLike[str], destination: str | os.PathLike[str], *,
     run, destination = Path(run), Path(destination)
     if not run.is_dir():
         raise UsageError("run folder not found", run)
-    if run.resolve() == destination.resolve() or destination.resolve().is_relative_to(run.resolve()) \
-            or run.resolve().is_relative_to(destination.resolve()):
+    if (
+        run.resolve() == destination.resolve()
+        or destination.resolve().is_relative_to(run.resolve())
+        or run.resolve().is_relative_to(destination.resolve())
+    ):
         raise UsageError("the published folder and the run folder must be separate", destination)
     summary = check_run(run, allow_dirty=allow_dirty)
     files = run_files(run)

@@ -13,8 +13,9 @@ from typing import Any
 from setdiff_bench.errors import SetDiffBenchError, UsageError
 
 
-def load_attribute(reference: str, what: str, *, error: type[SetDiffBenchError] = UsageError,
-                   path: str | None = None) -> Any:
+def load_attribute(
+    reference: str, what: str, *, error: type[SetDiffBenchError] = UsageError, path: str | None = None
+) -> Any:
     """Import ``module`` and return its attribute ``attr`` for a ``"module:attr"`` reference.
 
     Args:

@@ -11,8 +11,20 @@ from typing import Any
 import torch
 
 #: Distributions whose versions are recorded (absent ones are recorded as ``null``).
-DISTRIBUTIONS = ("setdiff-bench", "torch", "numpy", "pandas", "pyarrow", "OpenImageIO",
-                 "opencv-contrib-python-headless", "diffusers", "peft", "safetensors", "accelerate", "gsplat")
+DISTRIBUTIONS = (
+    "setdiff-bench",
+    "torch",
+    "numpy",
+    "pandas",
+    "pyarrow",
+    "OpenImageIO",
+    "opencv-contrib-python-headless",
+    "diffusers",
+    "peft",
+    "safetensors",
+    "accelerate",
+    "gsplat",
+)
 
 
 def package_versions(names: tuple[str, ...] = DISTRIBUTIONS) -> dict[str, str | None]:
@@ -33,10 +45,20 @@ def git_revision(folder: Path | None = None) -> dict[str, Any]:
     """
     folder = folder or Path(__file__).resolve().parent
     try:
-        revision = subprocess.run(["git", "-C", str(folder), "rev-parse", "HEAD"], capture_output=True, text=True,
-                                  timeout=10, check=True).stdout.strip()
-        status = subprocess.run(["git", "-C", str(folder), "status", "--porcelain", "--untracked-files=no"],
-                                capture_output=True, text=True, timeout=10, check=True).stdout
+        revision = subprocess.run(
+            ["git", "-C", str(folder), "rev-parse", "HEAD"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        ).stdout.strip()
+        status = subprocess.run(
+            ["git", "-C", str(folder), "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=True,
+        ).stdout
     except (OSError, subprocess.SubprocessError):
         return {"revision": None, "dirty": None}
     return {"revision": revision or None, "dirty": bool(status.strip())}

@@ -46,16 +46,22 @@ class EnhancerClient:
     """Blocking client; ``timeout`` (seconds) bounds every call."""
 
     def __init__(self, address: str, *, timeout: float = 60.0) -> None:
-        self.channel = grpc.insecure_channel(address, options=[("grpc.max_receive_message_length", MAX_MESSAGE_BYTES),
-                                                               ("grpc.max_send_message_length", MAX_MESSAGE_BYTES)])
+        self.channel = grpc.insecure_channel(
+            address,
+            options=[
+                ("grpc.max_receive_message_length", MAX_MESSAGE_BYTES),
+                ("grpc.max_send_message_length", MAX_MESSAGE_BYTES),
+            ],
+        )
         self.stub = pb_grpc.EnhancerStub(self.channel)
         self.timeout = timeout
 
     def __enter__(self) -> EnhancerClient:
         return self
 
-    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None,
-                 trace: TracebackType | None) -> None:
+    def __exit__(
+        self, kind: type[BaseException] | None, error: BaseException | None, trace: TracebackType | None
+    ) -> None:
         self.close()
 
     def close(self) -> None:
@@ -65,14 +71,18 @@ class EnhancerClient:
         grpc.channel_ready_future(self.channel).result(timeout=timeout)
 
     def healthy(self) -> bool:
-        reply = health_pb2_grpc.HealthStub(self.channel).Check(health_pb2.HealthCheckRequest(service=""),
-                                                                timeout=self.timeout)
+        reply = health_pb2_grpc.HealthStub(self.channel).Check(
+            health_pb2.HealthCheckRequest(service=""), timeout=self.timeout
+        )
         return reply.status == health_pb2.HealthCheckResponse.SERVING
 
     def start_session(self, references: Views, *, max_references: int = 0, ply_path: str = "") -> str:
-        reply = self.stub.start_session(pb.StartSessionRequest(references=view_messages(references),
-                                                               max_references=max_references, ply_path=ply_path),
-                                        timeout=self.timeout)
+        reply = self.stub.start_session(
+            pb.StartSessionRequest(
+                references=view_messages(references), max_references=max_references, ply_path=ply_path
+            ),
+            timeout=self.timeout,
+        )
         return reply.session_uuid
 
     def enhance_request(self, session: str, frames: Views) -> pb.EnhanceRequest:

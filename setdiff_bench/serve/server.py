@@ -73,23 +73,32 @@ class EnhancerService(pb_grpc.EnhancerServicer):
     def start_session(self, request: pb.StartSessionRequest, context: grpc.ServicerContext) -> pb.SessionId:
         try:
             if request.max_references < 0:
-                raise StreamInputError(f"max_references must be >= 0, got {request.max_references}", "max_references")
+                raise StreamInputError(
+                    f"max_references must be >= 0, got {request.max_references}", "max_references"
+                )
             ply = None
             if request.ply_path:
                 ply = Path(request.ply_path)
                 if not ply.is_file():
                     raise StreamInputError("PLY not found on the server", ply)
             references = from_views(request.references, "references")
-            stream = StreamSession(self.enhancer, references, ply=ply,
-                                   max_references=request.max_references or None,
-                                   max_cameras=self.settings.max_cameras,
-                                   cache_reference_latents=self.settings.cache_reference_latents)
+            stream = StreamSession(
+                self.enhancer,
+                references,
+                ply=ply,
+                max_references=request.max_references or None,
+                max_cameras=self.settings.max_cameras,
+                cache_reference_latents=self.settings.cache_reference_latents,
+            )
         except SetDiffBenchError as error:
             self._refuse(context, grpc.StatusCode.INVALID_ARGUMENT, error.one_line())
         with self._sessions_lock:
             if len(self.sessions) >= self.settings.max_sessions:
-                self._refuse(context, grpc.StatusCode.RESOURCE_EXHAUSTED,
-                             f"{len(self.sessions)} sessions open (at most {self.settings.max_sessions}); close one")
+                self._refuse(
+                    context,
+                    grpc.StatusCode.RESOURCE_EXHAUSTED,
+                    f"{len(self.sessions)} sessions open (at most {self.settings.max_sessions}); close one",
+                )
             session_uuid = str(uuid.uuid4())
             self.sessions[session_uuid] = _Session(stream)
         return pb.SessionId(session_uuid=session_uuid)
@@ -97,8 +106,11 @@ class EnhancerService(pb_grpc.EnhancerServicer):
     def enhance(self, request: pb.EnhanceRequest, context: grpc.ServicerContext) -> pb.EnhanceReturn:
         session = self._session(request.session_uuid, context)
         if len(request.frames) > self.settings.max_cameras:
-            self._refuse(context, grpc.StatusCode.INVALID_ARGUMENT,
-                         f"{len(request.frames)} cameras in one tick; at most {self.settings.max_cameras}")
+            self._refuse(
+                context,
+                grpc.StatusCode.INVALID_ARGUMENT,
+                f"{len(request.frames)} cameras in one tick; at most {self.settings.max_cameras}",
+            )
         try:
             frames = from_views(request.frames, "frames")
             with session.lock:
@@ -117,8 +129,11 @@ class EnhancerService(pb_grpc.EnhancerServicer):
         return pb.Empty()
 
     def get_version(self, request: pb.Empty, context: grpc.ServicerContext) -> pb.VersionId:
-        return pb.VersionId(version_id=__version__, checkpoint=str(getattr(self.enhancer, "checkpoint", "")),
-                            method=str(getattr(self.enhancer, "name", "")))
+        return pb.VersionId(
+            version_id=__version__,
+            checkpoint=str(getattr(self.enhancer, "checkpoint", "")),
+            method=str(getattr(self.enhancer, "name", "")),
+        )
 
 
 @dataclass
@@ -143,11 +158,15 @@ def start_server(enhancer: Any, settings: ServeSettings | None = None) -> Runnin
         SetDiffBenchError: the address cannot be bound.
     """
     settings = settings or ServeSettings()
-    server = grpc.server(futures.ThreadPoolExecutor(max_workers=settings.workers, thread_name_prefix="enhance"),
-                         maximum_concurrent_rpcs=settings.max_queue,
-                         options=[("grpc.max_receive_message_length", MAX_MESSAGE_BYTES),
-                                  ("grpc.max_send_message_length", MAX_MESSAGE_BYTES),
-                                  ("grpc.so_reuseport", 0)])
+    server = grpc.server(
+        futures.ThreadPoolExecutor(max_workers=settings.workers, thread_name_prefix="enhance"),
+        maximum_concurrent_rpcs=settings.max_queue,
+        options=[
+            ("grpc.max_receive_message_length", MAX_MESSAGE_BYTES),
+            ("grpc.max_send_message_length", MAX_MESSAGE_BYTES),
+            ("grpc.so_reuseport", 0),
+        ],
+    )
     service = EnhancerService(enhancer, settings)
     pb_grpc.add_EnhancerServicer_to_server(service, server)
     health_servicer = health.HealthServicer()

@@ -28,21 +28,28 @@ def to_array(values: np.ndarray) -> pb.Array:
     dtype = {np.dtype("uint8"): "uint8", np.dtype("float32"): "float32"}.get(values.dtype)
     if dtype is None:
         raise StreamInputError(f"arrays travel as uint8 or float32, got {values.dtype}", "array")
-    return pb.Array(data=values.astype(WIRE_DTYPES[dtype], copy=False).tobytes(), shape=list(values.shape), dtype=dtype)
+    return pb.Array(
+        data=values.astype(WIRE_DTYPES[dtype], copy=False).tobytes(), shape=list(values.shape), dtype=dtype
+    )
 
 
 def from_array(message: pb.Array, what: str, channels: int) -> np.ndarray:
     """Message → ``(H, W, channels)`` array, checking dtype, shape and byte count."""
     if message.dtype not in WIRE_DTYPES:
-        raise StreamInputError(f"{what}: dtype must be one of {', '.join(WIRE_DTYPES)}, got {message.dtype!r}", what)
+        raise StreamInputError(
+            f"{what}: dtype must be one of {', '.join(WIRE_DTYPES)}, got {message.dtype!r}", what
+        )
     shape = tuple(int(s) for s in message.shape)
     if len(shape) != 3 or shape[2] != channels or not all(0 < s <= MAX_SIDE for s in shape[:2]):
-        raise StreamInputError(f"{what}: shape must be (H, W, {channels}) with 0 < H, W <= {MAX_SIDE}, got {shape}", what)
+        raise StreamInputError(
+            f"{what}: shape must be (H, W, {channels}) with 0 < H, W <= {MAX_SIDE}, got {shape}", what
+        )
     dtype = WIRE_DTYPES[message.dtype]
     expected = int(np.prod(shape)) * dtype.itemsize
     if len(message.data) != expected:
-        raise StreamInputError(f"{what}: {len(message.data)} bytes for shape {shape} {message.dtype} "
-                               f"(expected {expected})", what)
+        raise StreamInputError(
+            f"{what}: {len(message.data)} bytes for shape {shape} {message.dtype} (expected {expected})", what
+        )
     array = np.frombuffer(message.data, dtype=dtype).reshape(shape)
     if array.dtype.kind == "f" and not np.isfinite(array).all():
         raise StreamInputError(f"{what}: contains NaN or infinite values", what)
@@ -50,24 +57,40 @@ def from_array(message: pb.Array, what: str, channels: int) -> np.ndarray:
 
 
 def to_camera_message(camera: Camera) -> pb.Camera:
-    return pb.Camera(intrinsics=camera.K.reshape(-1).tolist(), world_to_camera=camera.w2c.reshape(-1).tolist(),
-                     width=camera.width, height=camera.height)
+    return pb.Camera(
+        intrinsics=camera.K.reshape(-1).tolist(),
+        world_to_camera=camera.w2c.reshape(-1).tolist(),
+        width=camera.width,
+        height=camera.height,
+    )
 
 
 def from_camera_message(message: pb.Camera, what: str) -> Camera:
     if len(message.intrinsics) != 9 or len(message.world_to_camera) != 16:
-        raise StreamInputError(f"{what}: camera needs 9 intrinsics and 16 world_to_camera values, got "
-                               f"{len(message.intrinsics)} and {len(message.world_to_camera)}", what)
+        raise StreamInputError(
+            f"{what}: camera needs 9 intrinsics and 16 world_to_camera values, got "
+            f"{len(message.intrinsics)} and {len(message.world_to_camera)}",
+            what,
+        )
     try:
-        return Camera(K=np.asarray(message.intrinsics, dtype=np.float64).reshape(3, 3),
-                      w2c=np.asarray(message.world_to_camera, dtype=np.float64).reshape(4, 4),
-                      width=message.width, height=message.height, source=what)
+        return Camera(
+            K=np.asarray(message.intrinsics, dtype=np.float64).reshape(3, 3),
+            w2c=np.asarray(message.world_to_camera, dtype=np.float64).reshape(4, 4),
+            width=message.width,
+            height=message.height,
+            source=what,
+        )
     except SetDiffBenchError as error:
         raise StreamInputError(f"{what}: {error.problem}", what) from None
 
 
-def to_view(name: str, rgb: np.ndarray, camera: Camera, cmap: np.ndarray | None = None,
-            alpha: np.ndarray | None = None) -> pb.View:
+def to_view(
+    name: str,
+    rgb: np.ndarray,
+    camera: Camera,
+    cmap: np.ndarray | None = None,
+    alpha: np.ndarray | None = None,
+) -> pb.View:
     """One view message: ``rgb`` ``(H, W, 3)`` uint8, ``cmap`` ``(H, W, 3)`` / ``alpha`` ``(H, W, 1)`` float32."""
     view = pb.View(name=name, rgb=to_array(rgb), camera=to_camera_message(camera))
     if cmap is not None:
@@ -90,18 +113,28 @@ def from_views(messages: Sequence[pb.View], role: str) -> Views:
         images.append(torch.from_numpy(from_array(message.rgb, f"{what} rgb", 3).copy()).permute(2, 0, 1))
         cameras.append(from_camera_message(message.camera, what))
         if message.HasField("cmap"):
-            cmaps.append(torch.from_numpy(from_array(message.cmap, f"{what} cmap", 3).copy()).permute(2, 0, 1))
-            alpha = (from_array(message.alpha, f"{what} alpha", 1) if message.HasField("alpha")
-                     else np.ones((*cmaps[-1].shape[1:], 1), np.float32))
+            cmaps.append(
+                torch.from_numpy(from_array(message.cmap, f"{what} cmap", 3).copy()).permute(2, 0, 1)
+            )
+            alpha = (
+                from_array(message.alpha, f"{what} alpha", 1)
+                if message.HasField("alpha")
+                else np.ones((*cmaps[-1].shape[1:], 1), np.float32)
+            )
             alphas.append(torch.from_numpy(alpha.copy()).permute(2, 0, 1))
     shapes = {(tuple(t.shape), t.dtype) for t in images}
     if len(shapes) != 1:
-        raise StreamInputError(f"{role}: every rgb must have the same shape and dtype, got {sorted(map(str, shapes))}",
-                               role)
+        raise StreamInputError(
+            f"{role}: every rgb must have the same shape and dtype, got {sorted(map(str, shapes))}", role
+        )
     try:
-        return Views(images=torch.stack(images), cameras=cameras,
-                     cmaps=torch.stack(cmaps) if cmaps else None, alphas=torch.stack(alphas) if alphas else None,
-                     names=[m.name or f"view{i}" for i, m in enumerate(messages)])
+        return Views(
+            images=torch.stack(images),
+            cameras=cameras,
+            cmaps=torch.stack(cmaps) if cmaps else None,
+            alphas=torch.stack(alphas) if alphas else None,
+            names=[m.name or f"view{i}" for i, m in enumerate(messages)],
+        )
     except RuntimeError as error:  # C-map sizes differing between views
         raise StreamInputError(f"{role}: {str(error).splitlines()[0]}", role) from None
 

@@ -62,12 +62,15 @@ def posed_vehicle(template: GaussianModel, vehicle: MovingVehicle, time_s: float
     yaw = vehicle.car.yaw
     c, s = math.cos(yaw), math.sin(yaw)
     rotation = torch.tensor([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]], dtype=template.means.dtype)
-    position = torch.tensor([vehicle.x_start + vehicle.speed_mps * time_s, vehicle.car.y, 0.0],
-                            dtype=template.means.dtype)
+    position = torch.tensor(
+        [vehicle.x_start + vehicle.speed_mps * time_s, vehicle.car.y, 0.0], dtype=template.means.dtype
+    )
     q = torch.from_numpy(quaternion_multiply(yaw_quaternion(yaw)[None], template.quats.double().numpy())).to(
-        template.quats.dtype)
-    return GaussianModel(template.means @ rotation.T + position, q, template.log_scales,
-                         template.opacity_logits, template.sh)
+        template.quats.dtype
+    )
+    return GaussianModel(
+        template.means @ rotation.T + position, q, template.log_scales, template.opacity_logits, template.sh
+    )
 
 
 def concat_models(a: GaussianModel, b: GaussianModel) -> GaussianModel:
@@ -80,9 +83,18 @@ def expected_depth(depth: torch.Tensor, alpha: torch.Tensor, min_alpha: float = 
     return torch.where(alpha > min_alpha, depth / alpha.clamp_min(1e-6), torch.zeros_like(depth))
 
 
-def capture_drive(static: GaussianModel, traversal: Traversal, rig: Sequence[CameraSpec], width: int, height: int, *,
-                  vehicle: tuple[GaussianModel, MovingVehicle] | None = None, tile_size: int = 8,
-                  mask_dilation_px: int = 2, device: str | torch.device = "cpu") -> Iterator[CapturedFrame]:
+def capture_drive(
+    static: GaussianModel,
+    traversal: Traversal,
+    rig: Sequence[CameraSpec],
+    width: int,
+    height: int,
+    *,
+    vehicle: tuple[GaussianModel, MovingVehicle] | None = None,
+    tile_size: int = 8,
+    mask_dilation_px: int = 2,
+    device: str | torch.device = "cpu",
+) -> Iterator[CapturedFrame]:
     """Render every timestep of ``traversal`` with all cameras of ``rig``, in timestep order.
 
     ``device``: where the (pure PyTorch) rasteriser runs; results come back as CPU numpy arrays.
@@ -110,7 +122,13 @@ def capture_drive(static: GaussianModel, traversal: Traversal, rig: Sequence[Cam
                 kernel = np.ones((2 * mask_dilation_px + 1, 2 * mask_dilation_px + 1), np.uint8)
                 mask = cv2.dilate(mask, kernel)
             yield CapturedFrame(
-                name=frame_name(traversal.name, spec.name, step), traversal=traversal.name, sensor=spec.name,
-                index=step, timestamp_us=stamp, camera=cameras[v],
+                name=frame_name(traversal.name, spec.name, step),
+                traversal=traversal.name,
+                sensor=spec.name,
+                index=step,
+                timestamp_us=stamp,
+                camera=cameras[v],
                 rgb=out.rgb[v].clamp(0, 1).permute(1, 2, 0).contiguous().cpu().numpy(),
-                static_mask=mask == 0, depth=depth[v, 0].cpu().numpy())
+                static_mask=mask == 0,
+                depth=depth[v, 0].cpu().numpy(),
+            )

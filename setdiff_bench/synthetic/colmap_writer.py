@@ -32,8 +32,12 @@ class ColmapImage:
     camera: Camera
 
 
-def write_colmap_model(sparse_dir: str | os.PathLike[str], images: Sequence[ColmapImage], points_xyz: np.ndarray,
-                       points_rgb: np.ndarray) -> None:
+def write_colmap_model(
+    sparse_dir: str | os.PathLike[str],
+    images: Sequence[ColmapImage],
+    points_xyz: np.ndarray,
+    points_rgb: np.ndarray,
+) -> None:
     """Write the model into ``sparse_dir`` (created; the three files are moved in only when complete).
 
     Camera ids follow the order in which sensors first appear in ``images`` (1-based); image ids
@@ -51,14 +55,21 @@ def write_colmap_model(sparse_dir: str | os.PathLike[str], images: Sequence[Colm
         cam = image.camera
         if image.sensor not in camera_ids:
             camera_ids[image.sensor] = len(camera_ids) + 1
-            reconstruction.add_camera_with_trivial_rig(pycolmap.Camera(
-                camera_id=camera_ids[image.sensor], model="PINHOLE", width=cam.width, height=cam.height,
-                params=[cam.fx, cam.fy, cam.cx, cam.cy]))
+            reconstruction.add_camera_with_trivial_rig(
+                pycolmap.Camera(
+                    camera_id=camera_ids[image.sensor],
+                    model="PINHOLE",
+                    width=cam.width,
+                    height=cam.height,
+                    params=[cam.fx, cam.fy, cam.cx, cam.cy],
+                )
+            )
     for image_id, image in enumerate(images, start=1):
         quat_xyzw = matrix_to_quaternion(image.camera.R, order="xyzw")
         pose = pycolmap.Rigid3d(pycolmap.Rotation3d(quat_xyzw), np.asarray(image.camera.t, np.float64))
         reconstruction.add_image_with_trivial_frame(
-            pycolmap.Image(name=image.name, camera_id=camera_ids[image.sensor], image_id=image_id), pose)
+            pycolmap.Image(name=image.name, camera_id=camera_ids[image.sensor], image_id=image_id), pose
+        )
     for xyz, rgb in zip(np.asarray(points_xyz, np.float64), np.asarray(points_rgb, np.uint8)):
         reconstruction.add_point3D(xyz, pycolmap.Track(), rgb)
     target = Path(sparse_dir)

@@ -52,7 +52,11 @@ def render_frames(scene: Scene, frames: Sequence[Frame]) -> tuple[torch.Tensor, 
         with torch.no_grad():
             preds.append(render(model, [frame.camera], with_geometry=False).rgb[0].clamp(0, 1))
         targets.append(to_tensor_chw(read_rgb(frame.image_path)))
-        keep = read_mask(frame.mask_path) if frame.mask_path is not None else np.ones(targets[-1].shape[1:], bool)
+        keep = (
+            read_mask(frame.mask_path)
+            if frame.mask_path is not None
+            else np.ones(targets[-1].shape[1:], bool)
+        )
         masks.append(torch.from_numpy(keep)[None])
     return torch.stack(preds), torch.stack(targets), torch.stack(masks)
 
@@ -90,21 +94,27 @@ def grid_image(scene: Scene, out_path: Path) -> None:
     pred, target, mask = render_frames(scene, [f for _, f in picks])
     error = ((pred - target).abs().mean(dim=1) / 0.5).clamp(0, 1)  # (V, H, W), white at ≥ 0.5
     error_rgb = error[:, None].repeat(1, 3, 1, 1)
-    error_rgb[:, 0] = torch.where(mask[:, 0], error_rgb[:, 0], torch.ones_like(error))  # dynamic pixels in red
+    error_rgb[:, 0] = torch.where(
+        mask[:, 0], error_rgb[:, 0], torch.ones_like(error)
+    )  # dynamic pixels in red
     error_rgb[:, 1:] = torch.where(mask, error_rgb[:, 1:], torch.zeros_like(error_rgb[:, 1:]))
     fig, axes = plt.subplots(3, len(picks), figsize=(3.3 * len(picks), 6.4), squeeze=False)
     for column, (group, frame) in enumerate(picks):
-        value = float(psnr(pred[column:column + 1], target[column:column + 1], mask[column:column + 1]))
-        panels = ((target[column].permute(1, 2, 0).numpy(), f"{group} — ground truth\n{frame.name}"),
-                  (pred[column].permute(1, 2, 0).numpy(), f"3DGS fit ({value:.1f} dB)"),
-                  (error_rgb[column].permute(1, 2, 0).numpy(), "|error|: black 0, white ≥ 0.5, red = masked"))
+        value = float(psnr(pred[column : column + 1], target[column : column + 1], mask[column : column + 1]))
+        panels = (
+            (target[column].permute(1, 2, 0).numpy(), f"{group} — ground truth\n{frame.name}"),
+            (pred[column].permute(1, 2, 0).numpy(), f"3DGS fit ({value:.1f} dB)"),
+            (error_rgb[column].permute(1, 2, 0).numpy(), "|error|: black 0, white ≥ 0.5, red = masked"),
+        )
         for row, (image, title) in enumerate(panels):
             ax = axes[row][column]
             ax.imshow(image, interpolation="nearest")
             ax.set_xticks([])
             ax.set_yticks([])
             ax.set_title(title, fontsize=8)
-    fig.suptitle(f"{scene.name}: 3DGS fitted on lane0 front (train_set.txt), rendered at held-out views", fontsize=10)
+    fig.suptitle(
+        f"{scene.name}: 3DGS fitted on lane0 front (train_set.txt), rendered at held-out views", fontsize=10
+    )
     fig.tight_layout()
     out_path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(out_path) as tmp:
@@ -115,17 +125,33 @@ def grid_image(scene: Scene, out_path: Path) -> None:
 def report(rows: dict[str, dict[str, float]], command: str, notes: Sequence[str] = ()) -> str:
     """The Markdown table: one row per scene plus the mean, one column per group, and the step sizes."""
     groups = [g for g in GROUPS if any(g in r for r in rows.values())]
-    lines = ["# Synthetic benchmark: fit quality (PSNR, dB, static pixels)", "", "Produced by:", "", "```",
-             command, "```", "", "| scene | " + " | ".join(groups) + " |", "|---" * (len(groups) + 1) + "|"]
+    lines = [
+        "# Synthetic benchmark: fit quality (PSNR, dB, static pixels)",
+        "",
+        "Produced by:",
+        "",
+        "```",
+        command,
+        "```",
+        "",
+        "| scene | " + " | ".join(groups) + " |",
+        "|---" * (len(groups) + 1) + "|",
+    ]
     for name, values in rows.items():
-        lines.append(f"| {name} | " + " | ".join(f"{values[g]:.2f}" if g in values else "–" for g in groups) + " |")
+        lines.append(
+            f"| {name} | " + " | ".join(f"{values[g]:.2f}" if g in values else "–" for g in groups) + " |"
+        )
     mean = {g: float(np.mean([r[g] for r in rows.values() if g in r])) for g in groups}
     lines.append("| **mean** | " + " | ".join(f"**{mean[g]:.2f}**" for g in groups) + " |")
-    lines += ["", "Drops on average over the scenes (each must be ≥ 1.5 dB):", "",
-              f"- interp → lane+1: {mean['interp'] - mean['lane+1']:.2f} dB",
-              f"- lane+1 → lane+2: {mean['lane+1'] - mean['lane+2']:.2f} dB",
-              f"- interp − side (held-out side cameras below the training camera): {mean['interp'] - mean['side']:.2f} dB",
-              ""]
+    lines += [
+        "",
+        "Drops on average over the scenes (each must be ≥ 1.5 dB):",
+        "",
+        f"- interp → lane+1: {mean['interp'] - mean['lane+1']:.2f} dB",
+        f"- lane+1 → lane+2: {mean['lane+1'] - mean['lane+2']:.2f} dB",
+        f"- interp − side (held-out side cameras below the training camera): {mean['interp'] - mean['side']:.2f} dB",
+        "",
+    ]
     lines += list(notes)
     return "\n".join(lines) + "\n"
 
@@ -146,8 +172,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     for scene in scenes:
         rows[scene.name] = evaluate_scene(scene)
         print(scene.name, {k: round(v, 2) for k, v in rows[scene.name].items()}, flush=True)
-    command = args.command or " ".join([os.path.basename(sys.executable), "-m", "setdiff_bench.synthetic.evaluate",
-                                        *(argv if argv is not None else sys.argv[1:])])
+    command = args.command or " ".join(
+        [
+            os.path.basename(sys.executable),
+            "-m",
+            "setdiff_bench.synthetic.evaluate",
+            *(argv if argv is not None else sys.argv[1:]),
+        ]
+    )
     write_text_atomic(args.out / "fit_quality.md", report(rows, command, args.note))
     grid_image(scenes[0], args.out / "fit_grid.png")
     return 0

@@ -85,13 +85,23 @@ def build_scene(preset: Preset, seed: int, index: int) -> SceneBuild:
     drive_end = (preset.timesteps - 1) * preset.step_m
     layout = random_layout(layout_rng, -10.0, drive_end + preset.view_ahead_m)
     fx = intrinsics(preset.width, preset.height)[0]
-    detail = Detail(focal_px=fx, pixels_per_gaussian=preset.pixels_per_gaussian, min_spacing=preset.min_spacing,
-                    max_spacing=preset.max_spacing, path_x=(0.0, drive_end),
-                    path_y=(0.0, (EGO_LANES - 1) * layout.lane_width), foliage_count=preset.foliage_count)
+    detail = Detail(
+        focal_px=fx,
+        pixels_per_gaussian=preset.pixels_per_gaussian,
+        min_spacing=preset.min_spacing,
+        max_spacing=preset.max_spacing,
+        path_x=(0.0, drive_end),
+        path_y=(0.0, (EGO_LANES - 1) * layout.lane_width),
+        foliage_count=preset.foliage_count,
+    )
     static, categories = build_static(layout, detail, world_rng)
-    traversals = [straight_drive(f"lane{k}", k, layout.lane_width, preset.timesteps, preset.step_m, drive_rng)
-                  for k in range(EGO_LANES)]
-    traversals.append(lane_change_drive("turn", layout.lane_width, preset.timesteps, preset.step_m, drive_rng))
+    traversals = [
+        straight_drive(f"lane{k}", k, layout.lane_width, preset.timesteps, preset.step_m, drive_rng)
+        for k in range(EGO_LANES)
+    ]
+    traversals.append(
+        lane_change_drive("turn", layout.lane_width, preset.timesteps, preset.step_m, drive_rng)
+    )
     moving: dict[str, MovingVehicle] = {}
     templates: dict[str, GaussianModel] = {}
     if preset.moving_vehicles:
@@ -106,8 +116,9 @@ def build_scene(preset: Preset, seed: int, index: int) -> SceneBuild:
     return SceneBuild(scene_name(seed, index), seed, index, preset, world, traversals, moving, sparse_rng)
 
 
-def render_frames(build: SceneBuild, progress: Callable[[int, int], None] | None = None,
-                  device: str | torch.device = "cpu") -> list[CapturedFrame]:
+def render_frames(
+    build: SceneBuild, progress: Callable[[int, int], None] | None = None, device: str | torch.device = "cpu"
+) -> list[CapturedFrame]:
     """Ground truth for every drive, camera and timestep (sorted by frame name), rendered on ``device``."""
     p = build.preset
     frames: list[CapturedFrame] = []
@@ -116,8 +127,16 @@ def render_frames(build: SceneBuild, progress: Callable[[int, int], None] | None
         vehicle = None
         if traversal.name in build.moving:
             vehicle = (build.world.vehicles[traversal.name], build.moving[traversal.name])
-        for frame in capture_drive(build.world.static, traversal, RIG, p.width, p.height, vehicle=vehicle,
-                                   tile_size=p.tile_size, device=device):
+        for frame in capture_drive(
+            build.world.static,
+            traversal,
+            RIG,
+            p.width,
+            p.height,
+            vehicle=vehicle,
+            tile_size=p.tile_size,
+            device=device,
+        ):
             frames.append(frame)
             if progress is not None:
                 progress(len(frames), total)
@@ -131,19 +150,39 @@ def scene_description(build: SceneBuild, frames: list[CapturedFrame], num_points
     layout: StreetLayout = build.world.layout
     return {
         "format": FORMAT,
-        "scene": build.name, "seed": build.seed, "index": build.index, "preset": p.name,
-        "width": p.width, "height": p.height, "units": "metres",
-        "lane_width_m": layout.lane_width, "num_lanes": layout.num_lanes,
+        "scene": build.name,
+        "seed": build.seed,
+        "index": build.index,
+        "preset": p.name,
+        "width": p.width,
+        "height": p.height,
+        "units": "metres",
+        "lane_width_m": layout.lane_width,
+        "num_lanes": layout.num_lanes,
         "world_up": [0, 0, 1],
         "frame_rate_hz": FRAME_RATE_HZ,
         "holdout_every": p.holdout_every,
-        "traversals": [{"name": t.name, "kind": t.kind, "lane_offset": t.lane_offset} for t in build.traversals],
-        "cameras": [{"name": spec.name, "yaw_deg": spec.yaw_deg, "fx": fx, "fy": fy, "cx": cx, "cy": cy}
-                    for spec in RIG],
-        "frames": [{"name": f.name, "traversal": f.traversal, "camera": f.sensor, "index": f.index,
-                    "timestamp_us": f.timestamp_us,
-                    "split": "train" if is_training_frame(f.traversal, f.sensor, f.index, p.holdout_every) else "test",
-                    "has_dynamic": f.has_dynamic} for f in frames],
+        "traversals": [
+            {"name": t.name, "kind": t.kind, "lane_offset": t.lane_offset} for t in build.traversals
+        ],
+        "cameras": [
+            {"name": spec.name, "yaw_deg": spec.yaw_deg, "fx": fx, "fy": fy, "cx": cx, "cy": cy}
+            for spec in RIG
+        ],
+        "frames": [
+            {
+                "name": f.name,
+                "traversal": f.traversal,
+                "camera": f.sensor,
+                "index": f.index,
+                "timestamp_us": f.timestamp_us,
+                "split": "train"
+                if is_training_frame(f.traversal, f.sensor, f.index, p.holdout_every)
+                else "test",
+                "has_dynamic": f.has_dynamic,
+            }
+            for f in frames
+        ],
         "dynamic_objects": len(build.moving),
         "num_points3d": num_points,
     }
@@ -163,8 +202,10 @@ def write_scene(build: SceneBuild, frames: list[CapturedFrame], destination: Pat
         eligible |= build.world.categories == category
     points = sample_sparse_points(static, eligible, train, p.points3d, build.sparse_rng)
     order = {spec.name: i for i, spec in enumerate(RIG)}
-    images = [ColmapImage(f.name, f.sensor, f.camera)
-              for f in sorted(frames, key=lambda f: (order[f.sensor], f.name))]
+    images = [
+        ColmapImage(f.name, f.sensor, f.camera)
+        for f in sorted(frames, key=lambda f: (order[f.sensor], f.name))
+    ]
     write_colmap_model(destination / "sparse" / "0", images, points.xyz, points.rgb)
     train_names = sorted(f.name for f in train)
     test_names = sorted(f.name for f in frames if f.name not in set(train_names))
@@ -174,9 +215,16 @@ def write_scene(build: SceneBuild, frames: list[CapturedFrame], destination: Pat
     write_text_atomic(destination / "scene.json", json.dumps(description, indent=1, sort_keys=True) + "\n")
 
 
-def generate_scene(out_root: str | os.PathLike[str], preset: Preset, seed: int, index: int, *,
-                   overwrite: bool = False, progress: Callable[[int, int], None] | None = None,
-                   device: str | torch.device = "cpu") -> Path:
+def generate_scene(
+    out_root: str | os.PathLike[str],
+    preset: Preset,
+    seed: int,
+    index: int,
+    *,
+    overwrite: bool = False,
+    progress: Callable[[int, int], None] | None = None,
+    device: str | torch.device = "cpu",
+) -> Path:
     """Generate scene ``index`` of ``seed`` under ``out_root``; returns its folder.
 
     A complete existing scene (its ``scene.json`` present) is kept unless ``overwrite``.  ``device`` runs
@@ -191,8 +239,11 @@ def generate_scene(out_root: str | os.PathLike[str], preset: Preset, seed: int, 
         except (OSError, json.JSONDecodeError, AttributeError):
             existing = None
         if existing != preset.name:
-            raise UsageError(f"scene exists with preset {existing!r}, not {preset.name!r}; pass --overwrite to "
-                             "regenerate it", final / "scene.json")
+            raise UsageError(
+                f"scene exists with preset {existing!r}, not {preset.name!r}; pass --overwrite to "
+                "regenerate it",
+                final / "scene.json",
+            )
         return final
     root.mkdir(parents=True, exist_ok=True)
     build = build_scene(preset, seed, index)

@@ -136,15 +136,38 @@ class StreetLayout:
 
 
 # ---------------------------------------------------------------------- random draws
-_WALLS = [(0.82, 0.76, 0.66), (0.72, 0.42, 0.33), (0.86, 0.84, 0.78), (0.55, 0.57, 0.60), (0.78, 0.66, 0.48),
-          (0.62, 0.36, 0.28), (0.90, 0.88, 0.82), (0.45, 0.48, 0.52), (0.70, 0.74, 0.70), (0.80, 0.60, 0.52)]
-_CAR_COLORS = [(0.75, 0.08, 0.08), (0.10, 0.18, 0.45), (0.85, 0.85, 0.85), (0.12, 0.12, 0.13), (0.55, 0.56, 0.58),
-               (0.20, 0.40, 0.25), (0.90, 0.75, 0.15), (0.35, 0.22, 0.15), (0.60, 0.72, 0.85)]
+_WALLS = [
+    (0.82, 0.76, 0.66),
+    (0.72, 0.42, 0.33),
+    (0.86, 0.84, 0.78),
+    (0.55, 0.57, 0.60),
+    (0.78, 0.66, 0.48),
+    (0.62, 0.36, 0.28),
+    (0.90, 0.88, 0.82),
+    (0.45, 0.48, 0.52),
+    (0.70, 0.74, 0.70),
+    (0.80, 0.60, 0.52),
+]
+_CAR_COLORS = [
+    (0.75, 0.08, 0.08),
+    (0.10, 0.18, 0.45),
+    (0.85, 0.85, 0.85),
+    (0.12, 0.12, 0.13),
+    (0.55, 0.56, 0.58),
+    (0.20, 0.40, 0.25),
+    (0.90, 0.75, 0.15),
+    (0.35, 0.22, 0.15),
+    (0.60, 0.72, 0.85),
+]
 _GLASS = [(0.20, 0.27, 0.34), (0.28, 0.36, 0.42), (0.16, 0.19, 0.22), (0.30, 0.40, 0.38)]
 
 
-def _jitter(rng: np.random.Generator, color: tuple[float, float, float], amount: float) -> tuple[float, float, float]:
-    c = np.clip(np.asarray(color) * (1 + rng.uniform(-amount, amount)) + rng.uniform(-amount / 2, amount / 2, 3), 0, 1)
+def _jitter(
+    rng: np.random.Generator, color: tuple[float, float, float], amount: float
+) -> tuple[float, float, float]:
+    c = np.clip(
+        np.asarray(color) * (1 + rng.uniform(-amount, amount)) + rng.uniform(-amount / 2, amount / 2, 3), 0, 1
+    )
     return (float(c[0]), float(c[1]), float(c[2]))
 
 
@@ -164,10 +187,18 @@ def random_style(rng: np.random.Generator, width: float) -> FacadeStyle:
     n_doors = int(rng.integers(1, 3)) if width > 6 else 1
     doors = tuple(float(d) for d in np.sort(rng.uniform(1.2, max(1.3, width - 1.2), size=n_doors)))
     return FacadeStyle(
-        wall=_jitter(rng, wall, 0.08), trim=_jitter(rng, (0.9, 0.9, 0.88) if rng.random() < 0.6 else (0.3, 0.3, 0.32), 0.05),
-        glass=_jitter(rng, glass, 0.1), door=_jitter(rng, (0.35, 0.22, 0.12) if rng.random() < 0.5 else (0.2, 0.25, 0.3), 0.1),
-        pattern=pattern, floor_height=floor_height, window_width=ww, window_height=wh, window_pitch=pitch,
-        ground_floor_shop=bool(rng.random() < 0.4), door_positions=doors)
+        wall=_jitter(rng, wall, 0.08),
+        trim=_jitter(rng, (0.9, 0.9, 0.88) if rng.random() < 0.6 else (0.3, 0.3, 0.32), 0.05),
+        glass=_jitter(rng, glass, 0.1),
+        door=_jitter(rng, (0.35, 0.22, 0.12) if rng.random() < 0.5 else (0.2, 0.25, 0.3), 0.1),
+        pattern=pattern,
+        floor_height=floor_height,
+        window_width=ww,
+        window_height=wh,
+        window_pitch=pitch,
+        ground_floor_shop=bool(rng.random() < 0.4),
+        door_positions=doors,
+    )
 
 
 def _buildings(rng: np.random.Generator, x_min: float, x_max: float) -> tuple[Building, ...]:
@@ -184,10 +215,16 @@ def _buildings(rng: np.random.Generator, x_min: float, x_max: float) -> tuple[Bu
 
 def random_car(rng: np.random.Generator, x: float, y: float, yaw: float) -> Car:
     kind = rng.random()
-    length, width, height = (float(rng.uniform(4.0, 4.8)), float(rng.uniform(1.75, 1.9)), float(rng.uniform(1.4, 1.55)))
+    length, width, height = (
+        float(rng.uniform(4.0, 4.8)),
+        float(rng.uniform(1.75, 1.9)),
+        float(rng.uniform(1.4, 1.55)),
+    )
     if kind > 0.8:  # van / SUV
         length, height = float(rng.uniform(4.6, 5.3)), float(rng.uniform(1.75, 2.0))
-    return Car(x, y, yaw, length, width, height, _jitter(rng, _CAR_COLORS[int(rng.integers(len(_CAR_COLORS)))], 0.1))
+    return Car(
+        x, y, yaw, length, width, height, _jitter(rng, _CAR_COLORS[int(rng.integers(len(_CAR_COLORS)))], 0.1)
+    )
 
 
 def random_layout(rng: np.random.Generator, x_min: float, x_max: float) -> StreetLayout:
@@ -196,8 +233,26 @@ def random_layout(rng: np.random.Generator, x_min: float, x_max: float) -> Stree
     sidewalk_right, sidewalk_left = float(rng.uniform(3.0, 4.5)), float(rng.uniform(3.0, 4.5))
     asphalt = _jitter(rng, (0.30, 0.30, 0.31), 0.15)
     sidewalk = _jitter(rng, (0.62, 0.60, 0.56), 0.1)
-    layout_stub = StreetLayout(num_lanes, LANE_WIDTH_M, x_min, x_max, sidewalk_right, sidewalk_left, asphalt, sidewalk,
-                               0.0, (), (), (), (), (), None, "open", (0, 0, 0), (0, 0, 0))
+    layout_stub = StreetLayout(
+        num_lanes,
+        LANE_WIDTH_M,
+        x_min,
+        x_max,
+        sidewalk_right,
+        sidewalk_left,
+        asphalt,
+        sidewalk,
+        0.0,
+        (),
+        (),
+        (),
+        (),
+        (),
+        None,
+        "open",
+        (0, 0, 0),
+        (0, 0, 0),
+    )
     trees: list[Tree] = []
     poles: list[Pole] = []
     for side in (-1, 1):
@@ -206,20 +261,35 @@ def random_layout(rng: np.random.Generator, x_min: float, x_max: float) -> Stree
             x = x_min + float(rng.uniform(0, 6))
             spacing = float(rng.uniform(7, 12))
             while x < x_max - 4:
-                trees.append(Tree(x, curb + side * float(rng.uniform(0.9, 1.4)), float(rng.uniform(2.2, 3.2)),
-                                  float(rng.uniform(1.3, 2.1)), _jitter(rng, (0.22, 0.38, 0.16), 0.2)))
+                trees.append(
+                    Tree(
+                        x,
+                        curb + side * float(rng.uniform(0.9, 1.4)),
+                        float(rng.uniform(2.2, 3.2)),
+                        float(rng.uniform(1.3, 2.1)),
+                        _jitter(rng, (0.22, 0.38, 0.16), 0.2),
+                    )
+                )
                 x += spacing * float(rng.uniform(0.85, 1.15))
         x = x_min + float(rng.uniform(2, 10))
         spacing = float(rng.uniform(14, 22))
         while x < x_max - 4:
             pole_x = x
-            if any(abs(t.x - pole_x) < 2.0 and np.sign(t.y - layout_stub.lane_center(1)) == side for t in trees):
+            if any(
+                abs(t.x - pole_x) < 2.0 and np.sign(t.y - layout_stub.lane_center(1)) == side for t in trees
+            ):
                 pole_x += 3.0
-            poles.append(Pole(pole_x, curb + side * 0.45, float(rng.uniform(6, 8)), -side, bool(rng.random() < 0.35)))
+            poles.append(
+                Pole(pole_x, curb + side * 0.45, float(rng.uniform(6, 8)), -side, bool(rng.random() < 0.35))
+            )
             x += spacing
     cars: list[Car] = []
     for side in (-1, 1):
-        y = (layout_stub.road_right - PARKING_WIDTH_M / 2) if side < 0 else (layout_stub.road_left + PARKING_WIDTH_M / 2)
+        y = (
+            (layout_stub.road_right - PARKING_WIDTH_M / 2)
+            if side < 0
+            else (layout_stub.road_left + PARKING_WIDTH_M / 2)
+        )
         x = x_min + float(rng.uniform(-3, 5))
         while x < x_max - 3:
             if rng.random() < 0.7:
@@ -232,16 +302,30 @@ def random_layout(rng: np.random.Generator, x_min: float, x_max: float) -> Stree
     horizon = _jitter(rng, (0.80, 0.85, 0.90), 0.05)
     zenith = _jitter(rng, (0.35, 0.52, 0.80), 0.1)
     return StreetLayout(
-        num_lanes=num_lanes, lane_width=LANE_WIDTH_M, x_min=x_min, x_max=x_max,
-        sidewalk_right=sidewalk_right, sidewalk_left=sidewalk_left, asphalt_color=asphalt, sidewalk_color=sidewalk,
+        num_lanes=num_lanes,
+        lane_width=LANE_WIDTH_M,
+        x_min=x_min,
+        x_max=x_max,
+        sidewalk_right=sidewalk_right,
+        sidewalk_left=sidewalk_left,
+        asphalt_color=asphalt,
+        sidewalk_color=sidewalk,
         paving_tile=float(rng.choice([0.6, 0.8, 1.0])),
-        buildings_right=_buildings(rng, x_min, x_max), buildings_left=_buildings(rng, x_min, x_max),
-        trees=tuple(trees), poles=tuple(poles), parked_cars=tuple(cars), crosswalk_x=crosswalk,
-        street_end=str(rng.choice(["closed", "open"])), sky_horizon=horizon, sky_zenith=zenith)
+        buildings_right=_buildings(rng, x_min, x_max),
+        buildings_left=_buildings(rng, x_min, x_max),
+        trees=tuple(trees),
+        poles=tuple(poles),
+        parked_cars=tuple(cars),
+        crosswalk_x=crosswalk,
+        street_end=str(rng.choice(["closed", "open"])),
+        sky_horizon=horizon,
+        sky_zenith=zenith,
+    )
 
 
-def random_moving_vehicle(rng: np.random.Generator, layout: StreetLayout, duration_s: float,
-                          x_range: tuple[float, float]) -> MovingVehicle:
+def random_moving_vehicle(
+    rng: np.random.Generator, layout: StreetLayout, duration_s: float, x_range: tuple[float, float]
+) -> MovingVehicle:
     """An oncoming vehicle in the first oncoming lane that passes the ego vehicle's stretch of street."""
     lane = EGO_LANES
     speed = -float(rng.uniform(6.0, 11.0))

@@ -60,20 +60,29 @@ def timestamp_us(index: int) -> int:
     return index * (1_000_000 // FRAME_RATE_HZ)
 
 
-def straight_drive(name: str, lane: int, lane_width: float, steps: int, step_m: float,
-                   rng: np.random.Generator) -> Traversal:
+def straight_drive(
+    name: str, lane: int, lane_width: float, steps: int, step_m: float, rng: np.random.Generator
+) -> Traversal:
     """A drive along lane ``lane`` with slight lateral wander (±10 cm) and start jitter (±30 cm)."""
     x = float(rng.uniform(-0.3, 0.3)) + step_m * np.arange(steps)
-    wander = 0.1 * np.sin(2 * math.pi * (np.arange(steps) / max(steps, 2)) * float(rng.uniform(0.3, 0.8))
-                          + float(rng.uniform(0, 2 * math.pi)))
+    wander = 0.1 * np.sin(
+        2 * math.pi * (np.arange(steps) / max(steps, 2)) * float(rng.uniform(0.3, 0.8))
+        + float(rng.uniform(0, 2 * math.pi))
+    )
     y = lane * lane_width + wander
     heading = np.arctan2(np.gradient(y), step_m) if steps > 1 else np.zeros(steps)
-    return Traversal(name, "straight", lane, np.stack([x, y, heading], axis=1),
-                     CAMERA_HEIGHT_M + float(rng.uniform(-0.03, 0.03)))
+    return Traversal(
+        name,
+        "straight",
+        lane,
+        np.stack([x, y, heading], axis=1),
+        CAMERA_HEIGHT_M + float(rng.uniform(-0.03, 0.03)),
+    )
 
 
-def lane_change_drive(name: str, lane_width: float, steps: int, step_m: float,
-                      rng: np.random.Generator) -> Traversal:
+def lane_change_drive(
+    name: str, lane_width: float, steps: int, step_m: float, rng: np.random.Generator
+) -> Traversal:
     """A drive from lane 0 to lane 1 or 2: a smoothstep in y between 15 % and 85 % of the drive."""
     target = int(rng.choice([1, 2]))
     x = float(rng.uniform(-0.3, 0.3)) + step_m * np.arange(steps)
@@ -83,8 +92,13 @@ def lane_change_drive(name: str, lane_width: float, steps: int, step_m: float,
     y = target * lane_width * f * f * (3 - 2 * f)
     dydx = target * lane_width * 6 * f * (1 - f) / (stop - start)
     heading = np.arctan(dydx)
-    return Traversal(name, "lane_change", None, np.stack([x, y, heading], axis=1),
-                     CAMERA_HEIGHT_M + float(rng.uniform(-0.03, 0.03)))
+    return Traversal(
+        name,
+        "lane_change",
+        None,
+        np.stack([x, y, heading], axis=1),
+        CAMERA_HEIGHT_M + float(rng.uniform(-0.03, 0.03)),
+    )
 
 
 def intrinsics(width: int, height: int, hfov_deg: float = 90.0) -> tuple[float, float, float, float]:
@@ -101,5 +115,10 @@ def rig_camera(traversal: Traversal, step: int, spec: CameraSpec, width: int, he
     center = np.array([x, y, traversal.camera_height])
     direction = np.array([math.cos(yaw) * math.cos(pitch), math.sin(yaw) * math.cos(pitch), math.sin(pitch)])
     fx, fy, cx, cy = intrinsics(width, height)
-    return Camera(intrinsics_matrix(fx, fy, cx, cy), look_at(center, center + direction), width, height,
-                  source=f"{traversal.name}_{spec.name}_{step:03d}")
+    return Camera(
+        intrinsics_matrix(fx, fy, cx, cy),
+        look_at(center, center + direction),
+        width,
+        height,
+        source=f"{traversal.name}_{spec.name}_{step:03d}",
+    )

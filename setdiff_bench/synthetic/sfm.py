@@ -33,9 +33,18 @@ class SparsePoints:
     rgb: np.ndarray
 
 
-def sample_sparse_points(static: GaussianModel, eligible: torch.Tensor, frames: Sequence[CapturedFrame], count: int,
-                         rng: np.random.Generator, *, min_views: int = 2, candidates_per_point: int = 6,
-                         noise_base_m: float = 0.01, noise_per_m: float = 0.003) -> SparsePoints:
+def sample_sparse_points(
+    static: GaussianModel,
+    eligible: torch.Tensor,
+    frames: Sequence[CapturedFrame],
+    count: int,
+    rng: np.random.Generator,
+    *,
+    min_views: int = 2,
+    candidates_per_point: int = 6,
+    noise_base_m: float = 0.01,
+    noise_per_m: float = 0.003,
+) -> SparsePoints:
     """Sample ``count`` noisy, coloured surface points visible in ``frames`` (the training frames).
 
     Args:

@@ -50,10 +50,15 @@ def quaternion_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product of ``(..., 4)`` quaternions ``w, x, y, z`` (``a ∘ b`` = rotate by b, then a)."""
     aw, ax, ay, az = np.moveaxis(np.asarray(a, np.float64), -1, 0)
     bw, bx, by, bz = np.moveaxis(np.asarray(b, np.float64), -1, 0)
-    return np.stack([aw * bw - ax * bx - ay * by - az * bz,
-                     aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw], axis=-1)
+    return np.stack(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ],
+        axis=-1,
+    )
 
 
 @dataclass
@@ -70,8 +75,14 @@ class GaussianSoup:
         return int(sum(m.shape[0] for m in self.means))
 
     # ------------------------------------------------------------------ raw append
-    def add(self, means: np.ndarray, scales: np.ndarray, quats: np.ndarray, colors: np.ndarray,
-            opacities: np.ndarray | float) -> None:
+    def add(
+        self,
+        means: np.ndarray,
+        scales: np.ndarray,
+        quats: np.ndarray,
+        colors: np.ndarray,
+        opacities: np.ndarray | float,
+    ) -> None:
         """Append ``P`` Gaussians: means ``(P, 3)`` m, std devs ``(P, 3)`` m, quats ``(P, 4)`` or ``(4,)``,
         colours ``(P, 3)`` or ``(3,)`` in [0, 1], opacities ``(P,)`` or scalar in (0, 1)."""
         means = np.asarray(means, np.float64).reshape(-1, 3)
@@ -82,17 +93,28 @@ class GaussianSoup:
         self.scales.append(np.broadcast_to(np.asarray(scales, np.float64), (p, 3)).copy())
         self.quats.append(np.broadcast_to(np.asarray(quats, np.float64), (p, 4)).copy())
         self.colors.append(np.clip(np.broadcast_to(np.asarray(colors, np.float64), (p, 3)), 0.0, 1.0).copy())
-        self.opacities.append(np.clip(np.broadcast_to(np.asarray(opacities, np.float64), (p,)), 1e-3,
-                                      MAX_OPACITY).copy())
+        self.opacities.append(
+            np.clip(np.broadcast_to(np.asarray(opacities, np.float64), (p,)), 1e-3, MAX_OPACITY).copy()
+        )
 
     def extend(self, other: GaussianSoup) -> None:
         for name in ("means", "scales", "quats", "colors", "opacities"):
             getattr(self, name).extend(getattr(other, name))
 
     # ------------------------------------------------------------------ primitives
-    def add_plane(self, origin: np.ndarray, u_axis: np.ndarray, v_axis: np.ndarray, size_u: float, size_v: float,
-                  spacing: float, texture: Texture, *, opacity: float = MAX_OPACITY,
-                  thickness: float = SURFACE_THICKNESS_M) -> None:
+    def add_plane(
+        self,
+        origin: np.ndarray,
+        u_axis: np.ndarray,
+        v_axis: np.ndarray,
+        size_u: float,
+        size_v: float,
+        spacing: float,
+        texture: Texture,
+        *,
+        opacity: float = MAX_OPACITY,
+        thickness: float = SURFACE_THICKNESS_M,
+    ) -> None:
         """Tile the rectangle ``origin + u·û + v·v̂`` (``0 ≤ u ≤ size_u``, ``0 ≤ v ≤ size_v``) with flat disks.
 
         Args:
@@ -111,8 +133,16 @@ class GaussianSoup:
         scales = np.array([DISK_OVERLAP * su, DISK_OVERLAP * sv, thickness])
         self.add(means, scales, basis_quaternion(u_hat, v_hat), texture(u, v), opacity)
 
-    def add_box(self, center: np.ndarray, size: tuple[float, float, float], yaw: float, spacing: float,
-                textures: dict[str, Texture], *, bottom: bool = False) -> None:
+    def add_box(
+        self,
+        center: np.ndarray,
+        size: tuple[float, float, float],
+        yaw: float,
+        spacing: float,
+        textures: dict[str, Texture],
+        *,
+        bottom: bool = False,
+    ) -> None:
         """An axis-aligned (after ``yaw`` about +z) box's faces as textured planes.
 
         Args:
@@ -126,8 +156,8 @@ class GaussianSoup:
         base = np.asarray(center, np.float64)
         side = textures["side"]
         faces = [
-            (base - ex * length / 2 - ey * width / 2, ex, ez, length, height, side),            # right (-y)
-            (base + ex * length / 2 + ey * width / 2, -ex, ez, length, height, side),           # left (+y)
+            (base - ex * length / 2 - ey * width / 2, ex, ez, length, height, side),  # right (-y)
+            (base + ex * length / 2 + ey * width / 2, -ex, ez, length, height, side),  # left (+y)
             (base + ex * length / 2 - ey * width / 2, ey, ez, width, height, textures.get("front", side)),
             (base - ex * length / 2 + ey * width / 2, -ey, ez, width, height, textures.get("back", side)),
             (base - ex * length / 2 - ey * width / 2 + ez * height, ex, ey, length, width, textures["top"]),
@@ -137,20 +167,34 @@ class GaussianSoup:
         for origin, u_axis, v_axis, su, sv, tex in faces:
             self.add_plane(origin, u_axis, v_axis, su, sv, spacing, tex)
 
-    def add_rod(self, base: np.ndarray, radius: float, height: float, color: np.ndarray, *,
-                spacing: float = 0.5) -> None:
+    def add_rod(
+        self, base: np.ndarray, radius: float, height: float, color: np.ndarray, *, spacing: float = 0.5
+    ) -> None:
         """A thin vertical cylinder (pole, trunk) as one column of Gaussians elongated along +z, round
         in cross-section (standard deviation ``radius``), so it looks the same from every side."""
         n_z = max(1, round(height / spacing))
         dz = height / n_z
         zs = (np.arange(n_z) + 0.5) * dz
         means = np.asarray(base, np.float64) + np.stack([np.zeros_like(zs), np.zeros_like(zs), zs], axis=1)
-        self.add(means, np.array([radius, radius, DISK_OVERLAP * dz]), np.array([1.0, 0.0, 0.0, 0.0]), color,
-                 MAX_OPACITY)
+        self.add(
+            means,
+            np.array([radius, radius, DISK_OVERLAP * dz]),
+            np.array([1.0, 0.0, 0.0, 0.0]),
+            color,
+            MAX_OPACITY,
+        )
 
-    def add_segment(self, start: np.ndarray, end: np.ndarray, width: float, color: np.ndarray, *,
-                    normal: np.ndarray = (0.0, 0.0, 1.0), opacity: float = MAX_OPACITY,
-                    max_aspect: float = 8.0) -> None:
+    def add_segment(
+        self,
+        start: np.ndarray,
+        end: np.ndarray,
+        width: float,
+        color: np.ndarray,
+        *,
+        normal: np.ndarray = (0.0, 0.0, 1.0),
+        opacity: float = MAX_OPACITY,
+        max_aspect: float = 8.0,
+    ) -> None:
         """A painted strip from ``start`` to ``end`` (``width`` metres across, lying in the plane ⟂ ``normal``),
         as elongated disks with aspect ratio at most ``max_aspect``."""
         start, end = np.asarray(start, np.float64), np.asarray(end, np.float64)
@@ -168,9 +212,18 @@ class GaussianSoup:
         scales = np.array([0.5 * step, 0.35 * width, SURFACE_THICKNESS_M])
         self.add(centres, scales, basis_quaternion(u_hat, v_hat), color, opacity)
 
-    def add_blob(self, center: np.ndarray, radii: np.ndarray, color: np.ndarray, count: int,
-                 rng: np.random.Generator, *, color_jitter: float = 0.08, blob_scale: float = 0.35,
-                 opacity: float = 0.9) -> None:
+    def add_blob(
+        self,
+        center: np.ndarray,
+        radii: np.ndarray,
+        color: np.ndarray,
+        count: int,
+        rng: np.random.Generator,
+        *,
+        color_jitter: float = 0.08,
+        blob_scale: float = 0.35,
+        opacity: float = 0.9,
+    ) -> None:
         """A fuzzy ellipsoid (foliage, bushes): ``count`` isotropic Gaussians uniform in the ellipsoid ``radii``."""
         directions = rng.normal(size=(count, 3))
         directions /= np.linalg.norm(directions, axis=1, keepdims=True)
@@ -186,10 +239,17 @@ class GaussianSoup:
     def arrays(self) -> dict[str, np.ndarray]:
         """Concatenated ``means (N, 3)``, ``scales (N, 3)``, ``quats (N, 4)``, ``colors (N, 3)``, ``opacities (N,)``."""
         if not self.means:
-            return {"means": np.zeros((0, 3)), "scales": np.zeros((0, 3)), "quats": np.zeros((0, 4)),
-                    "colors": np.zeros((0, 3)), "opacities": np.zeros((0,))}
-        return {name: np.concatenate(getattr(self, name)) for name in
-                ("means", "scales", "quats", "colors", "opacities")}
+            return {
+                "means": np.zeros((0, 3)),
+                "scales": np.zeros((0, 3)),
+                "quats": np.zeros((0, 4)),
+                "colors": np.zeros((0, 3)),
+                "opacities": np.zeros((0,)),
+            }
+        return {
+            name: np.concatenate(getattr(self, name))
+            for name in ("means", "scales", "quats", "colors", "opacities")
+        }
 
     def to_model(self) -> GaussianModel:
         """A float32 degree-0 :class:`GaussianModel` (log-scales, opacity logits, SH DC from colour)."""

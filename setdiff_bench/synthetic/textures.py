@@ -15,8 +15,9 @@ import numpy as np
 from setdiff_bench.synthetic.soup import Texture
 
 
-def value_noise(rng: np.random.Generator, cell_m: float, extent_m: tuple[float, float] = (400.0, 120.0)
-                ) -> Texture:
+def value_noise(
+    rng: np.random.Generator, cell_m: float, extent_m: tuple[float, float] = (400.0, 120.0)
+) -> Texture:
     """Smooth scalar noise in [-1, 1] (bilinear value noise on a ``cell_m`` lattice), returned as a
     texture whose three channels are equal; deterministic from ``rng``."""
     nx = int(extent_m[0] / cell_m) + 3
@@ -37,8 +38,9 @@ def value_noise(rng: np.random.Generator, cell_m: float, extent_m: tuple[float, 
     return sample
 
 
-def noisy_color(rng: np.random.Generator, base: Sequence[float], amplitude: float = 0.06,
-                cell_m: float = 0.7) -> Texture:
+def noisy_color(
+    rng: np.random.Generator, base: Sequence[float], amplitude: float = 0.06, cell_m: float = 0.7
+) -> Texture:
     """``base`` colour modulated by two octaves of value noise (stains, weathering)."""
     coarse = value_noise(rng, cell_m * 4)
     fine = value_noise(rng, cell_m)
@@ -59,7 +61,7 @@ class FacadeStyle:
     trim: tuple[float, float, float]
     glass: tuple[float, float, float]
     door: tuple[float, float, float]
-    pattern: str            # "plaster" | "brick" | "panels" | "glass"
+    pattern: str  # "plaster" | "brick" | "panels" | "glass"
     floor_height: float
     window_width: float
     window_height: float
@@ -91,8 +93,15 @@ def facade_texture(rng: np.random.Generator, style: FacadeStyle, width: float, h
         if style.pattern == "brick":
             row = np.floor(v / brick_rows).astype(int)
             col = np.floor((u + 0.45 * (row % 2)) / 0.9).astype(int)
-            rgb = rgb * (1.0 + brick_jitter[np.clip(row, 0, brick_jitter.shape[0] - 1),
-                                            np.clip(col, 0, brick_jitter.shape[1] - 1)])[:, None]
+            rgb = (
+                rgb
+                * (
+                    1.0
+                    + brick_jitter[
+                        np.clip(row, 0, brick_jitter.shape[0] - 1), np.clip(col, 0, brick_jitter.shape[1] - 1)
+                    ]
+                )[:, None]
+            )
             mortar = (np.abs(v / brick_rows - np.round(v / brick_rows)) * brick_rows) < 0.035
             rgb = np.where(mortar[:, None], 0.8 * rgb + 0.2 * 0.85, rgb)
         elif style.pattern == "panels":
@@ -136,17 +145,29 @@ def facade_texture(rng: np.random.Generator, style: FacadeStyle, width: float, h
     return sample
 
 
-def asphalt_texture(rng: np.random.Generator, base: Sequence[float], *, lane_width: float | None = None,
-                    extent_m: tuple[float, float] = (400.0, 40.0)) -> Texture:
+def asphalt_texture(
+    rng: np.random.Generator,
+    base: Sequence[float],
+    *,
+    lane_width: float | None = None,
+    extent_m: tuple[float, float] = (400.0, 40.0),
+) -> Texture:
     """Road surface: grey with large stains, fine grain, sharp-edged repair patches, manhole covers and,
     with ``lane_width``, darker tyre tracks 0.9 m either side of each lane centre (``v`` = 0 on a lane edge)."""
     patches = value_noise(rng, 2.5)
     grain = value_noise(rng, 0.35)
     base_arr = np.asarray(base, np.float64)
     n_repairs = int(extent_m[0] * extent_m[1] / 60)
-    repairs = np.stack([rng.uniform(0, extent_m[0], n_repairs), rng.uniform(0, extent_m[1], n_repairs),
-                        rng.uniform(0.6, 3.5, n_repairs), rng.uniform(0.5, 2.0, n_repairs),
-                        rng.uniform(-0.25, 0.2, n_repairs)], axis=1)
+    repairs = np.stack(
+        [
+            rng.uniform(0, extent_m[0], n_repairs),
+            rng.uniform(0, extent_m[1], n_repairs),
+            rng.uniform(0.6, 3.5, n_repairs),
+            rng.uniform(0.5, 2.0, n_repairs),
+            rng.uniform(-0.25, 0.2, n_repairs),
+        ],
+        axis=1,
+    )
     n_covers = int(extent_m[0] / 25)
     covers = np.stack([rng.uniform(0, extent_m[0], n_covers), rng.uniform(0, extent_m[1], n_covers)], axis=1)
 
@@ -156,7 +177,11 @@ def asphalt_texture(rng: np.random.Generator, base: Sequence[float], *, lane_wid
         if lane_width is not None:
             across = np.mod(v, lane_width) - lane_width / 2
             shade -= 0.12 * np.exp(-0.5 * ((np.abs(across) - 0.9) / 0.25) ** 2)
-        near = (repairs[:, 0] + repairs[:, 2] > u.min()) & (repairs[:, 0] - repairs[:, 2] < u.max()) if u.size else []
+        near = (
+            (repairs[:, 0] + repairs[:, 2] > u.min()) & (repairs[:, 0] - repairs[:, 2] < u.max())
+            if u.size
+            else []
+        )
         for x0, y0, length, width, tone in repairs[near]:
             inside = (np.abs(u - x0) < length / 2) & (np.abs(v - y0) < width / 2)
             shade = np.where(inside, shade + tone, shade)
@@ -176,8 +201,9 @@ def paving_texture(rng: np.random.Generator, base: Sequence[float], tile_m: floa
         iu = np.clip(np.floor(u / tile_m).astype(int), 0, 255)
         iv = np.clip(np.floor(v / tile_m).astype(int), 0, 63)
         rgb = base_arr * (1.0 + tint[iu, iv])[:, None]
-        joint = ((np.abs(u / tile_m - np.round(u / tile_m)) * tile_m < 0.05)
-                 | (np.abs(v / tile_m - np.round(v / tile_m)) * tile_m < 0.05))
+        joint = (np.abs(u / tile_m - np.round(u / tile_m)) * tile_m < 0.05) | (
+            np.abs(v / tile_m - np.round(v / tile_m)) * tile_m < 0.05
+        )
         return np.clip(np.where(joint[:, None], rgb * 0.7, rgb), 0, 1)
 
     return sample

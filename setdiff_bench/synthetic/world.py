@@ -89,7 +89,9 @@ class World:
     vehicles: dict[str, GaussianModel]
 
 
-def build_static(layout: StreetLayout, detail: Detail, rng: np.random.Generator) -> tuple[GaussianModel, torch.Tensor]:
+def build_static(
+    layout: StreetLayout, detail: Detail, rng: np.random.Generator
+) -> tuple[GaussianModel, torch.Tensor]:
     """All static Gaussians of ``layout`` → ``(model, categories (N,))``."""
     parts: list[tuple[int, GaussianSoup]] = [
         (0, _ground(layout, detail, rng)),
@@ -108,8 +110,9 @@ def build_static(layout: StreetLayout, detail: Detail, rng: np.random.Generator)
 
 
 # ---------------------------------------------------------------------- ground
-def _chunks(start: float, stop: float, detail: Detail, y: float, z: float, factor: float,
-            max_chunk: float = 4.0) -> list[tuple[float, float, float]]:
+def _chunks(
+    start: float, stop: float, detail: Detail, y: float, z: float, factor: float, max_chunk: float = 4.0
+) -> list[tuple[float, float, float]]:
     """Split ``[start, stop]`` along x into pieces ``(x0, length, spacing)`` with distance-based spacing."""
     out = []
     x = start
@@ -145,8 +148,12 @@ def _road_texture(layout: StreetLayout, rng: np.random.Generator, y0: float) -> 
         edge = ((k == 0) | (k == layout.num_lanes)) & (near < 0.09)
         rgb = np.where(edge[:, None], white, rgb)
         if layout.crosswalk_x is not None:
-            zebra = (np.abs(x - layout.crosswalk_x) < 1.6) & (((y - layout.road_right) % 1.0) < 0.5) \
-                & (y > layout.road_right) & (y < layout.road_left)
+            zebra = (
+                (np.abs(x - layout.crosswalk_x) < 1.6)
+                & (((y - layout.road_right) % 1.0) < 0.5)
+                & (y > layout.road_right)
+                & (y < layout.road_left)
+            )
             rgb = np.where(zebra[:, None], white * 0.97, rgb)
         return rgb
 
@@ -156,24 +163,48 @@ def _road_texture(layout: StreetLayout, rng: np.random.Generator, y0: float) -> 
 def _ground(layout: StreetLayout, detail: Detail, rng: np.random.Generator) -> GaussianSoup:
     soup = GaussianSoup()
     road_tex = _road_texture(layout, rng, layout.road_right)
-    _ground_grid(soup, layout, detail, layout.road_right, layout.road_left, 0.0, road_tex, 1.0,
-                 align=layout.lane_width)
+    _ground_grid(
+        soup, layout, detail, layout.road_right, layout.road_left, 0.0, road_tex, 1.0, align=layout.lane_width
+    )
     parking_tex = tx.asphalt_texture(rng, tuple(np.asarray(layout.asphalt_color) * 0.93))
-    for y_lo, y_hi in ((layout.curb_right, layout.road_right - 0.1), (layout.road_left + 0.1, layout.curb_left)):
+    for y_lo, y_hi in (
+        (layout.curb_right, layout.road_right - 0.1),
+        (layout.road_left + 0.1, layout.curb_left),
+    ):
         _ground_grid(soup, layout, detail, y_lo, y_hi, 0.0, parking_tex, 1.5)
     # Curbs (vertical faces) and sidewalks.
     curb_tex = tx.noisy_color(rng, (0.7, 0.69, 0.66), 0.05)
-    for y_curb, y_out in ((layout.curb_right, layout.facade_right - 2.0), (layout.curb_left, layout.facade_left + 2.0)):
+    for y_curb, y_out in (
+        (layout.curb_right, layout.facade_right - 2.0),
+        (layout.curb_left, layout.facade_left + 2.0),
+    ):
         for x0, length, s in _chunks(layout.x_min, layout.x_max, detail, y_curb, 0.1, 1.0):
-            soup.add_plane(np.array([x0, y_curb, 0.0]), np.array([1.0, 0, 0]), np.array([0, 0, 1.0]), length,
-                           CURB_HEIGHT_M, max(s, 0.15), curb_tex)
+            soup.add_plane(
+                np.array([x0, y_curb, 0.0]),
+                np.array([1.0, 0, 0]),
+                np.array([0, 0, 1.0]),
+                length,
+                CURB_HEIGHT_M,
+                max(s, 0.15),
+                curb_tex,
+            )
         paving = tx.paving_texture(rng, layout.sidewalk_color, layout.paving_tile)
         _ground_grid(soup, layout, detail, min(y_curb, y_out), max(y_curb, y_out), CURB_HEIGHT_M, paving, 1.3)
     return soup
 
 
-def _ground_grid(soup: GaussianSoup, layout: StreetLayout, detail: Detail, y_lo: float, y_hi: float, z: float,
-                 texture: Texture, factor: float, *, align: float | None = None) -> None:
+def _ground_grid(
+    soup: GaussianSoup,
+    layout: StreetLayout,
+    detail: Detail,
+    y_lo: float,
+    y_hi: float,
+    z: float,
+    texture: Texture,
+    factor: float,
+    *,
+    align: float | None = None,
+) -> None:
     """Tile the horizontal strip ``y_lo ≤ y ≤ y_hi`` at height ``z`` along the whole street.
 
     Ground is seen at a grazing angle, foreshortened along x, so the longitudinal spacing grows with the
@@ -197,23 +228,36 @@ def _ground_grid(soup: GaussianSoup, layout: StreetLayout, detail: Detail, y_lo:
             cells = max(1, round(width / lateral_target))
             lateral = width / cells
             v = (np.arange(cells) + 0.5) * lateral
-        s_x = float(np.clip(0.5 * detail.pixels_per_gaussian * distance ** 2 / (detail.focal_px * 1.6),
-                            detail.min_spacing * factor, 1.0 * factor))
+        s_x = float(
+            np.clip(
+                0.5 * detail.pixels_per_gaussian * distance**2 / (detail.focal_px * 1.6),
+                detail.min_spacing * factor,
+                1.0 * factor,
+            )
+        )
         length = min(max(4.0, 4 * s_x), layout.x_max - x)
         nu = max(1, round(length / s_x))
         su = length / nu
         uu, vv = np.meshgrid((np.arange(nu) + 0.5) * su + (x - layout.x_min), v, indexing="xy")
         u, v_flat = uu.reshape(-1), vv.reshape(-1)
         means = np.stack([u + layout.x_min, v_flat + y_lo, np.full_like(u, z)], axis=1)
-        soup.add(means, np.array([0.6 * su, 0.6 * lateral, 0.01]), np.array([1.0, 0, 0, 0]), texture(u, v_flat), 0.995)
+        soup.add(
+            means,
+            np.array([0.6 * su, 0.6 * lateral, 0.01]),
+            np.array([1.0, 0, 0, 0]),
+            texture(u, v_flat),
+            0.995,
+        )
         x += length
 
 
 # ---------------------------------------------------------------------- buildings
 def _facades(layout: StreetLayout, detail: Detail, rng: np.random.Generator) -> GaussianSoup:
     soup = GaussianSoup()
-    for side, buildings, line in ((-1, layout.buildings_right, layout.facade_right),
-                                  (1, layout.buildings_left, layout.facade_left)):
+    for side, buildings, line in (
+        (-1, layout.buildings_right, layout.facade_right),
+        (1, layout.buildings_left, layout.facade_left),
+    ):
         for b in buildings:
             _building(soup, b, side, line + side * b.setback, detail, rng)
         # Gaps between buildings show a back wall (courtyards, fences) instead of the sky.
@@ -222,8 +266,15 @@ def _facades(layout: StreetLayout, detail: Detail, rng: np.random.Generator) -> 
         for (_, end), (start, _) in itertools.pairwise(edges):
             if start - end > 0.05:
                 origin = np.array([end, line + side * 9.0, 0.0])
-                soup.add_plane(origin, np.array([1.0, 0, 0]), np.array([0, 0, 1.0]), start - end, 7.0,
-                               detail.spacing(origin, 2.0), back_tex)
+                soup.add_plane(
+                    origin,
+                    np.array([1.0, 0, 0]),
+                    np.array([0, 0, 1.0]),
+                    start - end,
+                    7.0,
+                    detail.spacing(origin, 2.0),
+                    back_tex,
+                )
     if layout.street_end == "closed":
         width = layout.facade_left - layout.facade_right + 20.0
         style = random_style(rng, width)
@@ -235,7 +286,9 @@ def _facades(layout: StreetLayout, detail: Detail, rng: np.random.Generator) -> 
     return soup
 
 
-def _building(soup: GaussianSoup, b: Building, side: int, y: float, detail: Detail, rng: np.random.Generator) -> None:
+def _building(
+    soup: GaussianSoup, b: Building, side: int, y: float, detail: Detail, rng: np.random.Generator
+) -> None:
     """Façade of ``b`` at lateral position ``y`` (``side`` −1 = right of the street), plus its end walls."""
     tex = tx.facade_texture(rng, b.style, b.width, b.height)
     x = b.x0
@@ -249,8 +302,9 @@ def _building(soup: GaussianSoup, b: Building, side: int, y: float, detail: Deta
             def piece(u: np.ndarray, v: np.ndarray, du: float = x - b.x0, dv: float = z0) -> np.ndarray:
                 return tex(u + du, v + dv)
 
-            soup.add_plane(np.array([x, y, z0]), np.array([1.0, 0, 0]), np.array([0, 0, 1.0]), length, z1 - z0,
-                           s, piece)
+            soup.add_plane(
+                np.array([x, y, z0]), np.array([1.0, 0, 0]), np.array([0, 0, 1.0]), length, z1 - z0, s, piece
+            )
         x += length
     wall = tx.noisy_color(rng, b.style.wall, 0.08)
     for x_end in (b.x0, b.x0 + b.width):
@@ -260,8 +314,9 @@ def _building(soup: GaussianSoup, b: Building, side: int, y: float, detail: Deta
 
 
 # ---------------------------------------------------------------------- street furniture and cars
-def car_soup(car: Car, detail: Detail, rng: np.random.Generator, *, local: bool = False,
-             skip_side: int = 0) -> GaussianSoup:
+def car_soup(
+    car: Car, detail: Detail, rng: np.random.Generator, *, local: bool = False, skip_side: int = 0
+) -> GaussianSoup:
     """A car as textured boxes, wheels and lights; in its own frame when ``local`` (origin at the footprint
     centre, x forward) else placed at ``(car.x, car.y)`` with ``car.yaw``.  ``skip_side`` = ±1 omits the
     left (+1) or right (−1) body faces (hidden against the curb)."""
@@ -286,7 +341,12 @@ def car_soup(car: Car, detail: Detail, rng: np.random.Generator, *, local: bool 
 
     def cabin_side(u: np.ndarray, v: np.ndarray) -> np.ndarray:
         rgb = np.broadcast_to(glass, (u.shape[0], 3)).copy()
-        pillar = (u < 0.12) | (u > 0.55 * car.length - 0.12) | (np.abs(u - 0.27 * car.length) < 0.06) | (v > cabin_h - 0.06)
+        pillar = (
+            (u < 0.12)
+            | (u > 0.55 * car.length - 0.12)
+            | (np.abs(u - 0.27 * car.length) < 0.06)
+            | (v > cabin_h - 0.06)
+        )
         return np.where(pillar[:, None], body * 0.9, rgb)
 
     top = tx.solid(body * 1.05)
@@ -294,32 +354,75 @@ def car_soup(car: Car, detail: Detail, rng: np.random.Generator, *, local: bool 
     forward = np.array([c, sn, 0.0])
     left = np.array([-sn, c, 0.0])
     body_soup = GaussianSoup()
-    body_soup.add_box(center + np.array([0, 0, clearance]), (car.length, car.width, body_h), yaw, s,
-                      {"side": body_side, "top": top, "front": seam, "back": seam})
+    body_soup.add_box(
+        center + np.array([0, 0, clearance]),
+        (car.length, car.width, body_h),
+        yaw,
+        s,
+        {"side": body_side, "top": top, "front": seam, "back": seam},
+    )
     cabin_center = center + forward * (-0.05 * car.length) + np.array([0, 0, clearance + body_h])
-    body_soup.add_box(cabin_center, (0.55 * car.length, 0.9 * car.width, cabin_h), yaw, s,
-                      {"side": cabin_side, "top": top, "front": cabin_side, "back": cabin_side})
+    body_soup.add_box(
+        cabin_center,
+        (0.55 * car.length, 0.9 * car.width, cabin_h),
+        yaw,
+        s,
+        {"side": cabin_side, "top": top, "front": cabin_side, "back": cabin_side},
+    )
     if skip_side:
         arr = body_soup.arrays()
         lateral = (arr["means"] - center) @ left
         keep = ~(lateral * skip_side > 0.4 * car.width)
         body_soup = GaussianSoup()
-        body_soup.add(arr["means"][keep], arr["scales"][keep], arr["quats"][keep], arr["colors"][keep],
-                      arr["opacities"][keep])
+        body_soup.add(
+            arr["means"][keep],
+            arr["scales"][keep],
+            arr["quats"][keep],
+            arr["colors"][keep],
+            arr["opacities"][keep],
+        )
     soup.extend(body_soup)
     # wheels: dark vertical disks on both sides, lights on front and back
     for fx in (0.33, -0.33):
         for sy in (-1, 1):
             if skip_side and sy == skip_side:
                 continue
-            p = center + forward * fx * car.length + left * sy * (car.width / 2 + 0.01) + np.array([0, 0, 0.33])
-            soup.add(p[None], np.array([0.2, 0.2, 0.03]), basis_quaternion(forward, np.array([0, 0, 1.0])),
-                     np.array([0.06, 0.06, 0.07]), 0.99)
+            p = (
+                center
+                + forward * fx * car.length
+                + left * sy * (car.width / 2 + 0.01)
+                + np.array([0, 0, 0.33])
+            )
+            soup.add(
+                p[None],
+                np.array([0.2, 0.2, 0.03]),
+                basis_quaternion(forward, np.array([0, 0, 1.0])),
+                np.array([0.06, 0.06, 0.07]),
+                0.99,
+            )
     for sy in (-1, 1):
-        front = center + forward * (car.length / 2 + 0.01) + left * sy * 0.35 * car.width + np.array([0, 0, clearance + 0.6 * body_h])
-        back = center - forward * (car.length / 2 + 0.01) + left * sy * 0.38 * car.width + np.array([0, 0, clearance + 0.7 * body_h])
-        soup.add(front[None], np.array([0.08, 0.08, 0.05]), np.array([1.0, 0, 0, 0]), np.array([0.95, 0.95, 0.85]), 0.95)
-        soup.add(back[None], np.array([0.1, 0.1, 0.05]), np.array([1.0, 0, 0, 0]), np.array([0.8, 0.1, 0.08]), 0.95)
+        front = (
+            center
+            + forward * (car.length / 2 + 0.01)
+            + left * sy * 0.35 * car.width
+            + np.array([0, 0, clearance + 0.6 * body_h])
+        )
+        back = (
+            center
+            - forward * (car.length / 2 + 0.01)
+            + left * sy * 0.38 * car.width
+            + np.array([0, 0, clearance + 0.7 * body_h])
+        )
+        soup.add(
+            front[None],
+            np.array([0.08, 0.08, 0.05]),
+            np.array([1.0, 0, 0, 0]),
+            np.array([0.95, 0.95, 0.85]),
+            0.95,
+        )
+        soup.add(
+            back[None], np.array([0.1, 0.1, 0.05]), np.array([1.0, 0, 0, 0]), np.array([0.8, 0.1, 0.08]), 0.95
+        )
     return soup
 
 
@@ -335,16 +438,30 @@ def _street_objects(layout: StreetLayout, detail: Detail, rng: np.random.Generat
         top = base + np.array([0, 0, pole.height])
         tip = top + np.array([0, pole.arm_direction * 1.6, 0.1])
         soup.add_segment(top, tip, 0.1, metal, normal=np.array([1.0, 0, 0]))
-        soup.add(tip[None] - np.array([0, 0, 0.1]), np.array([0.25, 0.15, 0.08]), np.array([1.0, 0, 0, 0]),
-                 np.array([0.85, 0.85, 0.75]), 0.95)
+        soup.add(
+            tip[None] - np.array([0, 0, 0.1]),
+            np.array([0.25, 0.15, 0.08]),
+            np.array([1.0, 0, 0, 0]),
+            np.array([0.85, 0.85, 0.75]),
+            0.95,
+        )
         if pole.has_sign:
             sign_color = [(0.1, 0.25, 0.65), (0.75, 0.1, 0.1), (0.95, 0.95, 0.95)][int(rng.integers(3))]
             center = base + np.array([-0.1, 0, 2.6])
-            soup.add_plane(center - np.array([0, 0.35, 0.35]), np.array([0, 1.0, 0]), np.array([0, 0, 1.0]), 0.7, 0.7,
-                           0.12, tx.solid(sign_color))
+            soup.add_plane(
+                center - np.array([0, 0.35, 0.35]),
+                np.array([0, 1.0, 0]),
+                np.array([0, 0, 1.0]),
+                0.7,
+                0.7,
+                0.12,
+                tx.solid(sign_color),
+            )
     trunk = np.array([0.33, 0.25, 0.18])
     for tree in layout.trees:
-        soup.add_rod(np.array([tree.x, tree.y, CURB_HEIGHT_M]), 0.13, tree.trunk_height + 0.8, trunk, spacing=0.4)
+        soup.add_rod(
+            np.array([tree.x, tree.y, CURB_HEIGHT_M]), 0.13, tree.trunk_height + 0.8, trunk, spacing=0.4
+        )
     return soup
 
 
@@ -375,15 +492,24 @@ def _far_background(layout: StreetLayout, detail: Detail, rng: np.random.Generat
         mix = min(0.75, distance / 260.0)
         color = np.asarray([0.45, 0.45, 0.48]) * (1 + rng.uniform(-0.2, 0.2)) * (1 - mix) + haze * mix
         spacing = max(2.0, 1.2 * detail.pixels_per_gaussian * distance / detail.focal_px)
-        soup.add_plane(np.array([x, y + width / 2, 0.0]), np.array([0, -1.0, 0]), np.array([0, 0, 1.0]), width, height,
-                       spacing, tx.noisy_color(rng, tuple(color), 0.04, 6.0))
+        soup.add_plane(
+            np.array([x, y + width / 2, 0.0]),
+            np.array([0, -1.0, 0]),
+            np.array([0, 0, 1.0]),
+            width,
+            height,
+            spacing,
+            tx.noisy_color(rng, tuple(color), 0.04, 6.0),
+        )
     return soup
 
 
 def _sky(layout: StreetLayout, rng: np.random.Generator, step_deg: float = 6.0) -> GaussianSoup:
     """A dome of large Gaussians (gradient from horizon to zenith, soft clouds) around the street."""
     soup = GaussianSoup()
-    center = np.array([0.5 * (layout.x_min + layout.x_max), 0.5 * (layout.facade_left + layout.facade_right), 0.0])
+    center = np.array(
+        [0.5 * (layout.x_min + layout.x_max), 0.5 * (layout.facade_left + layout.facade_right), 0.0]
+    )
     clouds = tx.value_noise(rng, 18.0, (400.0, 120.0))
     horizon, zenith = np.asarray(layout.sky_horizon), np.asarray(layout.sky_zenith)
     step = math.radians(step_deg)
@@ -392,12 +518,21 @@ def _sky(layout: StreetLayout, rng: np.random.Generator, step_deg: float = 6.0) 
         ring = max(1, round(2 * math.pi * math.cos(elevation) / step))
         for k in range(ring):
             azimuth = -math.pi + 2 * math.pi * (k + 0.5) / ring
-            direction = np.array([math.cos(elevation) * math.cos(azimuth), math.cos(elevation) * math.sin(azimuth),
-                                  math.sin(elevation)])
+            direction = np.array(
+                [
+                    math.cos(elevation) * math.cos(azimuth),
+                    math.cos(elevation) * math.sin(azimuth),
+                    math.sin(elevation),
+                ]
+            )
             means.append(center + SKY_RADIUS_M * direction)
             f = max(0.0, math.sin(elevation)) ** 0.6
             rgb = horizon * (1 - f) + zenith * f
-            cloud = float(clouds(np.array([math.degrees(azimuth) + 180.0]), np.array([math.degrees(elevation) + 10]))[0, 0])
+            cloud = float(
+                clouds(np.array([math.degrees(azimuth) + 180.0]), np.array([math.degrees(elevation) + 10]))[
+                    0, 0
+                ]
+            )
             rgb = rgb + max(0.0, cloud - 0.25) * 0.6 * (np.array([0.97, 0.97, 0.98]) - rgb)
             colors.append(rgb)
             scales.append(0.75 * SKY_RADIUS_M * step)

@@ -50,8 +50,9 @@ def test_quaternion_norm_check() -> None:
 
 def test_pycolmap_camera_matches_pycolmap_projection() -> None:
     rec = pycolmap.Reconstruction()
-    rec.add_camera_with_trivial_rig(pycolmap.Camera(camera_id=1, model="PINHOLE", width=64, height=48,
-                                                    params=[55.0, 52.0, 31.0, 25.0]))
+    rec.add_camera_with_trivial_rig(
+        pycolmap.Camera(camera_id=1, model="PINHOLE", width=64, height=48, params=[55.0, 52.0, 31.0, 25.0])
+    )
     q = np.array([0.1, -0.2, 0.3, 0.9])
     q /= np.linalg.norm(q)  # x, y, z, w for pycolmap
     pose = pycolmap.Rigid3d(pycolmap.Rotation3d(q), np.array([0.3, -0.2, 2.0]))
@@ -91,14 +92,19 @@ def test_look_at_projects_target_to_principal_point() -> None:
     assert uv_up[0, 1] < 48
 
 
-@pytest.mark.parametrize("bad, match", [
-    (dict(w2c=np.diag([1.0, 1.0, -1.0, 1.0])), "determinant"),
-    (dict(w2c=np.diag([1.0, 1.01, 1.0, 1.0])), "orthonormal"),
-    (dict(K=intrinsics_matrix(-5, 5, 1, 1)), "focal"),
-    (dict(w2c=np.full((4, 4), np.nan)), "NaN"),
-])
+@pytest.mark.parametrize(
+    "bad, match",
+    [
+        (dict(w2c=np.diag([1.0, 1.0, -1.0, 1.0])), "determinant"),
+        (dict(w2c=np.diag([1.0, 1.01, 1.0, 1.0])), "orthonormal"),
+        (dict(K=intrinsics_matrix(-5, 5, 1, 1)), "focal"),
+        (dict(w2c=np.full((4, 4), np.nan)), "NaN"),
+    ],
+)
 def test_invalid_cameras_name_their_source(bad: dict, match: str) -> None:
-    kwargs = dict(K=intrinsics_matrix(5, 5, 1, 1), w2c=np.eye(4), width=4, height=4, source="images.bin image 7")
+    kwargs = dict(
+        K=intrinsics_matrix(5, 5, 1, 1), w2c=np.eye(4), width=4, height=4, source="images.bin image 7"
+    )
     kwargs.update(bad)
     with pytest.raises(CameraError, match=match) as info:
         Camera(**kwargs)
@@ -120,13 +126,20 @@ def test_resize_and_crop_keep_projection_consistent() -> None:
 def test_distortion_round_trip() -> None:
     from setdiff_bench.cameras import Distortion
 
-    camera = Camera(intrinsics_matrix(100, 100, 50, 40), np.eye(4), 100, 80,
-                    distortion=Distortion("OPENCV", (0.05, -0.01, 0.001, -0.002)))
+    camera = Camera(
+        intrinsics_matrix(100, 100, 50, 40),
+        np.eye(4),
+        100,
+        80,
+        distortion=Distortion("OPENCV", (0.05, -0.01, 0.001, -0.002)),
+    )
     points = np.array([[0.1, 0.05, 1.0], [-0.3, 0.2, 1.5]])
     uv, depth = camera.project(points)
     # OpenCV's own distortion model as the reference
     import cv2
 
-    ref, _ = cv2.projectPoints(points, np.zeros(3), np.zeros(3), camera.K, np.array([0.05, -0.01, 0.001, -0.002]))
+    ref, _ = cv2.projectPoints(
+        points, np.zeros(3), np.zeros(3), camera.K, np.array([0.05, -0.01, 0.001, -0.002])
+    )
     assert np.allclose(uv, ref[:, 0, :], atol=1e-9)
     assert np.allclose(camera.unproject(uv, depth), points, atol=1e-8)

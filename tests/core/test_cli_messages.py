@@ -19,34 +19,64 @@ def test_help_keeps_examples_on_their_own_lines(capsys: pytest.CaptureFixture[st
     text = capsys.readouterr().out
     lines = text.splitlines()
     examples = [line.strip() for line in lines if line.strip().startswith("setdiff-bench prepare ")]
-    assert len(examples) == 3 and all(line.startswith("    setdiff-bench prepare") for line in lines
-                                      if line.strip() in examples)
+    assert len(examples) == 3 and all(
+        line.startswith("    setdiff-bench prepare") for line in lines if line.strip() in examples
+    )
     assert "Examples:" in text and "Examples::" not in text and "``" not in text
 
 
-def test_one_error_prefix_for_usage_and_runtime_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_one_error_prefix_for_usage_and_runtime_errors(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     with pytest.raises(SystemExit) as usage:
         main(["list", "scenes"])
     assert usage.value.code == 2
-    assert capsys.readouterr().err.startswith("setdiff-bench list: error: the following arguments are required")
+    assert capsys.readouterr().err.startswith(
+        "setdiff-bench list: error: the following arguments are required"
+    )
     assert main(["list", "scenes", "--dataset", "euvs", "--root", str(tmp_path / "missing")]) == 2
     assert capsys.readouterr().err.startswith("setdiff-bench list: error: ")
 
 
 def test_unknown_dataset_lists_the_known_ones(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["prepare", "kitti", "--root", str(tmp_path), "--fits", str(tmp_path), "--out",
-                 str(tmp_path / "p")]) == 2
+    assert (
+        main(
+            [
+                "prepare",
+                "kitti",
+                "--root",
+                str(tmp_path),
+                "--fits",
+                str(tmp_path),
+                "--out",
+                str(tmp_path / "p"),
+            ]
+        )
+        == 2
+    )
     error = capsys.readouterr().err
     assert "unknown dataset 'kitti'" in error and all(key in error for key in DATASETS)
     assert not (tmp_path / "p").exists()
-    assert main(["leaderboard", "--dataset", "euvz", "--runs", str(tmp_path), "--out", str(tmp_path / "lb")]) == 2
+    assert (
+        main(["leaderboard", "--dataset", "euvz", "--runs", str(tmp_path), "--out", str(tmp_path / "lb")])
+        == 2
+    )
     error = capsys.readouterr().err
     assert "unknown dataset 'euvz'; choose from" in error and all(key in error for key in DATASETS)
 
 
 def test_leaderboard_names_what_there_is() -> None:
-    rows = pd.DataFrame({"dataset": ["synthetic"] * 2, "split": ["test"] * 2, "method": ["identity", "setdiff"],
-                         "group": ["lane+1"] * 2, "psnr": [20.0, 21.0], "ssim": [0.5, 0.6], "lpips": [0.3, 0.2]})
+    rows = pd.DataFrame(
+        {
+            "dataset": ["synthetic"] * 2,
+            "split": ["test"] * 2,
+            "method": ["identity", "setdiff"],
+            "group": ["lane+1"] * 2,
+            "psnr": [20.0, 21.0],
+            "ssim": [0.5, 0.6],
+            "lpips": [0.3, 0.2],
+        }
+    )
     with pytest.raises(Exception, match="runs found for: synthetic"):
         build_leaderboard("euvs", rows)
     with pytest.raises(Exception, match="splits with results: test"):

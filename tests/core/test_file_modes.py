@@ -67,8 +67,9 @@ def test_stale_temporaries_are_those_of_dead_writers_or_old_foreign_ones(tmp_pat
 
     with atomic_path(tmp_path / METRICS_FILE) as tmp:  # this process's write in progress
         assert writer_tag() in tmp.name and not is_stale_temporary(tmp)
-    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True,
-                          check=True)
+    gone = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True, check=True
+    )
     host = writer_tag().rsplit("-", 1)[0]
     dead = tmp_path / f".metrics.{host}-{gone.stdout.strip()}.abc123.tmp.parquet"  # a killed writer here
     dead.write_bytes(b"")

@@ -64,8 +64,10 @@ def test_select_references_ties_by_index() -> None:
 
 def test_normalize_packet_identity_unit_scale_and_reprojection() -> None:
     rng = np.random.default_rng(0)
-    cameras = [camera_at(rng.uniform(-5, 5, 3) + np.array([0, 0, 1]), rng.uniform(-1, 1, 3) + np.array([0, 20, 1]))
-               for _ in range(4)]
+    cameras = [
+        camera_at(rng.uniform(-5, 5, 3) + np.array([0, 0, 1]), rng.uniform(-1, 1, 3) + np.array([0, 20, 1]))
+        for _ in range(4)
+    ]
     H, W = cameras[0].height, cameras[0].width
     cmaps, alphas, points = [], [], []
     for cam in cameras:

@@ -15,14 +15,17 @@ def test_good_reference_loads_the_named_object() -> None:
     assert load_attribute("setdiff_bench.errors:UsageError", "test") is UsageError
 
 
-@pytest.mark.parametrize(("reference", "message"), [
-    ("os.path.join", "thing 'x': 'os.path.join' is not 'module:attr'"),
-    (":join", "thing 'x': ':join' is not 'module:attr'"),
-    ("os.path:", "thing 'x': 'os.path:' is not 'module:attr'"),
-    ("os:path:join", "thing 'x': 'os:path:join' is not 'module:attr'"),
-    (".path:join", "thing 'x': '.path:join' is not 'module:attr'"),
-    ("os.path:no_such_name", "thing 'x': os.path has no 'no_such_name' (from 'os.path:no_such_name')"),
-])
+@pytest.mark.parametrize(
+    ("reference", "message"),
+    [
+        ("os.path.join", "thing 'x': 'os.path.join' is not 'module:attr'"),
+        (":join", "thing 'x': ':join' is not 'module:attr'"),
+        ("os.path:", "thing 'x': 'os.path:' is not 'module:attr'"),
+        ("os:path:join", "thing 'x': 'os:path:join' is not 'module:attr'"),
+        (".path:join", "thing 'x': '.path:join' is not 'module:attr'"),
+        ("os.path:no_such_name", "thing 'x': os.path has no 'no_such_name' (from 'os.path:no_such_name')"),
+    ],
+)
 def test_malformed_or_missing_attribute_is_one_usage_line(reference: str, message: str) -> None:
     with pytest.raises(UsageError) as caught:
         load_attribute(reference, "thing 'x'")
@@ -33,8 +36,10 @@ def test_unimportable_module_is_one_line_naming_the_reference() -> None:
     with pytest.raises(UsageError) as caught:
         load_attribute("setdiff_bench.no_such_module:create", "method 'm' factory", path="plugins = m")
     text = str(caught.value)
-    assert text.startswith("plugins = m: method 'm' factory: cannot import setdiff_bench.no_such_module "
-                           "for 'setdiff_bench.no_such_module:create' (")
+    assert text.startswith(
+        "plugins = m: method 'm' factory: cannot import setdiff_bench.no_such_module "
+        "for 'setdiff_bench.no_such_module:create' ("
+    )
     assert "\n" not in text
 
 

@@ -23,8 +23,15 @@ def test_packet_carries_the_key_fields_in_key_order() -> None:
 
 
 def test_key_from_a_row_and_back() -> None:
-    row = {"packet_id": "p", "dataset": "d", "protocol": "q", "group": "g", "split": "test", "scene": "s",
-           "frame": "a.png"}
+    row = {
+        "packet_id": "p",
+        "dataset": "d",
+        "protocol": "q",
+        "group": "g",
+        "split": "test",
+        "scene": "s",
+        "frame": "a.png",
+    }
     ref = TargetRef.from_row(row, frame=row["frame"])
     assert ref.key == PacketKey("p", "d", "q", "g", "test", "s")
     assert ref.frame == "a.png"

@@ -16,10 +16,10 @@ def reorder_metadata(path: Path, order: list[str]) -> None:
     """Rewrite the header with the metadata keys in ``order`` (what another process's writer may produce)."""
     data = path.read_bytes()
     length = int.from_bytes(data[:8], "little")
-    header = json.loads(data[8:8 + length])
+    header = json.loads(data[8 : 8 + length])
     header["__metadata__"] = {key: header["__metadata__"][key] for key in order}
     text = json.dumps(header, separators=(",", ":"), ensure_ascii=False).encode()
-    path.write_bytes(data[:8] + text + b" " * (length - len(text)) + data[8 + length:])
+    path.write_bytes(data[:8] + text + b" " * (length - len(text)) + data[8 + length :])
 
 
 def test_metadata_order_no_longer_changes_the_bytes(tmp_path: Path) -> None:
@@ -38,5 +38,5 @@ def test_metadata_order_no_longer_changes_the_bytes(tmp_path: Path) -> None:
     assert loaded.keys() == tensors.keys() and all(torch.equal(loaded[k], tensors[k]) for k in tensors)
     with safe_open(str(first), "pt") as handle:
         assert handle.metadata() == metadata
-    header = json.loads(first.read_bytes()[8:8 + int.from_bytes(first.read_bytes()[:8], "little")])
+    header = json.loads(first.read_bytes()[8 : 8 + int.from_bytes(first.read_bytes()[:8], "little")])
     assert list(header["__metadata__"]) == sorted(metadata)

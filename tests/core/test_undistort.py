@@ -25,7 +25,9 @@ def _distorted_uv(xn: float, yn: float) -> tuple[float, float]:
 
 def _blob(u: float, v: float, sigma: float = 1.5) -> np.ndarray:
     jj, ii = np.meshgrid(np.arange(WIDTH) + 0.5, np.arange(HEIGHT) + 0.5)
-    return np.exp(-((jj - u) ** 2 + (ii - v) ** 2) / (2 * sigma**2)).astype(np.float32)[..., None].repeat(3, 2)
+    return (
+        np.exp(-((jj - u) ** 2 + (ii - v) ** 2) / (2 * sigma**2)).astype(np.float32)[..., None].repeat(3, 2)
+    )
 
 
 def _centroid(image: np.ndarray) -> tuple[float, float]:

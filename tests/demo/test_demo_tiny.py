@@ -56,8 +56,16 @@ def shipped_demo_out(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 #: Files that record wall times or absolute paths, never results (compared without those fields below).
-TIMED_OR_LOCAL = {SUMMARY_FILE, "README.md", LEDGER_FILE, "train_log.jsonl", RUN_FILE,
-                  MANIFEST_FILE, ENHANCER_FILE, ".index.lock"}
+TIMED_OR_LOCAL = {
+    SUMMARY_FILE,
+    "README.md",
+    LEDGER_FILE,
+    "train_log.jsonl",
+    RUN_FILE,
+    MANIFEST_FILE,
+    ENHANCER_FILE,
+    ".index.lock",
+}
 
 
 def test_same_command_gives_byte_identical_results(demo_out: Path, second_demo_out: Path) -> None:
@@ -72,17 +80,32 @@ def test_same_command_gives_byte_identical_results(demo_out: Path, second_demo_o
         if relative.name in TIMED_OR_LOCAL:
             continue
         if relative.name == METRICS_FILE or FRAGMENTS_DIR in relative.parts:
-            a, b = pd.read_parquet(first).drop(columns="ms_per_frame"), pd.read_parquet(second).drop(columns="ms_per_frame")
+            a, b = (
+                pd.read_parquet(first).drop(columns="ms_per_frame"),
+                pd.read_parquet(second).drop(columns="ms_per_frame"),
+            )
             pd.testing.assert_frame_equal(a, b, check_exact=True)
         else:
             assert first.read_bytes() == second.read_bytes(), relative
         compared += 1
     groups = {p.parts[0] if p.parts[0] != "work" else "/".join(p.parts[:2]) for p in files}
-    assert {"work/scenes", "work/packets", "work/checkpoints", "work/runs", "synthetic.md", "synthetic.parquet",
-            "synthetic_grid.png", "synthetic_lane_shift.png"} <= groups
+    assert {
+        "work/scenes",
+        "work/packets",
+        "work/checkpoints",
+        "work/runs",
+        "synthetic.md",
+        "synthetic.parquet",
+        "synthetic_grid.png",
+        "synthetic_lane_shift.png",
+    } <= groups
     assert compared > 300
     summaries = [json.loads((out / SUMMARY_FILE).read_text()) for out in (demo_out, second_demo_out)]
-    assert summaries[0]["provenance"]["torch_threads"] == summaries[1]["provenance"]["torch_threads"] == compute_threads()
+    assert (
+        summaries[0]["provenance"]["torch_threads"]
+        == summaries[1]["provenance"]["torch_threads"]
+        == compute_threads()
+    )
     assert summaries[0]["files"] == summaries[1]["files"] | {"README.md": summaries[0]["files"]["README.md"]}
 
 
@@ -103,7 +126,10 @@ def test_demo_writes_leaderboard_with_every_method_and_group(demo_out: Path) -> 
     for (_, metric), cell in board.groupby(["block", "metric"]):
         best = cell["value"].max() if metric != "lpips" else cell["value"].min()
         flagged = cell[cell["best"]]["value"]
-        assert len(flagged) >= 1 and (flagged.round(cell["decimals"].iloc[0]) == round(best, int(cell["decimals"].iloc[0]))).all()
+        assert (
+            len(flagged) >= 1
+            and (flagged.round(cell["decimals"].iloc[0]) == round(best, int(cell["decimals"].iloc[0]))).all()
+        )
     markdown = (demo_out / "synthetic.md").read_text()
     latex = (demo_out / "synthetic.tex").read_text()
     for method in METHODS:
@@ -132,8 +158,18 @@ def test_demo_per_target_metrics_and_images(demo_out: Path) -> None:
     counts = set()
     for method in METHODS:
         frame = pd.read_parquet(runs / method / METRICS_FILE)
-        assert {"dataset", "protocol", "group", "split", "scene", "frame", "method", "psnr", "ssim", "lpips"} <= set(
-            frame.columns)
+        assert {
+            "dataset",
+            "protocol",
+            "group",
+            "split",
+            "scene",
+            "frame",
+            "method",
+            "psnr",
+            "ssim",
+            "lpips",
+        } <= set(frame.columns)
         assert (frame["split"] == "test").all() and (frame["method"] == method).all()
         assert frame[["psnr", "ssim", "lpips"]].notna().all().all()
         counts.add(len(frame))
@@ -149,7 +185,10 @@ def test_shipped_demo_evaluates_the_packaged_models_on_test_scenes_only(shipped_
     assert names == ["synth", "prepare", *(f"run {m}" for m in METHODS), "leaderboard"]
     commands = {stage["name"]: stage["command"] for stage in summary["stages"]}
     assert "--indices 2" in commands["synth"] and "--test-scene scene_0000_02" in commands["prepare"]
-    assert "--checkpoint tiny_setdiff" in commands["run setdiff"] and "--checkpoint tiny_difix" in commands["run difix"]
+    assert (
+        "--checkpoint tiny_setdiff" in commands["run setdiff"]
+        and "--checkpoint tiny_difix" in commands["run difix"]
+    )
     assert summary["test_scenes"] == ["scene_0000_02"]
     assert sorted(p.name for p in (shipped_demo_out / "work" / "scenes").iterdir()) == ["scene_0000_02"]
     assert not (shipped_demo_out / "work" / "checkpoints").exists()

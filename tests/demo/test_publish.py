@@ -31,8 +31,11 @@ def make_run(run: Path, *, dirty: bool = False) -> None:
     (run / "synthetic.parquet").write_bytes(b"PAR1")
     (run / "README.md").write_text("# report\n")
     files = {p.name: sha256_file(p) for p in run.iterdir() if p.is_file()}
-    summary = {"invocation": "setdiff-bench demo --preset tiny --out runs/demo --seed 0", "files": files,
-               "provenance": {"git": {"revision": REVISION, "dirty": dirty}, "seed": 0, "torch_threads": 2}}
+    summary = {
+        "invocation": "setdiff-bench demo --preset tiny --out runs/demo --seed 0",
+        "files": files,
+        "provenance": {"git": {"revision": REVISION, "dirty": dirty}, "seed": 0, "torch_threads": 2},
+    }
     (run / SUMMARY_FILE).write_text(json.dumps(summary))
 
 
@@ -54,7 +57,14 @@ def test_publish_replaces_the_whole_folder_with_provenance(tmp_path: Path, umask
     (run / "diagnosis.md").write_text("an analysis written into the run folder\n")
     assert main(["publish", "--run", str(run), "--to", str(published)]) == 0
     names = sorted(p.name for p in published.iterdir())
-    assert names == ["README.md", SUMMARY_FILE, "diagnosis.md", PROVENANCE_FILE, "synthetic.md", "synthetic.parquet"]
+    assert names == [
+        "README.md",
+        SUMMARY_FILE,
+        "diagnosis.md",
+        PROVENANCE_FILE,
+        "synthetic.md",
+        "synthetic.parquet",
+    ]
     assert (published / "synthetic.md").read_text() == "| method | PSNR |\n"
     provenance = json.loads((published / PROVENANCE_FILE).read_text())
     assert provenance["git"]["revision"] == REVISION and provenance["seed"] == 0
@@ -98,7 +108,9 @@ def test_demo_default_output_is_git_ignored() -> None:
     root = Path(__file__).resolve().parents[2]
     if not (root / ".git").exists():
         pytest.skip("not a git checkout")
-    result = subprocess.run(["git", "-C", str(root), "check-ignore", "-q", f"{DEFAULT_OUT}/README.md"], check=False)
+    result = subprocess.run(
+        ["git", "-C", str(root), "check-ignore", "-q", f"{DEFAULT_OUT}/README.md"], check=False
+    )
     assert result.returncode == 0 and not DEFAULT_OUT.startswith("results")
 
 
@@ -107,7 +119,9 @@ class FakeProcess:
         self.returncode = returncode
 
 
-def test_stage_ledger_keeps_original_and_interrupted_times(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_stage_ledger_keeps_original_and_interrupted_times(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """A finished stage keeps its first time on a rerun (marked resumed); a failed attempt's time is added."""
     clock = iter([0.0, 100.0, 200.0, 203.0, 300.0, 340.0, 400.0, 460.0, 500.0, 502.0])
     codes = iter([0, 0, 1, 0, 0])

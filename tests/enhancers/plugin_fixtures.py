@@ -33,8 +33,9 @@ def create(factor: float = 0.5):
 '''
 
 
-def install_plugin(folder: Path, name: str = "darken", module: str = "setdiff_test_plugin",
-                   target: str | None = None) -> Path:
+def install_plugin(
+    folder: Path, name: str = "darken", module: str = "setdiff_test_plugin", target: str | None = None
+) -> Path:
     """Write ``module.py`` and ``<module>-0.1.dist-info`` (METADATA, entry_points.txt) into ``folder``.
 
     ``target`` overrides the entry point's value (default ``module:SPEC``).
@@ -44,5 +45,7 @@ def install_plugin(folder: Path, name: str = "darken", module: str = "setdiff_te
     info = folder / f"{module}-0.1.dist-info"
     info.mkdir(exist_ok=True)
     (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {module}\nVersion: 0.1\n")
-    (info / "entry_points.txt").write_text(f"[setdiff_bench.enhancers]\n{name} = {target or module + ':SPEC'}\n")
+    (info / "entry_points.txt").write_text(
+        f"[setdiff_bench.enhancers]\n{name} = {target or module + ':SPEC'}\n"
+    )
     return folder

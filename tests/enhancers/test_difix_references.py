@@ -44,15 +44,20 @@ def test_pose_distance_and_assignments_by_hand():
 def _views(cameras, values):
     n = len(cameras)
     images = torch.stack([torch.full((3, 8, 8), v) for v in values])
-    return ViewSet(tuple(f"v{i}" for i in range(n)), images, torch.zeros(n, 3, 8, 8), torch.ones(n, 1, 8, 8),
-                   tuple(cameras))
+    return ViewSet(
+        tuple(f"v{i}" for i in range(n)),
+        images,
+        torch.zeros(n, 3, 8, 8),
+        torch.ones(n, 1, 8, 8),
+        tuple(cameras),
+    )
 
 
 @pytest.mark.parametrize(("rule", "expected"), [("nearest_pose", [0.1, 0.9, 0.1]), ("eq2", [0.1, 0.1, 0.1])])
 def test_each_target_is_enhanced_with_its_rule_reference(monkeypatch, rule, expected):
     from setdiff_bench.models.setdiff import inference
 
-    def fake_enhance(model, packet, **options):      # output = the (single) reference image it was given
+    def fake_enhance(model, packet, **options):  # output = the (single) reference image it was given
         assert options["max_references"] == 1 and options["targets_per_set"] == 1
         return packet.references.images[:1].expand(len(packet.targets), -1, -1, -1).clone()
 
@@ -61,8 +66,16 @@ def test_each_target_is_enhanced_with_its_rule_reference(monkeypatch, rule, expe
     config = SimpleNamespace(model=SimpleNamespace(guidance_scale=1.0, max_references=1, targets_per_set=1))
     base = difix.ModelEnhancer("difix", model, config, "ckpt", guidance_scale=None, sets_per_call=None)
     enhancer = difix.DifixEnhancer(base, rule)
-    packet = Packet("p", "synthetic", "synthetic", "g", "test", "s", _views(REFS, [0.1, 0.9]),
-                    _views(TARGETS, [0.5, 0.5, 0.5]))
+    packet = Packet(
+        "p",
+        "synthetic",
+        "synthetic",
+        "g",
+        "test",
+        "s",
+        _views(REFS, [0.1, 0.9]),
+        _views(TARGETS, [0.5, 0.5, 0.5]),
+    )
     out = enhancer.enhance(packet)
     assert out[:, 0, 0, 0].tolist() == pytest.approx(expected)
     assert enhancer.options["references"] == rule

@@ -27,11 +27,15 @@ from tests.run.store_fixtures import camera_at, plane_view
 
 
 def test_builtins_are_listed_without_importing_model_code() -> None:
-    code = ("import sys; from setdiff_bench.enhancers.base import available_methods; m = available_methods(); "
-            "heavy = [k for k in sys.modules if k.startswith(('diffusers', 'peft', 'setdiff_bench.models', "
-            "'setdiff_bench.enhancers.setdiff', 'setdiff_bench.enhancers.reproject'))]; "
-            "print(sorted(m)); print(heavy)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.splitlines()
+    code = (
+        "import sys; from setdiff_bench.enhancers.base import available_methods; m = available_methods(); "
+        "heavy = [k for k in sys.modules if k.startswith(('diffusers', 'peft', 'setdiff_bench.models', "
+        "'setdiff_bench.enhancers.setdiff', 'setdiff_bench.enhancers.reproject'))]; "
+        "print(sorted(m)); print(heavy)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout.splitlines()
     assert out[0] == str(sorted(["identity", "reproject", "precomputed", "setdiff", "difix"]))
     assert out[1] == "[]"
 
@@ -65,14 +69,17 @@ def test_unknown_method_and_options_are_one_line_errors() -> None:
 
 
 def test_register_builtin_adds_a_spec(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setitem(BUILTIN_METHODS, "copy", MethodSpec("copy", "setdiff_bench.enhancers.identity:create", "x"))
+    monkeypatch.setitem(
+        BUILTIN_METHODS, "copy", MethodSpec("copy", "setdiff_bench.enhancers.identity:create", "x")
+    )
     register_builtin(MethodSpec("copy", "setdiff_bench.enhancers.identity:create", "a copy of identity"))
     assert available_methods()["copy"].description == "a copy of identity"
     assert isinstance(create_enhancer("copy"), IdentityEnhancer)
 
 
-def test_plugin_through_an_entry_point(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
-                                       capsys: pytest.CaptureFixture[str]) -> None:
+def test_plugin_through_an_entry_point(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     monkeypatch.syspath_prepend(str(install_plugin(tmp_path / "site")))
     spec = available_methods()["darken"]
     assert spec.source == "darken = setdiff_test_plugin:SPEC" and spec.factory == "setdiff_test_plugin:create"
@@ -83,27 +90,46 @@ def test_plugin_through_an_entry_point(tmp_path: Path, monkeypatch: pytest.Monke
     assert "test plugin: multiplies the render by a factor" in line and "[plugin: darken = " in line
     assert main(["list", "methods", "--json"]) == 0
     rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
-    assert {"name": "darken", "description": "test plugin: multiplies the render by a factor",
-            "needs_weights": False, "needs_gpu": False, "source": "darken = setdiff_test_plugin:SPEC"} in rows
+    assert {
+        "name": "darken",
+        "description": "test plugin: multiplies the render by a factor",
+        "needs_weights": False,
+        "needs_gpu": False,
+        "source": "darken = setdiff_test_plugin:SPEC",
+    } in rows
 
 
 def test_plugin_cannot_shadow_a_builtin(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.syspath_prepend(str(install_plugin(tmp_path / "site", name="identity", module="shadow_plugin")))
+    monkeypatch.syspath_prepend(
+        str(install_plugin(tmp_path / "site", name="identity", module="shadow_plugin"))
+    )
     with pytest.warns(RegistryWarning, match="already defined by 'builtin'"):
         methods = available_methods()
     assert methods["identity"].source == "builtin"
 
 
 def test_broken_plugin_is_named(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.syspath_prepend(str(install_plugin(tmp_path / "site", name="broken", module="broken_plugin",
-                                                   target="broken_plugin:NOPE")))
-    with pytest.raises(UsageError, match=r"entry point broken = broken_plugin:NOPE .*cannot load plugin method"):
+    monkeypatch.syspath_prepend(
+        str(
+            install_plugin(
+                tmp_path / "site", name="broken", module="broken_plugin", target="broken_plugin:NOPE"
+            )
+        )
+    )
+    with pytest.raises(
+        UsageError, match=r"entry point broken = broken_plugin:NOPE .*cannot load plugin method"
+    ):
         available_methods()
 
 
 def test_plugin_entry_point_must_give_a_method_spec(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.syspath_prepend(str(install_plugin(tmp_path / "site", name="notspec", module="notspec_plugin",
-                                                   target="notspec_plugin:create")))
+    monkeypatch.syspath_prepend(
+        str(
+            install_plugin(
+                tmp_path / "site", name="notspec", module="notspec_plugin", target="notspec_plugin:create"
+            )
+        )
+    )
     with pytest.raises(UsageError, match="plugin method is a Darken, expected a MethodSpec"):
         available_methods()
 

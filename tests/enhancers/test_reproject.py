@@ -20,8 +20,9 @@ from tests.run.store_fixtures import HEIGHT, WIDTH, camera_at, degrade, plane_vi
 DEPTH = 2.5
 
 
-def view_set(cameras: list[Camera], images: list[np.ndarray] | None = None,
-             points: list[np.ndarray] | None = None) -> ViewSet:
+def view_set(
+    cameras: list[Camera], images: list[np.ndarray] | None = None, points: list[np.ndarray] | None = None
+) -> ViewSet:
     views = [plane_view(c, DEPTH) for c in cameras]
     images = images if images is not None else [v[0] for v in views]
     points = points if points is not None else [v[1] for v in views]
@@ -29,8 +30,13 @@ def view_set(cameras: list[Camera], images: list[np.ndarray] | None = None,
     def chw(arrays: list[np.ndarray]) -> torch.Tensor:
         return torch.from_numpy(np.stack(arrays).transpose(0, 3, 1, 2).copy()).float()
 
-    return ViewSet(names=tuple(f"v{i}" for i in range(len(cameras))), images=chw(images), cmaps=chw(points),
-                   alphas=torch.ones(len(cameras), 1, HEIGHT, WIDTH), cameras=tuple(cameras))
+    return ViewSet(
+        names=tuple(f"v{i}" for i in range(len(cameras))),
+        images=chw(images),
+        cmaps=chw(points),
+        alphas=torch.ones(len(cameras), 1, HEIGHT, WIDTH),
+        cameras=tuple(cameras),
+    )
 
 
 def packet(refs: ViewSet, targets: ViewSet) -> Packet:
@@ -78,8 +84,16 @@ def test_depth_test_rejects_an_occluded_reference() -> None:
     ref_image = ref_image.copy()
     ref_image[region] = (1.0, 0.0, 0.0)
     render = render_of(target, seed=3)
-    output = ReprojectEnhancer().enhance(packet(view_set([ref], images=[ref_image], points=[ref_points]),
-                                                view_set([target], images=[render])))[0].permute(1, 2, 0).numpy()
+    output = (
+        ReprojectEnhancer()
+        .enhance(
+            packet(
+                view_set([ref], images=[ref_image], points=[ref_points]), view_set([target], images=[render])
+            )
+        )[0]
+        .permute(1, 2, 0)
+        .numpy()
+    )
     # target pixels whose plane point projects into the occluded region of the reference (numpy)
     _, points, _ = plane_view(target, DEPTH)
     uv, _ = ref.project(points.reshape(-1, 3).astype(np.float64))
@@ -98,7 +112,9 @@ def test_blend_weights_follow_equation_2() -> None:
     target = camera_at(0.0)
     grey = [np.full((HEIGHT, WIDTH, 3), 0.2, np.float32), np.full((HEIGHT, WIDTH, 3), 0.8, np.float32)]
     render = render_of(target)
-    output = ReprojectEnhancer().enhance(packet(view_set(refs, images=grey), view_set([target], images=[render])))[0]
+    output = ReprojectEnhancer().enhance(
+        packet(view_set(refs, images=grey), view_set([target], images=[render]))
+    )[0]
     # Eq. 2 by hand: 0.8·cos(view directions) + 0.2·(1 − distance / largest pairwise distance)
     centres = [c.center for c in (target, *refs)]
     d_max = max(np.linalg.norm(a - b) for a in centres for b in centres)
@@ -120,15 +136,22 @@ def test_invalid_geometry_and_no_references_keep_the_render() -> None:
     targets.alphas = torch.zeros_like(targets.alphas)  # nothing hit: no C-map point
     out = ReprojectEnhancer().enhance(packet(view_set([camera_at(-0.1)]), targets))
     np.testing.assert_array_equal(out[0].permute(1, 2, 0).numpy(), render)
-    empty = ViewSet((), torch.zeros(0, 3, HEIGHT, WIDTH), torch.zeros(0, 3, HEIGHT, WIDTH),
-                    torch.zeros(0, 1, HEIGHT, WIDTH), ())
+    empty = ViewSet(
+        (),
+        torch.zeros(0, 3, HEIGHT, WIDTH),
+        torch.zeros(0, 3, HEIGHT, WIDTH),
+        torch.zeros(0, 1, HEIGHT, WIDTH),
+        (),
+    )
     out = ReprojectEnhancer().enhance(packet(empty, view_set([target], images=[render])))
     np.testing.assert_array_equal(out[0].permute(1, 2, 0).numpy(), render)
 
 
 def test_pixel_chunks_do_not_change_the_result() -> None:
     refs, target = [camera_at(-0.3), camera_at(-0.1)], camera_at(0.2)
-    pk = packet(view_set(refs), view_set([target, camera_at(0.3)], images=[render_of(target), render_of(target, 1)]))
+    pk = packet(
+        view_set(refs), view_set([target, camera_at(0.3)], images=[render_of(target), render_of(target, 1)])
+    )
     whole = ReprojectEnhancer().enhance(pk)
     chunked = ReprojectEnhancer(ReprojectConfig(pixel_chunk=97)).enhance(pk)
     assert torch.equal(whole, chunked)
@@ -162,7 +185,9 @@ def test_ray_surface_tolerates_cmap_points_off_the_ray() -> None:
     offset[..., 0] = 0.3  # 0.3 scene units sideways, at the same camera depth (camera x axis = world x here)
     shifted = points + offset
     _uv, z = camera.project(shifted.reshape(-1, 3))
-    assert np.allclose(z.reshape(points.shape[:2]), camera.project(points.reshape(-1, 3))[1].reshape(points.shape[:2]))
+    assert np.allclose(
+        z.reshape(points.shape[:2]), camera.project(points.reshape(-1, 3))[1].reshape(points.shape[:2])
+    )
     render = render_of(camera)
     target = view_set([camera], images=[render], points=[shifted])
     reference = view_set([camera], images=[image], points=[shifted])

@@ -15,7 +15,14 @@ from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.gaussians.optim import GaussianParameters, exponential_lr
 from setdiff_bench.gaussians.render import render
 
-RATES = {"means": 1e-2, "sh_dc": 1e-2, "sh_rest": 1e-3, "opacity_logits": 5e-2, "log_scales": 5e-3, "quats": 1e-3}
+RATES = {
+    "means": 1e-2,
+    "sh_dc": 1e-2,
+    "sh_rest": 1e-3,
+    "opacity_logits": 5e-2,
+    "log_scales": 5e-3,
+    "quats": 1e-3,
+}
 
 
 def model_of(means, log_scale: float, opacity: float = 0.8) -> GaussianModel:
@@ -23,14 +30,19 @@ def model_of(means, log_scale: float, opacity: float = 0.8) -> GaussianModel:
     n = means.shape[0]
     quats = torch.zeros(n, 4)
     quats[:, 0] = 1.0
-    return GaussianModel(means, quats, torch.full((n, 3), log_scale), torch.full((n,), math.log(opacity / (1 - opacity))),
-                         torch.zeros(n, 4, 3))
+    return GaussianModel(
+        means,
+        quats,
+        torch.full((n, 3), log_scale),
+        torch.full((n,), math.log(opacity / (1 - opacity))),
+        torch.zeros(n, 4, 3),
+    )
 
 
 def test_clone_small_split_large_and_prune_transparent():
     means = [[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]]
     model = model_of(means, math.log(0.05))
-    model.log_scales[2:] = math.log(1.0)          # rows 2, 3 are large (> percent_dense · extent = 0.1)
+    model.log_scales[2:] = math.log(1.0)  # rows 2, 3 are large (> percent_dense · extent = 0.1)
     model.opacity_logits[3] = math.log(0.001 / 0.999)  # row 3 is nearly transparent → pruned
     params = GaussianParameters(model, RATES)
     strategy = DensificationStrategy(grad_threshold=2e-4, percent_dense=0.01, min_opacity=0.005)
@@ -44,7 +56,7 @@ def test_clone_small_split_large_and_prune_transparent():
     assert len(out) == 5 == result.total  # 0, 1, clone of 0, two samples of 2 (2 and 3 removed)
     assert torch.equal(out.means[:2], model.means[:2]) and torch.equal(out.means[2], model.means[0])
     samples = out.means[3:]
-    assert ((samples - model.means[2]).norm(dim=1) < 4.0).all()   # drawn from N(mean, 1 m²)
+    assert ((samples - model.means[2]).norm(dim=1) < 4.0).all()  # drawn from N(mean, 1 m²)
     assert not torch.equal(samples[0], samples[1])
     assert torch.allclose(out.log_scales[3:], torch.full((2, 3), math.log(1.0 / 1.6)))
 
@@ -55,12 +67,18 @@ def test_adam_moments_follow_their_rows():
     (model.means.sum() * torch.tensor(1.0)).backward()
     params.optimizer.step()
     moments = params.optimizer.state[params.params["means"]]["exp_avg"].clone()
-    params.remap(torch.tensor([2, 0, -1]), {"means": torch.tensor([[2.0, 0, 0], [0.0, 0, 0], [9.0, 9, 9]]),
-                                            **{k: v.detach()[torch.tensor([2, 0, 0])] for k, v in params.params.items()
-                                               if k != "means"}})
+    params.remap(
+        torch.tensor([2, 0, -1]),
+        {
+            "means": torch.tensor([[2.0, 0, 0], [0.0, 0, 0], [9.0, 9, 9]]),
+            **{k: v.detach()[torch.tensor([2, 0, 0])] for k, v in params.params.items() if k != "means"},
+        },
+    )
     state = params.optimizer.state[params.params["means"]]
     assert torch.equal(state["exp_avg"][0], moments[2]) and torch.equal(state["exp_avg"][1], moments[0])
-    assert torch.equal(state["exp_avg"][2], torch.zeros(3)) and torch.equal(state["exp_avg_sq"][2], torch.zeros(3))
+    assert torch.equal(state["exp_avg"][2], torch.zeros(3)) and torch.equal(
+        state["exp_avg_sq"][2], torch.zeros(3)
+    )
     assert torch.equal(params.params["means"][2].detach(), torch.tensor([9.0, 9, 9]))
     assert params.optimizer.param_groups[0]["params"][0] is params.params["means"]
 
@@ -88,7 +106,9 @@ def test_exponential_learning_rate_matches_inria():
 
 def meta_grads(meta, width: int, height: int) -> torch.Tensor:
     """``(N,)`` mean view-space gradient norms of one render's ``meta`` (the strategy's statistics)."""
-    state = DensificationStrategy().initialize_state(len(meta["visible"]), extent=1.0, generator=torch.Generator())
+    state = DensificationStrategy().initialize_state(
+        len(meta["visible"]), extent=1.0, generator=torch.Generator()
+    )
     state.stats.accumulate(meta, width, height)
     return state.stats.mean_grad()
 
@@ -97,8 +117,9 @@ def test_densification_adds_gaussians_where_the_gradient_is_large():
     """A plane of grey Gaussians in front of a camera; the target is its render plus a bright square on the right.
     Only Gaussians covering the square get large view-space gradients, and only there are Gaussians added."""
     width, height = 48, 32
-    camera = Camera(intrinsics_matrix(40.0, 40.0, 24.0, 16.0), look_at([0, 0, 0], [0, 0, 1], up=(0, -1, 0)),
-                    width, height)
+    camera = Camera(
+        intrinsics_matrix(40.0, 40.0, 24.0, 16.0), look_at([0, 0, 0], [0, 0, 1], up=(0, -1, 0)), width, height
+    )
     xs, ys = np.meshgrid(np.linspace(-0.6, 0.6, 13), np.linspace(-0.4, 0.4, 9))
     means = np.stack([xs.ravel(), ys.ravel(), np.full(xs.size, 1.0)], axis=1)
     model = model_of(means, math.log(0.06), opacity=0.9)
@@ -119,7 +140,7 @@ def test_densification_adds_gaussians_where_the_gradient_is_large():
     state = strategy.initialize_state(len(params), extent=1.0, generator=torch.Generator().manual_seed(0))
     state.stats.accumulate(out.meta[0], width, height)
     result = strategy.densify_and_prune(params, state, prune_large=False)
-    added = params.model().means.detach()[len(means):].numpy()
+    added = params.model().means.detach()[len(means) :].numpy()
     assert result.cloned + result.split > 0 and len(added) == result.cloned + result.split
     new_uv, _ = camera.project(added)
     assert (new_uv[:, 0] > 18).all()  # all new Gaussians sit on the bright square's side
@@ -141,11 +162,18 @@ def test_strategy_state_evolves_on_its_schedule():
     """Four Gaussians through ``step_post_backward`` on a 2×2-pixel view (so NDC gradients equal pixel
     gradients), thresholds chosen so that every count below follows by hand from the module docstring."""
     model = model_of([[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]], math.log(0.05))
-    model.log_scales[1] = math.log(1.0)                  # row 1 is large: 1.0 > percent_dense · extent = 0.1
-    model.opacity_logits[3] = math.log(0.001 / 0.999)    # row 3 is below min_opacity 0.005
+    model.log_scales[1] = math.log(1.0)  # row 1 is large: 1.0 > percent_dense · extent = 0.1
+    model.opacity_logits[3] = math.log(0.001 / 0.999)  # row 3 is below min_opacity 0.005
     params = GaussianParameters(model, RATES)
-    strategy = DensificationStrategy(densify_from=1, densify_until=10, densify_every=2, opacity_reset_every=4,
-                                     grad_threshold=1e-3, percent_dense=0.01, min_opacity=0.005)
+    strategy = DensificationStrategy(
+        densify_from=1,
+        densify_until=10,
+        densify_every=2,
+        opacity_reset_every=4,
+        grad_threshold=1e-3,
+        percent_dense=0.01,
+        min_opacity=0.005,
+    )
     state = strategy.initialize_state(4, extent=10.0, generator=torch.Generator().manual_seed(0))
     strong = [[2e-3, 0.0], [0.0, 3e-3], [1e-4, 0.0], [0.0, 0.0]]  # norms 2e-3, 3e-3 (≥ 1e-3), 1e-4, 0
 

@@ -39,8 +39,9 @@ def test_tiny_preset_fit_halves_the_l1_loss(tiny_scene, tiny_views, tmp_path):
     config = get_preset("tiny").fit
     assert config.iterations <= 60
     start = initial_model(tiny_views, tiny_scene.points3d, tiny_scene.points_rgb, config)
-    result = fit_gaussians(tiny_views, config, points=tiny_scene.points3d, colors=tiny_scene.points_rgb,
-                           progress=False)
+    result = fit_gaussians(
+        tiny_views, config, points=tiny_scene.points3d, colors=tiny_scene.points_rgb, progress=False
+    )
     before, after = masked_l1(start, tiny_views), masked_l1(result.model, tiny_views)
     assert after <= 0.5 * before, (before, after)
     assert len(result.losses) == config.iterations and np.isfinite(result.losses).all()
@@ -65,7 +66,9 @@ def test_random_initialisation_fills_the_camera_box(tiny_views):
     _, radius = scene_extent(tiny_views)
     means = model.means.numpy()
     assert len(model) == 500 and model.sh_degree == 1
-    assert (means >= centers.min(axis=0) - radius - 1e-4).all() and (means <= centers.max(axis=0) + radius + 1e-4).all()
+    assert (means >= centers.min(axis=0) - radius - 1e-4).all() and (
+        means <= centers.max(axis=0) + radius + 1e-4
+    ).all()
     assert np.allclose(model.opacities.numpy(), 0.1, atol=1e-6)
     assert torch.equal(initial_model(tiny_views, None, None, config).means, model.means)  # seeded
 
@@ -95,11 +98,19 @@ def test_resume_gives_the_uninterrupted_result(tiny_scene, tiny_views, tmp_path)
     points, colors = tiny_scene.points3d, tiny_scene.points_rgb
     straight = fit_gaussians(tiny_views, config, points=points, colors=colors, progress=False)
     assert straight.events and any(e["split"] + e["cloned"] > 0 for e in straight.events)
-    partial = fit_gaussians(tiny_views, config, points=points, colors=colors, progress=False,
-                            checkpoint_dir=tmp_path / "ckpt", stop_after=7)
+    partial = fit_gaussians(
+        tiny_views,
+        config,
+        points=points,
+        colors=colors,
+        progress=False,
+        checkpoint_dir=tmp_path / "ckpt",
+        stop_after=7,
+    )
     assert len(partial.losses) == 7
-    resumed = fit_gaussians(tiny_views, config, points=points, colors=colors, progress=False,
-                            checkpoint_dir=tmp_path / "ckpt")
+    resumed = fit_gaussians(
+        tiny_views, config, points=points, colors=colors, progress=False, checkpoint_dir=tmp_path / "ckpt"
+    )
     assert resumed.start_iteration == 8 and len(resumed.losses) == 9
     assert partial.losses + resumed.losses == straight.losses
     for name, value in straight.model.tensors().items():
@@ -108,18 +119,43 @@ def test_resume_gives_the_uninterrupted_result(tiny_scene, tiny_views, tmp_path)
 
 def test_checkpoint_of_another_configuration_is_refused(tiny_scene, tiny_views, tmp_path):
     config = _short_config()
-    fit_gaussians(tiny_views[:2], config, points=tiny_scene.points3d, colors=tiny_scene.points_rgb,
-                  progress=False, checkpoint_dir=tmp_path, stop_after=2)
+    fit_gaussians(
+        tiny_views[:2],
+        config,
+        points=tiny_scene.points3d,
+        colors=tiny_scene.points_rgb,
+        progress=False,
+        checkpoint_dir=tmp_path,
+        stop_after=2,
+    )
     with pytest.raises(CheckpointError, match="different fit configuration"):
-        fit_gaussians(tiny_views[:2], dataclasses.replace(config, lr_opacity=0.01), points=tiny_scene.points3d,
-                      colors=tiny_scene.points_rgb, progress=False, checkpoint_dir=tmp_path)
+        fit_gaussians(
+            tiny_views[:2],
+            dataclasses.replace(config, lr_opacity=0.01),
+            points=tiny_scene.points3d,
+            colors=tiny_scene.points_rgb,
+            progress=False,
+            checkpoint_dir=tmp_path,
+        )
     with pytest.raises(CheckpointError, match="different training frames"):
-        fit_gaussians(tiny_views[1:], config, points=tiny_scene.points3d, colors=tiny_scene.points_rgb,
-                      progress=False, checkpoint_dir=tmp_path)
+        fit_gaussians(
+            tiny_views[1:],
+            config,
+            points=tiny_scene.points3d,
+            colors=tiny_scene.points_rgb,
+            progress=False,
+            checkpoint_dir=tmp_path,
+        )
     (tmp_path / "fit_state.safetensors").write_bytes(b"garbage")
     with pytest.raises(CheckpointError, match="does not match"):
-        fit_gaussians(tiny_views[:2], config, points=tiny_scene.points3d, colors=tiny_scene.points_rgb,
-                      progress=False, checkpoint_dir=tmp_path)
+        fit_gaussians(
+            tiny_views[:2],
+            config,
+            points=tiny_scene.points3d,
+            colors=tiny_scene.points_rgb,
+            progress=False,
+            checkpoint_dir=tmp_path,
+        )
 
 
 def flat_json(config: FitConfig) -> dict[str, object]:
@@ -129,7 +165,9 @@ def flat_json(config: FitConfig) -> dict[str, object]:
 
 
 def test_fit_config_json_round_trips_in_both_shapes():
-    config = FitConfig.schedule(120, densify_every=6, max_gaussians=500, min_opacity=0.01, tile_size=16, seed=4)
+    config = FitConfig.schedule(
+        120, densify_every=6, max_gaussians=500, min_opacity=0.01, tile_size=16, seed=4
+    )
     assert config.strategy.max_gaussians == 500 and config.strategy.min_opacity == 0.01  # flat overrides
     assert config.strategy.densify_from == 12 and config.sh_increase_every == 12 and config.tile_size == 16
     assert FitConfig.from_json(json.loads(json.dumps(config.to_json()))) == config
@@ -146,14 +184,22 @@ def test_checkpoint_with_the_old_flat_configuration_resumes(tiny_scene, tiny_vie
     config = _short_config()
     points, colors = tiny_scene.points3d, tiny_scene.points_rgb
     straight = fit_gaussians(tiny_views[:3], config, points=points, colors=colors, progress=False)
-    fit_gaussians(tiny_views[:3], config, points=points, colors=colors, progress=False,
-                  checkpoint_dir=tmp_path, stop_after=5)
+    fit_gaussians(
+        tiny_views[:3],
+        config,
+        points=points,
+        colors=colors,
+        progress=False,
+        checkpoint_dir=tmp_path,
+        stop_after=5,
+    )
     state_path = tmp_path / "fit_state.json"
     state = json.loads(state_path.read_text())
     state["config"] = flat_json(config)
     state_path.write_text(json.dumps(state))
-    resumed = fit_gaussians(tiny_views[:3], config, points=points, colors=colors, progress=False,
-                            checkpoint_dir=tmp_path)
+    resumed = fit_gaussians(
+        tiny_views[:3], config, points=points, colors=colors, progress=False, checkpoint_dir=tmp_path
+    )
     assert resumed.start_iteration == 6
     for name, value in straight.model.tensors().items():
         assert torch.equal(value, resumed.model.tensors()[name]), name
@@ -164,6 +210,11 @@ def test_views_without_any_visible_gaussian_do_not_crash(tiny_views):
     behind = view.camera.center - 50.0 * view.camera.view_direction  # points behind the camera only
     points = behind[None] + np.random.default_rng(0).normal(size=(20, 3))
     config = FitConfig.schedule(3, densify_every=1, tile_size=8)
-    result = fit_gaussians([FitView(view.name, view.camera, view.image, None)], config, points=points,
-                           colors=None, progress=False)
+    result = fit_gaussians(
+        [FitView(view.name, view.camera, view.image, None)],
+        config,
+        points=points,
+        colors=None,
+        progress=False,
+    )
     assert len(result.losses) == 3

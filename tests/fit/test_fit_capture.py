@@ -38,8 +38,20 @@ def capture(tmp_path):
         if i != 2:
             image = (rng.random((HEIGHT, WIDTH, 3)) * 255).astype(np.uint8)
             cv2.imwrite(str(folder / "images" / f"{i:04d}.png"), image)
-    meta = {"fl_x": 60.0, "fl_y": 60.0, "cx": 32.0, "cy": 24.0, "w": float(WIDTH), "h": float(HEIGHT),
-            "k1": 0.2, "k2": 0.05, "p1": 0.0, "p2": 0.0, "aabb_scale": 4, "frames": frames}
+    meta = {
+        "fl_x": 60.0,
+        "fl_y": 60.0,
+        "cx": 32.0,
+        "cy": 24.0,
+        "w": float(WIDTH),
+        "h": float(HEIGHT),
+        "k1": 0.2,
+        "k2": 0.05,
+        "p1": 0.0,
+        "p2": 0.0,
+        "aabb_scale": 4,
+        "frames": frames,
+    }
     (folder / "transforms.json").write_text(json.dumps(meta))
     return tmp_path
 
@@ -59,8 +71,28 @@ def test_views_are_undistorted_and_downscaled(capture):
 
 def test_fit_cli_reads_a_dataset_with_loader_options(capture, tmp_path, capsys):
     out = tmp_path / "fit.ply"
-    args = ["fit", "--dataset", "nerfstudio", "--root", str(capture), "--scene", "capture", "--out", str(out),
-            "--downscale", "2", "--preset", "tiny", "--iterations", "2", "--device", "cpu", "--no-progress", "--init", "random"]
+    args = [
+        "fit",
+        "--dataset",
+        "nerfstudio",
+        "--root",
+        str(capture),
+        "--scene",
+        "capture",
+        "--out",
+        str(out),
+        "--downscale",
+        "2",
+        "--preset",
+        "tiny",
+        "--iterations",
+        "2",
+        "--device",
+        "cpu",
+        "--no-progress",
+        "--init",
+        "random",
+    ]
     assert main(args) == 2  # the absent image is refused by default ...
     assert "-o missing=skip" in capsys.readouterr().err
     assert not out.exists()

@@ -10,8 +10,24 @@ from setdiff_bench.gaussians.ply import read_ply
 
 def test_fit_writes_a_standard_ply(tiny_scene_dir, tmp_path, capsys):
     out = tmp_path / "model.ply"
-    code = main(["fit", "--scene", str(tiny_scene_dir), "--out", str(out), "--preset", "tiny", "--iterations", "4",
-                 "--device", "cpu", "--no-progress", "--checkpoint", str(tmp_path / "ckpt")])
+    code = main(
+        [
+            "fit",
+            "--scene",
+            str(tiny_scene_dir),
+            "--out",
+            str(out),
+            "--preset",
+            "tiny",
+            "--iterations",
+            "4",
+            "--device",
+            "cpu",
+            "--no-progress",
+            "--checkpoint",
+            str(tmp_path / "ckpt"),
+        ]
+    )
     assert code == 0
     model = read_ply(out)
     assert len(model) > 100 and model.sh_degree == 3
@@ -24,18 +40,46 @@ def test_fit_writes_a_standard_ply(tiny_scene_dir, tmp_path, capsys):
 
 def test_fit_on_an_explicit_frame_list(tiny_scene_dir, tmp_path):
     frames = "lane1_front_000.png,lane1_front_001.png"
-    code = main(["fit", "--scene", str(tiny_scene_dir), "--out", str(tmp_path / "m.ply"), "--frames", frames,
-                 "--iterations", "2", "--device", "cpu", "--no-progress", "--checkpoint", str(tmp_path / "c")])
+    code = main(
+        [
+            "fit",
+            "--scene",
+            str(tiny_scene_dir),
+            "--out",
+            str(tmp_path / "m.ply"),
+            "--frames",
+            frames,
+            "--iterations",
+            "2",
+            "--device",
+            "cpu",
+            "--no-progress",
+            "--checkpoint",
+            str(tmp_path / "c"),
+        ]
+    )
     assert code == 0
     assert json.loads((tmp_path / "c" / "fit_state.json").read_text())["views"] == frames.split(",")
 
 
 def test_fit_errors_are_one_line(tiny_scene_dir, tmp_path, capsys):
-    code = main(["fit", "--scene", str(tmp_path / "missing"), "--out", str(tmp_path / "m.ply"), "--no-progress"])
+    code = main(
+        ["fit", "--scene", str(tmp_path / "missing"), "--out", str(tmp_path / "m.ply"), "--no-progress"]
+    )
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and "missing" in err
-    code = main(["fit", "--scene", str(tiny_scene_dir), "--out", str(tmp_path / "m.ply"), "--frames", "nope.png",
-                 "--no-progress"])
+    code = main(
+        [
+            "fit",
+            "--scene",
+            str(tiny_scene_dir),
+            "--out",
+            str(tmp_path / "m.ply"),
+            "--frames",
+            "nope.png",
+            "--no-progress",
+        ]
+    )
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and "nope.png" in err
     assert not (tmp_path / "m.ply").exists()

@@ -45,8 +45,10 @@ def _view(eye, texture) -> FitView:
 @pytest.fixture(scope="module")
 def plane_views():
     texture = _texture()
-    return [_view(eye, texture) for eye in ([0.0, -0.6, 3.0], [0.5, -0.5, 3.1], [-0.5, -0.4, 2.9],
-                                            [0.2, 0.5, 3.2])]
+    return [
+        _view(eye, texture)
+        for eye in ([0.0, -0.6, 3.0], [0.5, -0.5, 3.1], [-0.5, -0.4, 2.9], [0.2, 0.5, 3.2])
+    ]
 
 
 def test_triangulated_points_lie_on_the_plane(plane_views):

@@ -44,7 +44,7 @@ def test_no_import_cycle_in_the_gaussians_package():
     def cycle_from(start: str, trail: tuple[str, ...]) -> tuple[str, ...] | None:
         for nxt in sorted(graph[start]):
             if nxt in trail:
-                return (*trail[trail.index(nxt):], nxt)
+                return (*trail[trail.index(nxt) :], nxt)
             found = cycle_from(nxt, (*trail, nxt))
             if found:
                 return found
@@ -57,7 +57,11 @@ def test_no_import_cycle_in_the_gaussians_package():
 
 def test_gsplat_backend_imports_on_its_own():
     """Without importing ``render`` first, and on a CPU machine without gsplat (it is imported when used)."""
-    code = ("import sys; import setdiff_bench.gaussians.backends.gsplat_backend as b; "
-            "print(callable(b.render), 'setdiff_bench.gaussians.render' in sys.modules, 'gsplat' in sys.modules)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    code = (
+        "import sys; import setdiff_bench.gaussians.backends.gsplat_backend as b; "
+        "print(callable(b.render), 'setdiff_bench.gaussians.render' in sys.modules, 'gsplat' in sys.modules)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout.split()
     assert out == ["True", "False", "False"]

@@ -15,9 +15,13 @@ from setdiff_bench.gaussians.ply import read_ply, write_ply
 
 def random_model(n: int = 20, degree: int = 3) -> GaussianModel:
     g = torch.Generator().manual_seed(3)
-    return GaussianModel(torch.randn(n, 3, generator=g), torch.randn(n, 4, generator=g),
-                         torch.randn(n, 3, generator=g), torch.randn(n, generator=g),
-                         torch.randn(n, (degree + 1) ** 2, 3, generator=g))
+    return GaussianModel(
+        torch.randn(n, 3, generator=g),
+        torch.randn(n, 4, generator=g),
+        torch.randn(n, 3, generator=g),
+        torch.randn(n, generator=g),
+        torch.randn(n, (degree + 1) ** 2, 3, generator=g),
+    )
 
 
 @pytest.mark.parametrize("degree", [0, 1, 3])
@@ -68,8 +72,22 @@ def test_reads_inria_layout_written_by_hand(tmp_path: Path) -> None:
 
 
 def test_reads_ascii(tmp_path: Path) -> None:
-    names = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
-             "rot_0", "rot_1", "rot_2", "rot_3"]
+    names = [
+        "x",
+        "y",
+        "z",
+        "f_dc_0",
+        "f_dc_1",
+        "f_dc_2",
+        "opacity",
+        "scale_0",
+        "scale_1",
+        "scale_2",
+        "rot_0",
+        "rot_1",
+        "rot_2",
+        "rot_3",
+    ]
     header = "ply\nformat ascii 1.0\nelement vertex 2\n" + "".join(f"property float {n}\n" for n in names)
     rows = ["1 2 3 0.1 0.2 0.3 -1 -2 -2 -2 1 0 0 0", "4 5 6 0 0 0 2 -1 -1 -1 0 1 0 0"]
     (tmp_path / "a.ply").write_text(header + "end_header\n" + "\n".join(rows) + "\n")

@@ -68,7 +68,9 @@ def test_alpha_clamp_and_transmittance_stop() -> None:
     assert clamped.alpha[0, 0, 24, 32].item() == pytest.approx(0.99, abs=1e-6)
     # three Gaussians of α = 0.98: T goes 1 → 0.02 → 4e-4 (≥ 1e-4, kept) → 8e-6 (< 1e-4: the third is dropped)
     centres = [[0.0, 0.0, 3.0], [0.0, 0.0, 4.0], [0.0, 0.0, 5.0]]
-    out = render(gaussians(centres, [0.2] * 3, [0.98] * 3, [[1, 0, 0], [0, 1, 0], [0, 0, 1]]), centred_camera())
+    out = render(
+        gaussians(centres, [0.2] * 3, [0.98] * 3, [[1, 0, 0], [0, 1, 0], [0, 0, 1]]), centred_camera()
+    )
     rgb = out.rgb[0, :, 24, 32]
     assert rgb[0].item() == pytest.approx(0.98, abs=1e-5)
     assert rgb[1].item() == pytest.approx(0.02 * 0.98, abs=1e-6)
@@ -77,7 +79,9 @@ def test_alpha_clamp_and_transmittance_stop() -> None:
 
 
 def test_background_fills_remaining_transmittance() -> None:
-    out = render(gaussians([[0.0, 0.0, 5.0]], [0.2], [0.25], [[0, 0, 0]]), centred_camera(), background=(1, 1, 1))
+    out = render(
+        gaussians([[0.0, 0.0, 5.0]], [0.2], [0.25], [[0, 0, 0]]), centred_camera(), background=(1, 1, 1)
+    )
     assert torch.allclose(out.rgb[0, :, 24, 32], torch.full((3,), 0.75), atol=1e-6)
     assert torch.allclose(out.rgb[0, :, 0, 0], torch.ones(3))
 
@@ -93,7 +97,9 @@ def test_rgb_only_render_matches_full_render() -> None:
 
 def random_scene(n: int, seed: int, dtype=torch.float32) -> GaussianModel:
     g = torch.Generator().manual_seed(seed)
-    means = torch.randn(n, 3, generator=g, dtype=torch.float64) * torch.tensor([1.5, 1.0, 1.0], dtype=torch.float64)
+    means = torch.randn(n, 3, generator=g, dtype=torch.float64) * torch.tensor(
+        [1.5, 1.0, 1.0], dtype=torch.float64
+    )
     means[:, 2] += 6.0
     return GaussianModel(
         means=means.to(dtype),
@@ -105,8 +111,12 @@ def random_scene(n: int, seed: int, dtype=torch.float32) -> GaussianModel:
 
 
 def scene_camera(width: int = 40, height: int = 30) -> Camera:
-    return Camera(intrinsics_matrix(35, 35, width / 2 + 0.1, height / 2 - 0.2),
-                  look_at([0.3, -0.2, 0.0], [0.0, 0.1, 6.0], up=(0.0, -1.0, 0.0)), width, height)
+    return Camera(
+        intrinsics_matrix(35, 35, width / 2 + 0.1, height / 2 - 0.2),
+        look_at([0.3, -0.2, 0.0], [0.0, 0.1, 6.0], up=(0.0, -1.0, 0.0)),
+        width,
+        height,
+    )
 
 
 def test_gradients_match_finite_differences_float64() -> None:

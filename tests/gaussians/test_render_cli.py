@@ -19,15 +19,22 @@ from tests.gaussians.test_render import random_scene
 
 def write_model(folder: Path, *, radial: float | None = None) -> None:
     rec = pycolmap.Reconstruction()
-    camera = (pycolmap.Camera(camera_id=1, model="PINHOLE", width=40, height=30, params=[35.0, 35.0, 20.0, 15.0])
-              if radial is None else
-              pycolmap.Camera(camera_id=1, model="SIMPLE_RADIAL", width=40, height=30, params=[35.0, 20.0, 15.0, radial]))
+    camera = (
+        pycolmap.Camera(camera_id=1, model="PINHOLE", width=40, height=30, params=[35.0, 35.0, 20.0, 15.0])
+        if radial is None
+        else pycolmap.Camera(
+            camera_id=1, model="SIMPLE_RADIAL", width=40, height=30, params=[35.0, 20.0, 15.0, radial]
+        )
+    )
     rec.add_camera_with_trivial_rig(camera)
     for image_id, eye in enumerate([[0.0, 0.0, 0.0], [0.5, 0.2, 0.3]], start=1):
         w2c = look_at(eye, [0.0, 0.0, 6.0], up=(0.0, -1.0, 0.0))
-        pose = pycolmap.Rigid3d(pycolmap.Rotation3d(matrix_to_quaternion(w2c[:3, :3], order="xyzw")), w2c[:3, 3])
-        rec.add_image_with_trivial_frame(pycolmap.Image(name=f"view_{image_id}.jpg", camera_id=1,
-                                                        image_id=image_id), pose)
+        pose = pycolmap.Rigid3d(
+            pycolmap.Rotation3d(matrix_to_quaternion(w2c[:3, :3], order="xyzw")), w2c[:3, 3]
+        )
+        rec.add_image_with_trivial_frame(
+            pycolmap.Image(name=f"view_{image_id}.jpg", camera_id=1, image_id=image_id), pose
+        )
     folder.mkdir(parents=True)
     rec.write_binary(str(folder))
 
@@ -35,8 +42,15 @@ def write_model(folder: Path, *, radial: float | None = None) -> None:
 def test_render_verb_writes_views_and_resumes(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     write_model(tmp_path / "sparse")
     write_ply(tmp_path / "scene.ply", random_scene(200, seed=1))
-    args = ["render", "--ply", str(tmp_path / "scene.ply"), "--colmap", str(tmp_path / "sparse"),
-            "--out", str(tmp_path / "out")]
+    args = [
+        "render",
+        "--ply",
+        str(tmp_path / "scene.ply"),
+        "--colmap",
+        str(tmp_path / "sparse"),
+        "--out",
+        str(tmp_path / "out"),
+    ]
     assert main(args) == 0
     for view in ("view_1", "view_2"):
         for name in ("rgb.png", "cmap.exr", "depth.exr", "alpha.png"):
@@ -46,7 +60,9 @@ def test_render_verb_writes_views_and_resumes(tmp_path: Path, capsys: pytest.Cap
     cmap = read_exr(tmp_path / "out" / "view_2" / "cmap.exr", channels=3)
     assert np.allclose(cmap, expected.cmap[0].permute(1, 2, 0).numpy(), atol=1e-6)
     rgb = read_image_raw(tmp_path / "out" / "view_2" / "rgb.png", "uint8")
-    assert np.array_equal(rgb, np.rint(expected.rgb[0].clamp(0, 1).permute(1, 2, 0).numpy() * 255).astype(np.uint8))
+    assert np.array_equal(
+        rgb, np.rint(expected.rgb[0].clamp(0, 1).permute(1, 2, 0).numpy() * 255).astype(np.uint8)
+    )
     stamp = (tmp_path / "out" / "view_1" / "rgb.png").stat().st_mtime_ns
     assert main(args) == 0
     assert (tmp_path / "out" / "view_1" / "rgb.png").stat().st_mtime_ns == stamp
@@ -56,25 +72,60 @@ def test_render_verb_writes_views_and_resumes(tmp_path: Path, capsys: pytest.Cap
 def test_render_verb_bad_input_is_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     write_model(tmp_path / "sparse")
     write_ply(tmp_path / "scene.ply", random_scene(10, seed=1))
-    code = main(["render", "--ply", str(tmp_path / "scene.ply"), "--colmap", str(tmp_path / "sparse"),
-                 "--out", str(tmp_path / "out"), "--images", "nope.jpg"])
+    code = main(
+        [
+            "render",
+            "--ply",
+            str(tmp_path / "scene.ply"),
+            "--colmap",
+            str(tmp_path / "sparse"),
+            "--out",
+            str(tmp_path / "out"),
+            "--images",
+            "nope.jpg",
+        ]
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "nope.jpg" in err[0] and "sparse" in err[0]
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
     (tmp_path / "broken.ply").write_bytes(b"ply\nformat ascii 1.0\n")
-    code = main(["render", "--ply", str(tmp_path / "broken.ply"), "--colmap", str(tmp_path / "sparse"),
-                 "--out", str(tmp_path / "out2")])
+    code = main(
+        [
+            "render",
+            "--ply",
+            str(tmp_path / "broken.ply"),
+            "--colmap",
+            str(tmp_path / "sparse"),
+            "--out",
+            str(tmp_path / "out2"),
+        ]
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "broken.ply" in err[0]
 
 
-def test_distorted_camera_is_rendered_as_its_pinhole_and_said_so(tmp_path: Path,
-                                                                  capsys: pytest.CaptureFixture[str]) -> None:
+def test_distorted_camera_is_rendered_as_its_pinhole_and_said_so(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """Regression: a SIMPLE_RADIAL camera was rendered as a pinhole image without a word."""
     write_model(tmp_path / "sparse", radial=0.08)
     write_ply(tmp_path / "scene.ply", random_scene(200, seed=1))
-    assert main(["render", "--ply", str(tmp_path / "scene.ply"), "--colmap", str(tmp_path / "sparse"),
-                 "--out", str(tmp_path / "out"), "--downscale", "2"]) == 0
+    assert (
+        main(
+            [
+                "render",
+                "--ply",
+                str(tmp_path / "scene.ply"),
+                "--colmap",
+                str(tmp_path / "sparse"),
+                "--out",
+                str(tmp_path / "out"),
+                "--downscale",
+                "2",
+            ]
+        )
+        == 0
+    )
     assert "2 of 2 camera(s) have lens distortion" in capsys.readouterr().err
     rgb = read_image_raw(tmp_path / "out" / "view_1" / "rgb.png", "uint8")
     assert rgb.shape[:2] == (15, 20)  # --downscale 2 of 40x30

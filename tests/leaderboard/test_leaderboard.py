@@ -30,22 +30,49 @@ from setdiff_bench.reporting.leaderboard import (
 )
 
 
-def images(method: str, group: str, values: list[tuple[float, float, float]], *, dataset: str = "synthetic",
-           run: str = "r", frames: list[str] | None = None) -> pd.DataFrame:
+def images(
+    method: str,
+    group: str,
+    values: list[tuple[float, float, float]],
+    *,
+    dataset: str = "synthetic",
+    run: str = "r",
+    frames: list[str] | None = None,
+) -> pd.DataFrame:
     """Per-target rows with given (psnr, ssim, lpips) values, frames f0, f1, ... of scene s."""
     frames = frames or [f"f{i}" for i in range(len(values))]
-    return pd.DataFrame([{"dataset": dataset, "protocol": dataset, "group": group, "split": "test", "scene": "s",
-                          "frame": frame, "method": method, "psnr": p, "ssim": s, "lpips": lp, "run": f"{run}/{method}"}
-                         for frame, (p, s, lp) in zip(frames, values)])
+    return pd.DataFrame(
+        [
+            {
+                "dataset": dataset,
+                "protocol": dataset,
+                "group": group,
+                "split": "test",
+                "scene": "s",
+                "frame": frame,
+                "method": method,
+                "psnr": p,
+                "ssim": s,
+                "lpips": lp,
+                "run": f"{run}/{method}",
+            }
+            for frame, (p, s, lp) in zip(frames, values)
+        ]
+    )
 
 
 def table() -> pd.DataFrame:
-    return pd.concat([
-        images("alpha", "lane+1", [(20.0, 0.50, 0.30), (22.0, 0.70, 0.10)]),      # 21.00 0.600 0.200
-        images("alpha", "lane+2", [(18.0, 0.40, 0.40), (19.0, 0.46, 0.38)]),      # 18.50 0.430 0.390
-        images("beta", "lane+1", [(21.004, 0.61, 0.25), (20.996, 0.59, 0.15)]),  # 21.00 0.600 0.200 (ties)
-        images("beta", "lane+2", [(17.0, 0.45, 0.35), (17.5, 0.45, 0.36)]),      # 17.25 0.450 0.355
-    ], ignore_index=True)
+    return pd.concat(
+        [
+            images("alpha", "lane+1", [(20.0, 0.50, 0.30), (22.0, 0.70, 0.10)]),  # 21.00 0.600 0.200
+            images("alpha", "lane+2", [(18.0, 0.40, 0.40), (19.0, 0.46, 0.38)]),  # 18.50 0.430 0.390
+            images(
+                "beta", "lane+1", [(21.004, 0.61, 0.25), (20.996, 0.59, 0.15)]
+            ),  # 21.00 0.600 0.200 (ties)
+            images("beta", "lane+2", [(17.0, 0.45, 0.35), (17.5, 0.45, 0.36)]),  # 17.25 0.450 0.355
+        ],
+        ignore_index=True,
+    )
 
 
 def split_cells(line: str) -> list[str]:
@@ -74,7 +101,7 @@ def check_latex_structure(text: str) -> tuple[int, list[list[str]]]:
             spans = [tuple(map(int, m)) for m in re.findall(r"\\cmidrule\(lr\)\{(\d+)-(\d+)\}", line)]
             assert spans[0][0] == 2 and spans[-1][1] == columns
             assert all(b[0] == a[1] + 1 for a, b in itertools.pairwise(spans))
-    body = [split_cells(line) for line in lines[first_mid + 1:] if line.endswith(r"\\")]
+    body = [split_cells(line) for line in lines[first_mid + 1 :] if line.endswith(r"\\")]
     return columns, body
 
 
@@ -87,17 +114,28 @@ def test_block_means_are_means_of_per_image_values() -> None:
     assert frame[("beta", "lane+2", "lpips")] == pytest.approx(0.355)
     assert frame[("beta", "lane+1", "psnr")] == pytest.approx(21.0)
     assert set(to_frame(board)["count"]) == {2}
-    assert [b.label for b, _ in board.columns] == ["Lane +1", "Lane +2"]  # synthetic blocks without data dropped
+    assert [b.label for b, _ in board.columns] == [
+        "Lane +1",
+        "Lane +2",
+    ]  # synthetic blocks without data dropped
 
 
 def test_bold_goes_to_the_best_displayed_value_and_ties_share_it() -> None:
     board = build_leaderboard("synthetic", table())
     best = to_frame(board).query("best")[["method", "block", "metric"]].apply(tuple, axis=1).tolist()
-    assert sorted(best) == sorted([
-        ("alpha", "lane+1", "psnr"), ("beta", "lane+1", "psnr"),    # 21.00 = 21.00
-        ("alpha", "lane+1", "ssim"), ("beta", "lane+1", "ssim"),    # 0.600 = 0.600
-        ("alpha", "lane+1", "lpips"), ("beta", "lane+1", "lpips"),  # 0.200 = 0.200, lower is better
-        ("alpha", "lane+2", "psnr"), ("beta", "lane+2", "ssim"), ("beta", "lane+2", "lpips")])
+    assert sorted(best) == sorted(
+        [
+            ("alpha", "lane+1", "psnr"),
+            ("beta", "lane+1", "psnr"),  # 21.00 = 21.00
+            ("alpha", "lane+1", "ssim"),
+            ("beta", "lane+1", "ssim"),  # 0.600 = 0.600
+            ("alpha", "lane+1", "lpips"),
+            ("beta", "lane+1", "lpips"),  # 0.200 = 0.200, lower is better
+            ("alpha", "lane+2", "psnr"),
+            ("beta", "lane+2", "ssim"),
+            ("beta", "lane+2", "lpips"),
+        ]
+    )
     md = render_markdown(board)
     assert "| alpha | **21.00** | **0.600** | **0.200** | **18.50** | 0.430 | 0.390 |" in md
     assert "| beta | **21.00** | **0.600** | **0.200** | 17.25 | **0.450** | **0.355** |" in md
@@ -112,19 +150,28 @@ def test_pooled_block_averages_every_image() -> None:
 
 def test_a_method_missing_rows_is_refused_and_an_absent_block_is_a_dash() -> None:
     partial = pd.concat([table(), images("gamma", "lane+1", [(25.0, 0.9, 0.1)])], ignore_index=True)
-    with pytest.raises(LeaderboardError, match=r"method 'gamma' lacks 1 of 2 targets of block 'Lane \+1' "
-                                               r"that other runs have \(s/f1 \(lane\+1\)\)"):
+    with pytest.raises(
+        LeaderboardError,
+        match=r"method 'gamma' lacks 1 of 2 targets of block 'Lane \+1' "
+        r"that other runs have \(s/f1 \(lane\+1\)\)",
+    ):
         build_leaderboard("synthetic", partial)
-    complete = pd.concat([table(), images("gamma", "lane+1", [(25.0, 0.9, 0.1), (25.0, 0.9, 0.1)])],
-                         ignore_index=True)
+    complete = pd.concat(
+        [table(), images("gamma", "lane+1", [(25.0, 0.9, 0.1), (25.0, 0.9, 0.1)])], ignore_index=True
+    )
     md = render_markdown(build_leaderboard("synthetic", complete))
     assert "| gamma | **25.00** | **0.900** | **0.100** | – | – | – |" in md
 
 
 def test_duplicate_rows_across_runs_are_refused() -> None:
-    doubled = pd.concat([table(), images("alpha", "lane+1", [(1.0, 0.1, 0.9)], run="other")], ignore_index=True)
-    with pytest.raises(LeaderboardError, match=r"method 'alpha' has 2 duplicate rows, e.g. s/f0 \(lane\+1\) "
-                                               r"in runs other/alpha, r/alpha"):
+    doubled = pd.concat(
+        [table(), images("alpha", "lane+1", [(1.0, 0.1, 0.9)], run="other")], ignore_index=True
+    )
+    with pytest.raises(
+        LeaderboardError,
+        match=r"method 'alpha' has 2 duplicate rows, e.g. s/f0 \(lane\+1\) "
+        r"in runs other/alpha, r/alpha",
+    ):
         build_leaderboard("synthetic", doubled)
 
 
@@ -140,16 +187,28 @@ def test_filters_and_missing_inputs() -> None:
 
 
 def test_nuscenes_pools_buckets_and_adds_warp_error_per_sequence() -> None:
-    frame = pd.concat([images("identity", "10-11s", [(16.0, 0.6, 0.5)], dataset="nuscenes", frames=["a"]),
-                       images("identity", "14-15s", [(14.0, 0.5, 0.6)], dataset="nuscenes", frames=["b"])],
-                      ignore_index=True)
-    sequences = pd.DataFrame({"dataset": "nuscenes", "method": "identity", "sensor": ["CAM_FRONT", "CAM_BACK"],
-                              "warp": [100.0, 110.0]})
+    frame = pd.concat(
+        [
+            images("identity", "10-11s", [(16.0, 0.6, 0.5)], dataset="nuscenes", frames=["a"]),
+            images("identity", "14-15s", [(14.0, 0.5, 0.6)], dataset="nuscenes", frames=["b"]),
+        ],
+        ignore_index=True,
+    )
+    sequences = pd.DataFrame(
+        {
+            "dataset": "nuscenes",
+            "method": "identity",
+            "sensor": ["CAM_FRONT", "CAM_BACK"],
+            "warp": [100.0, 110.0],
+        }
+    )
     board = build_leaderboard("nuscenes", frame, sequences)
     md = render_markdown(board)
     assert "| Method | PSNR↑ | SSIM↑ | LPIPS↓ | Warp↓ |" in md
     assert "| identity | **15.00** | **0.550** | **0.550** | **105.0** |" in md
-    mixed = render_markdown(build_leaderboard("nuscenes", frame, sequences, reported=reported_for("nuscenes")))
+    mixed = render_markdown(
+        build_leaderboard("nuscenes", frame, sequences, reported=reported_for("nuscenes"))
+    )
     assert "| OmniRe + SetDiff (paper) | **21.58** | **0.716** | **0.303** | 108.9 |" in mixed
     assert "| identity | 15.00 | 0.550 | 0.550 | **105.0** |" in mixed
 
@@ -157,7 +216,9 @@ def test_nuscenes_pools_buckets_and_adds_warp_error_per_sequence() -> None:
 # ---------------------------------------------------------------------- LaTeX and Markdown
 def test_latex_is_booktabs_in_the_papers_shape_with_bold_and_escaping() -> None:
     named = table().replace({"method": {"alpha": "my_method & 50% #1"}})
-    text = render_latex(build_leaderboard("synthetic", named), command="setdiff-bench leaderboard --dataset synthetic")
+    text = render_latex(
+        build_leaderboard("synthetic", named), command="setdiff-bench leaderboard --dataset synthetic"
+    )
     columns, body = check_latex_structure(text)
     assert columns == 1 + 2 * 3
     assert r"\multicolumn{3}{c}{\textbf{Lane +1}} & \multicolumn{3}{c}{\textbf{Lane +2}}" in text
@@ -171,10 +232,15 @@ def test_latex_is_booktabs_in_the_papers_shape_with_bold_and_escaping() -> None:
 @pytest.mark.skipif(shutil.which("pdflatex") is None, reason="pdflatex not installed")
 def test_latex_compiles(tmp_path: Path) -> None:
     body = render_latex(build_leaderboard("euvs", pd.DataFrame(), reported=reported_for("euvs")))
-    (tmp_path / "t.tex").write_text("\\documentclass{article}\\usepackage{booktabs}\\begin{document}\n"
-                                    f"{body}\\end{{document}}\n")
-    subprocess.run(["pdflatex", "-interaction=nonstopmode", "-halt-on-error", "t.tex"], cwd=tmp_path, check=True,
-                   capture_output=True)
+    (tmp_path / "t.tex").write_text(
+        f"\\documentclass{{article}}\\usepackage{{booktabs}}\\begin{{document}}\n{body}\\end{{document}}\n"
+    )
+    subprocess.run(
+        ["pdflatex", "-interaction=nonstopmode", "-halt-on-error", "t.tex"],
+        cwd=tmp_path,
+        check=True,
+        capture_output=True,
+    )
 
 
 def test_markdown_rows_have_the_header_width() -> None:
@@ -189,17 +255,27 @@ def test_markdown_rows_have_the_header_width() -> None:
 @pytest.mark.parametrize("dataset", ["euvs", "paralane", "nuscenes", "dl3dv"])
 def test_reported_only_table_reproduces_the_papers_bold(dataset: str) -> None:
     board = build_leaderboard(dataset, pd.DataFrame(), reported=reported_for(dataset))
-    best = {(row.section, row.label, cell) for cell, rows in board.best.items() for i, row in enumerate(board.rows)
-            if i in rows}
+    best = {
+        (row.section, row.label, cell)
+        for cell, rows in board.best.items()
+        for i, row in enumerate(board.rows)
+        if i in rows
+    }
     reported = reported_for(dataset)
     labels = reported.drop_duplicates(["section", "method_id"]).set_index(["section", "method_id"])["method"]
-    bold = {(r.section, labels[(r.section, r.method_id)], (r.group, r.metric)) for r in reported.itertuples() if r.bold}
+    bold = {
+        (r.section, labels[(r.section, r.method_id)], (r.group, r.metric))
+        for r in reported.itertuples()
+        if r.bold
+    }
     assert best == bold
 
 
 def test_reported_rows_are_marked_and_only_mixed_on_request() -> None:
-    measured = pd.concat([images("identity", g, [(15.0, 0.7, 0.3)], dataset="euvs") for g in ("level1", "level3")],
-                         ignore_index=True)
+    measured = pd.concat(
+        [images("identity", g, [(15.0, 0.7, 0.3)], dataset="euvs") for g in ("level1", "level3")],
+        ignore_index=True,
+    )
     plain = build_leaderboard("euvs", measured)
     assert {row.source for row in plain.rows} == {"measured"}
     mixed = build_leaderboard("euvs", measured, reported=reported_for("euvs"))
@@ -207,7 +283,10 @@ def test_reported_rows_are_marked_and_only_mixed_on_request() -> None:
     assert set(frame["source"]) == {"measured", "reported"}
     assert set(frame[frame["source"] == "measured"]["label"]) == {"identity"}
     md, tex = render_markdown(mixed), render_latex(mixed)
-    assert "| 3DGS + SetDiff (paper) | 17.84 |" in md and "| identity | 15.00 | 0.700 | 0.300 | – | – | – | 15.00 |" in md
+    assert (
+        "| 3DGS + SetDiff (paper) | 17.84 |" in md
+        and "| identity | 15.00 | 0.700 | 0.300 | – | – | – | 15.00 |" in md
+    )
     assert r"3DGS + SetDiff$^\dagger$ & 17.84" in tex and "\nidentity & 15.00" in tex
     _, body = check_latex_structure(tex)
     assert len(body) == 13 + 1
@@ -221,11 +300,15 @@ def test_load_reported_filters() -> None:
 
 
 # ---------------------------------------------------------------------- real runs, shards, CLI
-def test_two_shards_give_the_same_leaderboard_as_one_run(lb_store: Path, lb_runs: Path, tmp_path: Path) -> None:
+def test_two_shards_give_the_same_leaderboard_as_one_run(
+    lb_store: Path, lb_runs: Path, tmp_path: Path
+) -> None:
     sharded = tmp_path / "sharded"
     shutil.copytree(lb_runs / "reproject", sharded / "reproject")
     for index in (1, 0):
-        run_method(lb_store, sharded / "identity", RunSettings("identity"), shard=Shard(index, 2), progress=False)
+        run_method(
+            lb_store, sharded / "identity", RunSettings("identity"), shard=Shard(index, 2), progress=False
+        )
     outputs = []
     for runs in (lb_runs, sharded):
         found, sequences = load_runs(runs)
@@ -235,15 +318,40 @@ def test_two_shards_give_the_same_leaderboard_as_one_run(lb_store: Path, lb_runs
     assert outputs[0] == outputs[1]
 
 
-def test_leaderboard_cli(lb_store: Path, lb_runs: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_leaderboard_cli(
+    lb_store: Path, lb_runs: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     out = tmp_path / "lb"
-    assert main(["leaderboard", "--dataset", "synthetic", "--runs", str(lb_runs), "--out", str(out), "--plots",
-                 "--grids", "2", "--packets", str(lb_store), "--with-reported"]) == 0
+    assert (
+        main(
+            [
+                "leaderboard",
+                "--dataset",
+                "synthetic",
+                "--runs",
+                str(lb_runs),
+                "--out",
+                str(out),
+                "--plots",
+                "--grids",
+                "2",
+                "--packets",
+                str(lb_store),
+                "--with-reported",
+            ]
+        )
+        == 0
+    )
     captured = capsys.readouterr()
     assert "the paper reports no numbers for dataset 'synthetic'" in captured.err
     names = sorted(p.name for p in out.iterdir())
-    assert names == ["synthetic.md", "synthetic.parquet", "synthetic.tex", "synthetic_grid.png",
-                     "synthetic_lane_shift.png"]
+    assert names == [
+        "synthetic.md",
+        "synthetic.parquet",
+        "synthetic.tex",
+        "synthetic_grid.png",
+        "synthetic_lane_shift.png",
+    ]
     md = (out / "synthetic.md").read_text()
     assert "| identity |" in md and "| reproject |" in md and "Generated by `setdiff-bench leaderboard" in md
     frame = pd.read_parquet(out / "synthetic.parquet")
@@ -251,9 +359,11 @@ def test_leaderboard_cli(lb_store: Path, lb_runs: Path, tmp_path: Path, capsys: 
     # reproject really repairs the shifted views of the analytic scene
     psnr = frame[frame["metric"] == "psnr"].groupby("method")["value"].mean()
     assert psnr["reproject"] > psnr["identity"] + 3
-    for argv, fragment in ((["--runs", str(tmp_path / "none")], "runs folder not found"),
-                           (["--runs", str(lb_runs), "--format", "pdf"], "unknown format(s) pdf"),
-                           (["--runs", str(lb_runs), "--grids", "2"], "--grids needs --packets")):
+    for argv, fragment in (
+        (["--runs", str(tmp_path / "none")], "runs folder not found"),
+        (["--runs", str(lb_runs), "--format", "pdf"], "unknown format(s) pdf"),
+        (["--runs", str(lb_runs), "--grids", "2"], "--grids needs --packets"),
+    ):
         code = main(["leaderboard", "--dataset", "synthetic", "--out", str(tmp_path / "x"), *argv])
         err = capsys.readouterr().err.strip().splitlines()
         assert code == 2 and len(err) == 1 and fragment in err[0], err

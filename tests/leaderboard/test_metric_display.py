@@ -36,9 +36,22 @@ LATEX_ROWS = [
 
 def leaderboard_of_the_same_numbers() -> pd.DataFrame:
     """One nuScenes target per method (the pooled block only), valued as the geometry variants."""
-    return pd.DataFrame([{"dataset": "nuscenes", "protocol": "nuscenes", "group": "10-11s", "split": "test",
-                          "scene": "s", "frame": "f0", "method": LABELS[key], "run": f"r/{key}",
-                          **{m: GEOMETRY[key][m] for m in ("psnr", "ssim", "lpips")}} for key in GEOMETRY])
+    return pd.DataFrame(
+        [
+            {
+                "dataset": "nuscenes",
+                "protocol": "nuscenes",
+                "group": "10-11s",
+                "split": "test",
+                "scene": "s",
+                "frame": "f0",
+                "method": LABELS[key],
+                "run": f"r/{key}",
+                **{m: GEOMETRY[key][m] for m in ("psnr", "ssim", "lpips")},
+            }
+            for key in GEOMETRY
+        ]
+    )
 
 
 def table_lines(text: str) -> list[str]:
@@ -49,13 +62,22 @@ def test_ablation_and_leaderboard_cells_are_formatted_identically() -> None:
     frame = ablation.geometry_frame(GEOMETRY)
     markdown = ablation.geometry_markdown(frame, ablation.ordering_geometry(frame), "`cmd`", "Geometry")
     ours = table_lines(markdown)[:6]
-    assert ours == ["| Geometric grounding | PSNR↑ | SSIM↑ | LPIPS↓ |", "|---|---:|---:|---:|", *MARKDOWN_ROWS]
+    assert ours == [
+        "| Geometric grounding | PSNR↑ | SSIM↑ | LPIPS↓ |",
+        "|---|---:|---:|---:|",
+        *MARKDOWN_ROWS,
+    ]
     board = build_leaderboard("nuscenes", leaderboard_of_the_same_numbers(), methods=list(LABELS.values()))
-    assert table_lines(render_markdown(board)) == ["| Method | PSNR↑ | SSIM↑ | LPIPS↓ |", "|---|---:|---:|---:|",
-                                                   *MARKDOWN_ROWS]
+    assert table_lines(render_markdown(board)) == [
+        "| Method | PSNR↑ | SSIM↑ | LPIPS↓ |",
+        "|---|---:|---:|---:|",
+        *MARKDOWN_ROWS,
+    ]
     latex = ablation.geometry_latex(frame, "Geometry")
-    assert r"\textbf{Geometric grounding} & \textbf{PSNR}$\uparrow$ & \textbf{SSIM}$\uparrow$ & " \
-           r"\textbf{LPIPS}$\downarrow$ \\" in latex.splitlines()
+    assert (
+        r"\textbf{Geometric grounding} & \textbf{PSNR}$\uparrow$ & \textbf{SSIM}$\uparrow$ & "
+        r"\textbf{LPIPS}$\downarrow$ \\" in latex.splitlines()
+    )
     for row in LATEX_ROWS:
         assert row in latex.splitlines() and row in render_latex(board).splitlines()
 
@@ -64,23 +86,31 @@ def test_ablation_markdown_document() -> None:
     frame = ablation.geometry_frame(GEOMETRY)
     markdown = ablation.geometry_markdown(frame, ["PSNR: fine"], "`cmd`", "Geometry")
     assert markdown.startswith("**Geometry**\n\n| Geometric grounding |")
-    assert "\n\nPooled over 12 test targets per variant.\n\nOrdering against the paper:\n- PSNR: fine\n\n" in markdown
+    assert (
+        "\n\nPooled over 12 test targets per variant.\n\nOrdering against the paper:\n- PSNR: fine\n\n"
+        in markdown
+    )
     assert "**Paper, Table 5 (DL3DV; for orientation, not comparable numbers)**" in markdown
     assert "| Both (paper) | **18.74** | **0.587** | **0.265** |" in markdown
     assert markdown.endswith("\n\nProduced by:\n\n`cmd`")
 
 
 def test_setsize_table_has_one_row_per_size_and_the_papers_bold() -> None:
-    results = {(1, 1): {"psnr": 18.0, "ssim": 0.5, "lpips": 0.3, "targets": 8.0},
-               (3, 6): {"psnr": 18.254, "ssim": 0.52, "lpips": 0.3001, "targets": 8.0}}
+    results = {
+        (1, 1): {"psnr": 18.0, "ssim": 0.5, "lpips": 0.3, "targets": 8.0},
+        (3, 6): {"psnr": 18.254, "ssim": 0.52, "lpips": 0.3001, "targets": 8.0},
+    }
     frame = ablation.setsize_frame(results)
-    assert list(frame["metric"]) == ["PSNR", "SSIM", "LPIPS"]   # the Parquet keeps the paper's shape
+    assert list(frame["metric"]) == ["PSNR", "SSIM", "LPIPS"]  # the Parquet keeps the paper's shape
     markdown = ablation.setsize_markdown(frame, ablation.ordering_setsize(results), "`cmd`", "Sizes", 8)
-    assert table_lines(markdown)[:4] == ["| References + targets | PSNR↑ | SSIM↑ | LPIPS↓ |", "|---|---:|---:|---:|",
-                                         "| 1 + 1 | 18.00 | 0.500 | **0.300** |",
-                                         "| 3 + 6 | **18.25** | **0.520** | **0.300** |"]
+    assert table_lines(markdown)[:4] == [
+        "| References + targets | PSNR↑ | SSIM↑ | LPIPS↓ |",
+        "|---|---:|---:|---:|",
+        "| 1 + 1 | 18.00 | 0.500 | **0.300** |",
+        "| 3 + 6 | **18.25** | **0.520** | **0.300** |",
+    ]
     assert "Every set size scores the same 8 test targets." in markdown
-    assert "| 3 + 1 (paper) | 18.67 | 0.581 | **0.255** |" in markdown   # the paper's own bold, not a tie rule
+    assert "| 3 + 1 (paper) | 18.67 | 0.581 | **0.255** |" in markdown  # the paper's own bold, not a tie rule
     assert "| 3 + 2 (paper) | 18.69 | 0.582 | 0.255 |" in markdown
     latex = ablation.setsize_latex(frame, "Sizes")
     assert r"3 + 6 & \textbf{18.25} & \textbf{0.520} & \textbf{0.300} \\" in latex.splitlines()
@@ -88,5 +118,5 @@ def test_setsize_table_has_one_row_per_size_and_the_papers_bold() -> None:
 
 def test_a_metric_column_without_a_spec_is_refused() -> None:
     frame = leaderboard_of_the_same_numbers().assign(psnr_mine=1.0)
-    with pytest.raises(UsageError, match="unknown metric"):   # no spec: no header, decimals or direction
+    with pytest.raises(UsageError, match="unknown metric"):  # no spec: no header, decimals or direction
         build_leaderboard("nuscenes", frame, metrics=["psnr_mine"])

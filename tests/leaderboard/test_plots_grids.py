@@ -24,8 +24,18 @@ from setdiff_bench.reporting.plots import (
 
 
 def per_image(method: str, group: str, psnr: list[float]) -> pd.DataFrame:
-    return pd.DataFrame({"dataset": "nuscenes", "split": "test", "method": method, "group": group, "psnr": psnr,
-                         "ssim": 0.5, "lpips": 0.3, "frame": [f"f{i}" for i in range(len(psnr))]})
+    return pd.DataFrame(
+        {
+            "dataset": "nuscenes",
+            "split": "test",
+            "method": method,
+            "group": group,
+            "psnr": psnr,
+            "ssim": 0.5,
+            "lpips": 0.3,
+            "frame": [f"f{i}" for i in range(len(psnr))],
+        }
+    )
 
 
 def test_group_positions() -> None:
@@ -36,8 +46,13 @@ def test_group_positions() -> None:
 
 
 def test_group_summary_is_mean_and_standard_error() -> None:
-    frame = pd.concat([per_image("a", "10-11s", [20.0, 22.0, 24.0]), per_image("a", "11-12s", [18.0]),
-                       per_image("a", "level1", [1.0])])
+    frame = pd.concat(
+        [
+            per_image("a", "10-11s", [20.0, 22.0, 24.0]),
+            per_image("a", "11-12s", [18.0]),
+            per_image("a", "level1", [1.0]),
+        ]
+    )
     summary = group_summary(frame, "psnr", time_bucket).set_index("group")
     assert list(summary.index) == ["10-11s", "11-12s"]
     assert summary.loc["10-11s", "mean"] == pytest.approx(22.0)
@@ -46,15 +61,28 @@ def test_group_summary_is_mean_and_standard_error() -> None:
 
 
 def test_plot_caption_says_what_the_error_bars_are() -> None:
-    summary = group_summary(pd.concat([per_image("identity", "lane+1", [20.0, 22.0, 21.0]),
-                                       per_image("identity", "lane+2", [18.0, 19.0])]), "psnr", lane_shift)
+    summary = group_summary(
+        pd.concat(
+            [
+                per_image("identity", "lane+1", [20.0, 22.0, 21.0]),
+                per_image("identity", "lane+2", [18.0, 19.0]),
+            ]
+        ),
+        "psnr",
+        lane_shift,
+    )
     caption = error_bar_caption(summary)
     assert "±1 standard error of the mean" in caption and "n = 2–3" in caption
 
 
 def test_plots_are_written(tmp_path: Path) -> None:
-    frame = pd.concat([per_image(m, g, [20.0 + i + j, 21.0 + i]) for i, m in enumerate(("identity", "setdiff"))
-                       for j, g in enumerate(("10-11s", "11-12s", "12-13s"))])
+    frame = pd.concat(
+        [
+            per_image(m, g, [20.0 + i + j, 21.0 + i])
+            for i, m in enumerate(("identity", "setdiff"))
+            for j, g in enumerate(("10-11s", "11-12s", "12-13s"))
+        ]
+    )
     path = plot_time_buckets(frame, tmp_path / "plots" / "buckets.png")
     image = cv2.imread(str(path))
     assert image is not None and image.shape[1] > image.shape[0] > 200
@@ -66,14 +94,24 @@ def test_pick_frames_round_robin_from_the_middle(lb_store: Path) -> None:
     index = PacketStore(lb_store).index
     frames = pick_frames(index, 3)
     targets = index[index["role"] == "target"].set_index(["packet_id", "view"])
-    picked = [(targets.loc[(f.packet_id, f.view), "group"], targets.loc[(f.packet_id, f.view), "frame"]) for f in frames]
+    picked = [
+        (targets.loc[(f.packet_id, f.view), "group"], targets.loc[(f.packet_id, f.view), "frame"])
+        for f in frames
+    ]
     # lane+1 holds front/000000..000003, lane+2 front/000004..000007 (two packets of two targets each)
-    assert picked == [("lane+1", "front/000001.jpg"), ("lane+2", "front/000005.jpg"), ("lane+1", "front/000002.jpg")]
+    assert picked == [
+        ("lane+1", "front/000001.jpg"),
+        ("lane+2", "front/000005.jpg"),
+        ("lane+1", "front/000002.jpg"),
+    ]
 
 
 def test_grid_layout_and_cells(lb_store: Path, lb_runs: Path, tmp_path: Path) -> None:
     store = PacketStore(lb_store)
-    frames = [GridFrame("synthetic__scene-a__lane+2__0001", 1), GridFrame("synthetic__scene-a__lane+1__0000", 0)]
+    frames = [
+        GridFrame("synthetic__scene-a__lane+2__0001", 1),
+        GridFrame("synthetic__scene-a__lane+1__0000", 0),
+    ]
     runs = {"identity": lb_runs / "identity", "reproject": lb_runs / "reproject"}
     path = qualitative_grid(store, runs, frames, tmp_path / "grid.png", cell_width=96)
     grid = cv2.imread(str(path))[:, :, ::-1]
@@ -84,20 +122,37 @@ def test_grid_layout_and_cells(lb_store: Path, lb_runs: Path, tmp_path: Path) ->
     for r, frame in enumerate(frames):
         top = BAND + r * (cell_h + BAND + GAP)
         record = rows.loc[(frame.packet_id, frame.view)]
-        for c, source in enumerate((lb_runs / "identity" /
-                                    pd.read_parquet(lb_runs / "identity" / METRICS_FILE)
-                                    .set_index(["packet_id", "view"]).loc[(frame.packet_id, frame.view), "image"],
-                                    None, lb_store / record["gt"])):
+        for c, source in enumerate(
+            (
+                lb_runs
+                / "identity"
+                / pd.read_parquet(lb_runs / "identity" / METRICS_FILE)
+                .set_index(["packet_id", "view"])
+                .loc[(frame.packet_id, frame.view), "image"],
+                None,
+                lb_store / record["gt"],
+            )
+        ):
             if source is None:
                 continue
-            expected = cv2.resize(cv2.imread(str(source))[:, :, ::-1], (96, cell_h), interpolation=cv2.INTER_NEAREST)
+            expected = cv2.resize(
+                cv2.imread(str(source))[:, :, ::-1], (96, cell_h), interpolation=cv2.INTER_NEAREST
+            )
             left = 150 + c * (96 + GAP)
-            np.testing.assert_array_equal(grid[top:top + cell_h, left:left + 96], expected)
-        first = cv2.resize(cv2.imread(str(lb_store / record["image"]))[:, :, ::-1], (96, cell_h),
-                           interpolation=cv2.INTER_NEAREST)
-        np.testing.assert_array_equal(grid[top:top + cell_h, 150:150 + 96], first)  # = the 3DGS render
-    without_identity = cv2.imread(str(qualitative_grid(store, {"reproject": lb_runs / "reproject"}, frames,
-                                                       tmp_path / "grid2.png", cell_width=96)))
+            np.testing.assert_array_equal(grid[top : top + cell_h, left : left + 96], expected)
+        first = cv2.resize(
+            cv2.imread(str(lb_store / record["image"]))[:, :, ::-1],
+            (96, cell_h),
+            interpolation=cv2.INTER_NEAREST,
+        )
+        np.testing.assert_array_equal(grid[top : top + cell_h, 150 : 150 + 96], first)  # = the 3DGS render
+    without_identity = cv2.imread(
+        str(
+            qualitative_grid(
+                store, {"reproject": lb_runs / "reproject"}, frames, tmp_path / "grid2.png", cell_width=96
+            )
+        )
+    )
     assert without_identity.shape[1] == 150 + 3 * (96 + GAP)  # render | reproject | ground truth
     with pytest.raises(UsageError, match="no frames chosen"):
         qualitative_grid(store, runs, [], tmp_path / "empty.png")

@@ -27,7 +27,10 @@ DIST = np.array([0.03, -0.01, 0.0005, -0.001])
 def _views(seed: int):
     rng = np.random.default_rng(seed)
     K = intrinsics(fx=100.0, fy=101.0, cx=64.3, cy=35.9)
-    return {f"frame_{i:05d}.png": random_view(rng, K, width=FULL[0], height=FULL[1], dist=DIST) for i in (10, 2, 1)}
+    return {
+        f"frame_{i:05d}.png": random_view(rng, K, width=FULL[0], height=FULL[1], dist=DIST)
+        for i in (10, 2, 1)
+    }
 
 
 def _images(folder, views):
@@ -46,7 +49,9 @@ def dl3dv_root(tmp_path):
     views[HASH_B] = _views(32)
     write_transforms(scene_b, views[HASH_B], full_size=FULL, applied=True)
     _images(scene_b, views[HASH_B])
-    scene_c = tmp_path / "2K" / HASH_C / "colmap"  # HF sample: colmap/{images_4, colmap/sparse/0, transforms.json}
+    scene_c = (
+        tmp_path / "2K" / HASH_C / "colmap"
+    )  # HF sample: colmap/{images_4, colmap/sparse/0, transforms.json}
     views[HASH_C] = _views(33)
     write_colmap(scene_c / "colmap" / "sparse" / "0", views[HASH_C], model="OPENCV")
     write_transforms(scene_c, views[HASH_C], full_size=FULL, applied=True)

@@ -24,9 +24,13 @@ def test_frames_cameras_split_and_masks(euvs_root):
     assert list_scenes("euvs", root) == ["Level 3/MARS_location_62_scene_03"]
     [scene] = load_scenes("euvs", root)
     # natural order: traversal 6 before 11, then channel, then index
-    assert scene.frame_names == ("trav_6_channel_1_img_001.jpg", "trav_6_channel_1_img_002.jpg",
-                                 "trav_6_channel_2_img_001.jpg", "trav_11_channel_1_img_001.jpg",
-                                 "trav_11_channel_1_img_002.jpg")
+    assert scene.frame_names == (
+        "trav_6_channel_1_img_001.jpg",
+        "trav_6_channel_1_img_002.jpg",
+        "trav_6_channel_2_img_001.jpg",
+        "trav_11_channel_1_img_001.jpg",
+        "trav_11_channel_1_img_002.jpg",
+    )
     for frame in scene.frames:
         view = fixture.views[frame.name]
         assert_projects(frame.camera, view.points, view.expected_pixels())
@@ -61,13 +65,20 @@ def test_level_given_inferred_from_name_or_unknown(tmp_path):
     rng = np.random.default_rng(12)
     write_euvs_scene(tmp_path / "MARS_location_15_scene_02", rng, gt_poses=False)
     write_euvs_scene(tmp_path / "level_2" / "nuplan_vegas_location_8", rng, gt_poses=False)
-    write_euvs_scene(tmp_path / "nuplan_boston_location_3", rng, gt_poses=False, train_file="training_set.txt")
+    write_euvs_scene(
+        tmp_path / "nuplan_boston_location_3", rng, gt_poses=False, train_file="training_set.txt"
+    )
     scenes = {s.name: s for s in load_scenes("euvs", tmp_path)}
     # natural order, case-sensitive (upper case first)
-    assert list(scenes) == ["MARS_location_15_scene_02", "level_2/nuplan_vegas_location_8",
-                            "nuplan_boston_location_3"]
-    assert (scenes["MARS_location_15_scene_02"].metadata["level"], scenes["MARS_location_15_scene_02"]
-            .metadata["level_source"]) == (3, "name")
+    assert list(scenes) == [
+        "MARS_location_15_scene_02",
+        "level_2/nuplan_vegas_location_8",
+        "nuplan_boston_location_3",
+    ]
+    assert (
+        scenes["MARS_location_15_scene_02"].metadata["level"],
+        scenes["MARS_location_15_scene_02"].metadata["level_source"],
+    ) == (3, "name")
     assert scenes["level_2/nuplan_vegas_location_8"].metadata["level"] == 2
     assert scenes["nuplan_boston_location_3"].metadata["level"] is None
     assert scenes["nuplan_boston_location_3"].metadata["train_set"] == "training_set.txt"
@@ -118,7 +129,9 @@ def test_test_image_without_mask(euvs_root):
     (fixture.folder / "dynamic_masks" / "trav_11_channel_1_img_002.png").unlink()
     with pytest.raises(DatasetError) as info:
         load_scenes("euvs", root)
-    _one_line(info.value, fixture.folder / "dynamic_masks", "has no dynamic mask 'trav_11_channel_1_img_002.png'")
+    _one_line(
+        info.value, fixture.folder / "dynamic_masks", "has no dynamic mask 'trav_11_channel_1_img_002.png'"
+    )
     load_scenes("euvs", root, masks="optional")  # explicitly optional: accepted
 
 

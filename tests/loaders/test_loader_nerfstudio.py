@@ -27,7 +27,9 @@ DIST = np.array([0.04, -0.01, 0.002, 0.001])
 def _scene(folder, seed: int, *, applied: bool, downscaled: bool):
     rng = np.random.default_rng(seed)
     K = intrinsics(fx=118.0, fy=121.0, cx=63.1, cy=47.7)
-    views = {f"frame_{i:05d}.png": random_view(rng, K, width=FULL[0], height=FULL[1], dist=DIST) for i in (3, 1, 2)}
+    views = {
+        f"frame_{i:05d}.png": random_view(rng, K, width=FULL[0], height=FULL[1], dist=DIST) for i in (3, 1, 2)
+    }
     write_transforms(folder, views, full_size=FULL, applied=applied)
     for name in views:
         if downscaled:
@@ -53,8 +55,11 @@ def test_full_resolution_projects_known_points(tmp_path, applied):
 def test_downscaled_folder_rescales_intrinsics(tmp_path, applied):
     views = _scene(tmp_path, 22, applied=applied, downscaled=True)
     frames = read_transforms(tmp_path / "transforms.json", images_dir="images_4")
-    assert [f.name for f in frames] == ["images_4/frame_00003.png", "images_4/frame_00001.png",
-                                        "images_4/frame_00002.png"]
+    assert [f.name for f in frames] == [
+        "images_4/frame_00003.png",
+        "images_4/frame_00001.png",
+        "images_4/frame_00002.png",
+    ]
     for frame in frames:
         view = views[frame.image_path.name]
         assert (frame.camera.width, frame.camera.height) == (32, 24)
@@ -138,7 +143,9 @@ def test_frames_without_an_image_error_or_skip(tmp_path):
     message = str(info.value)
     assert message.startswith(f"{transforms}: 1 of 3 frames name an image that does not exist")
     assert "frame_00002.png" in message and "-o missing=skip" in message
-    with pytest.warns(UserWarning, match="1 of 3 frames name an image that does not exist; skipped") as caught:
+    with pytest.warns(
+        UserWarning, match="1 of 3 frames name an image that does not exist; skipped"
+    ) as caught:
         [scene] = load_scenes("nerfstudio", tmp_path, missing="skip")
     assert len(caught) == 1
     assert [f.name for f in scene.frames] == ["images/frame_00001.png", "images/frame_00003.png"]

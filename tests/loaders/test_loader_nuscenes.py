@@ -27,8 +27,11 @@ def test_every_camera_frame_in_time_order_with_known_geometry(nu):
     assert set(scene.sensors) == set(NU_CAMERAS)
     for frame in scene.frames:
         known = expected[frame.metadata["sample_data_token"]]
-        assert (frame.sensor, frame.timestamp_us, frame.metadata["is_key_frame"]) == \
-            (known.channel, known.timestamp, known.is_key_frame)
+        assert (frame.sensor, frame.timestamp_us, frame.metadata["is_key_frame"]) == (
+            known.channel,
+            known.timestamp,
+            known.is_key_frame,
+        )
         assert frame.name.startswith("samples/" if known.is_key_frame else "sweeps/")
         assert frame.image_path == (nu.root / frame.name).resolve()
         assert_projects(frame.camera, known.points, known.pixels)
@@ -58,7 +61,9 @@ def test_missing_table(nu):
     (nu.root / "v1.0-mini" / "ego_pose.json").unlink()
     with pytest.raises(DatasetError) as info:
         load_scenes("nuscenes", nu.root)
-    assert str(info.value) == f"{nu.root / 'v1.0-mini' / 'ego_pose.json'}: missing nuScenes table ego_pose.json"
+    assert (
+        str(info.value) == f"{nu.root / 'v1.0-mini' / 'ego_pose.json'}: missing nuScenes table ego_pose.json"
+    )
 
 
 def test_dangling_token(nu):
@@ -94,8 +99,10 @@ def test_missing_field_is_named(nu):
     nu.write()
     with pytest.raises(DatasetError) as info:
         load_scenes("nuscenes", nu.root, ["scene-0061"])
-    assert str(info.value) == (f"{nu.root / 'v1.0-mini' / 'sample_data.json'}: sample_data "
-                               "'scene0_CAM_FRONT_LEFT_2': missing field 'ego_pose_token'")
+    assert str(info.value) == (
+        f"{nu.root / 'v1.0-mini' / 'sample_data.json'}: sample_data "
+        "'scene0_CAM_FRONT_LEFT_2': missing field 'ego_pose_token'"
+    )
 
 
 def test_quaternion_norm_off(nu):

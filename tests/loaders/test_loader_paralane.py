@@ -74,7 +74,9 @@ def test_lanes_frames_geometry_and_lidar(paralane_root):
         view = views[names[frame.timestamp_us]]
         assert_projects(frame.camera, view.points, view.expected_pixels())
         assert frame.metadata["lane"] == int(frame.traversal[-1])
-        np.testing.assert_allclose(frame.metadata["lidar_to_world"], lidar[str(frame.timestamp_us)], atol=1e-12)
+        np.testing.assert_allclose(
+            frame.metadata["lidar_to_world"], lidar[str(frame.timestamp_us)], atol=1e-12
+        )
         assert frame.mask_path is None  # foreground masks: 255 = moving, not the keep convention
         assert frame.metadata["foreground_mask_path"].parts[-3] == MASK_FOLDERS[frame.traversal]
     # cameras of neighbouring lanes sit one lane width apart at equal times
@@ -87,8 +89,9 @@ def test_lanes_frames_geometry_and_lidar(paralane_root):
 def test_mask_polarity_keep_and_lane_override(paralane_root):
     root, _ = paralane_root
     with pytest.warns(UserWarning):
-        [scene] = load_scenes("paralane", root, mask_polarity="keep",
-                              lane_of_clip={"clip_0": 2, "clip_1": 1, "clip_2": 0})
+        [scene] = load_scenes(
+            "paralane", root, mask_polarity="keep", lane_of_clip={"clip_0": 2, "clip_1": 1, "clip_2": 0}
+        )
     assert all(frame.mask_path is not None and frame.mask_path.is_file() for frame in scene.frames)
     assert scene.traversals == ("clip_2", "clip_1", "clip_0")
 

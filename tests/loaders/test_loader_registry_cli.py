@@ -31,11 +31,17 @@ def euvs_root(tmp_path):
 
 
 def test_registry_is_lazy_and_complete():
-    code = ("import sys, setdiff_bench.loaders as l; "
-            "print(sorted(l.DATASETS)); print(any(m.startswith('setdiff_bench.loaders.') for m in sys.modules)); "
-            "print('torch' in sys.modules)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split("\n")
-    assert out[0] == str(sorted(["colmap", "dl3dv", "euvs", "nerfstudio", "nuscenes", "paralane", "synthetic"]))
+    code = (
+        "import sys, setdiff_bench.loaders as l; "
+        "print(sorted(l.DATASETS)); print(any(m.startswith('setdiff_bench.loaders.') for m in sys.modules)); "
+        "print('torch' in sys.modules)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout.split("\n")
+    assert out[0] == str(
+        sorted(["colmap", "dl3dv", "euvs", "nerfstudio", "nuscenes", "paralane", "synthetic"])
+    )
     assert out[1] == "False" and out[2] == "False"
     for spec in DATASETS.values():
         assert callable(spec.load_lister()) and callable(spec.load_loader())
@@ -53,7 +59,7 @@ def test_a_scene_folder_is_recognised_by_its_files_most_specific_layout_first(tm
     colmap = ("sparse/0/cameras.bin", "sparse/0/images.bin")
     folders = {
         "synthetic": touch(tmp_path / "s", "scene.json", "test_set.txt", *colmap),  # also an EUVS layout
-        "euvs": touch(tmp_path / "e", "test_set.txt", *colmap),                     # also a COLMAP scene
+        "euvs": touch(tmp_path / "e", "test_set.txt", *colmap),  # also a COLMAP scene
         "colmap": touch(tmp_path / "c", "sparse/cameras.txt", "sparse/images.txt", "transforms.json"),
         "nerfstudio": touch(tmp_path / "n", "transforms.json"),
     }
@@ -64,13 +70,20 @@ def test_a_scene_folder_is_recognised_by_its_files_most_specific_layout_first(tm
 
 
 def test_options_are_checked(euvs_root):
-    assert loader_options("euvs") == {"level": None, "masks": "require_test", "poses": "sparse", "distortion": "keep"}
+    assert loader_options("euvs") == {
+        "level": None,
+        "masks": "require_test",
+        "poses": "sparse",
+        "distortion": "keep",
+    }
     with pytest.raises(UsageError, match="no option 'sweeps'"):
         load_scenes("euvs", euvs_root, sweeps=False)
     with pytest.raises(UsageError, match="unknown dataset 'kitti'"):
         list_scenes("kitti", euvs_root)
-    assert list_scenes("euvs", euvs_root, masks="optional") == ["Level 1/nuplan_vegas_location_1",
-                                                               "Level 3/MARS_location_62_scene_03"]
+    assert list_scenes("euvs", euvs_root, masks="optional") == [
+        "Level 1/nuplan_vegas_location_1",
+        "Level 3/MARS_location_62_scene_03",
+    ]
 
 
 def test_cli_list_scenes_table_and_json(euvs_root, capsys):
@@ -79,16 +92,47 @@ def test_cli_list_scenes_table_and_json(euvs_root, capsys):
     assert lines[0] == f"euvs: 2 scenes under {euvs_root}"
     assert lines[1].split() == ["SCENE", "FRAMES", "CAMERAS", "TRAVERSALS", "TRAIN", "TEST", "SIZE"]
     # name has a space; the counts are the last six columns
-    assert lines[2].startswith("Level 1/nuplan_vegas_location_1") and lines[2].split()[-6:] == \
-        ["5", "2", "2", "3", "2", "32x24"]
-    assert main(["list", "scenes", "--dataset", "euvs", "--root", str(euvs_root), "--scene", "MARS_location_62_scene_03",
-                 "--json", "-o", "level=3"]) == 0
+    assert lines[2].startswith("Level 1/nuplan_vegas_location_1") and lines[2].split()[-6:] == [
+        "5",
+        "2",
+        "2",
+        "3",
+        "2",
+        "32x24",
+    ]
+    assert (
+        main(
+            [
+                "list",
+                "scenes",
+                "--dataset",
+                "euvs",
+                "--root",
+                str(euvs_root),
+                "--scene",
+                "MARS_location_62_scene_03",
+                "--json",
+                "-o",
+                "level=3",
+            ]
+        )
+        == 0
+    )
     row = json.loads(capsys.readouterr().out)
-    assert row == {"scene": "Level 3/MARS_location_62_scene_03", "frames": 5, "cameras": 2, "traversals": 2,
-                   "train": 3, "test": 2, "sizes": ["32x24"]}
+    assert row == {
+        "scene": "Level 3/MARS_location_62_scene_03",
+        "frames": 5,
+        "cameras": 2,
+        "traversals": 2,
+        "train": 3,
+        "test": 2,
+        "sizes": ["32x24"],
+    }
     assert main(["list", "scenes", "--dataset", "euvs", "--root", str(euvs_root), "--names-only"]) == 0
-    assert capsys.readouterr().out.splitlines() == ["Level 1/nuplan_vegas_location_1",
-                                                    "Level 3/MARS_location_62_scene_03"]
+    assert capsys.readouterr().out.splitlines() == [
+        "Level 1/nuplan_vegas_location_1",
+        "Level 3/MARS_location_62_scene_03",
+    ]
 
 
 def test_cli_bad_root_exits_2_with_one_line(tmp_path, capsys):

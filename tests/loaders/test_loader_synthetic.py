@@ -23,7 +23,9 @@ def test_frames_annotated_from_scene_json(synthetic_root):
     assert list_scenes("synthetic", root) == ["scene_0000_00"]
     [scene] = load_scenes("synthetic", root)
     assert scene.dataset == "synthetic"
-    expected_order = [f"{t}_{c}_{i:03d}.png" for t, _, _ in SYN_TRAVERSALS for c, _ in SYN_CAMERAS for i in range(3)]
+    expected_order = [
+        f"{t}_{c}_{i:03d}.png" for t, _, _ in SYN_TRAVERSALS for c, _ in SYN_CAMERAS for i in range(3)
+    ]
     assert list(scene.frame_names) == expected_order
     offsets = {name: offset for name, _, offset in SYN_TRAVERSALS}
     for frame in scene.frames:
@@ -32,8 +34,9 @@ def test_frames_annotated_from_scene_json(synthetic_root):
         assert (frame.traversal, frame.sensor) == (traversal, camera)
         assert frame.timestamp_us == int(index[:3]) * 100000
         assert frame.metadata["lane_offset"] == offsets[traversal]
-        assert frame.split == ("train" if (traversal, camera) == ("lane0", "front") and index[:3] != "001"
-                               else "test")
+        assert frame.split == (
+            "train" if (traversal, camera) == ("lane0", "front") and index[:3] != "001" else "test"
+        )
         assert frame.mask_path is not None and frame.mask_path.name == frame.name
         assert_projects(frame.camera, views[frame.name].points, views[frame.name].expected_pixels())
     assert scene.traversals == ("lane0", "lane1", "turn")

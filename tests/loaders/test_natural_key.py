@@ -9,8 +9,11 @@ def test_numbers_sort_numerically() -> None:
     assert sorted(["n12", "n6", "n3"], key=natural_key) == ["n3", "n6", "n12"]
     assert sorted(["12-13s", "10-11s", "11-12s"], key=natural_key) == ["10-11s", "11-12s", "12-13s"]
     assert sorted(["trav_11", "trav_6", "holdout8"], key=natural_key) == ["holdout8", "trav_6", "trav_11"]
-    assert sorted(["frame_10.png", "frame_9.png", "frame_100.png"], key=natural_key) == \
-        ["frame_9.png", "frame_10.png", "frame_100.png"]
+    assert sorted(["frame_10.png", "frame_9.png", "frame_100.png"], key=natural_key) == [
+        "frame_9.png",
+        "frame_10.png",
+        "frame_100.png",
+    ]
 
 
 def test_zero_padding_ties_break_on_the_text() -> None:

@@ -7,8 +7,11 @@ import torch
 from skimage import data
 
 
-def photo_batch(names: tuple[str, ...] = ("astronaut", "coffee"), size: tuple[int, int] = (256, 320),
-                dtype: torch.dtype = torch.float64) -> torch.Tensor:
+def photo_batch(
+    names: tuple[str, ...] = ("astronaut", "coffee"),
+    size: tuple[int, int] = (256, 320),
+    dtype: torch.dtype = torch.float64,
+) -> torch.Tensor:
     """``(V, 3, H, W)`` crops in [0, 1] of scikit-image's bundled colour photographs."""
     crops = []
     for name in names:

@@ -56,12 +56,16 @@ def test_equals_independent_numpy_forward(model: LPIPS, net: str) -> None:
     pred = blur(add_noise(target, 0.05, seed=3), 0.8)
     weights = load_file(str(resolve_lpips_weights(net)))
     for rescale in (True, False) if net == "alex" else (True,):  # the unscaled mode matters for EUVS (alex)
-        expected = [lpips_numpy(p.permute(1, 2, 0).numpy(), t.permute(1, 2, 0).numpy(), weights, net, rescale)
-                    for p, t in zip(pred, target)]
+        expected = [
+            lpips_numpy(p.permute(1, 2, 0).numpy(), t.permute(1, 2, 0).numpy(), weights, net, rescale)
+            for p, t in zip(pred, target)
+        ]
         tested = LPIPS(net, rescale_input=rescale)
         tested.load_state_dict(model.state_dict())
         np.testing.assert_allclose(tested.double()(pred, target).numpy(), expected, rtol=0, atol=1e-9)
-        np.testing.assert_allclose(tested.float()(pred.float(), target.float()).numpy(), expected, rtol=0, atol=1e-5)
+        np.testing.assert_allclose(
+            tested.float()(pred.float(), target.float()).numpy(), expected, rtol=0, atol=1e-5
+        )
 
 
 def test_trunk_is_frozen_and_gradients_reach_inputs(model: LPIPS) -> None:
@@ -81,12 +85,17 @@ def test_functional_mask_and_euvs_variant(model: LPIPS, net: str) -> None:
     mask = torch.ones(2, 1, 40, 56, dtype=torch.bool)
     mask[:, :, 10:30, 20:40] = False
     expected = model(pred * mask, target * mask)
-    np.testing.assert_allclose(lpips(pred, target, net=net, mask=mask, chunk=1).numpy(), expected.numpy(), atol=1e-6)
+    np.testing.assert_allclose(
+        lpips(pred, target, net=net, mask=mask, chunk=1).numpy(), expected.numpy(), atol=1e-6
+    )
     if net == "alex":
         unscaled = LPIPS("alex", rescale_input=False)
         unscaled.load_state_dict(model.state_dict())
-        np.testing.assert_allclose(lpips_euvs(pred, target, mask.float()).numpy(),
-                                   unscaled(pred * mask, target * mask).numpy(), atol=1e-6)
+        np.testing.assert_allclose(
+            lpips_euvs(pred, target, mask.float()).numpy(),
+            unscaled(pred * mask, target * mask).numpy(),
+            atol=1e-6,
+        )
         assert not torch.allclose(lpips_euvs(pred, target, mask.float()), expected, atol=1e-3)
 
 

@@ -73,7 +73,9 @@ def test_dataset_mean_of_per_image_psnr_exceeds_pooled() -> None:
     assert psnr(pred, target).mean().item() > pooled  # Jensen: the documented per-image mean is higher
 
 
-@pytest.mark.parametrize(("pred_shape", "target_shape"), [((1, 3, 8, 8), (1, 3, 8, 9)), ((3, 8, 8), (3, 8, 8))])
+@pytest.mark.parametrize(
+    ("pred_shape", "target_shape"), [((1, 3, 8, 8), (1, 3, 8, 9)), ((3, 8, 8), (3, 8, 8))]
+)
 def test_bad_shapes_raise(pred_shape: tuple[int, ...], target_shape: tuple[int, ...]) -> None:
     with pytest.raises(ImageError, match=r"psnr|mse"):
         psnr(torch.zeros(pred_shape), torch.zeros(target_shape))

@@ -23,17 +23,26 @@ def test_directions() -> None:
     assert higher == {"psnr", "ssim", "ssim_same", "psnr_euvs", "ssim_euvs", "cos_dinov2", "final_score"}
     assert get_metric("warp").scope == "sequence"
     assert get_metric("warp").kwargs["scale"] == PAPER_SCALE
-    assert {name for name, spec in METRICS.items() if spec.scope == "profile"} == {"cos_dinov2", "final_score"}
+    assert {name for name, spec in METRICS.items() if spec.scope == "profile"} == {
+        "cos_dinov2",
+        "final_score",
+    }
 
 
 # The tables' label, decimals and arrow of every metric, written out by hand (the leaderboards' format).
 DISPLAY = {
-    "psnr": ("PSNR", 2, "↑"), "psnr_euvs": ("PSNR", 2, "↑"),
-    "ssim": ("SSIM", 3, "↑"), "ssim_same": ("SSIM", 3, "↑"), "ssim_euvs": ("SSIM", 3, "↑"),
-    "lpips": ("LPIPS", 3, "↓"), "lpips_vgg": ("LPIPS", 3, "↓"), "lpips_vgg_unscaled": ("LPIPS", 3, "↓"),
+    "psnr": ("PSNR", 2, "↑"),
+    "psnr_euvs": ("PSNR", 2, "↑"),
+    "ssim": ("SSIM", 3, "↑"),
+    "ssim_same": ("SSIM", 3, "↑"),
+    "ssim_euvs": ("SSIM", 3, "↑"),
+    "lpips": ("LPIPS", 3, "↓"),
+    "lpips_vgg": ("LPIPS", 3, "↓"),
+    "lpips_vgg_unscaled": ("LPIPS", 3, "↓"),
     "lpips_euvs": ("LPIPS", 3, "↓"),
     "warp": ("Warp", 1, "↓"),
-    "cos_dinov2": ("Cos", 3, "↑"), "final_score": ("Final", 3, "↑"),
+    "cos_dinov2": ("Cos", 3, "↑"),
+    "final_score": ("Final", 3, "↑"),
 }
 
 
@@ -45,9 +54,16 @@ def test_every_metric_declares_its_display() -> None:
 
 
 def test_listing_imports_nothing_heavy() -> None:
-    code = ("import sys, setdiff_bench.metrics as m; m.METRICS; "
-            "print(any(k in sys.modules for k in ('cv2', 'safetensors', 'setdiff_bench.metrics.lpips')))")
-    assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip() == "False"
+    code = (
+        "import sys, setdiff_bench.metrics as m; m.METRICS; "
+        "print(any(k in sys.modules for k in ('cv2', 'safetensors', 'setdiff_bench.metrics.lpips')))"
+    )
+    assert (
+        subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, check=True
+        ).stdout.strip()
+        == "False"
+    )
 
 
 def test_specs_select_their_variant() -> None:
@@ -57,11 +73,19 @@ def test_specs_select_their_variant() -> None:
     mask[:, :, :20] = False
     torch.testing.assert_close(get_metric("psnr").compute(pred, target), psnr(pred, target))
     torch.testing.assert_close(get_metric("psnr").compute(pred, target, mask), psnr(pred, target, mask))
-    torch.testing.assert_close(get_metric("ssim_same").compute(pred, target), ssim(pred, target, border="same"))
-    torch.testing.assert_close(get_metric("ssim_euvs").compute(pred, target, mask), ssim_euvs(pred, target, mask))
-    torch.testing.assert_close(get_metric("ssim_euvs").compute(pred, target), ssim(pred, target, border="same"))
-    torch.testing.assert_close(get_metric("lpips_vgg_unscaled").compute(pred, target),
-                               lpips(pred, target, net="vgg", rescale_input=False))
+    torch.testing.assert_close(
+        get_metric("ssim_same").compute(pred, target), ssim(pred, target, border="same")
+    )
+    torch.testing.assert_close(
+        get_metric("ssim_euvs").compute(pred, target, mask), ssim_euvs(pred, target, mask)
+    )
+    torch.testing.assert_close(
+        get_metric("ssim_euvs").compute(pred, target), ssim(pred, target, border="same")
+    )
+    torch.testing.assert_close(
+        get_metric("lpips_vgg_unscaled").compute(pred, target),
+        lpips(pred, target, net="vgg", rescale_input=False),
+    )
     for spec in preset("euvs_official") + preset("standard") + preset("gaussian_splatting"):
         values = spec.compute(pred, target, mask)
         assert values.shape == (2,) and torch.isfinite(values).all()

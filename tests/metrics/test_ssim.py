@@ -23,8 +23,16 @@ def skimage_ssim(pred: torch.Tensor, target: torch.Tensor, full: bool = False):
     """The standard SSIM through skimage, one (C, H, W) or (H, W) image."""
     channel_axis = -1 if pred.ndim == 3 else None
     to_np = (lambda t: t.permute(1, 2, 0).numpy()) if pred.ndim == 3 else (lambda t: t.numpy())
-    return structural_similarity(to_np(pred), to_np(target), gaussian_weights=True, sigma=1.5,
-                                 use_sample_covariance=False, data_range=1, channel_axis=channel_axis, full=full)
+    return structural_similarity(
+        to_np(pred),
+        to_np(target),
+        gaussian_weights=True,
+        sigma=1.5,
+        use_sample_covariance=False,
+        data_range=1,
+        channel_axis=channel_axis,
+        full=full,
+    )
 
 
 def gaussian_splatting_ssim(img1: torch.Tensor, img2: torch.Tensor) -> torch.Tensor:
@@ -34,8 +42,9 @@ def gaussian_splatting_ssim(img1: torch.Tensor, img2: torch.Tensor) -> torch.Ten
     groups = channels, C1 = 0.01², C2 = 0.03², mean over channels and pixels.
     """
     size, sigma = 11, 1.5
-    gauss = torch.tensor([math.exp(-((x - size // 2) ** 2) / float(2 * sigma**2)) for x in range(size)],
-                         dtype=img1.dtype)
+    gauss = torch.tensor(
+        [math.exp(-((x - size // 2) ** 2) / float(2 * sigma**2)) for x in range(size)], dtype=img1.dtype
+    )
     gauss = gauss / gauss.sum()
     channel = img1.shape[1]
     window = (gauss[:, None] @ gauss[None, :]).expand(channel, 1, size, size).contiguous()
@@ -46,7 +55,9 @@ def gaussian_splatting_ssim(img1: torch.Tensor, img2: torch.Tensor) -> torch.Ten
     sigma2_sq = F.conv2d(img2 * img2, window, padding=size // 2, groups=channel) - mu2_sq
     sigma12 = F.conv2d(img1 * img2, window, padding=size // 2, groups=channel) - mu1_mu2
     c1, c2 = 0.01**2, 0.03**2
-    ssim_map = ((2 * mu1_mu2 + c1) * (2 * sigma12 + c2)) / ((mu1_sq + mu2_sq + c1) * (sigma1_sq + sigma2_sq + c2))
+    ssim_map = ((2 * mu1_mu2 + c1) * (2 * sigma12 + c2)) / (
+        (mu1_sq + mu2_sq + c1) * (sigma1_sq + sigma2_sq + c2)
+    )
     return ssim_map.flatten(1).mean(dim=1)
 
 
@@ -58,7 +69,9 @@ def test_valid_border_equals_skimage_on_photographs(backend: str, dtype: torch.d
         pred = add_noise(target, sigma, seed=int(sigma * 100))
         expected = [skimage_ssim(p, t) for p, t in zip(pred, target)]
         got = ssim(pred.to(dtype), target.to(dtype), backend=backend)
-        np.testing.assert_allclose(got.double().numpy(), expected, atol=1e-4 if dtype == torch.float32 else 1e-9)
+        np.testing.assert_allclose(
+            got.double().numpy(), expected, atol=1e-4 if dtype == torch.float32 else 1e-9
+        )
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -67,7 +80,9 @@ def test_valid_border_equals_skimage_on_random_images(backend: str) -> None:
     target = (0.6 * pred + 0.4 * random_images((3, 3, 37, 61), seed=11)).clamp(0, 1)
     expected = [skimage_ssim(p, t) for p, t in zip(pred, target)]
     np.testing.assert_allclose(ssim(pred, target, backend=backend).numpy(), expected, atol=1e-9)
-    np.testing.assert_allclose(ssim(pred.float(), target.float(), backend=backend).numpy(), expected, atol=1e-4)
+    np.testing.assert_allclose(
+        ssim(pred.float(), target.float(), backend=backend).numpy(), expected, atol=1e-4
+    )
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -75,8 +90,9 @@ def test_reflect_border_equals_torchmetrics(backend: str) -> None:
     target = photo_batch(size=(128, 160))
     pred = add_noise(target, 0.05, seed=5)
     expected = structural_similarity_index_measure(pred, target, data_range=1.0, reduction="none")
-    np.testing.assert_allclose(ssim(pred, target, border="reflect", backend=backend).numpy(), expected.numpy(),
-                               atol=1e-9)
+    np.testing.assert_allclose(
+        ssim(pred, target, border="reflect", backend=backend).numpy(), expected.numpy(), atol=1e-9
+    )
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -84,16 +100,22 @@ def test_same_border_equals_gaussian_splatting_formula(backend: str) -> None:
     target = photo_batch(("astronaut", "rocket"), size=(128, 160))
     pred = add_noise(target, 0.07, seed=6)
     expected = gaussian_splatting_ssim(pred, target)
-    np.testing.assert_allclose(ssim(pred, target, border="same", backend=backend).numpy(), expected.numpy(),
-                               atol=1e-10)
-    np.testing.assert_allclose(ssim(pred.float(), target.float(), border="same", backend=backend).numpy(),
-                               expected.numpy(), atol=1e-5)
+    np.testing.assert_allclose(
+        ssim(pred, target, border="same", backend=backend).numpy(), expected.numpy(), atol=1e-10
+    )
+    np.testing.assert_allclose(
+        ssim(pred.float(), target.float(), border="same", backend=backend).numpy(),
+        expected.numpy(),
+        atol=1e-5,
+    )
 
 
 def test_same_and_valid_differ_as_documented() -> None:
     target = photo_batch(size=(64, 64))
     pred = add_noise(target, 0.1)
-    assert not torch.allclose(ssim(pred, target, border="same"), ssim(pred, target, border="valid"), atol=1e-4)
+    assert not torch.allclose(
+        ssim(pred, target, border="same"), ssim(pred, target, border="valid"), atol=1e-4
+    )
 
 
 def test_gradient_of_dssim_loss_matches_3dgs_and_finite_differences() -> None:
@@ -106,8 +128,9 @@ def test_gradient_of_dssim_loss_matches_3dgs_and_finite_differences() -> None:
     np.testing.assert_allclose(grad.numpy(), expected.numpy(), atol=1e-12)
     small = pred.detach()[:, :1, :12, :13].clone().requires_grad_(True)
     for border in ("valid", "reflect"):
-        assert torch.autograd.gradcheck(lambda x, b=border: ssim(x, target[:, :1, :12, :13], border=b), (small,),
-                                         fast_mode=True)
+        assert torch.autograd.gradcheck(
+            lambda x, b=border: ssim(x, target[:, :1, :12, :13], border=b), (small,), fast_mode=True
+        )
 
 
 def test_float32_gradient_flows_for_training() -> None:
@@ -144,7 +167,9 @@ def test_masked_ssim_is_mean_of_skimage_map_over_valid_pixels(backend: str) -> N
         expected.append(interior[m[0, 5:-5, 5:-5].numpy()].mean())
     np.testing.assert_allclose(ssim(pred, target, mask=mask, backend=backend).numpy(), expected, atol=1e-9)
     all_valid = torch.ones_like(mask)
-    np.testing.assert_allclose(ssim(pred, target, mask=all_valid).numpy(), ssim(pred, target).numpy(), atol=1e-12)
+    np.testing.assert_allclose(
+        ssim(pred, target, mask=all_valid).numpy(), ssim(pred, target).numpy(), atol=1e-12
+    )
 
 
 def test_euvs_ssim_multiplies_by_mask_and_averages_whole_map() -> None:

@@ -21,11 +21,15 @@ from setdiff_bench.metrics.warp import (
 )
 
 
-def translating_sequence(frames: int = 4, step: tuple[int, int] = (3, 2), size: tuple[int, int] = (96, 128)) -> torch.Tensor:
+def translating_sequence(
+    frames: int = 4, step: tuple[int, int] = (3, 2), size: tuple[int, int] = (96, 128)
+) -> torch.Tensor:
     """``(T, 3, H, W)`` crops of a photograph sliding by ``step = (dx, dy)`` pixels per frame, range [0.1, 0.9]."""
     photo = torch.from_numpy(data.astronaut()).permute(2, 0, 1).double() / 255
-    crops = [photo[:, 50 + step[1] * t: 50 + step[1] * t + size[0], 60 + step[0] * t: 60 + step[0] * t + size[1]]
-             for t in range(frames)]
+    crops = [
+        photo[:, 50 + step[1] * t : 50 + step[1] * t + size[0], 60 + step[0] * t : 60 + step[0] * t + size[1]]
+        for t in range(frames)
+    ]
     return 0.1 + 0.8 * torch.stack(crops)
 
 
@@ -51,7 +55,9 @@ def test_known_translation_gives_almost_zero(sequence: torch.Tensor, reference: 
 
 
 def test_error_grows_with_flicker_as_derived(sequence: torch.Tensor, reference: WarpReference) -> None:
-    signs = torch.tensor([(-1.0) ** t for t in range(sequence.shape[0])], dtype=sequence.dtype).view(-1, 1, 1, 1)
+    signs = torch.tensor([(-1.0) ** t for t in range(sequence.shape[0])], dtype=sequence.dtype).view(
+        -1, 1, 1, 1
+    )
     errors = []
     for amplitude in (0.0, 0.01, 0.03, 0.08):
         flickering = sequence + amplitude * signs  # stays inside [0, 1]: no clipping
@@ -92,8 +98,9 @@ def test_occlusion_rules_hand_derived() -> None:
     # inconsistent backward flow: |2 + 0|² = 4 > 0.01·(0 + 4) + 0.5
     assert occlusion_mask(forward, torch.zeros_like(forward), keep_all).all()
     # just under the threshold: |fw + bw|² = 0.49 < 0.01·(4 + 1.69) + 0.5
-    assert not occlusion_mask(forward, torch.full_like(forward, 0.0).index_fill(1, torch.tensor([0]), -1.3),
-                              keep_all).any()
+    assert not occlusion_mask(
+        forward, torch.full_like(forward, 0.0).index_fill(1, torch.tensor([0]), -1.3), keep_all
+    ).any()
     # motion boundary: u jumps from 0 to 5 between columns 4 and 5 → (0 − 5)² = 25 > 0.01·0 + 0.002 at x = 4
     step = torch.zeros(1, 2, height, width, dtype=torch.float64)
     step[:, 0, :, 5:] = 5.0
@@ -108,7 +115,7 @@ def test_disocclusion_behind_a_moving_object_is_masked() -> None:
     frames = []
     for t in range(3):
         frame = background.copy()
-        frame[40:88, 50 + 8 * t: 114 + 8 * t] = patch  # a 48×64 object moves right 8 px per frame
+        frame[40:88, 50 + 8 * t : 114 + 8 * t] = patch  # a 48×64 object moves right 8 px per frame
         frames.append(torch.from_numpy(frame).permute(2, 0, 1))
     frames = torch.stack(frames)
     reference = warp_reference(frames)
@@ -145,8 +152,16 @@ def test_shape_mismatch_raises(reference: WarpReference) -> None:
 def test_default_flow_method_is_the_more_accurate_on_known_flow() -> None:
     texture = cv2.resize(data.astronaut(), (640, 640), interpolation=cv2.INTER_CUBIC)
     obj = cv2.resize(data.coffee(), (300, 200), interpolation=cv2.INTER_AREA)[50:98, 100:164]
-    scene = synthetic_scene_pair(texture, (144, 256), rotation=0.02, zoom=1.03, shift=(3.1, 1.2),
-                                 object_texture=obj, object_origin=(100, 40), object_motion=(6, -2))
+    scene = synthetic_scene_pair(
+        texture,
+        (144, 256),
+        rotation=0.02,
+        zoom=1.03,
+        shift=(3.1, 1.2),
+        object_texture=obj,
+        object_origin=(100, 40),
+        object_motion=(6, -2),
+    )
     gray = [cv2.cvtColor((f * 255).round().astype(np.uint8), cv2.COLOR_RGB2GRAY) for f in scene[:2]]
     deepflow = endpoint_error(flow_gray(*gray, "deepflow"), scene.flow, scene.valid)
     dis = endpoint_error(flow_gray(*gray, "dis"), scene.flow, scene.valid)

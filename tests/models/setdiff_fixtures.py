@@ -31,7 +31,9 @@ def smooth_images(count: int, height: int, width: int, generator: torch.Generato
 def look_camera(yaw_deg: float, x: float, height: int, width: int) -> Camera:
     """A pinhole camera at ``(x, 0, 0)`` (world) turned by ``yaw`` about the y axis."""
     yaw = math.radians(yaw_deg)
-    rotation = np.array([[math.cos(yaw), 0.0, -math.sin(yaw)], [0.0, 1.0, 0.0], [math.sin(yaw), 0.0, math.cos(yaw)]])
+    rotation = np.array(
+        [[math.cos(yaw), 0.0, -math.sin(yaw)], [0.0, 1.0, 0.0], [math.sin(yaw), 0.0, math.cos(yaw)]]
+    )
     center = np.array([x, 0.0, 0.0])
     w2c = np.eye(4)
     w2c[:3, :3] = rotation
@@ -41,8 +43,9 @@ def look_camera(yaw_deg: float, x: float, height: int, width: int) -> Camera:
     return Camera(K=K, w2c=w2c, width=width, height=height)
 
 
-def view_set(prefix: str, count: int, height: int, width: int, generator: torch.Generator,
-             offset: float) -> ViewSet:
+def view_set(
+    prefix: str, count: int, height: int, width: int, generator: torch.Generator, offset: float
+) -> ViewSet:
     cameras = tuple(look_camera(7.0 * i + offset * 3, 0.1 * i + offset, height, width) for i in range(count))
     return ViewSet(
         names=tuple(f"{prefix}{i}" for i in range(count)),
@@ -57,12 +60,21 @@ def make_packet(num_refs: int, num_targets: int, size: tuple[int, int] = (32, 32
     """A packet of random smooth images, random C-maps and distinct real cameras."""
     generator = torch.Generator().manual_seed(seed)
     height, width = size
-    return Packet(packet_id=f"p{seed}", dataset="test", protocol="unit", group="g", split="train", scene="s",
-                  references=view_set("ref", num_refs, height, width, generator, 0.05),
-                  targets=view_set("tgt", num_targets, height, width, generator, 0.0))
+    return Packet(
+        packet_id=f"p{seed}",
+        dataset="test",
+        protocol="unit",
+        group="g",
+        split="train",
+        scene="s",
+        references=view_set("ref", num_refs, height, width, generator, 0.05),
+        targets=view_set("tgt", num_targets, height, width, generator, 0.0),
+    )
 
 
-def make_sample(num_refs: int, num_targets: int, size: tuple[int, int] = (32, 32), seed: int = 0) -> TrainingSample:
+def make_sample(
+    num_refs: int, num_targets: int, size: tuple[int, int] = (32, 32), seed: int = 0
+) -> TrainingSample:
     """A training sample whose target renders are the ground truth, blurred and noised."""
     packet = make_packet(num_refs, num_targets, size, seed)
     generator = torch.Generator().manual_seed(seed + 1000)
@@ -76,19 +88,41 @@ def make_sample(num_refs: int, num_targets: int, size: tuple[int, int] = (32, 32
 def tiny_config(**model_overrides: object) -> Config:
     """The tiny architecture with test-friendly training settings (no LPIPS weights needed)."""
     model = model_config_from_dict({"preset": "tiny", **model_overrides})
-    train = TrainConfig(steps=4, learning_rate=1e-3, min_views=2, max_views=4, decode_targets=1, lpips_weight=0.0,
-                        checkpoint_every=1000, validate_every=1000, log_every=1, seed=0)
+    train = TrainConfig(
+        steps=4,
+        learning_rate=1e-3,
+        min_views=2,
+        max_views=4,
+        decode_targets=1,
+        lpips_weight=0.0,
+        checkpoint_every=1000,
+        validate_every=1000,
+        log_every=1,
+        seed=0,
+    )
     return Config(model=model, train=train)
 
 
 # The scheduler_config.json of stabilityai/sd-turbo (docs/model.md, "SD-Turbo scheduler config").
 SD_TURBO_SCHEDULER_JSON = {
-    "_class_name": "EulerDiscreteScheduler", "beta_start": 0.00085, "beta_end": 0.012,
-    "beta_schedule": "scaled_linear", "clip_sample": False, "interpolation_type": "linear",
-    "num_train_timesteps": 1000, "prediction_type": "epsilon", "sample_max_value": 1.0,
-    "set_alpha_to_one": False, "sigma_max": None, "sigma_min": None, "skip_prk_steps": True,
-    "steps_offset": 1, "timestep_spacing": "trailing", "timestep_type": "discrete",
-    "trained_betas": None, "use_karras_sigmas": False,
+    "_class_name": "EulerDiscreteScheduler",
+    "beta_start": 0.00085,
+    "beta_end": 0.012,
+    "beta_schedule": "scaled_linear",
+    "clip_sample": False,
+    "interpolation_type": "linear",
+    "num_train_timesteps": 1000,
+    "prediction_type": "epsilon",
+    "sample_max_value": 1.0,
+    "set_alpha_to_one": False,
+    "sigma_max": None,
+    "sigma_min": None,
+    "skip_prk_steps": True,
+    "steps_offset": 1,
+    "timestep_spacing": "trailing",
+    "timestep_type": "discrete",
+    "trained_betas": None,
+    "use_karras_sigmas": False,
 }
 
 
@@ -114,10 +148,21 @@ def write_diffusers_folder(root: Path, *, text: bool) -> tuple[Any, Any]:
         (root / "raw" / "vocab.json").write_text(json.dumps(vocab))
         (root / "raw" / "merges.txt").write_text("#version: 0.2\n")
         CLIPTokenizer(str(root / "raw" / "vocab.json"), str(root / "raw" / "merges.txt")).save_pretrained(
-            root / "tokenizer")
-        encoder = CLIPTextModel(CLIPTextConfig(vocab_size=len(vocab), hidden_size=32, intermediate_size=64,
-                                               num_hidden_layers=1, num_attention_heads=2, max_position_embeddings=77,
-                                               bos_token_id=0, eos_token_id=1, pad_token_id=1))
+            root / "tokenizer"
+        )
+        encoder = CLIPTextModel(
+            CLIPTextConfig(
+                vocab_size=len(vocab),
+                hidden_size=32,
+                intermediate_size=64,
+                num_hidden_layers=1,
+                num_attention_heads=2,
+                max_position_embeddings=77,
+                bos_token_id=0,
+                eos_token_id=1,
+                pad_token_id=1,
+            )
+        )
         encoder.save_pretrained(root / "text_encoder")
     return unet, vae
 

@@ -66,7 +66,9 @@ def test_other_configuration_is_refused(tmp_path: Path) -> None:
 def test_inference_settings_do_not_block_loading(tmp_path: Path) -> None:
     model, config = perturbed_model()
     save_checkpoint(tmp_path / "ckpt", model, config)
-    other = dataclasses.replace(config, model=dataclasses.replace(config.model, guidance_scale=3.0, cfg_batched=False))
+    other = dataclasses.replace(
+        config, model=dataclasses.replace(config.model, guidance_scale=3.0, cfg_batched=False)
+    )
     load_model(tmp_path / "ckpt", expected=other)
 
 
@@ -76,7 +78,9 @@ def test_weights_that_do_not_fit_are_refused(tmp_path: Path) -> None:
     # config.json says one thing, the weights another
     small, small_config = perturbed_model({"skip_connections": True, "geometry_channels": [8, 8, 8, 8, 8]})
     save_checkpoint(tmp_path / "other", small, small_config)
-    (tmp_path / "ckpt" / "model.safetensors").write_bytes((tmp_path / "other" / "model.safetensors").read_bytes())
+    (tmp_path / "ckpt" / "model.safetensors").write_bytes(
+        (tmp_path / "other" / "model.safetensors").read_bytes()
+    )
     with pytest.raises(CheckpointError, match="shape"):
         load_model(tmp_path / "ckpt")
     (tmp_path / "ckpt" / "model.safetensors").write_bytes(b"not a safetensors file")

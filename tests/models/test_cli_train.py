@@ -17,7 +17,9 @@ from setdiff_bench.models.setdiff.checkpoint import read_config, resolve_checkpo
 from setdiff_bench.models.setdiff.manifest import MANIFEST_FILE
 from tests.models.setdiff_fixtures import TINY_SETDIFF_MODEL_TOML, make_sample
 
-CONFIG = TINY_SETDIFF_MODEL_TOML + """
+CONFIG = (
+    TINY_SETDIFF_MODEL_TOML
+    + """
 [train]
 steps = 2
 learning_rate = 1e-3
@@ -29,6 +31,7 @@ validate_every = 2
 checkpoint_every = 1
 log_every = 1
 """
+)
 
 
 class FakeStore:
@@ -40,13 +43,19 @@ class FakeStore:
         self.root = Path(root)
         self.samples = {"train-0": make_sample(2, 2, seed=0), "test-0": make_sample(1, 2, seed=1)}
         # index rows as prepare writes them (only the columns the training manifest reads)
-        self.index = pd.DataFrame({
-            "packet_id": ["train-0", "train-0", "test-0"], "split": ["train", "train", "test"],
-            "scene": ["scene_0003_01", "scene_0003_01", "scene_0003_02"],
-            **{f"{c}_sha256": ["a" * 64, "b" * 64, "c" * 64] for c in ("image", "cmap", "gt")},
-            "mask_sha256": ["", "d" * 64, ""]})
+        self.index = pd.DataFrame(
+            {
+                "packet_id": ["train-0", "train-0", "test-0"],
+                "split": ["train", "train", "test"],
+                "scene": ["scene_0003_01", "scene_0003_01", "scene_0003_02"],
+                **{f"{c}_sha256": ["a" * 64, "b" * 64, "c" * 64] for c in ("image", "cmap", "gt")},
+                "mask_sha256": ["", "d" * 64, ""],
+            }
+        )
 
-    def training_dataset(self, split: str = "train", min_views: int = 8, max_views: int = 12, seed: int = 0) -> list:
+    def training_dataset(
+        self, split: str = "train", min_views: int = 8, max_views: int = 12, seed: int = 0
+    ) -> list:
         FakeStore.calls.append(("training_dataset", (split, min_views, max_views, seed)))
         return [s for k, s in self.samples.items() if k.startswith(split)]
 
@@ -74,8 +83,19 @@ def test_train_verb(tmp_path: Path, fake_store: type[FakeStore], capsys: pytest.
     config = tmp_path / "tiny.toml"
     config.write_text(CONFIG)
     out = tmp_path / "run"
-    code = main(["train", "--config", str(config), "--packets", str(tmp_path / "packets"), "--out", str(out),
-                 "--no-progress", "--cpu"])
+    code = main(
+        [
+            "train",
+            "--config",
+            str(config),
+            "--packets",
+            str(tmp_path / "packets"),
+            "--out",
+            str(out),
+            "--no-progress",
+            "--cpu",
+        ]
+    )
     assert code == 0
     assert fake_store.calls == [("training_dataset", ("train", 2, 4, 0))]
     printed = capsys.readouterr().out
@@ -84,8 +104,23 @@ def test_train_verb(tmp_path: Path, fake_store: type[FakeStore], capsys: pytest.
     assert checkpoint.name == "step-00000002"
     assert read_config(checkpoint).train.steps == 2
     # running again resumes (nothing left to do) and --steps extends the run
-    assert main(["train", "--config", str(config), "--packets", "p", "--out", str(out), "--no-progress",
-                 "--steps", "3"]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "--config",
+                str(config),
+                "--packets",
+                "p",
+                "--out",
+                str(out),
+                "--no-progress",
+                "--steps",
+                "3",
+            ]
+        )
+        == 0
+    )
     assert resolve_checkpoint(out).name == "step-00000003"
     manifest = json.loads((out / MANIFEST_FILE).read_text())
     assert [(s["start_step"], s["end_step"]) for s in manifest["sessions"]] == [(0, 2), (2, 3)]
@@ -98,8 +133,12 @@ def test_train_verb(tmp_path: Path, fake_store: type[FakeStore], capsys: pytest.
     assert manifest["validation"]["psnr"] > 0
 
 
-def test_train_verb_errors(tmp_path: Path, fake_store: type[FakeStore], capsys: pytest.CaptureFixture[str]) -> None:
-    code = main(["train", "--config", str(tmp_path / "missing.toml"), "--packets", "p", "--out", str(tmp_path)])
+def test_train_verb_errors(
+    tmp_path: Path, fake_store: type[FakeStore], capsys: pytest.CaptureFixture[str]
+) -> None:
+    code = main(
+        ["train", "--config", str(tmp_path / "missing.toml"), "--packets", "p", "--out", str(tmp_path)]
+    )
     assert code == 2
     assert "config file not found" in capsys.readouterr().err
     bad = tmp_path / "bad.toml"

@@ -42,7 +42,9 @@ def test_alphas_cumprod_matches_diffusers() -> None:
 
 
 def test_overrides_and_errors(tmp_path: Path) -> None:
-    config = config_from_dict({"model": {"preset": "tiny", "unet": {"layers_per_block": 2}}, "train": {"steps": 7}})
+    config = config_from_dict(
+        {"model": {"preset": "tiny", "unet": {"layers_per_block": 2}}, "train": {"steps": 7}}
+    )
     assert config.model.unet["layers_per_block"] == 2 and config.model.unet["block_out_channels"] == [32, 64]
     assert config.train.steps == 7
     with pytest.raises(UsageError, match="unknown preset"):

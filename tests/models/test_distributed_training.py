@@ -30,7 +30,9 @@ from tests.models.setdiff_fixtures import TINY_SETDIFF_MODEL_TOML
 from tests.run.store_fixtures import StoreSpec, build_store
 
 STEPS = 8
-CONFIG = TINY_SETDIFF_MODEL_TOML + """
+CONFIG = (
+    TINY_SETDIFF_MODEL_TOML
+    + """
 [train]
 steps = {steps}
 learning_rate = 1e-3
@@ -43,6 +45,7 @@ validate_every = 4
 checkpoint_every = 2
 log_every = 1
 """
+)
 
 
 def free_port() -> int:
@@ -52,13 +55,39 @@ def free_port() -> int:
 
 
 def train_command(config: Path, store: Path, out: Path, processes: int) -> list[str]:
-    verb = ["train", "--config", str(config), "--packets", str(store), "--out", str(out), "--cpu", "--no-progress"]
+    verb = [
+        "train",
+        "--config",
+        str(config),
+        "--packets",
+        str(store),
+        "--out",
+        str(out),
+        "--cpu",
+        "--no-progress",
+    ]
     if processes == 1:
         return [sys.executable, "-m", "setdiff_bench", *verb]
     # --multi_gpu on a machine without CUDA: torch.distributed with the gloo backend, one process per rank
-    return [sys.executable, "-m", "accelerate.commands.launch", "--multi_gpu", "--num_processes", str(processes),
-            "--num_machines", "1", "--mixed_precision", "no", "--dynamo_backend", "no",
-            "--main_process_port", str(free_port()), "-m", "setdiff_bench", *verb]
+    return [
+        sys.executable,
+        "-m",
+        "accelerate.commands.launch",
+        "--multi_gpu",
+        "--num_processes",
+        str(processes),
+        "--num_machines",
+        "1",
+        "--mixed_precision",
+        "no",
+        "--dynamo_backend",
+        "no",
+        "--main_process_port",
+        str(free_port()),
+        "-m",
+        "setdiff_bench",
+        *verb,
+    ]
 
 
 def environment() -> dict[str, str]:
@@ -66,7 +95,9 @@ def environment() -> dict[str, str]:
 
 
 def run(command: list[str]) -> None:
-    done = subprocess.run(command, env=environment(), capture_output=True, text=True, timeout=600, check=False)
+    done = subprocess.run(
+        command, env=environment(), capture_output=True, text=True, timeout=600, check=False
+    )
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
 
 
@@ -94,8 +125,13 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 
     # the same two-process run, killed (SIGKILL, every process) after its first checkpoint, then resumed
     command = train_command(configs[1], store, outs["killed"], 2)
-    job = subprocess.Popen(command, env=environment(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                           start_new_session=True)
+    job = subprocess.Popen(
+        command,
+        env=environment(),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
     deadline = time.monotonic() + 300
     while not (outs["killed"] / "latest").is_file() and job.poll() is None and time.monotonic() < deadline:
         time.sleep(0.05)
@@ -148,7 +184,9 @@ def test_only_the_main_process_writes(runs: dict[str, Path]) -> None:
 
 def test_a_killed_run_resumes_the_sample_sequence_where_it_stopped(runs: dict[str, Path]) -> None:
     killed, two = runs["killed"], runs["two"]
-    assert records(killed / SAMPLES_FILE) == records(two / SAMPLES_FILE)  # steps after the checkpoint were redone
+    assert records(killed / SAMPLES_FILE) == records(
+        two / SAMPLES_FILE
+    )  # steps after the checkpoint were redone
     assert [r["step"] for r in records(killed / LOG_FILE)] == list(range(1, STEPS + 1))
     for key, value in final_weights(killed).items():
         torch.testing.assert_close(value, final_weights(two)[key], rtol=1e-4, atol=1e-5, msg=key)

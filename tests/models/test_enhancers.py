@@ -15,8 +15,14 @@ from setdiff_bench.models.setdiff.inference import enhance_packet
 from setdiff_bench.models.setdiff.model import SetDiffModel
 from tests.models.setdiff_fixtures import make_packet, tiny_config
 
-DIFIX = {"method": "difix", "prediction": "epsilon", "use_geometry": False, "max_references": 1,
-         "targets_per_set": 1, "skip_connections": True}
+DIFIX = {
+    "method": "difix",
+    "prediction": "epsilon",
+    "use_geometry": False,
+    "max_references": 1,
+    "targets_per_set": 1,
+    "skip_connections": True,
+}
 
 
 def saved(tmp_path: Path, **overrides: object) -> tuple[Path, SetDiffModel]:
@@ -42,7 +48,10 @@ def test_setdiff_enhancer(tmp_path: Path) -> None:
     assert output.shape == (3, 3, 32, 32) and output.dtype == torch.float32
     assert torch.equal(output, enhance_packet(model, packet))
     assert enhancer.options["guidance_scale"] == 2.0
-    assert create_enhancer("setdiff", checkpoint=str(folder), guidance_scale=1.5).options["guidance_scale"] == 1.5
+    assert (
+        create_enhancer("setdiff", checkpoint=str(folder), guidance_scale=1.5).options["guidance_scale"]
+        == 1.5
+    )
 
 
 def test_difix_enhancer(tmp_path: Path) -> None:
@@ -56,11 +65,12 @@ def test_difix_enhancer(tmp_path: Path) -> None:
 
     choice = nearest_pose_assignments(packet.references.cameras, packet.targets.cameras)
     for target, reference in enumerate(choice):
-        single = dataclasses.replace(packet, references=packet.references.subset([reference]),
-                                     targets=packet.targets.subset([target]))
-        assert torch.allclose(output[target:target + 1], enhance_packet(model, single), atol=1e-5)
+        single = dataclasses.replace(
+            packet, references=packet.references.subset([reference]), targets=packet.targets.subset([target])
+        )
+        assert torch.allclose(output[target : target + 1], enhance_packet(model, single), atol=1e-5)
     eq2 = create_enhancer("difix", checkpoint=str(folder), device="cpu", references="eq2")
-    assert torch.equal(eq2.enhance(packet), enhance_packet(model, packet))   # the packet's first reference
+    assert torch.equal(eq2.enhance(packet), enhance_packet(model, packet))  # the packet's first reference
 
 
 def test_method_and_checkpoint_must_match(tmp_path: Path) -> None:

@@ -29,8 +29,15 @@ from tests.models.test_store_training import write_store
 
 def residual_model(**overrides: object) -> SetDiffModel:
     torch.manual_seed(0)
-    config = model_config_from_dict({"preset": "tiny", "output_mode": "residual", "skip_connections": True,
-                                     "vae_decoder": "full", **overrides})
+    config = model_config_from_dict(
+        {
+            "preset": "tiny",
+            "output_mode": "residual",
+            "skip_connections": True,
+            "vae_decoder": "full",
+            **overrides,
+        }
+    )
     return SetDiffModel(config).eval()
 
 
@@ -54,8 +61,9 @@ def test_direct_model_does_not_return_the_render() -> None:
 def test_residual_model_learns_a_correction() -> None:
     """The zero-initialised heads still receive gradients, so the output can move off the render."""
     model = residual_model().train()
-    drawn = training_set(make_sample(2, 2), random.Random(0), min_views=4, max_views=4, use_geometry=True,
-                         cmap_clip=10.0)
+    drawn = training_set(
+        make_sample(2, 2), random.Random(0), min_views=4, max_views=4, use_geometry=True, cmap_clip=10.0
+    )
     prediction = model(drawn.batch, geometry_keep=torch.ones(1), decode_index=torch.tensor([0, 1]))
     (prediction.decoded - drawn.target_gt[0]).square().mean().backward()
     assert float(model.unet.conv_out.weight.grad.abs().sum()) > 0
@@ -64,10 +72,18 @@ def test_residual_model_learns_a_correction() -> None:
 def test_identity_samples_feed_ground_truth_as_input() -> None:
     sample = make_sample(2, 3)
     rng_state = 7
-    always = training_set(sample, random.Random(rng_state), min_views=5, max_views=5, use_geometry=True,
-                          cmap_clip=10.0, identity_probability=0.999999)
-    never = training_set(sample, random.Random(rng_state), min_views=5, max_views=5, use_geometry=True,
-                         cmap_clip=10.0)
+    always = training_set(
+        sample,
+        random.Random(rng_state),
+        min_views=5,
+        max_views=5,
+        use_geometry=True,
+        cmap_clip=10.0,
+        identity_probability=0.999999,
+    )
+    never = training_set(
+        sample, random.Random(rng_state), min_views=5, max_views=5, use_geometry=True, cmap_clip=10.0
+    )
     n = always.batch.num_references
     assert torch.equal(always.batch.images[0, n:], always.target_gt[0])
     assert torch.equal(always.batch.images[0, :n], never.batch.images[0, :n])
@@ -127,8 +143,9 @@ def test_surface_points_divide_by_alpha_where_valid() -> None:
     cmaps = torch.cat([packet.references.cmaps, packet.targets.cmaps])
     valid = alphas > 0.5
     assert torch.equal(points[:, 3:] > 0, valid)
-    torch.testing.assert_close(points[:, :3][valid.expand(-1, 3, -1, -1)],
-                               (cmaps / alphas)[valid.expand(-1, 3, -1, -1)])
+    torch.testing.assert_close(
+        points[:, :3][valid.expand(-1, 3, -1, -1)], (cmaps / alphas)[valid.expand(-1, 3, -1, -1)]
+    )
 
 
 def test_train_autoencoder_and_build_a_model_on_it(tmp_path: Path) -> None:
@@ -136,16 +153,40 @@ def test_train_autoencoder_and_build_a_model_on_it(tmp_path: Path) -> None:
     VAE has its architecture, scale and weights, and a frozen encoder."""
     write_store(tmp_path / "packets")
     out = tmp_path / "ae"
-    assert main(["train", "autoencoder", "--packets", str(tmp_path / "packets"), "--out", str(out), "--steps", "3",
-                 "--batch-size", "2", "--crop", "16", "--latent-channels", "6", "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "autoencoder",
+                "--packets",
+                str(tmp_path / "packets"),
+                "--out",
+                str(out),
+                "--steps",
+                "3",
+                "--batch-size",
+                "2",
+                "--crop",
+                "16",
+                "--latent-channels",
+                "6",
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     assert {p.name for p in out.iterdir()} == {CONFIG_FILE, WEIGHTS_FILE, MANIFEST_FILE}
     manifest = json.loads((out / MANIFEST_FILE).read_text())
-    assert manifest["settings"]["steps"] == 3 and manifest["train_frames"] == 6 and manifest["test_frames"] == 6
+    assert (
+        manifest["settings"]["steps"] == 3 and manifest["train_frames"] == 6 and manifest["test_frames"] == 6
+    )
     assert manifest["train_scenes"] == ["s0"] and manifest["test_scenes"] == ["s1"]
     assert len(manifest["data_sha256"]) == 64 and math.isfinite(manifest["reconstruction_test"]["psnr"])
     config = read_autoencoder_config(out)
     assert config["latent_channels"] == 6 and config["scaling_factor"] == manifest["scaling_factor"] > 0
-    model = SetDiffModel(model_config_from_dict({"preset": "tiny", "autoencoder": str(out), "vae_decoder": "full"}))
+    model = SetDiffModel(
+        model_config_from_dict({"preset": "tiny", "autoencoder": str(out), "vae_decoder": "full"})
+    )
     assert model.config.unet["in_channels"] == 6 and model.codec.scaling_factor == config["scaling_factor"]
     from safetensors.torch import load_file
 
@@ -159,8 +200,18 @@ def test_missing_autoencoder_is_one_clear_error(tmp_path: Path, capsys: pytest.C
     config = tmp_path / "c.toml"
     config.write_text('[model]\npreset = "tiny"\nautoencoder = "no_such_autoencoder"\n')
     write_store(tmp_path / "packets")
-    code = main(["train", "--config", str(config), "--packets", str(tmp_path / "packets"), "--out",
-                 str(tmp_path / "run"), "--no-progress"])
+    code = main(
+        [
+            "train",
+            "--config",
+            str(config),
+            "--packets",
+            str(tmp_path / "packets"),
+            "--out",
+            str(tmp_path / "run"),
+            "--no-progress",
+        ]
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "no_such_autoencoder" in err[0] and "autoencoder" in err[0]
     assert not (tmp_path / "run").exists()

@@ -13,7 +13,10 @@ from setdiff_bench.models.setdiff.geometry_encoder import geometry_input
 
 
 def cameras(offset: float) -> list[Camera]:
-    return [Camera(intrinsics_matrix(20, 20, 8, 8), look_at([offset + i, 0, 0], [i, 10, 0]), 16, 16) for i in range(2)]
+    return [
+        Camera(intrinsics_matrix(20, 20, 8, 8), look_at([offset + i, 0, 0], [i, 10, 0]), 16, 16)
+        for i in range(2)
+    ]
 
 
 def test_cmap_only_ignores_poses_and_pose_only_ignores_cmaps() -> None:

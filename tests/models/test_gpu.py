@@ -32,6 +32,8 @@ def test_bf16_inference_matches_float32(tmp_path: Path) -> None:
 
 def test_bf16_training_step(tmp_path: Path) -> None:
     config = tiny_config(skip_connections=True)
-    config = dataclasses.replace(config, train=dataclasses.replace(config.train, steps=2, mixed_precision="bf16"))
+    config = dataclasses.replace(
+        config, train=dataclasses.replace(config.train, steps=2, mixed_precision="bf16")
+    )
     result = train(config, [make_sample(2, 2)], tmp_path, cpu=False, progress=False)
     assert result.step == 2 and all(torch.isfinite(torch.tensor(list(result.losses.values()))))

@@ -47,7 +47,9 @@ def model() -> SetDiffModel:
 def test_alpha_bar_matches_reference_table() -> None:
     config = model_config_from_dict({"preset": "tiny"})
     assert config.alpha_bar == pytest.approx(ALPHA_BAR_199, abs=1e-7)
-    assert model_config_from_dict({"preset": "tiny", "timestep": 999}).alpha_bar == pytest.approx(0.0046601, abs=1e-7)
+    assert model_config_from_dict({"preset": "tiny", "timestep": 999}).alpha_bar == pytest.approx(
+        0.0046601, abs=1e-7
+    )
 
 
 @pytest.mark.parametrize("prediction", ["v_prediction", "epsilon"])
@@ -86,7 +88,9 @@ def test_untrained_geometry_encoder_adds_nothing() -> None:
     batch = SetBatch(images[None], geometry[None], n)
     without = SetBatch(images[None], None, n)
     assert torch.equal(model.enhance(batch, guidance_scale=1.0), model.enhance(without))
-    torch.testing.assert_close(model.enhance(batch, guidance_scale=2.0), model.enhance(without), atol=1e-5, rtol=0)
+    torch.testing.assert_close(
+        model.enhance(batch, guidance_scale=2.0), model.enhance(without), atol=1e-5, rtol=0
+    )
 
 
 def test_permuting_views_permutes_outputs(model: SetDiffModel) -> None:
@@ -123,7 +127,9 @@ def test_geometry_dropout_removes_geometry(model: SetDiffModel) -> None:
     batch = SetBatch(images[None], geometry[None], n)
     with torch.no_grad():
         dropped = model(batch, geometry_keep=torch.zeros(1)).target_x0
-        dropped_other = model(SetBatch(images[None], other_geometry[None], n), geometry_keep=torch.zeros(1)).target_x0
+        dropped_other = model(
+            SetBatch(images[None], other_geometry[None], n), geometry_keep=torch.zeros(1)
+        ).target_x0
         no_geometry = model(SetBatch(images[None], None, n)).target_x0
         kept = model(batch, geometry_keep=torch.ones(1)).target_x0
     assert torch.equal(dropped, no_geometry)
@@ -144,7 +150,9 @@ def test_guidance_scale(model: SetDiffModel) -> None:
     torch.testing.assert_close(x0_guided, x0_uncond + 2.0 * (x0_cond - x0_uncond), atol=1e-5, rtol=0)
     assert (x0_guided - x0_cond).abs().max() > 1e-4
     batch = SetBatch(images[None], geometry[None], n)
-    assert (model.enhance(batch, guidance_scale=2.0) - model.enhance(batch, guidance_scale=1.0)).abs().max() > 1e-4
+    assert (
+        model.enhance(batch, guidance_scale=2.0) - model.enhance(batch, guidance_scale=1.0)
+    ).abs().max() > 1e-4
 
 
 def test_batched_and_sequential_cfg_agree(model: SetDiffModel) -> None:
@@ -166,8 +174,14 @@ def test_sets_in_a_batch_do_not_mix(model: SetDiffModel) -> None:
 
 
 def test_difix_pairs_first_reference_with_each_target() -> None:
-    model = tiny_model(method="difix", prediction="epsilon", use_geometry=False, max_references=1, targets_per_set=1,
-                       skip_connections=True)
+    model = tiny_model(
+        method="difix",
+        prediction="epsilon",
+        use_geometry=False,
+        max_references=1,
+        targets_per_set=1,
+        skip_connections=True,
+    )
     packet = make_packet(3, 3)
     output = enhance_packet(model, packet)
     for target in range(3):
@@ -217,7 +231,9 @@ def test_inference_set_size_overrides_equal_explicit_subsets(model: SetDiffModel
         explicit = make_packet(3, 4)
         explicit.references = packet.references.subset([0])
         explicit.targets = packet.targets.subset(chunk)
-        torch.testing.assert_close(limited[chunk], enhance_packet(model, renormalize(explicit)), atol=1e-5, rtol=0)
+        torch.testing.assert_close(
+            limited[chunk], enhance_packet(model, renormalize(explicit)), atol=1e-5, rtol=0
+        )
     assert (limited - enhance_packet(model, packet)).abs().max() > 1e-5
 
 
@@ -252,4 +268,6 @@ def test_inference_subsets_satisfy_the_training_normalisation() -> None:
         original = packet.targets.cameras[chunk[0]]
         before = packet.targets.cmaps[chunk[0]].double().numpy().reshape(3, -1)
         valid = np.abs(camera_points(original, before)[2]) > 0.1
-        np.testing.assert_allclose(project(first, cmap)[:, valid], project(original, before)[:, valid], atol=1e-3)
+        np.testing.assert_allclose(
+            project(first, cmap)[:, valid], project(original, before)[:, valid], atol=1e-3
+        )

@@ -40,7 +40,10 @@ def test_every_shipped_model_matches_its_manifest_hashes() -> None:
         files = model.manifest["files"]
         assert set(files) == {p.name for p in model.folder.iterdir() if p.is_file()} - {MANIFEST_FILE}
         for name, expected in files.items():  # hashed here with hashlib, independently of verify()
-            assert hashlib.sha256((model.folder / name).read_bytes()).hexdigest() == expected, (model.name, name)
+            assert hashlib.sha256((model.folder / name).read_bytes()).hexdigest() == expected, (
+                model.name,
+                name,
+            )
         assert verify(model) == []
         assert model.size_bytes() <= 15e6
 
@@ -86,22 +89,42 @@ def _training_run(folder: Path, steps: int, finished: int) -> Path:
     model, config = perturbed_model()
     for step in range(1, finished + 1):
         mark_latest(folder, save_checkpoint(step_folder(folder, step), model, config, step=step), keep=1)
-    data = {"split": "train", "packets": 1, "views": 2, "scenes": ["scene_0000_01"], "synthetic_seeds": [[0, 1]],
-            "data_sha256": "0" * 64}
-    record_training_session(folder, command="setdiff-bench train --config tiny_setdiff", method="setdiff",
-                            config_name="tiny_setdiff", seed=0, steps=steps, start_step=0, end_step=finished,
-                            wall_seconds=1.0, data=data, validation={"psnr": 20.0})
+    data = {
+        "split": "train",
+        "packets": 1,
+        "views": 2,
+        "scenes": ["scene_0000_01"],
+        "synthetic_seeds": [[0, 1]],
+        "data_sha256": "0" * 64,
+    }
+    record_training_session(
+        folder,
+        command="setdiff-bench train --config tiny_setdiff",
+        method="setdiff",
+        config_name="tiny_setdiff",
+        seed=0,
+        steps=steps,
+        start_step=0,
+        end_step=finished,
+        wall_seconds=1.0,
+        data=data,
+        validation={"psnr": 20.0},
+    )
     return folder
 
 
 def test_export_then_verify_and_load(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     run = _training_run(tmp_path / "run", steps=2, finished=2)
-    assert main(["weights", "export", str(run), "--name", "my_setdiff", "--to", str(tmp_path / "shipped")]) == 0
+    assert (
+        main(["weights", "export", str(run), "--name", "my_setdiff", "--to", str(tmp_path / "shipped")]) == 0
+    )
     folder = tmp_path / "shipped" / "my_setdiff"
     assert sorted(p.name for p in folder.iterdir()) == ["config.json", MANIFEST_FILE, "model.safetensors"]
     exported = packaged_models(tmp_path / "shipped")["my_setdiff"]
     assert exported.kind == "enhancer" and verify(exported) == []
-    assert exported.manifest["export"]["checkpoint_step"] == 2 and exported.manifest["validation"] == {"psnr": 20.0}
+    assert exported.manifest["export"]["checkpoint_step"] == 2 and exported.manifest["validation"] == {
+        "psnr": 20.0
+    }
     packet = make_packet(1, 2)
     original, _ = load_model(run)
     loaded, _ = load_model(folder)
@@ -142,6 +165,19 @@ def test_training_manifest_refuses_other_data(tmp_path: Path) -> None:
     manifest = json.loads((run / MANIFEST_FILE).read_text())
     other = {**manifest["data"], "data_sha256": "1" * 64}
     with pytest.raises(CheckpointError, match="other data"):
-        record_training_session(run, command="c", method="setdiff", config_name="c", seed=0, steps=2, start_step=2,
-                                end_step=2, wall_seconds=0.0, data=other, validation=None)
-    assert pd.Series([s["end_step"] for s in json.loads((run / MANIFEST_FILE).read_text())["sessions"]]).tolist() == [2]
+        record_training_session(
+            run,
+            command="c",
+            method="setdiff",
+            config_name="c",
+            seed=0,
+            steps=2,
+            start_step=2,
+            end_step=2,
+            wall_seconds=0.0,
+            data=other,
+            validation=None,
+        )
+    assert pd.Series(
+        [s["end_step"] for s in json.loads((run / MANIFEST_FILE).read_text())["sessions"]]
+    ).tolist() == [2]

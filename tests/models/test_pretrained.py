@@ -24,7 +24,9 @@ def test_loads_unet_vae_and_learned_null_text(tmp_path: Path) -> None:
         if name.startswith("encoder.") or name.startswith("quant_conv"):
             assert torch.equal(vae_state[name], tensor), name
     # LoRA wraps decoder layers: the base weights are kept as base_layer
-    assert torch.equal(vae_state["decoder.conv_in.base_layer.weight"], vae.state_dict()["decoder.conv_in.weight"])
+    assert torch.equal(
+        vae_state["decoder.conv_in.base_layer.weight"], vae.state_dict()["decoder.conv_in.weight"]
+    )
     assert model.text_embedding.requires_grad and torch.count_nonzero(model.text_embedding) == 0
 
 
@@ -35,8 +37,9 @@ def test_encodes_the_fixed_prompt_once(tmp_path: Path) -> None:
 
     tokenizer = AutoTokenizer.from_pretrained(tmp_path / "tokenizer", local_files_only=True)
     encoder = CLIPTextModel.from_pretrained(tmp_path / "text_encoder", local_files_only=True)
-    ids = tokenizer("remove degradation", padding="max_length", max_length=77, truncation=True,
-                    return_tensors="pt").input_ids
+    ids = tokenizer(
+        "remove degradation", padding="max_length", max_length=77, truncation=True, return_tensors="pt"
+    ).input_ids
     with torch.no_grad():
         expected = encoder(ids).last_hidden_state
     assert not model.text_embedding.requires_grad
@@ -48,8 +51,11 @@ def test_missing_parts_and_mismatches(tmp_path: Path) -> None:
         SetDiffModel(model_config_from_dict({"preset": "tiny", "pretrained": str(tmp_path)}))
     write_diffusers_folder(tmp_path, text=False)
     with pytest.raises(WeightsError, match="block_out_channels"):
-        SetDiffModel(model_config_from_dict({"preset": "tiny", "pretrained": str(tmp_path),
-                                             "unet": {"block_out_channels": [32, 96]}}))
+        SetDiffModel(
+            model_config_from_dict(
+                {"preset": "tiny", "pretrained": str(tmp_path), "unet": {"block_out_channels": [32, 96]}}
+            )
+        )
     schedule = {**SD_TURBO_SCHEDULER_JSON, "beta_end": 0.02}
     (tmp_path / "scheduler" / "scheduler_config.json").write_text(json.dumps(schedule))
     with pytest.raises(WeightsError, match="beta_end"):

@@ -30,9 +30,13 @@ def test_sd_turbo_architecture_runs_one_step() -> None:
         assert base_vae == SD_VAE_PARAMETERS
         # 16 transformer blocks → 16 self-attentions mixed; heads 5/10/20 of dim 64 (the head-dim quirk)
         assert len(model.mixed_attention) == 16
-        head_dims = {m.to_q.out_features // m.heads for n, m in model.unet.named_modules() if n.endswith("attn1")}
+        head_dims = {
+            m.to_q.out_features // m.heads for n, m in model.unet.named_modules() if n.endswith("attn1")
+        }
         assert head_dims == {64}
-        level_heads = {n.split(".attentions")[0]: m.heads for n, m in model.unet.named_modules() if n.endswith("attn1")}
+        level_heads = {
+            n.split(".attentions")[0]: m.heads for n, m in model.unet.named_modules() if n.endswith("attn1")
+        }
         assert level_heads["down_blocks.0"] == 5 and level_heads["down_blocks.1"] == 10
         assert level_heads["down_blocks.2"] == 20 and level_heads["mid_block"] == 20
         assert model.text_embedding.shape == (1, 77, 1024)

@@ -32,9 +32,9 @@ def test_views_attend_jointly(sets: int, views: int) -> None:
         mixed = SetSelfAttnProcessor()(attn, tokens, num_views=views)
     with torch.no_grad():
         for s in range(sets):
-            joined = torch.cat(list(tokens[s * views:(s + 1) * views]), dim=0)[None]  # (1, V·L, C)
+            joined = torch.cat(list(tokens[s * views : (s + 1) * views]), dim=0)[None]  # (1, V·L, C)
             expected = AttnProcessor2_0()(attn, joined)[0].reshape(views, 6, -1)
-            torch.testing.assert_close(mixed[s * views:(s + 1) * views], expected, atol=1e-5, rtol=1e-5)
+            torch.testing.assert_close(mixed[s * views : (s + 1) * views], expected, atol=1e-5, rtol=1e-5)
 
 
 def test_needs_the_set_size() -> None:
@@ -53,7 +53,9 @@ def test_through_the_attention_module() -> None:
     attn.set_processor(SetSelfAttnProcessor())
     tokens = torch.randn(4, 5, 32)
     with torch.no_grad():
-        torch.testing.assert_close(attn(tokens, **set_kwargs(2)), SetSelfAttnProcessor()(attn, tokens, num_views=2))
+        torch.testing.assert_close(
+            attn(tokens, **set_kwargs(2)), SetSelfAttnProcessor()(attn, tokens, num_views=2)
+        )
 
 
 def test_install_replaces_only_self_attention() -> None:

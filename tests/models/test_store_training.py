@@ -37,23 +37,45 @@ checkpoint_every = 2
 def contents(views: ViewSet, gt: torch.Tensor | None = None) -> list[ViewContent]:
     items = []
     for i, camera in enumerate(views.cameras):
-        items.append(ViewContent(
-            frame=views.names[i], sensor="front", traversal="lane0", timestamp_us=i, camera=camera, camera_world=camera,
-            image=views.images[i].permute(1, 2, 0).numpy(), cmap=views.cmaps[i].permute(1, 2, 0).numpy(),
-            alpha=views.alphas[i, 0].numpy(),
-            gt=None if gt is None else gt[i].permute(1, 2, 0).numpy(),
-            mask=None if gt is None else np.ones(gt.shape[-2:], dtype=bool),
-            overlap_score=None if gt is not None else 1.0 - 0.1 * i))
+        items.append(
+            ViewContent(
+                frame=views.names[i],
+                sensor="front",
+                traversal="lane0",
+                timestamp_us=i,
+                camera=camera,
+                camera_world=camera,
+                image=views.images[i].permute(1, 2, 0).numpy(),
+                cmap=views.cmaps[i].permute(1, 2, 0).numpy(),
+                alpha=views.alphas[i, 0].numpy(),
+                gt=None if gt is None else gt[i].permute(1, 2, 0).numpy(),
+                mask=None if gt is None else np.ones(gt.shape[-2:], dtype=bool),
+                overlap_score=None if gt is not None else 1.0 - 0.1 * i,
+            )
+        )
     return items
 
 
 def write_store(root: Path) -> None:
     for split, seed in (("train", 0), ("test", 1)):
         sample = make_sample(3, 3, seed=seed)
-        header = PacketHeader(packet_id=f"{split}-0", dataset="test", protocol="unit", group="g", split=split,
-                              scene=f"s{seed}", fit_key="fit", scale=1.0, recipe="r")
-        write_packet(root, header, contents(sample.packet.references),
-                     contents(sample.packet.targets, sample.target_gt))
+        header = PacketHeader(
+            packet_id=f"{split}-0",
+            dataset="test",
+            protocol="unit",
+            group="g",
+            split=split,
+            scene=f"s{seed}",
+            fit_key="fit",
+            scale=1.0,
+            recipe="r",
+        )
+        write_packet(
+            root,
+            header,
+            contents(sample.packet.references),
+            contents(sample.packet.targets, sample.target_gt),
+        )
     merge_index(root)
 
 
@@ -62,12 +84,28 @@ def test_train_on_a_packet_store_and_enhance(tmp_path: Path) -> None:
     config = tmp_path / "tiny.toml"
     config.write_text(CONFIG)
     out = tmp_path / "run"
-    assert main(["train", "--config", str(config), "--packets", str(tmp_path / "packets"), "--out", str(out),
-                 "--cpu", "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "--config",
+                str(config),
+                "--packets",
+                str(tmp_path / "packets"),
+                "--out",
+                str(out),
+                "--cpu",
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     assert resolve_checkpoint(out).name == "step-00000002"
     assert (out / "validation.jsonl").read_text().count("psnr") == 1
     store = PacketStore(tmp_path / "packets")
-    enhanced = create_enhancer("setdiff", checkpoint=str(out), device="cpu").enhance(store.load_packet("test-0"))
+    enhanced = create_enhancer("setdiff", checkpoint=str(out), device="cpu").enhance(
+        store.load_packet("test-0")
+    )
     assert enhanced.shape == (3, 3, 32, 32) and float(enhanced.min()) >= 0.0 and float(enhanced.max()) <= 1.0
 
 
@@ -80,8 +118,9 @@ def test_training_sets_from_the_store_keep_the_packet_invariant(tmp_path: Path) 
     sample = dataset[0]
     reordered = 0
     for seed in range(6):
-        drawn = training_set(sample, random.Random(seed), min_views=3, max_views=4, use_geometry=True,
-                             cmap_clip=0.0)
+        drawn = training_set(
+            sample, random.Random(seed), min_views=3, max_views=4, use_geometry=True, cmap_clip=0.0
+        )
         n = drawn.batch.num_references
         assert drawn.batch.num_views == len(sample.packet.references) + len(sample.packet.targets)
         reordered += not torch.equal(drawn.batch.images[0, n], sample.packet.targets.images[0])
@@ -89,7 +128,9 @@ def test_training_sets_from_the_store_keep_the_packet_invariant(tmp_path: Path) 
         first_target = geometry[n]
         assert float(first_target[3:6].abs().max()) < 1e-6  # Plücker moment o × d = 0: camera at the origin
         height, width = first_target.shape[-2:]
-        centre = first_target[6:9, height // 2 - 1: height // 2 + 1, width // 2 - 1: width // 2 + 1].mean(dim=(1, 2))
+        centre = first_target[6:9, height // 2 - 1 : height // 2 + 1, width // 2 - 1 : width // 2 + 1].mean(
+            dim=(1, 2)
+        )
         assert float(centre[2]) > 0.99  # its centre rays look down its own +z
         # unit extent around the first target at the origin: every centre o has |o| <= 1, so |o × d| <= 1
         assert float(geometry[:, 3:6].norm(dim=1).max()) <= 1.0 + 1e-5

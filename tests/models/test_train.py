@@ -30,10 +30,19 @@ def with_train(config: Config, **changes: object) -> Config:
     return dataclasses.replace(config, train=dataclasses.replace(config.train, **changes))
 
 
-def overfit(tmp_path: Path, refs: int, targets: int, steps: int, decode: int = 1) -> tuple[torch.Tensor, torch.Tensor]:
+def overfit(
+    tmp_path: Path, refs: int, targets: int, steps: int, decode: int = 1
+) -> tuple[torch.Tensor, torch.Tensor]:
     """PSNR of the targets before and after training ``steps`` steps on one sample."""
-    config = with_train(tiny_config(skip_connections=True, vae_decoder="full"), steps=steps, min_views=12,
-                        max_views=12, log_every=steps, checkpoint_every=steps, decode_targets=decode)
+    config = with_train(
+        tiny_config(skip_connections=True, vae_decoder="full"),
+        steps=steps,
+        min_views=12,
+        max_views=12,
+        log_every=steps,
+        checkpoint_every=steps,
+        decode_targets=decode,
+    )
     sample = make_sample(refs, targets)
     torch.manual_seed(config.train.seed)
     initial = SetDiffModel(config.model).eval()
@@ -82,7 +91,9 @@ def test_resume_refuses_another_configuration(tmp_path: Path) -> None:
 
 def test_validation_and_logs(tmp_path: Path) -> None:
     config = with_train(tiny_config(), steps=2, validate_every=1, validation_packets=1)
-    result = train(config, [make_sample(2, 2)], tmp_path, validation=[make_sample(1, 2, seed=9)], progress=False)
+    result = train(
+        config, [make_sample(2, 2)], tmp_path, validation=[make_sample(1, 2, seed=9)], progress=False
+    )
     assert [r["step"] for r in result.validation] == [1, 2]
     assert {"psnr", "ssim"} <= set(result.validation[-1])
     lines = (tmp_path / "validation.jsonl").read_text().splitlines()
@@ -92,6 +103,7 @@ def test_validation_and_logs(tmp_path: Path) -> None:
 
 def test_lpips_term_is_never_dropped_silently(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """With an LPIPS weight the trainer needs LPIPS weights; missing ones raise WeightsError."""
+
     def missing(*args: object, **kwargs: object) -> None:
         raise WeightsError("LPIPS trunk weights not found", "vgg16.pth")
 
@@ -105,8 +117,17 @@ def test_lpips_term_is_never_dropped_silently(tmp_path: Path, monkeypatch: pytes
 
 
 def test_difix_trains_on_pairs(tmp_path: Path) -> None:
-    config = with_train(tiny_config(method="difix", prediction="epsilon", use_geometry=False, max_references=1,
-                                    targets_per_set=1, skip_connections=True), steps=2)
+    config = with_train(
+        tiny_config(
+            method="difix",
+            prediction="epsilon",
+            use_geometry=False,
+            max_references=1,
+            targets_per_set=1,
+            skip_connections=True,
+        ),
+        steps=2,
+    )
     result = train(config, [make_sample(3, 2)], tmp_path, progress=False)
     model, saved = load_model(result.checkpoint, method="difix")
     assert saved.model.method == "difix"
@@ -116,8 +137,9 @@ def test_difix_trains_on_pairs(tmp_path: Path) -> None:
 def test_difix_pairs_use_best_reference() -> None:
     sample = make_sample(3, 2)
     # target 0's camera is closest to reference 0 (same yaw and position offsets, see the fixtures)
-    drawn = training_set(sample, random.Random(0), min_views=8, max_views=8, use_geometry=False, cmap_clip=0.0,
-                         pairs=True)
+    drawn = training_set(
+        sample, random.Random(0), min_views=8, max_views=8, use_geometry=False, cmap_clip=0.0, pairs=True
+    )
     assert drawn.batch.num_references == 1 and drawn.batch.num_targets == 1
     references = sample.packet.references.images
     chosen = drawn.batch.images[0, 0]
@@ -127,11 +149,18 @@ def test_difix_pairs_use_best_reference() -> None:
 
 
 @settings(max_examples=60, deadline=None)
-@given(refs=st.integers(0, 12), targets=st.integers(1, 12), low=st.integers(2, 10), extra=st.integers(0, 6),
-       seed=st.integers(0, 10_000))
+@given(
+    refs=st.integers(0, 12),
+    targets=st.integers(1, 12),
+    low=st.integers(2, 10),
+    extra=st.integers(0, 6),
+    seed=st.integers(0, 10_000),
+)
 def test_choose_views(refs: int, targets: int, low: int, extra: int, seed: int) -> None:
     high = low + extra
-    reference_ids, target_ids = choose_views(refs, targets, random.Random(seed), min_views=low, max_views=high)
+    reference_ids, target_ids = choose_views(
+        refs, targets, random.Random(seed), min_views=low, max_views=high
+    )
     size = len(reference_ids) + len(target_ids)
     assert size <= min(high, refs + targets)
     assert size >= min(low, refs + targets) or len(target_ids) == targets

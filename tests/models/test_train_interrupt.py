@@ -53,8 +53,20 @@ def test_interrupted_training_checkpoints_and_resumes(tmp_path: Path) -> None:
     write_store(tmp_path / "packets")
     (tmp_path / "tiny.toml").write_text(CONFIG)
     out = tmp_path / "run"
-    command = [sys.executable, "-m", "setdiff_bench", "train", "--config", str(tmp_path / "tiny.toml"),
-               "--packets", str(tmp_path / "packets"), "--out", str(out), "--cpu", "--no-progress"]
+    command = [
+        sys.executable,
+        "-m",
+        "setdiff_bench",
+        "train",
+        "--config",
+        str(tmp_path / "tiny.toml"),
+        "--packets",
+        str(tmp_path / "packets"),
+        "--out",
+        str(out),
+        "--cpu",
+        "--no-progress",
+    ]
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     process = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     interval = checkpoint_interval(500, STEPS)

@@ -33,8 +33,12 @@ STEPS = 5
 HOLDOUT = 2
 STEP_M = 1.5
 LANE_M = 3.5
-TRAVERSALS = (("lane0", "straight", 0), ("lane1", "straight", 1), ("lane2", "straight", 2),
-              ("turn", "lane_change", None))
+TRAVERSALS = (
+    ("lane0", "straight", 0),
+    ("lane1", "straight", 1),
+    ("lane2", "straight", 2),
+    ("turn", "lane_change", None),
+)
 CAMERAS = (("front", 0.0), ("front_left", 45.0), ("front_right", -45.0))
 DYNAMIC_INDEX = 3  # frames at this timestep carry a masked-out rectangle
 
@@ -44,7 +48,7 @@ class StreetScene:
     folder: Path
     truth: GaussianModel
     fit: GaussianModel
-    cameras: dict[str, Camera]   # frame name → camera (world frame)
+    cameras: dict[str, Camera]  # frame name → camera (world frame)
     train: list[str]
     test: list[str]
 
@@ -83,17 +87,30 @@ def world_gaussians(rng: np.random.Generator) -> GaussianModel:
     gx, gy = np.meshgrid(np.arange(-4.0, 26.0, 0.6), np.arange(-5.0, 12.0, 0.6), indexing="ij")
     ground = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], 1)
     parts.append(ground)
-    colors.append(np.stack([0.3 + 0.2 * np.sin(ground[:, 0]), 0.3 + 0.1 * np.cos(ground[:, 1]),
-                            np.full(len(ground), 0.35)], 1))
+    colors.append(
+        np.stack(
+            [0.3 + 0.2 * np.sin(ground[:, 0]), 0.3 + 0.1 * np.cos(ground[:, 1]), np.full(len(ground), 0.35)],
+            1,
+        )
+    )
     for y_wall in (-5.0, 12.0):
         wx, wz = np.meshgrid(np.arange(-4.0, 26.0, 0.6), np.arange(0.3, 7.0, 0.6), indexing="ij")
         wall = np.stack([wx.ravel(), np.full(wx.size, y_wall), wz.ravel()], 1)
         parts.append(wall)
-        colors.append(np.stack([0.5 + 0.4 * np.sin(wall[:, 0] * 0.7), 0.4 + 0.3 * np.sin(wall[:, 2]),
-                                0.6 + 0.3 * np.cos(wall[:, 0] * 0.3)], 1))
+        colors.append(
+            np.stack(
+                [
+                    0.5 + 0.4 * np.sin(wall[:, 0] * 0.7),
+                    0.4 + 0.3 * np.sin(wall[:, 2]),
+                    0.6 + 0.3 * np.cos(wall[:, 0] * 0.3),
+                ],
+                1,
+            )
+        )
     for cx, cy in ((6.0, -3.0), (12.0, 9.5), (18.0, -2.5)):
-        bx, by, bz = np.meshgrid(np.arange(-0.9, 1.0, 0.45), np.arange(-0.9, 1.0, 0.45), np.arange(0.2, 1.8, 0.45),
-                                 indexing="ij")
+        bx, by, bz = np.meshgrid(
+            np.arange(-0.9, 1.0, 0.45), np.arange(-0.9, 1.0, 0.45), np.arange(0.2, 1.8, 0.45), indexing="ij"
+        )
         box = np.stack([bx.ravel() + cx, by.ravel() + cy, bz.ravel()], 1)
         parts.append(box)
         colors.append(np.tile(rng.uniform(0.1, 0.9, 3), (len(box), 1)))
@@ -104,15 +121,22 @@ def world_gaussians(rng: np.random.Generator) -> GaussianModel:
     sh[:, 0, :] = (torch.tensor(rgb, dtype=torch.float32) - 0.5) / 0.28209479177387814
     quats = torch.zeros(n, 4)
     quats[:, 0] = 1.0
-    return GaussianModel(torch.tensor(means, dtype=torch.float32), quats, torch.full((n, 3), float(np.log(0.32))),
-                         torch.full((n,), 3.5), sh)
+    return GaussianModel(
+        torch.tensor(means, dtype=torch.float32),
+        quats,
+        torch.full((n, 3), float(np.log(0.32))),
+        torch.full((n,), 3.5),
+        sh,
+    )
 
 
 def perturbed(model: GaussianModel, rng: np.random.Generator) -> GaussianModel:
     """The "fitted" model: positions jittered by 4 cm, colours by 0.04."""
     means = model.means + torch.tensor(rng.normal(0, 0.04, tuple(model.means.shape)), dtype=torch.float32)
     sh = model.sh + torch.tensor(rng.normal(0, 0.04 / 0.282, tuple(model.sh.shape)), dtype=torch.float32)
-    return GaussianModel(means, model.quats.clone(), model.log_scales.clone(), model.opacity_logits.clone(), sh)
+    return GaussianModel(
+        means, model.quats.clone(), model.log_scales.clone(), model.opacity_logits.clone(), sh
+    )
 
 
 def write_scene(folder: Path, seed: int, *, fit_in_scene: bool = True) -> StreetScene:
@@ -132,9 +156,17 @@ def write_scene(folder: Path, seed: int, *, fit_in_scene: bool = True) -> Street
                 w2c = look_at_w2c(center, np.array([np.cos(yaw), np.sin(yaw), -0.05]))
                 cameras[name] = Camera(K, w2c, WIDTH, HEIGHT)
                 train = t_name == "lane0" and c_name == "front" and index != HOLDOUT
-                entries.append({"name": name, "traversal": t_name, "camera": c_name, "index": index,
-                                "timestamp_us": index * 100_000, "split": "train" if train else "test",
-                                "has_dynamic": index == DYNAMIC_INDEX})
+                entries.append(
+                    {
+                        "name": name,
+                        "traversal": t_name,
+                        "camera": c_name,
+                        "index": index,
+                        "timestamp_us": index * 100_000,
+                        "split": "train" if train else "test",
+                        "has_dynamic": index == DYNAMIC_INDEX,
+                    }
+                )
     names = list(cameras)
     with torch.no_grad():
         rgb = render(truth, [cameras[n] for n in names]).rgb
@@ -154,13 +186,24 @@ def write_scene(folder: Path, seed: int, *, fit_in_scene: bool = True) -> Street
     (folder / "train_set.txt").write_text("\n".join(train) + "\n")
     (folder / "test_set.txt").write_text("\n".join(test) + "\n")
     description = {
-        "format": "setdiff-synthetic/1", "scene": folder.name, "seed": seed, "preset": "test",
-        "width": WIDTH, "height": HEIGHT, "units": "metres", "lane_width_m": LANE_M, "num_lanes": 3,
+        "format": "setdiff-synthetic/1",
+        "scene": folder.name,
+        "seed": seed,
+        "preset": "test",
+        "width": WIDTH,
+        "height": HEIGHT,
+        "units": "metres",
+        "lane_width_m": LANE_M,
+        "num_lanes": 3,
         "world_up": [0, 0, 1],
         "traversals": [{"name": n, "kind": k, "lane_offset": o} for n, k, o in TRAVERSALS],
-        "cameras": [{"name": n, "yaw_deg": y, "fx": FOCAL, "fy": FOCAL, "cx": WIDTH / 2, "cy": HEIGHT / 2}
-                    for n, y in CAMERAS],
-        "frames": sorted(entries, key=lambda e: e["name"]), "dynamic_objects": 1}
+        "cameras": [
+            {"name": n, "yaw_deg": y, "fx": FOCAL, "fy": FOCAL, "cx": WIDTH / 2, "cy": HEIGHT / 2}
+            for n, y in CAMERAS
+        ],
+        "frames": sorted(entries, key=lambda e: e["name"]),
+        "dynamic_objects": 1,
+    }
     (folder / "scene.json").write_text(json.dumps(description, indent=1, sort_keys=True))
     fit = perturbed(truth, rng)
     if fit_in_scene:
@@ -172,12 +215,21 @@ def write_colmap(folder: Path, cameras: dict[str, Camera], points: np.ndarray) -
     """A binary COLMAP model (one shared PINHOLE camera, ``points`` as grey 3D points) through pycolmap."""
     rec = pycolmap.Reconstruction()
     K = next(iter(cameras.values())).K
-    rec.add_camera_with_trivial_rig(pycolmap.Camera(model="PINHOLE", width=WIDTH, height=HEIGHT,
-                                                    params=[K[0, 0], K[1, 1], K[0, 2], K[1, 2]], camera_id=1))
+    rec.add_camera_with_trivial_rig(
+        pycolmap.Camera(
+            model="PINHOLE",
+            width=WIDTH,
+            height=HEIGHT,
+            params=[K[0, 0], K[1, 1], K[0, 2], K[1, 2]],
+            camera_id=1,
+        )
+    )
     for image_id, (name, camera) in enumerate(sorted(cameras.items()), 1):
         quat = Rotation.from_matrix(camera.R).as_quat()  # x, y, z, w
-        rec.add_image_with_trivial_frame(pycolmap.Image(name=name, camera_id=1, image_id=image_id),
-                                         pycolmap.Rigid3d(pycolmap.Rotation3d(quat), camera.t))
+        rec.add_image_with_trivial_frame(
+            pycolmap.Image(name=name, camera_id=1, image_id=image_id),
+            pycolmap.Rigid3d(pycolmap.Rotation3d(quat), camera.t),
+        )
     for xyz in points:
         rec.add_point3D(np.asarray(xyz, np.float64), pycolmap.Track(), np.array([128, 128, 128], np.uint8))
     folder.mkdir(parents=True, exist_ok=True)

@@ -30,9 +30,13 @@ def test_fit_mode_trains_once_and_reuses_the_fit(street, tmp_path):
 def test_synth_tiny_preset_end_to_end(tmp_path):
     """The synthetic generator's own tiny scene (minutes on a busy CPU; the street fixture covers the same code)."""
     data, out = tmp_path / "data", tmp_path / "packets"
-    for command in (["synth", "--preset", "tiny", "--out", str(data), "--no-progress"],
-                    ["prepare", "synthetic", "--root", str(data), "--fits", str(data), "--out", str(out), "--quiet"]):
-        done = subprocess.run([sys.executable, "-m", "setdiff_bench", *command], capture_output=True, text=True)
+    for command in (
+        ["synth", "--preset", "tiny", "--out", str(data), "--no-progress"],
+        ["prepare", "synthetic", "--root", str(data), "--fits", str(data), "--out", str(out), "--quiet"],
+    ):
+        done = subprocess.run(
+            [sys.executable, "-m", "setdiff_bench", *command], capture_output=True, text=True
+        )
         assert done.returncode == 0, done.stderr
     store = PacketStore(out)
     assert store.verify() == [] and len(store) > 0

@@ -49,7 +49,9 @@ def test_every_packet_is_normalised_into_its_first_target(prepared, street):
         for camera, w in zip(cameras, world):
             rotation = w[:3, :3] @ anchor[:3, :3].T
             np.testing.assert_allclose(camera.w2c[:3, :3], rotation, atol=1e-9)
-            np.testing.assert_allclose(camera.w2c[:3, 3], scale * (w[:3, 3] - rotation @ anchor[:3, 3]), atol=1e-9)
+            np.testing.assert_allclose(
+                camera.w2c[:3, 3], scale * (w[:3, 3] - rotation @ anchor[:3, 3]), atol=1e-9
+            )
 
 
 def test_references_are_the_top_n_by_eq2(prepared, street):
@@ -76,8 +78,9 @@ def test_references_are_the_top_n_by_eq2(prepared, street):
         n = min(len(candidates), 6 if rows["split"].iloc[0] == "train" else 8)
         expected = [candidates[i] for i in order[:n]]
         assert list(rows.loc[rows["role"] == "ref", "frame"]) == expected, pid
-        np.testing.assert_allclose(rows.loc[rows["role"] == "ref", "overlap_score"],
-                                   [scores[i] for i in order[:n]], atol=1e-12)
+        np.testing.assert_allclose(
+            rows.loc[rows["role"] == "ref", "overlap_score"], [scores[i] for i in order[:n]], atol=1e-12
+        )
 
 
 def test_cmaps_and_alpha_are_the_fit_render_moved_into_the_packet_frame(prepared, street):
@@ -92,13 +95,18 @@ def test_cmaps_and_alpha_are_the_fit_render_moved_into_the_packet_frame(prepared
         all_centres = np.stack([centre(c.w2c) for c in scene.cameras.values()])
         bound, middle = pdist(all_centres).max() * 3.0, all_centres.mean(axis=0)  # cmap_clip = 3.0
         with torch.no_grad():
-            out = render(scene.fit, [scene.cameras[name] for name in names], cmap_bound=bound,
-                         cmap_center=middle.tolist())
+            out = render(
+                scene.fit,
+                [scene.cameras[name] for name in names],
+                cmap_bound=bound,
+                cmap_center=middle.tolist(),
+            )
         anchor, scale = world[n], packet.scale
         cmap = out.cmap.double().numpy()
         alpha = out.alpha.double().numpy()
-        expected = scale * (np.einsum("ij,vjhw->vihw", anchor[:3, :3], cmap)
-                            + alpha * anchor[:3, 3].reshape(1, 3, 1, 1))
+        expected = scale * (
+            np.einsum("ij,vjhw->vihw", anchor[:3, :3], cmap) + alpha * anchor[:3, 3].reshape(1, 3, 1, 1)
+        )
         stored = torch.cat([packet.references.cmaps, packet.targets.cmaps]).double().numpy()
         stored_alpha = torch.cat([packet.references.alphas, packet.targets.alphas]).double().numpy()
         np.testing.assert_allclose(stored_alpha, alpha, atol=1e-6)
@@ -116,7 +124,9 @@ def test_cmaps_and_alpha_are_the_fit_render_moved_into_the_packet_frame(prepared
             uv_world = project(camera.K, world[v], world_points)
             np.testing.assert_allclose(uv_packet, uv_world, atol=1e-3)
             pixel = np.stack([xs + 0.5, ys + 0.5], 1)
-            inside = (np.abs(world_points - middle) < bound - 1e-3).all(axis=1)  # not moved by the clipping box
+            inside = (np.abs(world_points - middle) < bound - 1e-3).all(
+                axis=1
+            )  # not moved by the clipping box
             error = np.linalg.norm(uv_packet - pixel, axis=1)[inside]
             # near its pixel: a few px off because these Gaussians are 3-10 px wide and compositing favours
             # the nearer ones on oblique surfaces; a point in another frame would land anywhere

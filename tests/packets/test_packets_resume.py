@@ -21,8 +21,11 @@ from tests.packets.packet_fixtures import tree_bytes
 
 def snapshot(root: Path) -> dict[str, tuple[int, int, bytes]]:
     """Relative path → (mtime_ns, inode, bytes) of every file."""
-    return {p.relative_to(root).as_posix(): (p.stat().st_mtime_ns, p.stat().st_ino, p.read_bytes())
-            for p in sorted(root.rglob("*")) if p.is_file()}
+    return {
+        p.relative_to(root).as_posix(): (p.stat().st_mtime_ns, p.stat().st_ino, p.read_bytes())
+        for p in sorted(root.rglob("*"))
+        if p.is_file()
+    }
 
 
 def complete_packets(out: Path) -> int:
@@ -36,13 +39,32 @@ def test_second_run_does_nothing(prepared, street):
     assert first.written == 17 and first.skipped == 0 and first.index_written
     before = snapshot(out)
     again = prepare("synthetic", root, out, fits=root, progress=False)
-    assert (again.planned, again.written, again.skipped, again.removed, again.index_written) == (17, 0, 17, 0, False)
+    assert (again.planned, again.written, again.skipped, again.removed, again.index_written) == (
+        17,
+        0,
+        17,
+        0,
+        False,
+    )
     assert snapshot(out) == before  # not a byte, inode or mtime changed
 
 
 def _cli(root: Path, out: Path, *extra: str) -> subprocess.Popen:
-    command = [sys.executable, "-m", "setdiff_bench", "prepare", "synthetic", "--root", str(root), "--fits", str(root),
-               "--out", str(out), "--quiet", *extra]
+    command = [
+        sys.executable,
+        "-m",
+        "setdiff_bench",
+        "prepare",
+        "synthetic",
+        "--root",
+        str(root),
+        "--fits",
+        str(root),
+        "--out",
+        str(out),
+        "--quiet",
+        *extra,
+    ]
     return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
 
 
@@ -104,7 +126,19 @@ def test_bad_shard_is_one_line_error(shard, street, tmp_path, capsys):
     from setdiff_bench.cli.main import main
 
     root, _ = street
-    code = main(["prepare", "synthetic", "--root", str(root), "--fits", str(root), "--out", str(tmp_path),
-                 "--shard", shard])
+    code = main(
+        [
+            "prepare",
+            "synthetic",
+            "--root",
+            str(root),
+            "--fits",
+            str(root),
+            "--out",
+            str(tmp_path),
+            "--shard",
+            shard,
+        ]
+    )
     err = capsys.readouterr().err.strip()
     assert code == 2 and "--shard" in err and len(err.splitlines()) == 1

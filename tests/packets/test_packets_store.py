@@ -74,8 +74,9 @@ def test_training_dataset_draws_reproducible_normalised_subsets(prepared):
     assert draws == [dataset.choose(i) for i in range(len(dataset))]  # deterministic per (seed, epoch, index)
     dataset.set_epoch(1)
     assert [dataset.choose(i) for i in range(len(dataset))] != draws
-    assert store.training_dataset("train", 5, 9, seed=4).choose(0) != store.training_dataset("train", 5, 9,
-                                                                                                   seed=3).choose(0)
+    assert store.training_dataset("train", 5, 9, seed=4).choose(0) != store.training_dataset(
+        "train", 5, 9, seed=3
+    ).choose(0)
     sizes = set()
     for index in range(len(dataset)):
         sample = dataset[index]
@@ -92,12 +93,19 @@ def test_training_dataset_draws_reproducible_normalised_subsets(prepared):
         assert torch.equal(sample.target_gt, gt) and torch.equal(sample.target_masks, masks)
         # the re-normalised C-maps stay in the cameras' frame: same projections as the stored packet
         stored = store.load_packet(packet.packet_id, refs, tgts)
-        for new_views, old_views in ((packet.references, stored.references), (packet.targets, stored.targets)):
+        for new_views, old_views in (
+            (packet.references, stored.references),
+            (packet.targets, stored.targets),
+        ):
             for v in range(len(new_views)):
                 a = old_views.alphas[v, 0].double().numpy()
                 ys, xs = np.nonzero(a > 0.98)
-                new = project(new_views.cameras[v], new_views.cmaps[v].double().numpy()[:, ys, xs] / a[ys, xs])
-                old = project(old_views.cameras[v], old_views.cmaps[v].double().numpy()[:, ys, xs] / a[ys, xs])
+                new = project(
+                    new_views.cameras[v], new_views.cmaps[v].double().numpy()[:, ys, xs] / a[ys, xs]
+                )
+                old = project(
+                    old_views.cameras[v], old_views.cmaps[v].double().numpy()[:, ys, xs] / a[ys, xs]
+                )
                 np.testing.assert_allclose(new, old, atol=1e-3)
     assert len(sizes) > 1
     loader = torch.utils.data.DataLoader(dataset, batch_size=None, shuffle=False, collate_fn=lambda s: s)
@@ -114,32 +122,80 @@ def test_cli_errors_are_one_line(street, tmp_path, capsys):
     root, _ = street
     empty = tmp_path / "fits"
     empty.mkdir()
-    code = main(["prepare", "synthetic", "--root", str(root), "--fits", str(empty), "--out", str(tmp_path / "o")])
+    code = main(
+        ["prepare", "synthetic", "--root", str(root), "--fits", str(empty), "--out", str(tmp_path / "o")]
+    )
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1
     assert str(empty / "street_00" / "lane0.ply") in err and "missing 3DGS fit" in err
     assert not (tmp_path / "o" / INDEX_FILE).exists()
 
-    code = main(["prepare", "synthetic", "--root", str(root), "--fits", str(root), "--out", str(tmp_path / "o"),
-                 "--protocol", "euvs"])
+    code = main(
+        [
+            "prepare",
+            "synthetic",
+            "--root",
+            str(root),
+            "--fits",
+            str(root),
+            "--out",
+            str(tmp_path / "o"),
+            "--protocol",
+            "euvs",
+        ]
+    )
     err = capsys.readouterr().err.strip()
     assert code == 2 and "is for dataset 'euvs', not 'synthetic'" in err and len(err.splitlines()) == 1
 
-    code = main(["prepare", "synthetic", "--root", str(tmp_path / "missing"), "--fits", str(root),
-                 "--out", str(tmp_path / "o")])
+    code = main(
+        [
+            "prepare",
+            "synthetic",
+            "--root",
+            str(tmp_path / "missing"),
+            "--fits",
+            str(root),
+            "--out",
+            str(tmp_path / "o"),
+        ]
+    )
     err = capsys.readouterr().err.strip()
     assert code == 2 and "missing" in err and len(err.splitlines()) == 1
 
     bad = tmp_path / "bad_fits" / "street_00" / "lane0.ply"
     bad.parent.mkdir(parents=True)
     bad.write_bytes(b"ply\nformat ascii 1.0\nelement vertex 1\nend_header\n")
-    code = main(["prepare", "synthetic", "--root", str(root), "--fits", str(tmp_path / "bad_fits"),
-                 "--scene", "street_00", "--out", str(tmp_path / "o")])
+    code = main(
+        [
+            "prepare",
+            "synthetic",
+            "--root",
+            str(root),
+            "--fits",
+            str(tmp_path / "bad_fits"),
+            "--scene",
+            "street_00",
+            "--out",
+            str(tmp_path / "o"),
+        ]
+    )
     err = capsys.readouterr().err.strip()
     assert code == 2 and str(bad) in err and len(err.splitlines()) == 1
 
     with pytest.raises(SystemExit) as exit_info:
-        main(["prepare", "synthetic", "--root", str(root), "--fits", str(root), "--fit", "--out", str(tmp_path)])
+        main(
+            [
+                "prepare",
+                "synthetic",
+                "--root",
+                str(root),
+                "--fits",
+                str(root),
+                "--fit",
+                "--out",
+                str(tmp_path),
+            ]
+        )
     assert exit_info.value.code == 2
 
 
@@ -156,9 +212,13 @@ def test_half_precision_cmaps_are_smaller_and_close(prepared, street, tmp_path):
     assert handle.spec().format == oiio.HALF
     handle.close()
     a, b = half.load_packet(pid), full.load_packet(pid)
-    np.testing.assert_allclose(a.targets.cmaps, b.targets.cmaps, rtol=2 ** -10, atol=1e-6)
-    assert half.rows(pid)["recipe"].iloc[0] != full.rows(pid)["recipe"].iloc[0]  # switching precision rewrites
-    assert (out / half.rows(pid)["cmap"].iloc[0]).stat().st_size < (full.root / full.rows(pid)["cmap"].iloc[0]).stat().st_size
+    np.testing.assert_allclose(a.targets.cmaps, b.targets.cmaps, rtol=2**-10, atol=1e-6)
+    assert (
+        half.rows(pid)["recipe"].iloc[0] != full.rows(pid)["recipe"].iloc[0]
+    )  # switching precision rewrites
+    assert (out / half.rows(pid)["cmap"].iloc[0]).stat().st_size < (
+        full.root / full.rows(pid)["cmap"].iloc[0]
+    ).stat().st_size
 
 
 def test_declared_test_scenes_replace_the_protocol_split(street, tmp_path, capsys):
@@ -166,13 +226,43 @@ def test_declared_test_scenes_replace_the_protocol_split(street, tmp_path, capsy
     60/40 rule would make street_02 the test scene)."""
     root, _ = street
     out = tmp_path / "o"
-    assert main(["prepare", "synthetic", "--root", str(root), "--fits", str(root), "--out", str(out),
-                 "--split", "test", "--test-scene", "street_00", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "prepare",
+                "synthetic",
+                "--root",
+                str(root),
+                "--fits",
+                str(root),
+                "--out",
+                str(out),
+                "--split",
+                "test",
+                "--test-scene",
+                "street_00",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     index = PacketStore(out).index
     assert set(index["scene"]) == {"street_00"} and set(index["split"]) == {"test"}
     capsys.readouterr()
-    code = main(["prepare", "synthetic", "--root", str(root), "--fits", str(root), "--out", str(tmp_path / "x"),
-                 "--test-scene", "street_09"])
+    code = main(
+        [
+            "prepare",
+            "synthetic",
+            "--root",
+            str(root),
+            "--fits",
+            str(root),
+            "--out",
+            str(tmp_path / "x"),
+            "--test-scene",
+            "street_09",
+        ]
+    )
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1
     assert "no scene 'street_09'" in err and "street_00, street_01, street_02" in err

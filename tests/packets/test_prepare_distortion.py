@@ -16,8 +16,17 @@ LENS = Distortion("OPENCV", (0.15, 0.02, 0.0, 0.0))
 
 
 def _job(path, camera) -> ViewJob:
-    return ViewJob(frame="f.png", sensor="cam", traversal="t", timestamp_us=None, image_path=path, mask_path=None,
-                   invert_mask=False, crop=Crop(0, 0, WIDTH, HEIGHT), camera=camera)
+    return ViewJob(
+        frame="f.png",
+        sensor="cam",
+        traversal="t",
+        timestamp_us=None,
+        image_path=path,
+        mask_path=None,
+        invert_mask=False,
+        crop=Crop(0, 0, WIDTH, HEIGHT),
+        camera=camera,
+    )
 
 
 def test_capture_of_a_distorted_camera_is_undistorted(tmp_path):

@@ -33,7 +33,7 @@ def test_constant_images_give_the_hand_computed_cosine():
     render = np.full((518, 518, 3), (255, 0, 51), np.uint8)
     truth = np.full((518, 518, 3), (0, 255, 102), np.uint8)
     # every patch of a constant image embeds to sum_c v_c * S_c, S_c = spatial sum of the filter weights
-    s = net.embed.weight.detach().double().sum(dim=(2, 3))            # (8, 3)
+    s = net.embed.weight.detach().double().sum(dim=(2, 3))  # (8, 3)
     v1 = (torch.tensor([255, 0, 51]) / 255.0 - 0.5) / 0.5
     v2 = (torch.tensor([0, 255, 102]) / 255.0 - 0.5) / 0.5
     f1, f2 = s @ v1.double(), s @ v2.double()
@@ -47,9 +47,9 @@ def test_first_patch_token_is_dropped_as_the_official_slice_does():
     rng = np.random.default_rng(0)
     truth = rng.integers(0, 256, (518, 518, 3), dtype=np.uint8)
     render = truth.copy()
-    render[:14, :14] = 255 - render[:14, :14]           # only the first patch differs
+    render[:14, :14] = 255 - render[:14, :14]  # only the first patch differs
     assert masked_cosine(net, render, truth, np.ones((518, 518), bool)) == pytest.approx(1.0, abs=1e-6)
-    render[:14, 14:28] = 255 - render[:14, 14:28]       # the second patch differs too
+    render[:14, 14:28] = 255 - render[:14, 14:28]  # the second patch differs too
     assert masked_cosine(net, render, truth, np.ones((518, 518), bool)) < 0.9999
 
 
@@ -58,7 +58,7 @@ def test_resize_crop_geometry_and_empty_mask_gives_zero():
     image = np.zeros((1080, 1920, 3), np.uint8)
     assert preprocess_image(image).shape == (1, 3, 518, 518)
     mask = np.zeros((1080, 1920), bool)
-    mask[:, :200] = True    # resized columns j with floor(j*1920/920) < 200 are j <= 95 < 201: cropped away
+    mask[:, :200] = True  # resized columns j with floor(j*1920/920) < 200 are j <= 95 < 201: cropped away
     assert not preprocess_mask(mask).any()
     assert masked_cosine(PatchNet(), image, image, mask) == 0.0
     mask[:, 900:1000] = True
@@ -86,8 +86,14 @@ def test_transformers_folder_adapter_returns_patch_tokens(tmp_path):
     from transformers import Dinov2Config, Dinov2Model
 
     torch.manual_seed(0)
-    config = Dinov2Config(hidden_size=8, num_hidden_layers=1, num_attention_heads=2, intermediate_size=16,
-                          image_size=518, patch_size=14)
+    config = Dinov2Config(
+        hidden_size=8,
+        num_hidden_layers=1,
+        num_attention_heads=2,
+        intermediate_size=16,
+        image_size=518,
+        patch_size=14,
+    )
     Dinov2Model(config).save_pretrained(tmp_path, safe_serialization=True)
     model = load_dinov2(tmp_path)
     x = preprocess_image(np.full((518, 518, 3), 128, np.uint8))

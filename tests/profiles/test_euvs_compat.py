@@ -9,9 +9,9 @@ from setdiff_bench.evaluation.euvs_compat import (
     positional_mispairings,
 )
 
-A = "trav_6_channel_1_img_2.jpg"    # digits 6,1,2   -> 612
-B = "trav_11_channel_1_img_2.jpg"   # digits 11,1,2  -> 1112
-C = "trav_6_channel_1_img_10.jpg"   # digits 6,1,10  -> 6110
+A = "trav_6_channel_1_img_2.jpg"  # digits 6,1,2   -> 612
+B = "trav_11_channel_1_img_2.jpg"  # digits 11,1,2  -> 1112
+C = "trav_6_channel_1_img_10.jpg"  # digits 6,1,10  -> 6110
 
 
 def test_digits_key_concatenates_every_digit():
@@ -23,7 +23,10 @@ def test_mars_names_are_mispaired_by_position():
     # renders by digits: A, B, C; masks as strings: trav_11..img_2 < trav_6..img_10 < trav_6..img_2 = B, C, A
     result = positional_mispairings([C, A, B])
     assert [(m.frame, m.official_mask) for m in result] == [
-        (A, B.replace(".jpg", ".png")), (B, C.replace(".jpg", ".png")), (C, A.replace(".jpg", ".png"))]
+        (A, B.replace(".jpg", ".png")),
+        (B, C.replace(".jpg", ".png")),
+        (C, A.replace(".jpg", ".png")),
+    ]
 
 
 def test_single_digit_names_pair_correctly():
@@ -33,9 +36,11 @@ def test_single_digit_names_pair_correctly():
 
 def test_mask_name_rules_disagree_on_upper_case_and_multi_dot_names():
     rows = mask_name_disagreements(["a.jpg", "b.JPG", "c.d.jpg", "e.jpeg"])
-    assert rows == [("b.JPG", "b.JPG", "b.png", "b.png"),
-                    ("c.d.jpg", "c.d.png", "c.png", "c.d.png"),
-                    ("e.jpeg", "e.jpeg", "e.png", "e.png")]   # ".jpeg" has no ".jpg" to replace
+    assert rows == [
+        ("b.JPG", "b.JPG", "b.png", "b.png"),
+        ("c.d.jpg", "c.d.png", "c.png", "c.d.png"),
+        ("e.jpeg", "e.jpeg", "e.png", "e.png"),
+    ]  # ".jpeg" has no ".jpg" to replace
 
 
 def test_report_counts_per_scene():

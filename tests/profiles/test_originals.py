@@ -14,13 +14,15 @@ def test_euvs_original_capture_mask_and_crop_window(tmp_path):
     write_euvs_scene(tmp_path / "Level 3" / scene, np.random.default_rng(3))
     frame = MARS_TEST[0]
     mask_path = tmp_path / "Level 3" / scene / "dynamic_masks" / (frame.removesuffix(".jpg") + ".png")
-    write_mask(mask_path, keep=False)                      # 0 everywhere: nothing evaluated
+    write_mask(mask_path, keep=False)  # 0 everywhere: nothing evaluated
     row = {"dataset": "euvs", "protocol": "euvs", "scene": scene, "frame": frame}
     original, mask, window = _Originals(tmp_path).target(row)
     assert original.shape == (HEIGHT, WIDTH, 3) and original.dtype == np.uint8
     assert mask.shape == (HEIGHT, WIDTH) and not mask.any()
     # 32x24 is 4:3; the working 576x1024 is 16:9: full width, height round(32*9/16) = 18, top (24-18)//2 = 3
     assert window == (0, 3, 32, 18)
-    pair = profile_pair(get_profile("euvs_official"), np.zeros((576, 1024, 3), np.uint8), original, mask, window)
+    pair = profile_pair(
+        get_profile("euvs_official"), np.zeros((576, 1024, 3), np.uint8), original, mask, window
+    )
     assert pair.ground_truth.shape == (18, 32, 3) and pair.prediction.shape == (18, 32, 3)
     assert np.array_equal(pair.ground_truth, original[3:21])

@@ -20,15 +20,15 @@ from setdiff_bench.evaluation.profiles import (
 
 
 def test_render_size_caps_width_at_1600_as_3dgs():
-    assert render_size(1920, 1080) == (1600, 900)      # nuPlan-level EUVS images
-    assert render_size(1921, 1080) == (1600, 899)      # 1080 / 1.200625 = 899.53 -> truncated
+    assert render_size(1920, 1080) == (1600, 900)  # nuPlan-level EUVS images
+    assert render_size(1921, 1080) == (1600, 899)  # 1080 / 1.200625 = 899.53 -> truncated
     assert render_size(4000, 3000) == (1600, 1200)
-    assert render_size(1600, 900) == (1600, 900)       # at the cap: unchanged
+    assert render_size(1600, 900) == (1600, 900)  # at the cap: unchanged
     assert render_size(960, 540) == (960, 540)
 
 
 def test_centre_crop_box_is_pil_rounding():
-    assert centre_crop_box(960, 540, 960, 512) == (0, 14, 960, 526)   # DL3DV images_4 -> 960x512
+    assert centre_crop_box(960, 540, 960, 512) == (0, 14, 960, 526)  # DL3DV images_4 -> 960x512
     # 961 wide: left 0.5 -> 0, right 960.5 -> 960 (half to even): still 960 columns
     assert centre_crop_box(961, 540, 960, 512) == (0, 14, 960, 526)
     # 1024x576 render: left 32, top 32
@@ -53,12 +53,19 @@ def test_pil_resize_bicubic_matches_pillow_and_mask_nearest_matches_floor_rule()
 
 def test_scene_means_differ_from_pooled_means_on_a_hand_case():
     # scene A: three images 10, 20, 30 (mean 20); scene B: one image 40.
-    frame = pd.DataFrame({"method": ["m"] * 4, "group": ["g"] * 4, "scene": ["A", "A", "A", "B"],
-                          "frame": ["a1", "a2", "a3", "b1"], "psnr": [10.0, 20.0, 30.0, 40.0]})
+    frame = pd.DataFrame(
+        {
+            "method": ["m"] * 4,
+            "group": ["g"] * 4,
+            "scene": ["A", "A", "A", "B"],
+            "frame": ["a1", "a2", "a3", "b1"],
+            "psnr": [10.0, 20.0, 30.0, 40.0],
+        }
+    )
     pooled, _ = aggregate(frame, ["psnr"], "pooled")
     scene_mean, scenes = aggregate(frame, ["psnr"], "scene_mean")
-    assert pooled["psnr"].item() == pytest.approx(25.0)        # (10+20+30+40)/4
-    assert scene_mean["psnr"].item() == pytest.approx(30.0)    # (20+40)/2
+    assert pooled["psnr"].item() == pytest.approx(25.0)  # (10+20+30+40)/4
+    assert scene_mean["psnr"].item() == pytest.approx(30.0)  # (20+40)/2
     assert scenes.set_index("scene")["psnr"].to_dict() == {"A": 20.0, "B": 40.0}
     assert scenes.set_index("scene")["images"].to_dict() == {"A": 3, "B": 1}
     assert (scene_mean["scenes"].item(), scene_mean["images"].item()) == (2, 4)
@@ -67,7 +74,12 @@ def test_scene_means_differ_from_pooled_means_on_a_hand_case():
 def test_profiles_are_declared_and_unknown_names_are_refused():
     assert set(PROFILES) >= {"paper", "euvs_official", "dl3dv_3dgs_enhancer"}
     euvs = get_profile("euvs_official")
-    assert (euvs.size, euvs.max_width, euvs.aggregation, euvs.scenes) == ("render_capped", 1600, "scene_mean", "all")
+    assert (euvs.size, euvs.max_width, euvs.aggregation, euvs.scenes) == (
+        "render_capped",
+        1600,
+        "scene_mean",
+        "all",
+    )
     dl3dv = get_profile("dl3dv_3dgs_enhancer")
     assert (dl3dv.metrics, dl3dv.crop, dl3dv.aggregation) == (("psnr",), (512, 960), "scene_mean")
     with pytest.raises(UsageError, match="known: paper"):
@@ -88,24 +100,40 @@ def test_euvs_pair_is_scored_at_1600x900_and_dl3dv_pair_at_960x512():
     expected = np.asarray(Image.fromarray(original).resize((1600, 900), Image.Resampling.BICUBIC))
     assert np.array_equal(pair.ground_truth, expected)
     small = rng.integers(0, 256, (540, 960, 3), dtype=np.uint8)
-    pair = profile_pair(get_profile("dl3dv_3dgs_enhancer"), prediction, small, np.ones((540, 960), bool),
-                        (0, 0, 960, 540))
+    pair = profile_pair(
+        get_profile("dl3dv_3dgs_enhancer"), prediction, small, np.ones((540, 960), bool), (0, 0, 960, 540)
+    )
     assert pair.ground_truth.shape == (512, 960, 3) and pair.prediction.shape == (512, 960, 3)
-    assert np.array_equal(pair.ground_truth, small[14:526])     # native size: GT untouched, rows 14..525
+    assert np.array_equal(pair.ground_truth, small[14:526])  # native size: GT untouched, rows 14..525
 
 
 def test_leaderboard_of_euvs_official_uses_every_scene_scene_means_and_its_metrics():
     from setdiff_bench.reporting.leaderboard import build_leaderboard, render_markdown
 
     # level1: scene A (test split) images 10 and 20 dB, scene B (train split) one image 40 dB
-    frame = pd.DataFrame({
-        "dataset": "euvs", "protocol": "euvs", "group": "level1", "method": "identity", "run": "r",
-        "profile": "euvs_official", "scene": ["A", "A", "B"], "frame": ["a1", "a2", "b1"],
-        "split": ["test", "test", "train"], "psnr_euvs": [10.0, 20.0, 40.0], "ssim_euvs": [0.5, 0.7, 0.9],
-        "lpips_euvs": [0.3, 0.1, 0.2], "cos_dinov2": [0.8, 0.6, 1.0], "final_score": [1.0, 2.0, 3.0]})
+    frame = pd.DataFrame(
+        {
+            "dataset": "euvs",
+            "protocol": "euvs",
+            "group": "level1",
+            "method": "identity",
+            "run": "r",
+            "profile": "euvs_official",
+            "scene": ["A", "A", "B"],
+            "frame": ["a1", "a2", "b1"],
+            "split": ["test", "test", "train"],
+            "psnr_euvs": [10.0, 20.0, 40.0],
+            "ssim_euvs": [0.5, 0.7, 0.9],
+            "lpips_euvs": [0.3, 0.1, 0.2],
+            "cos_dinov2": [0.8, 0.6, 1.0],
+            "final_score": [1.0, 2.0, 3.0],
+        }
+    )
     board = build_leaderboard("euvs", frame, profile="euvs_official")
     values = board.rows[0].values
-    assert values[("level1", "psnr_euvs")] == pytest.approx((15.0 + 40.0) / 2)     # not 23.33 pooled, not 15 test-only
+    assert values[("level1", "psnr_euvs")] == pytest.approx(
+        (15.0 + 40.0) / 2
+    )  # not 23.33 pooled, not 15 test-only
     assert values[("level1", "cos_dinov2")] == pytest.approx((0.7 + 1.0) / 2)
     assert values[("level1", "final_score")] == pytest.approx((1.5 + 3.0) / 2)
     assert "evaluation profile: euvs_official" in render_markdown(board)

@@ -19,7 +19,7 @@ LAST_DL3DV_TEST = "efdf19ca82bba7bccc73f64273405d077abd61dd2f5339a0a642bc75d7d90
 
 def test_packaged_protocols_state_the_papers_settings():
     paper = ["dl3dv", "euvs", "nuscenes", "paralane", "synthetic"]
-    assert set(paper) <= set(list_protocols())      # plus other designs (nuscenes_drivestudio, ...)
+    assert set(paper) <= set(list_protocols())  # plus other designs (nuscenes_drivestudio, ...)
     for name in paper:
         protocol = load_protocol(name)
         assert protocol.name == protocol.dataset == name
@@ -41,9 +41,17 @@ def test_packaged_protocols_state_the_papers_settings():
     assert len(load_protocol("nuscenes").groups[0].params["sensors"]) == 6
     paralane = load_protocol("paralane")
     assert [(g.name, g.params["train_lane"], g.params["target_lane"]) for g in paralane.groups] == [
-        ("single", 0, 1), ("double", 0, 2)]
+        ("single", 0, 1),
+        ("double", 0, 2),
+    ]
     assert {(g.params["fit_frames"], g.params["target_frames"]) for g in paralane.groups} == {(200, 25)}
-    assert [g.name for g in load_protocol("synthetic").groups] == ["lane+1", "lane+2", "side", "turn", "interp"]
+    assert [g.name for g in load_protocol("synthetic").groups] == [
+        "lane+1",
+        "lane+2",
+        "side",
+        "turn",
+        "interp",
+    ]
 
 
 def test_interleaved_split_is_sixty_forty_and_order_independent():
@@ -53,7 +61,12 @@ def test_interleaved_split_is_sixty_forty_and_order_independent():
     shuffled = names[:]
     random.Random(1).shuffle(shuffled)
     assignment = split.assign(shuffled)
-    assert sorted(n for n, s in assignment.items() if s == "test") == ["scene_02", "scene_04", "scene_07", "scene_09"]
+    assert sorted(n for n, s in assignment.items() if s == "test") == [
+        "scene_02",
+        "scene_04",
+        "scene_07",
+        "scene_09",
+    ]
     many = split.assign([f"Level {1 + i % 3}/loc_{i:03d}" for i in range(104)])
     assert sum(s == "test" for s in many.values()) == 41  # ⌊104 · 2/5⌋
     assert split.assign(["only"]) == {"only": "train"}
@@ -66,7 +79,11 @@ def test_every_fifth_sorted_scene_is_a_nuscenes_test_scene():
     random.Random(2).shuffle(names)
     assignment = split.assign(names)
     assert sorted(n for n, s in assignment.items() if s == "test") == [
-        "scene-0005", "scene-0010", "scene-0015", "scene-0020"]
+        "scene-0005",
+        "scene-0010",
+        "scene-0015",
+        "scene-0020",
+    ]
     assert sum(s == "test" for s in split.assign([f"scene-{i:04d}" for i in range(850)]).values()) == 170
 
 
@@ -88,44 +105,111 @@ def mutated(tmp_path: Path, old: str, new: str, base: str = "euvs") -> Path:
     return path
 
 
-@pytest.mark.parametrize(("base", "old", "new", "message"), [
-    ("euvs", 'name = "euvs"', 'name = "euvs"\ncolour = 1', "colour: unknown key"),
-    ("euvs", "alpha = 0.8", 'alpha = "high"', "references.alpha: expected a number"),
-    ("euvs", 'rule = "test_set"\nfit_key = "level2"', 'rule = "nope"\nfit_key = "level2"',
-     "groups[1].rule: expected one of"),
-    ("euvs", "test_views = 16", "", "packets.test_views: missing required key"),
-    ("euvs", "test = 8", "test = 16", "references.test: N = 16 leaves no target"),
-    ("euvs", "test_fraction = [2, 5]", "test_fraction = [5, 2]", "split.test_fraction"),
-    ("euvs", "[split]", "[split\n", "invalid TOML"),
-    ("euvs", 'fit_key = "level1"', 'fit_key = "a/b"', "groups[0].fit_key: must not contain"),
-    ("paralane", "target_lane = 1", "target_lane = 0", "groups[0].target_lane: must differ"),
-    ("nuscenes", "target_window = [10, 11]", "target_window = [9, 11]", "groups[0].target_window: overlaps"),
-    ("nuscenes", "target_window = [10, 11]", "target_window = [11, 10]", "groups[0].target_window: expected"),
-    ("synthetic", 'targets = { split = "test", lane_offset = 1', 'targets = { colour = "test", lane_offset = 1',
-     "groups[0].targets.colour: unknown key"),
-    ("dl3dv", 'file = "splits/dl3dv_3dgs_enhancer_test.txt"', 'file = "splits/missing.txt"', "split.file"),
-    ("dl3dv", "views = 3", "views = 1", "groups[0].views: expected an integer >= 2"),
-    ("euvs", 'title = "EUVS', 'colour = 1\ntitle = "EUVS', "leaderboard.colour: unknown key"),
-    ("euvs", '{ group = "level2", label = "Setting 2" }', '{ group = "level9", label = "Setting 2" }',
-     "leaderboard.blocks[1].group: no group 'level9' in this protocol; groups: level1, level2, level3"),
-    ("euvs", '{ group = "level2", label = "Setting 2" }', '{ group = "level1", label = "Setting 2" }',
-     "leaderboard.blocks: group 'level1' appears twice"),
-    ("euvs", '{ group = "level2", label = "Setting 2" }', '{ group = "level2" }',
-     "leaderboard.blocks[1].label: missing required key"),
-    ("euvs", '{ group = "level2", label = "Setting 2" }', '{ label = "Setting 2" }',
-     "leaderboard.blocks[1].group: missing required key (or pooled = true)"),
-    ("nuscenes", "{ pooled = true, label", "{ pooled = false, label", "leaderboard.blocks[0].pooled: expected true"),
-    ("nuscenes", "{ pooled = true, label", '{ pooled = true, group = "10-11s", label',
-     "leaderboard.blocks[0].pooled: a block has either group or pooled = true"),
-    ("nuscenes", 'sequence_metrics = ["warp"]', 'sequence_metrics = ["psnr"]',
-     "leaderboard.sequence_metrics: unknown sequence metric 'psnr'"),
-    ("euvs", 'reported_tables = ["table1_euvs"]', 'reported_tables = ["table4_dl3dv"]',
-     "leaderboard.reported_tables: no reported table 'table4_dl3dv' of dataset 'euvs'"),
-    ("euvs", 'reported_tables = ["table1_euvs"]', 'reported_tables = ["table1_euvs"]\nmetrics = ["psnr", "warp"]',
-     "leaderboard.metrics: unknown image metric 'warp'"),
-    ("paralane", '    { group = "single", label = "Single-lane shift" },\n    { group = "double", label = "Double-lane shift" },\n',
-     "", "leaderboard.blocks: expected a non-empty list of tables"),
-])
+@pytest.mark.parametrize(
+    ("base", "old", "new", "message"),
+    [
+        ("euvs", 'name = "euvs"', 'name = "euvs"\ncolour = 1', "colour: unknown key"),
+        ("euvs", "alpha = 0.8", 'alpha = "high"', "references.alpha: expected a number"),
+        (
+            "euvs",
+            'rule = "test_set"\nfit_key = "level2"',
+            'rule = "nope"\nfit_key = "level2"',
+            "groups[1].rule: expected one of",
+        ),
+        ("euvs", "test_views = 16", "", "packets.test_views: missing required key"),
+        ("euvs", "test = 8", "test = 16", "references.test: N = 16 leaves no target"),
+        ("euvs", "test_fraction = [2, 5]", "test_fraction = [5, 2]", "split.test_fraction"),
+        ("euvs", "[split]", "[split\n", "invalid TOML"),
+        ("euvs", 'fit_key = "level1"', 'fit_key = "a/b"', "groups[0].fit_key: must not contain"),
+        ("paralane", "target_lane = 1", "target_lane = 0", "groups[0].target_lane: must differ"),
+        (
+            "nuscenes",
+            "target_window = [10, 11]",
+            "target_window = [9, 11]",
+            "groups[0].target_window: overlaps",
+        ),
+        (
+            "nuscenes",
+            "target_window = [10, 11]",
+            "target_window = [11, 10]",
+            "groups[0].target_window: expected",
+        ),
+        (
+            "synthetic",
+            'targets = { split = "test", lane_offset = 1',
+            'targets = { colour = "test", lane_offset = 1',
+            "groups[0].targets.colour: unknown key",
+        ),
+        (
+            "dl3dv",
+            'file = "splits/dl3dv_3dgs_enhancer_test.txt"',
+            'file = "splits/missing.txt"',
+            "split.file",
+        ),
+        ("dl3dv", "views = 3", "views = 1", "groups[0].views: expected an integer >= 2"),
+        ("euvs", 'title = "EUVS', 'colour = 1\ntitle = "EUVS', "leaderboard.colour: unknown key"),
+        (
+            "euvs",
+            '{ group = "level2", label = "Setting 2" }',
+            '{ group = "level9", label = "Setting 2" }',
+            "leaderboard.blocks[1].group: no group 'level9' in this protocol; groups: level1, level2, level3",
+        ),
+        (
+            "euvs",
+            '{ group = "level2", label = "Setting 2" }',
+            '{ group = "level1", label = "Setting 2" }',
+            "leaderboard.blocks: group 'level1' appears twice",
+        ),
+        (
+            "euvs",
+            '{ group = "level2", label = "Setting 2" }',
+            '{ group = "level2" }',
+            "leaderboard.blocks[1].label: missing required key",
+        ),
+        (
+            "euvs",
+            '{ group = "level2", label = "Setting 2" }',
+            '{ label = "Setting 2" }',
+            "leaderboard.blocks[1].group: missing required key (or pooled = true)",
+        ),
+        (
+            "nuscenes",
+            "{ pooled = true, label",
+            "{ pooled = false, label",
+            "leaderboard.blocks[0].pooled: expected true",
+        ),
+        (
+            "nuscenes",
+            "{ pooled = true, label",
+            '{ pooled = true, group = "10-11s", label',
+            "leaderboard.blocks[0].pooled: a block has either group or pooled = true",
+        ),
+        (
+            "nuscenes",
+            'sequence_metrics = ["warp"]',
+            'sequence_metrics = ["psnr"]',
+            "leaderboard.sequence_metrics: unknown sequence metric 'psnr'",
+        ),
+        (
+            "euvs",
+            'reported_tables = ["table1_euvs"]',
+            'reported_tables = ["table4_dl3dv"]',
+            "leaderboard.reported_tables: no reported table 'table4_dl3dv' of dataset 'euvs'",
+        ),
+        (
+            "euvs",
+            'reported_tables = ["table1_euvs"]',
+            'reported_tables = ["table1_euvs"]\nmetrics = ["psnr", "warp"]',
+            "leaderboard.metrics: unknown image metric 'warp'",
+        ),
+        (
+            "paralane",
+            '    { group = "single", label = "Single-lane shift" },\n    { group = "double", label = "Double-lane shift" },\n',
+            "",
+            "leaderboard.blocks: expected a non-empty list of tables",
+        ),
+    ],
+)
 def test_invalid_protocol_files_name_the_file_and_key(tmp_path, base, old, new, message):
     path = mutated(tmp_path, old, new, base)
     if base == "dl3dv":  # keep the split list reachable from the copy
@@ -139,7 +223,9 @@ def test_invalid_protocol_files_name_the_file_and_key(tmp_path, base, old, new, 
 
 
 def test_unknown_protocol_lists_the_packaged_ones():
-    with pytest.raises(ProtocolError, match=r"unknown protocol 'waymo'.*colmap, dl3dv, euvs, nerfstudio, nuscenes, "):
+    with pytest.raises(
+        ProtocolError, match=r"unknown protocol 'waymo'.*colmap, dl3dv, euvs, nerfstudio, nuscenes, "
+    ):
         load_protocol("waymo")
     with pytest.raises(ProtocolError, match="protocol file not found"):
         load_protocol("/nonexistent/p.toml")
@@ -147,6 +233,17 @@ def test_unknown_protocol_lists_the_packaged_ones():
 
 def test_split_rules_directly():
     assert SceneSplit("every_nth", every=3).assign("abcdefg") == {
-        "a": "train", "b": "train", "c": "test", "d": "train", "e": "train", "f": "test", "g": "train"}
+        "a": "train",
+        "b": "train",
+        "c": "test",
+        "d": "train",
+        "e": "train",
+        "f": "test",
+        "g": "train",
+    }
     assert SceneSplit("interleaved", test_fraction=Fraction(1, 2)).assign("abcd") == {
-        "a": "train", "b": "test", "c": "train", "d": "test"}
+        "a": "train",
+        "b": "test",
+        "c": "train",
+        "d": "test",
+    }

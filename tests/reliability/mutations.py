@@ -21,14 +21,66 @@ from typing import Any
 from hypothesis import strategies as st
 
 #: Tokens that break numeric fields in interesting ways.
-NASTY_TOKENS = ("nan", "NaN", "inf", "-inf", "1e308", "-1e308", "1e400", "-1", "0", "-0", "1e-320",
-                "18446744073709551616", "-9223372036854775809", "99999999999999999999", "4294967296", "2147483648",
-                "abc", "1.5.2", "0x10", "", "#", "--", "1,5", "٣", "\u00a0", "None", "true")
+NASTY_TOKENS = (
+    "nan",
+    "NaN",
+    "inf",
+    "-inf",
+    "1e308",
+    "-1e308",
+    "1e400",
+    "-1",
+    "0",
+    "-0",
+    "1e-320",
+    "18446744073709551616",
+    "-9223372036854775809",
+    "99999999999999999999",
+    "4294967296",
+    "2147483648",
+    "abc",
+    "1.5.2",
+    "0x10",
+    "",
+    "#",
+    "--",
+    "1,5",
+    "٣",
+    "\u00a0",
+    "None",
+    "true",
+)
 
 #: JSON values of every type and extreme magnitudes.
-NASTY_VALUES: tuple[Any, ...] = (None, True, False, 0, -1, 1, 10**30, -(10**30), 2**63, 1e308, -1e308, 1e-320,
-                                 math.nan, math.inf, -math.inf, "", "x", "../../../etc/passwd", "/abs/path",
-                                 "a\x00b", [], [1], [[0.0] * 4] * 4, {}, {"token": "x"}, 0.5, "1")
+NASTY_VALUES: tuple[Any, ...] = (
+    None,
+    True,
+    False,
+    0,
+    -1,
+    1,
+    10**30,
+    -(10**30),
+    2**63,
+    1e308,
+    -1e308,
+    1e-320,
+    math.nan,
+    math.inf,
+    -math.inf,
+    "",
+    "x",
+    "../../../etc/passwd",
+    "/abs/path",
+    "a\x00b",
+    [],
+    [1],
+    [[0.0] * 4] * 4,
+    {},
+    {"token": "x"},
+    0.5,
+    "1",
+)
 
 
 @st.composite
@@ -50,10 +102,10 @@ def mutated_bytes(draw: st.DrawFn, base: bytes, max_ops: int = 3) -> bytes:
         elif op == "insert":
             data[at:at] = draw(st.binary(min_size=1, max_size=16))
         elif op == "delete":
-            del data[at:at + draw(st.integers(1, 64))]
+            del data[at : at + draw(st.integers(1, 64))]
         elif op == "duplicate":
             length = draw(st.integers(1, 64))
-            data[at:at] = data[at:at + length]
+            data[at:at] = data[at : at + length]
     return bytes(data)
 
 
@@ -62,18 +114,36 @@ def mutated_text(draw: st.DrawFn, base: str, max_ops: int = 3) -> str:
     """``base`` (whitespace-separated fields in lines) changed by 1..``max_ops`` token/line operations."""
     lines = [line.split(" ") for line in base.split("\n")]
     for _ in range(draw(st.integers(1, max_ops))):
-        op = draw(st.sampled_from(("token", "token", "token", "drop_token", "add_token", "drop_line", "dup_line",
-                                   "swap_lines", "add_line", "cut")))
+        op = draw(
+            st.sampled_from(
+                (
+                    "token",
+                    "token",
+                    "token",
+                    "drop_token",
+                    "add_token",
+                    "drop_line",
+                    "dup_line",
+                    "swap_lines",
+                    "add_line",
+                    "cut",
+                )
+            )
+        )
         row = draw(st.integers(0, max(len(lines) - 1, 0)))
         if not lines:
             lines = [[]]
         fields = lines[row]
         col = draw(st.integers(0, max(len(fields) - 1, 0)))
         if op == "token" and fields:
-            fields[col] = draw(st.one_of(st.sampled_from(NASTY_TOKENS),
-                                         st.integers(-(2**70), 2**70).map(str),
-                                         st.floats(allow_nan=True, allow_infinity=True).map(repr),
-                                         st.text(alphabet="0123456789.-+eE", max_size=8)))
+            fields[col] = draw(
+                st.one_of(
+                    st.sampled_from(NASTY_TOKENS),
+                    st.integers(-(2**70), 2**70).map(str),
+                    st.floats(allow_nan=True, allow_infinity=True).map(repr),
+                    st.text(alphabet="0123456789.-+eE", max_size=8),
+                )
+            )
         elif op == "drop_token" and fields:
             del fields[col]
         elif op == "add_token":
@@ -121,20 +191,32 @@ def mutated_json(draw: st.DrawFn, base: Any, max_ops: int = 3) -> Any:
             return copy.deepcopy(draw(st.sampled_from(NASTY_VALUES)))
         node = _at(tree, draw(st.sampled_from(containers)))
         keys = list(node) if isinstance(node, dict) else list(range(len(node)))
-        op = draw(st.sampled_from(("replace", "replace", "replace", "delete", "duplicate", "retype_container")))
+        op = draw(
+            st.sampled_from(("replace", "replace", "replace", "delete", "duplicate", "retype_container"))
+        )
         if not keys:
             continue
         key = draw(st.sampled_from(keys))
         if op == "replace":  # (copied: the nasty lists and dicts must not be shared between places)
-            node[key] = copy.deepcopy(draw(st.one_of(st.sampled_from(NASTY_VALUES), st.integers(-(2**70), 2**70),
-                                                     st.floats(allow_nan=True, allow_infinity=True),
-                                                     st.text(max_size=6))))
+            node[key] = copy.deepcopy(
+                draw(
+                    st.one_of(
+                        st.sampled_from(NASTY_VALUES),
+                        st.integers(-(2**70), 2**70),
+                        st.floats(allow_nan=True, allow_infinity=True),
+                        st.text(max_size=6),
+                    )
+                )
+            )
         elif op == "delete":
             del node[key]
         elif op == "duplicate" and isinstance(node, list):
             node.insert(key, copy.deepcopy(node[key]))
         elif op == "retype_container":
             value = node[key]
-            node[key] = list(value.values()) if isinstance(value, dict) else (
-                {str(i): v for i, v in enumerate(value)} if isinstance(value, list) else [value])
+            node[key] = (
+                list(value.values())
+                if isinstance(value, dict)
+                else ({str(i): v for i, v in enumerate(value)} if isinstance(value, list) else [value])
+            )
     return tree

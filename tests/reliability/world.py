@@ -80,8 +80,11 @@ class World:
     @property
     def shared(self) -> list[Path]:
         """The pristine inputs built so far (checked unchanged after every case)."""
-        return [self.base / name for name in ("street", "store", "train_store", "setdiff_run")
-                if (self.base / name).exists()]
+        return [
+            self.base / name
+            for name in ("street", "store", "train_store", "setdiff_run")
+            if (self.base / name).exists()
+        ]
 
 
 def copy(source: Path, destination: Path) -> Path:
@@ -94,7 +97,9 @@ def first_packet(store: Path) -> Path:
     return sorted(p for p in (store / PACKETS_DIR).iterdir() if not p.name.startswith("."))[0]
 
 
-def edit_rows(store: Path, packet: Path, edit: Callable[[list[dict[str, Any]]], Iterable[dict[str, Any]]]) -> None:
+def edit_rows(
+    store: Path, packet: Path, edit: Callable[[list[dict[str, Any]]], Iterable[dict[str, Any]]]
+) -> None:
     """Rewrite a packet's fragment rows with ``edit`` and merge the store index again."""
     rows = pq.read_table(packet / INDEX_FILE).to_pylist()
     write_rows(packet / INDEX_FILE, list(edit(rows)))
@@ -103,6 +108,7 @@ def edit_rows(store: Path, packet: Path, edit: Callable[[list[dict[str, Any]]], 
 
 def rehash(store: Path, packet: Path) -> None:
     """Record the current SHA-256 of every file of ``packet`` (as if ``prepare`` had written them)."""
+
     def update(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
         for row in rows:
             for column in FILE_COLUMNS:
@@ -125,5 +131,9 @@ def tree_state(roots: Iterable[Path]) -> dict[str, tuple[str, int, int]]:
             except FileNotFoundError:  # removed while listing (a writer's temporary file)
                 continue
             kind = "dir" if stat.S_ISDIR(info.st_mode) else "file"
-            state[str(path)] = (kind, info.st_size if kind == "file" else 0, info.st_mtime_ns if kind == "file" else 0)
+            state[str(path)] = (
+                kind,
+                info.st_size if kind == "file" else 0,
+                info.st_mtime_ns if kind == "file" else 0,
+            )
     return state

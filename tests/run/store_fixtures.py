@@ -23,7 +23,6 @@ from setdiff_bench.packets.store import PacketHeader, ViewContent, write_packet
 HEIGHT, WIDTH = 32, 48
 
 
-
 def texture(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Smooth colour texture of the plane at world ``(x, y)`` → ``(..., 3)`` float in [0, 1]."""
     r = 0.5 + 0.4 * np.sin(2.1 * x + 0.3) * np.cos(1.3 * y)
@@ -35,7 +34,9 @@ def texture(x: np.ndarray, y: np.ndarray) -> np.ndarray:
 def camera_at(x: float, *, yaw_deg: float = 0.0, height: int = HEIGHT, width: int = WIDTH) -> Camera:
     """A pinhole camera at world ``(x, 0, 0)`` looking along +z (turned by ``yaw`` about y)."""
     yaw = math.radians(yaw_deg)
-    rotation = np.array([[math.cos(yaw), 0.0, -math.sin(yaw)], [0.0, 1.0, 0.0], [math.sin(yaw), 0.0, math.cos(yaw)]])
+    rotation = np.array(
+        [[math.cos(yaw), 0.0, -math.sin(yaw)], [0.0, 1.0, 0.0], [math.sin(yaw), 0.0, math.cos(yaw)]]
+    )
     w2c = np.eye(4)
     w2c[:3, :3] = rotation
     w2c[:3, 3] = -rotation @ np.array([x, 0.0, 0.0])
@@ -53,8 +54,11 @@ def plane_view(camera: Camera, depth: float) -> tuple[np.ndarray, np.ndarray, np
     t = (depth - origin[2]) / dirs[:, 2]
     points = origin + t[:, None] * dirs
     image = texture(points[:, 0], points[:, 1]).reshape(camera.height, camera.width, 3)
-    return image.astype(np.float32), points.reshape(camera.height, camera.width, 3).astype(np.float32), \
-        np.ones((camera.height, camera.width), np.float32)
+    return (
+        image.astype(np.float32),
+        points.reshape(camera.height, camera.width, 3).astype(np.float32),
+        np.ones((camera.height, camera.width), np.float32),
+    )
 
 
 def degrade(image: np.ndarray, seed: int) -> np.ndarray:
@@ -93,26 +97,57 @@ def build_store(root: Path, spec: StoreSpec = StoreSpec()) -> Path:
                 for i in range(spec.references):
                     camera = camera_at(-0.5 + 0.25 * i)
                     image, points, alpha = plane_view(camera, spec.depth)
-                    refs.append(ViewContent(frame=f"ref_{g}_{p}_{i:02d}.png", sensor=spec.sensors[0], traversal="lane0",
-                                            timestamp_us=None, camera=camera, camera_world=camera, image=image,
-                                            cmap=points * alpha[:, :, None], alpha=alpha, overlap_score=0.9 - 0.1 * i))
+                    refs.append(
+                        ViewContent(
+                            frame=f"ref_{g}_{p}_{i:02d}.png",
+                            sensor=spec.sensors[0],
+                            traversal="lane0",
+                            timestamp_us=None,
+                            camera=camera,
+                            camera_world=camera,
+                            image=image,
+                            cmap=points * alpha[:, :, None],
+                            alpha=alpha,
+                            overlap_score=0.9 - 0.1 * i,
+                        )
+                    )
                 for j in range(spec.targets):
                     sensor = spec.sensors[j % len(spec.sensors)]
                     step = (g * spec.packets_per_group + p) * spec.targets + j
-                    camera = camera_at(0.25 * (j // len(spec.sensors)) + 0.1 * g,
-                                       yaw_deg=0.0 if sensor == spec.sensors[0] else 8.0)
+                    camera = camera_at(
+                        0.25 * (j // len(spec.sensors)) + 0.1 * g,
+                        yaw_deg=0.0 if sensor == spec.sensors[0] else 8.0,
+                    )
                     gt, points, alpha = plane_view(camera, spec.depth)
                     mask = np.ones((HEIGHT, WIDTH), bool)
                     if spec.masked_target and j == 1:
                         mask[4:12, 10:30] = False
-                    tgts.append(ViewContent(
-                        frame=f"{sensor}/{step:06d}.jpg", sensor=sensor, traversal=f"lane{g + 1}",
-                        timestamp_us=(10_000_000 + 100_000 * step) if spec.timestamps else None, camera=camera,
-                        camera_world=camera, image=degrade(gt, seed=counter * 100 + j), cmap=points * alpha[:, :, None],
-                        alpha=alpha, gt=gt, mask=mask))
-                header = PacketHeader(packet_id=packet_id(spec.protocol, scene, group, p), dataset=spec.dataset,
-                                      protocol=spec.protocol, group=group, split=spec.split, scene=scene,
-                                      fit_key="lane0", scale=1.0, recipe=f"test-{counter}")
+                    tgts.append(
+                        ViewContent(
+                            frame=f"{sensor}/{step:06d}.jpg",
+                            sensor=sensor,
+                            traversal=f"lane{g + 1}",
+                            timestamp_us=(10_000_000 + 100_000 * step) if spec.timestamps else None,
+                            camera=camera,
+                            camera_world=camera,
+                            image=degrade(gt, seed=counter * 100 + j),
+                            cmap=points * alpha[:, :, None],
+                            alpha=alpha,
+                            gt=gt,
+                            mask=mask,
+                        )
+                    )
+                header = PacketHeader(
+                    packet_id=packet_id(spec.protocol, scene, group, p),
+                    dataset=spec.dataset,
+                    protocol=spec.protocol,
+                    group=group,
+                    split=spec.split,
+                    scene=scene,
+                    fit_key="lane0",
+                    scale=1.0,
+                    recipe=f"test-{counter}",
+                )
                 write_packet(root, header, refs, tgts)
     merge_index(root)
     return root
@@ -132,5 +167,9 @@ def target_frames(spec: StoreSpec) -> list[str]:
 
 def files_of(folder: Path, patterns: Sequence[str] = ("images/**/*.png",)) -> dict[str, bytes]:
     """Relative path → bytes of the files matching ``patterns`` (for byte-identity comparisons)."""
-    return {str(p.relative_to(folder)): p.read_bytes() for pattern in patterns for p in sorted(folder.glob(pattern))
-            if p.is_file()}
+    return {
+        str(p.relative_to(folder)): p.read_bytes()
+        for pattern in patterns
+        for p in sorted(folder.glob(pattern))
+        if p.is_file()
+    }

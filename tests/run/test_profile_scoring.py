@@ -42,12 +42,15 @@ def test_paper_profile_reproduces_the_runs_own_scores(run_copy: Path, store: Pat
     assert json.loads((out / PROFILE_FILE).read_text())["profile"]["name"] == "paper"
 
 
-def test_scene_mean_profile_in_the_leaderboard_caption_and_never_mixed(run_copy: Path, store: Path, monkeypatch):
+def test_scene_mean_profile_in_the_leaderboard_caption_and_never_mixed(
+    run_copy: Path, store: Path, monkeypatch
+):
     identity_run = run_copy
     from setdiff_bench.evaluation import profiles
 
-    custom = EvaluationProfile("scene_test", "test profile: per-scene means", "", ("psnr",),
-                               aggregation="scene_mean")
+    custom = EvaluationProfile(
+        "scene_test", "test profile: per-scene means", "", ("psnr",), aggregation="scene_mean"
+    )
     monkeypatch.setattr(profiles, "PROFILES", {**profiles.PROFILES, "scene_test": custom})
     score_run(identity_run, custom, packets=store, progress=False)
     images, _ = load_runs(identity_run)
@@ -57,12 +60,14 @@ def test_scene_mean_profile_in_the_leaderboard_caption_and_never_mixed(run_copy:
     rows = images[images["profile"] == "scene_test"]
     group = board.columns[0][0].key
     block = rows[rows["group"] == group]
-    expected = block.groupby("scene")["psnr"].mean().mean()           # mean of scene means
+    expected = block.groupby("scene")["psnr"].mean().mean()  # mean of scene means
     assert board.rows[0].values[(group, "psnr")] == pytest.approx(expected)
     assert "means over scenes" in render_markdown(board)
-    plain = build_leaderboard(dataset, images, metrics=["psnr"])       # default: the plain run rows only
+    plain = build_leaderboard(dataset, images, metrics=["psnr"])  # default: the plain run rows only
     assert "evaluation profile: paper" in plain.title
-    assert plain.rows[0].counts[(group, "psnr")] == len(images[images["profile"].isna() & (images["group"] == group)])
+    assert plain.rows[0].counts[(group, "psnr")] == len(
+        images[images["profile"].isna() & (images["group"] == group)]
+    )
     reported = pd.DataFrame({"dataset": [dataset], "metric": ["psnr"]})
     with pytest.raises(LeaderboardError, match="cannot share a table"):
         build_leaderboard(dataset, images, profile="scene_test", metrics=["psnr"], reported=reported)
@@ -71,10 +76,26 @@ def test_scene_mean_profile_in_the_leaderboard_caption_and_never_mixed(run_copy:
 def test_profiles_needing_the_dataset_say_so(identity_run: Path, store: Path, capsys):
     with pytest.raises(UsageError, match="--data"):
         score_run(identity_run, get_profile("euvs_official"), packets=store, progress=False)
-    assert main(["evaluate", str(identity_run), "--profile", "dl3dv_3dgs_enhancer", "--packets", str(store)]) == 2
+    assert (
+        main(["evaluate", str(identity_run), "--profile", "dl3dv_3dgs_enhancer", "--packets", str(store)])
+        == 2
+    )
     assert "pass the dataset root (--data)" in capsys.readouterr().err
-    assert main(["evaluate", str(identity_run), "--profile", "euvs_official", "--packets", str(store),
-                 "--dinov2", str(store / "absent")]) == 2
+    assert (
+        main(
+            [
+                "evaluate",
+                str(identity_run),
+                "--profile",
+                "euvs_official",
+                "--packets",
+                str(store),
+                "--dinov2",
+                str(store / "absent"),
+            ]
+        )
+        == 2
+    )
     assert "DINOv2 weights folder not found" in capsys.readouterr().err
 
 
@@ -84,6 +105,20 @@ def test_evaluate_and_leaderboard_commands(run_copy: Path, store: Path, tmp_path
     assert (run_copy / PROFILES_DIR / "paper" / GROUPS_FILE).is_file()
     dataset = pd.read_parquet(run_copy / METRICS_FILE)["dataset"].iloc[0]
     out = tmp_path / "boards"
-    assert main(["leaderboard", "--dataset", dataset, "--runs", str(run_copy), "--out", str(out),
-                 "--format", "md"]) == 0
+    assert (
+        main(
+            [
+                "leaderboard",
+                "--dataset",
+                dataset,
+                "--runs",
+                str(run_copy),
+                "--out",
+                str(out),
+                "--format",
+                "md",
+            ]
+        )
+        == 0
+    )
     assert "evaluation profile: paper" in (out / f"{dataset}.md").read_text()

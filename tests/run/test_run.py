@@ -40,8 +40,25 @@ from tests.metrics.lpips_numpy import lpips_numpy
 from tests.run.store_fixtures import StoreSpec, build_store, files_of
 
 ONE_THREAD = {**os.environ, "OMP_NUM_THREADS": "1"}  # subprocesses: tiny images, busy machine
-COLUMNS = ["dataset", "protocol", "group", "split", "scene", "frame", "sensor", "timestamp_us", "packet_id", "view",
-           "method", "psnr", "ssim", "lpips", "ms_per_frame", "image", "image_sha256"]
+COLUMNS = [
+    "dataset",
+    "protocol",
+    "group",
+    "split",
+    "scene",
+    "frame",
+    "sensor",
+    "timestamp_us",
+    "packet_id",
+    "view",
+    "method",
+    "psnr",
+    "ssim",
+    "lpips",
+    "ms_per_frame",
+    "image",
+    "image_sha256",
+]
 
 
 def read_rgb_cv2(path: Path) -> np.ndarray:
@@ -102,8 +119,15 @@ def test_identity_run_writes_images_metrics_and_manifest(store: Path, identity_r
         mse = ((output - gt) ** 2)[mask].mean()
         assert row.psnr == pytest.approx(10 * np.log10(1 / mse), rel=1e-6)
         if mask.all():
-            expected = structural_similarity(output, gt, gaussian_weights=True, sigma=1.5, use_sample_covariance=False,
-                                             data_range=1.0, channel_axis=-1)
+            expected = structural_similarity(
+                output,
+                gt,
+                gaussian_weights=True,
+                sigma=1.5,
+                use_sample_covariance=False,
+                data_range=1.0,
+                channel_axis=-1,
+            )
             assert row.ssim == pytest.approx(expected, abs=1e-5)
     assert (~metrics["psnr"].between(20, 30)).sum() == 0
 
@@ -122,30 +146,39 @@ def test_manifest_records_method_versions_device_and_index_hash(store: Path, ide
     manifest = json.loads((identity_run / MANIFEST_FILE).read_text())
     assert manifest["method"]["name"] == "identity"
     assert manifest["method"]["factory"] == "setdiff_bench.enhancers.identity:create"
-    assert manifest["packets"]["index_sha256"] == hashlib.sha256((store / INDEX_FILE).read_bytes()).hexdigest()
+    assert (
+        manifest["packets"]["index_sha256"] == hashlib.sha256((store / INDEX_FILE).read_bytes()).hexdigest()
+    )
     assert manifest["packets"]["targets"] == 12 and manifest["packets"]["packets"] == 4
     assert manifest["versions"]["torch"] == torch.__version__.split("+")[0] or manifest["versions"]["torch"]
     assert set(manifest["git"]) == {"revision", "dirty"}
     assert manifest["device"]["type"] == "cpu"
     assert manifest["timing"]["frames"] == 12
-    assert set(manifest["metrics"]["image"]) == {"psnr", "ssim", "lpips"} and manifest["metrics"]["warp"] is None
+    assert (
+        set(manifest["metrics"]["image"]) == {"psnr", "ssim", "lpips"} and manifest["metrics"]["warp"] is None
+    )
 
 
 # ---------------------------------------------------------------------- precomputed
-def test_precomputed_on_a_copy_of_identity_outputs_gives_identical_metrics(store: Path, identity_run: Path,
-                                                                           tmp_path: Path) -> None:
+def test_precomputed_on_a_copy_of_identity_outputs_gives_identical_metrics(
+    store: Path, identity_run: Path, tmp_path: Path
+) -> None:
     copy = tmp_path / "external"
     shutil.copytree(identity_run / IMAGES_DIR, copy)
     run_method(store, tmp_path / "pre", RunSettings("precomputed", {"source": str(copy)}), progress=False)
     same_results(identity_run, tmp_path / "pre", method_b="identity")
     # a run folder itself also works (its images/ is used)
-    run_method(store, tmp_path / "pre2", RunSettings("precomputed", {"source": str(identity_run)}), progress=False)
+    run_method(
+        store, tmp_path / "pre2", RunSettings("precomputed", {"source": str(identity_run)}), progress=False
+    )
     same_results(identity_run, tmp_path / "pre2", method_b="identity")
 
 
 def test_precomputed_scene_level_layout(store: Path, identity_run: Path, tmp_path: Path) -> None:
     flat = tmp_path / "flat"
-    for png in (identity_run / IMAGES_DIR).glob("*/*/*/*/*.png"):  # images/<protocol>/<group>/<scene>/front/x.png
+    for png in (identity_run / IMAGES_DIR).glob(
+        "*/*/*/*/*.png"
+    ):  # images/<protocol>/<group>/<scene>/front/x.png
         scene, sub, name = png.parts[-3], png.parts[-2], png.name
         (flat / scene / sub).mkdir(parents=True, exist_ok=True)
         shutil.copy(png, flat / scene / sub / name)
@@ -153,18 +186,34 @@ def test_precomputed_scene_level_layout(store: Path, identity_run: Path, tmp_pat
     same_results(identity_run, tmp_path / "pre", method_b="identity")
 
 
-def test_precomputed_missing_frames_are_listed(store: Path, identity_run: Path, tmp_path: Path,
-                                               capsys: pytest.CaptureFixture[str]) -> None:
+def test_precomputed_missing_frames_are_listed(
+    store: Path, identity_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     copy = tmp_path / "external"
     shutil.copytree(identity_run / IMAGES_DIR, copy)
     (copy / "synthetic/lane+2/scene_b/front/000004.png").unlink()
     (copy / "synthetic/lane+1/scene_a/front/000001.png").unlink()
-    with pytest.raises(UsageError, match=r"2 of 12 target frames have no precomputed image: "
-                                         r"scene_a/front/000001.jpg \(lane\+1\), scene_b/front/000004.jpg \(lane\+2\)"):
+    with pytest.raises(
+        UsageError,
+        match=r"2 of 12 target frames have no precomputed image: "
+        r"scene_a/front/000001.jpg \(lane\+1\), scene_b/front/000004.jpg \(lane\+2\)",
+    ):
         run_method(store, tmp_path / "pre", RunSettings("precomputed", {"source": str(copy)}), progress=False)
     assert not list((tmp_path / "pre").glob("fragments/*"))
-    code = main(["run", "--method", "precomputed", "--from", str(copy), "--packets", str(store),
-                 "--out", str(tmp_path / "pre_cli"), "--no-progress"])
+    code = main(
+        [
+            "run",
+            "--method",
+            "precomputed",
+            "--from",
+            str(copy),
+            "--packets",
+            str(store),
+            "--out",
+            str(tmp_path / "pre_cli"),
+            "--no-progress",
+        ]
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "2 of 12 target frames have no precomputed image" in err[0]
 
@@ -174,7 +223,9 @@ def test_precomputed_wrong_size_names_the_file(store: Path, identity_run: Path, 
     shutil.copytree(identity_run / IMAGES_DIR, copy)
     bad = copy / "synthetic/lane+1/scene_a/front/000000.png"
     cv2.imwrite(str(bad), np.zeros((10, 10, 3), np.uint8))
-    with pytest.raises(ImageError, match=r"000000\.png: precomputed image for scene_a/front/000000\.jpg: image is 10x10"):
+    with pytest.raises(
+        ImageError, match=r"000000\.png: precomputed image for scene_a/front/000000\.jpg: image is 10x10"
+    ):
         run_method(store, tmp_path / "pre", RunSettings("precomputed", {"source": str(copy)}), progress=False)
 
 
@@ -204,9 +255,11 @@ def test_sigkilled_run_resumes_to_identical_outputs(store: Path, identity_run: P
         "    def enhance(self, packet):\n"
         "        time.sleep(0.4)\n"
         "        return super().enhance(packet)\n"
-        "run_method(sys.argv[1], sys.argv[2], RunSettings('identity'), enhancer=Slow(), progress=False)\n")
-    process = subprocess.Popen([sys.executable, "-c", script, str(store), str(out)], cwd=Path(__file__).parents[2],
-                               env=ONE_THREAD)
+        "run_method(sys.argv[1], sys.argv[2], RunSettings('identity'), enhancer=Slow(), progress=False)\n"
+    )
+    process = subprocess.Popen(
+        [sys.executable, "-c", script, str(store), str(out)], cwd=Path(__file__).parents[2], env=ONE_THREAD
+    )
     deadline = time.monotonic() + 60
     while not fragments(out) and time.monotonic() < deadline and process.poll() is None:
         time.sleep(0.02)
@@ -230,20 +283,47 @@ def test_two_shards_merge_to_the_single_run(store: Path, identity_run: Path, tmp
     same_results(identity_run, out)
 
 
-def test_concurrent_shard_processes_into_one_new_folder(store: Path, identity_run: Path, tmp_path: Path) -> None:
+def test_concurrent_shard_processes_into_one_new_folder(
+    store: Path, identity_run: Path, tmp_path: Path
+) -> None:
     out = tmp_path / "parallel"
-    processes = [subprocess.Popen([sys.executable, "-m", "setdiff_bench", "run", "--method", "identity", "--packets",
-                                   str(store), "--out", str(out), "--shard", f"{i}/2", "--device", "cpu",
-                                   "--no-progress"], cwd=Path(__file__).parents[2], env=ONE_THREAD, stdout=subprocess.PIPE,
-                                  stderr=subprocess.PIPE, text=True) for i in range(2)]
+    processes = [
+        subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "setdiff_bench",
+                "run",
+                "--method",
+                "identity",
+                "--packets",
+                str(store),
+                "--out",
+                str(out),
+                "--shard",
+                f"{i}/2",
+                "--device",
+                "cpu",
+                "--no-progress",
+            ],
+            cwd=Path(__file__).parents[2],
+            env=ONE_THREAD,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for i in range(2)
+    ]
     results = [process.communicate(timeout=120) for process in processes]
     assert [process.returncode for process in processes] == [0, 0], results
     same_results(identity_run, out)
 
 
 def test_second_run_does_nothing(store: Path, identity_run: Path) -> None:
-    before = {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in (identity_run / METRICS_FILE,
-                                                                   identity_run / MANIFEST_FILE)}
+    before = {
+        p: (p.stat().st_mtime_ns, p.read_bytes())
+        for p in (identity_run / METRICS_FILE, identity_run / MANIFEST_FILE)
+    }
     result = run_method(store, identity_run, RunSettings("identity"), progress=False)
     assert (result.enhanced, result.skipped, result.merged) == (0, 4, True)
     assert {p: (p.stat().st_mtime_ns, p.read_bytes()) for p in before} == before
@@ -258,9 +338,14 @@ def test_a_folder_with_other_settings_is_refused(store: Path, identity_run: Path
         run_method(store, tmp_path / "full", RunSettings("identity"), progress=False)
 
 
-@pytest.mark.parametrize("bad, message", [(lambda t: t[:, :2], r"shape \(3, 2, 32, 48\)"),
-                                          (lambda t: t * float("nan"), "NaN"),
-                                          (lambda t: (t * 255).to(torch.uint8), "dtype torch.uint8")])
+@pytest.mark.parametrize(
+    "bad, message",
+    [
+        (lambda t: t[:, :2], r"shape \(3, 2, 32, 48\)"),
+        (lambda t: t * float("nan"), "NaN"),
+        (lambda t: (t * 255).to(torch.uint8), "dtype torch.uint8"),
+    ],
+)
 def test_bad_enhancer_output_is_refused(store: Path, tmp_path: Path, bad, message: str) -> None:  # type: ignore[no-untyped-def]
     class Bad(IdentityEnhancer):
         def enhance(self, packet):  # type: ignore[no-untyped-def]
@@ -272,17 +357,35 @@ def test_bad_enhancer_output_is_refused(store: Path, tmp_path: Path, bad, messag
 
 
 # ---------------------------------------------------------------------- CLI, plugins, warp
-def test_cli_run_and_one_line_errors(store: Path, identity_run: Path, tmp_path: Path,
-                                     capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_run_and_one_line_errors(
+    store: Path, identity_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     out = tmp_path / "cli"
-    assert main(["run", "--method", "identity", "--packets", str(store), "--out", str(out), "--device", "cpu",
-                 "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "run",
+                "--method",
+                "identity",
+                "--packets",
+                str(store),
+                "--out",
+                str(out),
+                "--device",
+                "cpu",
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     assert "enhanced 4 packets" in capsys.readouterr().out
     same_results(identity_run, out)
-    for argv, fragment in ((["--packets", str(tmp_path / "none")], "no index.parquet here"),
-                           (["--packets", str(store), "--shard", "2/2"], "shard must be i/n with 0 <= i < n"),
-                           (["--packets", str(store), "--split", "train"], "no packets of split 'train'"),
-                           (["--packets", str(store), "--checkpoint", "x"], "does not take --checkpoint")):
+    for argv, fragment in (
+        (["--packets", str(tmp_path / "none")], "no index.parquet here"),
+        (["--packets", str(store), "--shard", "2/2"], "shard must be i/n with 0 <= i < n"),
+        (["--packets", str(store), "--split", "train"], "no packets of split 'train'"),
+        (["--packets", str(store), "--checkpoint", "x"], "does not take --checkpoint"),
+    ):
         code = main(["run", "--method", "identity", "--out", str(tmp_path / "err"), "--no-progress", *argv])
         err = capsys.readouterr().err.strip().splitlines()
         assert code == 2 and len(err) == 1 and fragment in err[0], err
@@ -290,8 +393,23 @@ def test_cli_run_and_one_line_errors(store: Path, identity_run: Path, tmp_path: 
 
 def test_plugin_method_runs(store: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.syspath_prepend(str(install_plugin(tmp_path / "site")))
-    assert main(["run", "--method", "darken", "-o", "factor=0.5", "--packets", str(store), "--out",
-                 str(tmp_path / "darken"), "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "run",
+                "--method",
+                "darken",
+                "-o",
+                "factor=0.5",
+                "--packets",
+                str(store),
+                "--out",
+                str(tmp_path / "darken"),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     metrics = pd.read_parquet(tmp_path / "darken" / METRICS_FILE)
     assert set(metrics["method"]) == {"darken"} and len(metrics) == 12
     targets = store_rows(store)
@@ -299,13 +417,21 @@ def test_plugin_method_runs(store: Path, tmp_path: Path, monkeypatch: pytest.Mon
         render = cv2.imread(str(store / targets.loc[(row.packet_id, row.view)]["image"]))
         written = cv2.imread(str(tmp_path / "darken" / row.image))
         assert np.abs(written.astype(int) - np.rint(render * 0.5).astype(int)).max() <= 1
-    assert json.loads((tmp_path / "darken" / MANIFEST_FILE).read_text())["method"]["enhancer"]["options"] == \
-        {"factor": 0.5}
+    assert json.loads((tmp_path / "darken" / MANIFEST_FILE).read_text())["method"]["enhancer"]["options"] == {
+        "factor": 0.5
+    }
 
 
 def test_warp_error_per_camera_sequence_across_groups(tmp_path: Path) -> None:
-    spec = StoreSpec(dataset="nuscenes", protocol="nuscenes", groups=("10-11s", "11-12s"), scenes=("scene-0001",),
-                     sensors=("CAM_FRONT", "CAM_BACK"), targets=4, timestamps=True)
+    spec = StoreSpec(
+        dataset="nuscenes",
+        protocol="nuscenes",
+        groups=("10-11s", "11-12s"),
+        scenes=("scene-0001",),
+        sensors=("CAM_FRONT", "CAM_BACK"),
+        targets=4,
+        timestamps=True,
+    )
     store = build_store(tmp_path / "store", spec)
     out, cache = tmp_path / "run", tmp_path / "flows"
     run_method(store, out, RunSettings("identity", flow_method="dis", warp_cache=str(cache)), progress=False)
@@ -313,8 +439,12 @@ def test_warp_error_per_camera_sequence_across_groups(tmp_path: Path) -> None:
     cached = {p: p.stat().st_mtime_ns for p in cache.glob("*.safetensors")}
     assert len(cached) == 2  # one ground-truth flow per camera sequence
     # another method on the same store reuses the flows; a copy of identity's images scores the same
-    run_method(store, tmp_path / "pre", RunSettings("precomputed", {"source": str(out)}, flow_method="dis",
-                                                    warp_cache=str(cache)), progress=False)
+    run_method(
+        store,
+        tmp_path / "pre",
+        RunSettings("precomputed", {"source": str(out)}, flow_method="dis", warp_cache=str(cache)),
+        progress=False,
+    )
     assert {p: p.stat().st_mtime_ns for p in cache.glob("*.safetensors")} == cached
     again = pd.read_parquet(tmp_path / "pre" / SEQUENCES_FILE)
     assert again["warp"].tolist() == sequences["warp"].tolist()
@@ -325,7 +455,9 @@ def test_warp_error_per_camera_sequence_across_groups(tmp_path: Path) -> None:
     packets = PacketStore(store)
     for sequence in sequences.itertuples():
         rows = metrics[metrics["sensor"] == sequence.sensor].sort_values("timestamp_us")
-        frames = torch.stack([torch.from_numpy(read_rgb_cv2(out / p).transpose(2, 0, 1)).float() for p in rows["image"]])
+        frames = torch.stack(
+            [torch.from_numpy(read_rgb_cv2(out / p).transpose(2, 0, 1)).float() for p in rows["image"]]
+        )
         gts, masks = zip(*(packets.load_ground_truth(r.packet_id, [r.view]) for r in rows.itertuples()))
         reference = warp_reference(torch.cat(gts), method="dis")
         expected = float(warp_error(frames, reference, torch.cat(masks)))
@@ -340,7 +472,24 @@ def test_run_verb_takes_a_shipped_model_by_name(store: Path, tmp_path: Path) -> 
     from setdiff_bench.cli.main import main
 
     out = tmp_path / "difix"
-    assert main(["run", "--method", "difix", "--checkpoint", "tiny_difix", "--packets", str(store), "--out", str(out),
-                 "--metrics", "psnr", "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "run",
+                "--method",
+                "difix",
+                "--checkpoint",
+                "tiny_difix",
+                "--packets",
+                str(store),
+                "--out",
+                str(out),
+                "--metrics",
+                "psnr",
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     assert json.loads((out / RUN_FILE).read_text())["options"] == {"checkpoint": "tiny_difix"}
     assert len(pd.read_parquet(out / METRICS_FILE)) > 0

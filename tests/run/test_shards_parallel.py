@@ -63,29 +63,67 @@ class Cli:
     """``python -m setdiff_bench`` in subprocesses that see the plugin."""
 
     def __init__(self, plugin: Path) -> None:
-        self.env = {**os.environ, "SETDIFF_THREADS": "1",
-                    "PYTHONPATH": os.pathsep.join([str(plugin), str(Path.cwd())])}
+        self.env = {
+            **os.environ,
+            "SETDIFF_THREADS": "1",
+            "PYTHONPATH": os.pathsep.join([str(plugin), str(Path.cwd())]),
+        }
 
     def command(self, *args: str) -> list[str]:
         return [sys.executable, "-m", "setdiff_bench", *args]
 
     def run(self, *args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-        return subprocess.run(self.command(*args), env=self.env, capture_output=True, text=True, timeout=300,
-                              check=False, cwd=cwd)
+        return subprocess.run(
+            self.command(*args),
+            env=self.env,
+            capture_output=True,
+            text=True,
+            timeout=300,
+            check=False,
+            cwd=cwd,
+        )
 
     def start(self, *args: str) -> subprocess.Popen[str]:
-        return subprocess.Popen(self.command(*args), env=self.env, stdout=subprocess.DEVNULL,
-                                stderr=subprocess.PIPE, text=True, start_new_session=True)
+        return subprocess.Popen(
+            self.command(*args),
+            env=self.env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+            start_new_session=True,
+        )
 
 
 def run_args(store: Path, out: Path, *extra: str) -> list[str]:
-    return ["run", "--method", "slowcopy", "--packets", str(store), "--out", str(out), "--metrics", "psnr,ssim",
-            "--no-progress", *extra]
+    return [
+        "run",
+        "--method",
+        "slowcopy",
+        "--packets",
+        str(store),
+        "--out",
+        str(out),
+        "--metrics",
+        "psnr,ssim",
+        "--no-progress",
+        *extra,
+    ]
 
 
 def leaderboard_args(runs: Path, out: Path) -> list[str]:
-    return ["leaderboard", "--dataset", "synthetic", "--runs", str(runs), "--out", str(out), "--format", "parquet,md",
-            "--metrics", "psnr,ssim"]
+    return [
+        "leaderboard",
+        "--dataset",
+        "synthetic",
+        "--runs",
+        str(runs),
+        "--out",
+        str(out),
+        "--format",
+        "parquet,md",
+        "--metrics",
+        "psnr,ssim",
+    ]
 
 
 @pytest.fixture(scope="module")
@@ -121,14 +159,24 @@ def cluster(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
         boards[name] = folder.parent.parent / "board"  # relative paths: the command line is in the Markdown
         made = cli.run(*leaderboard_args(Path("runs"), Path("board")), cwd=folder.parent.parent)
         assert made.returncode == 0, made.stderr
-    return {"one": one, "sharded": sharded, "boards": boards, "early_merge": early_merge, "early_board": early_board,
-            "written_before_kill": written_before_kill, "killed_packets": killed_packets, "rerun": rerun}
+    return {
+        "one": one,
+        "sharded": sharded,
+        "boards": boards,
+        "early_merge": early_merge,
+        "early_board": early_board,
+        "written_before_kill": written_before_kill,
+        "killed_packets": killed_packets,
+        "rerun": rerun,
+    }
 
 
 def test_the_killed_shard_stopped_between_packets_and_its_rerun_did_the_rest(cluster: dict) -> None:
     assert 1 <= cluster["written_before_kill"] < len(cluster["killed_packets"])
     done = len(cluster["killed_packets"]) - cluster["written_before_kill"]
-    assert f"enhanced {done} packets, {cluster['written_before_kill']} already done" in cluster["rerun"].stdout
+    assert (
+        f"enhanced {done} packets, {cluster['written_before_kill']} already done" in cluster["rerun"].stdout
+    )
 
 
 def test_an_unfinished_run_is_refused_in_one_line(cluster: dict) -> None:
@@ -145,7 +193,9 @@ def test_sharded_leaderboard_is_byte_identical_to_one_process(cluster: dict) -> 
     assert names and names == sorted(p.name for p in sharded.iterdir())
     for name in names:
         assert (one / name).read_bytes() == (sharded / name).read_bytes(), name
-    pd.testing.assert_frame_equal(comparable_metrics(cluster["one"] / METRICS_FILE),
-                                  comparable_metrics(cluster["sharded"] / METRICS_FILE))
+    pd.testing.assert_frame_equal(
+        comparable_metrics(cluster["one"] / METRICS_FILE),
+        comparable_metrics(cluster["sharded"] / METRICS_FILE),
+    )
     assert len(list((cluster["sharded"] / FRAGMENTS_DIR).iterdir())) == 12
     assert not list(cluster["sharded"].glob(".*")), "no lock or claim file is left behind"

@@ -74,12 +74,31 @@ def test_submit_chain_shards_prepare_and_run_and_ends_in_a_leaderboard(tmp_path:
     fake.write_text(textwrap.dedent(FAKE_SBATCH.format(python=sys.executable)))
     fake.chmod(0o755)
     packets, runs = tmp_path / "packets", tmp_path / "runs"
-    env = {**os.environ, "PATH": f"{bin_dir}{os.pathsep}{os.environ['PATH']}", "FAKE_SLURM_DIR": str(slurm_dir),
-           "DATASET": "synthetic", "ROOT": str(root), "FITS": str(root), "PACKETS": str(packets), "RUNS": str(runs),
-           "METHOD": "identity", "SHARDS": "2", "SETDIFF": f"{sys.executable} -m setdiff_bench",
-           "SETDIFF_THREADS": "1", "PYTHONPATH": str(REPO), "EXTRA_PREPARE": "--test-scene street_01"}
-    done = subprocess.run(["bash", str(REPO / "benchmarks" / "slurm" / "submit.sh")], env=env, capture_output=True,
-                          text=True, timeout=900, check=False, cwd=tmp_path)
+    env = {
+        **os.environ,
+        "PATH": f"{bin_dir}{os.pathsep}{os.environ['PATH']}",
+        "FAKE_SLURM_DIR": str(slurm_dir),
+        "DATASET": "synthetic",
+        "ROOT": str(root),
+        "FITS": str(root),
+        "PACKETS": str(packets),
+        "RUNS": str(runs),
+        "METHOD": "identity",
+        "SHARDS": "2",
+        "SETDIFF": f"{sys.executable} -m setdiff_bench",
+        "SETDIFF_THREADS": "1",
+        "PYTHONPATH": str(REPO),
+        "EXTRA_PREPARE": "--test-scene street_01",
+    }
+    done = subprocess.run(
+        ["bash", str(REPO / "benchmarks" / "slurm" / "submit.sh")],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=900,
+        check=False,
+        cwd=tmp_path,
+    )
     logs = "".join(p.read_text() for p in sorted(slurm_dir.glob("*.log")))
     assert done.returncode == 0, done.stderr + logs
     assert done.stdout.startswith("submitted: prepare 1, index 2, run 3, merge + leaderboard 4")
@@ -95,6 +114,11 @@ def test_submit_chain_shards_prepare_and_run_and_ends_in_a_leaderboard(tmp_path:
 def test_sbatch_script_refuses_an_unknown_stage(tmp_path: Path, stage: str) -> None:
     if shutil.which("bash") is None:
         pytest.skip("no bash")
-    done = subprocess.run(["bash", str(REPO / "benchmarks" / "slurm" / "shards.sbatch"), stage],
-                          env={**os.environ, "PACKETS": str(tmp_path)}, capture_output=True, text=True, check=False)
+    done = subprocess.run(
+        ["bash", str(REPO / "benchmarks" / "slurm" / "shards.sbatch"), stage],
+        env={**os.environ, "PACKETS": str(tmp_path)},
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     assert done.returncode == 2 and "unknown stage 'bogus'" in done.stderr

@@ -27,14 +27,20 @@ def test_synthetic_packets_end_to_end(tmp_path: Path) -> None:
 
     with torch_threads(1):
         generate_scene(tmp_path / "data", get_preset("tiny"), seed=0, index=0)
-        prepare("synthetic", tmp_path / "data", tmp_path / "packets", fit=True, fit_iterations=60, progress=False)
+        prepare(
+            "synthetic", tmp_path / "data", tmp_path / "packets", fit=True, fit_iterations=60, progress=False
+        )
         runs = tmp_path / "runs"
         for method in ("identity", "reproject"):
             run_method(tmp_path / "packets", runs / method, RunSettings(method, split=None), progress=False)
         external = tmp_path / "external"
         shutil.copytree(runs / "identity" / IMAGES_DIR, external)
-        run_method(tmp_path / "packets", runs / "precomputed", RunSettings("precomputed", {"source": str(external)},
-                                                                             split=None), progress=False)
+        run_method(
+            tmp_path / "packets",
+            runs / "precomputed",
+            RunSettings("precomputed", {"source": str(external)}, split=None),
+            progress=False,
+        )
     identity = comparable_metrics(runs / "identity" / METRICS_FILE)
     copied = comparable_metrics(runs / "precomputed" / METRICS_FILE).assign(method="identity")
     pd.testing.assert_frame_equal(identity, copied)

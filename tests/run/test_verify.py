@@ -38,8 +38,13 @@ def test_corrupt_file_is_found_before_any_work(store: Path, tmp_path: Path) -> N
     copy, victim = corrupt_last_packet(store, tmp_path)
     enhancer = CountingIdentity()
     with pytest.raises(PacketError) as error:
-        run_method(copy, tmp_path / "out", RunSettings(method="identity", device="cpu"), progress=False,
-                   enhancer=enhancer)
+        run_method(
+            copy,
+            tmp_path / "out",
+            RunSettings(method="identity", device="cpu"),
+            progress=False,
+            enhancer=enhancer,
+        )
     assert enhancer.calls == 0 and error.value.path == str(victim)
     assert "SHA-256 mismatch" in error.value.problem and "before any work" in error.value.problem
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").rglob("*.parquet"))
@@ -49,6 +54,12 @@ def test_without_the_check_the_run_finds_it_late(store: Path, tmp_path: Path) ->
     copy, _ = corrupt_last_packet(store, tmp_path)
     enhancer = CountingIdentity()
     with pytest.raises(PacketError, match="SHA-256 mismatch"):
-        run_method(copy, tmp_path / "out", RunSettings(method="identity", device="cpu"), progress=False,
-                   enhancer=enhancer, verify=False)
+        run_method(
+            copy,
+            tmp_path / "out",
+            RunSettings(method="identity", device="cpu"),
+            progress=False,
+            enhancer=enhancer,
+            verify=False,
+        )
     assert enhancer.calls > 0  # packets before the corrupt one were enhanced first

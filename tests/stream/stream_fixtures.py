@@ -16,7 +16,9 @@ HEIGHT, WIDTH = 32, 48
 RIG = (("front", 0.0), ("front_left", 20.0), ("front_right", -20.0))
 
 
-def rig_camera(x: float, yaw_deg: float, lateral: float = 0.0, size: tuple[int, int] = (HEIGHT, WIDTH)) -> Camera:
+def rig_camera(
+    x: float, yaw_deg: float, lateral: float = 0.0, size: tuple[int, int] = (HEIGHT, WIDTH)
+) -> Camera:
     """A camera at world ``(x + 10, lateral + 5, 1)`` looking along world +x turned by ``yaw`` (z up)."""
     yaw = math.radians(yaw_deg)
     forward = np.array([math.cos(yaw), math.sin(yaw), 0.0])
@@ -36,8 +38,13 @@ def rig_camera(x: float, yaw_deg: float, lateral: float = 0.0, size: tuple[int, 
 def plane_points(camera: Camera, depth: float = 6.0) -> torch.Tensor:
     """``(3, H, W)`` world points of a fronto-parallel wall ``depth`` ahead (the C-map, alpha 1)."""
     v, u = np.meshgrid(np.arange(camera.height) + 0.5, np.arange(camera.width) + 0.5, indexing="ij")
-    rays = np.stack([(u - camera.K[0, 2]) / camera.K[0, 0], (v - camera.K[1, 2]) / camera.K[1, 1],
-                     np.ones_like(u)], axis=-1) * depth
+    rays = (
+        np.stack(
+            [(u - camera.K[0, 2]) / camera.K[0, 0], (v - camera.K[1, 2]) / camera.K[1, 1], np.ones_like(u)],
+            axis=-1,
+        )
+        * depth
+    )
     world = (rays - camera.t) @ camera.R
     return torch.from_numpy(world.transpose(2, 0, 1).astype(np.float32))
 
@@ -47,21 +54,34 @@ def views(cameras: list[Camera], seed: int, names: list[str] | None = None) -> V
     generator = torch.Generator().manual_seed(seed)
     height, width = cameras[0].height, cameras[0].width
     coarse = torch.rand(len(cameras), 3, height // 8, width // 8, generator=generator)
-    images = torch.nn.functional.interpolate(coarse, size=(height, width), mode="bilinear", align_corners=False)
-    return Views(images=torch.round(images * 255).to(torch.uint8), cameras=cameras, cmaps=torch.stack([plane_points(c) for c in cameras]),
-                 alphas=torch.ones(len(cameras), 1, height, width), names=names)
+    images = torch.nn.functional.interpolate(
+        coarse, size=(height, width), mode="bilinear", align_corners=False
+    )
+    return Views(
+        images=torch.round(images * 255).to(torch.uint8),
+        cameras=cameras,
+        cmaps=torch.stack([plane_points(c) for c in cameras]),
+        alphas=torch.ones(len(cameras), 1, height, width),
+        names=names,
+    )
 
 
 def recorded_references(size: tuple[int, int] = (HEIGHT, WIDTH), seed: int = 1) -> Views:
     """Six clean frames along lane 0 (front camera)."""
-    return views([rig_camera(2.0 * i, 0.0, size=size) for i in range(6)], seed=seed,
-                 names=[f"rec{i}" for i in range(6)])
+    return views(
+        [rig_camera(2.0 * i, 0.0, size=size) for i in range(6)],
+        seed=seed,
+        names=[f"rec{i}" for i in range(6)],
+    )
 
 
 def tick_frames(tick: int, size: tuple[int, int] = (HEIGHT, WIDTH)) -> Views:
     """The rig's three renders at ``tick`` on the shifted lane (0.5 m per tick)."""
-    return views([rig_camera(0.5 * tick, yaw, lateral=3.0, size=size) for _, yaw in RIG], seed=100 + tick,
-                 names=[f"{name}/{tick:06d}.png" for name, _ in RIG])
+    return views(
+        [rig_camera(0.5 * tick, yaw, lateral=3.0, size=size) for _, yaw in RIG],
+        seed=100 + tick,
+        names=[f"{name}/{tick:06d}.png" for name, _ in RIG],
+    )
 
 
 def save_tiny_checkpoint(folder: Path) -> Path:

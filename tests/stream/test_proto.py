@@ -16,8 +16,12 @@ ROOT = Path(__file__).resolve().parents[2]
 def test_generated_code_matches_proto(tmp_path: Path) -> None:
     protoc = pytest.importorskip("grpc_tools.protoc")
     out = tmp_path / "enhancer.desc"
-    assert protoc.main(["protoc", f"-I{ROOT}", f"--descriptor_set_out={out}",
-                        "setdiff_bench/serve/enhancer.proto"]) == 0
+    assert (
+        protoc.main(
+            ["protoc", f"-I{ROOT}", f"--descriptor_set_out={out}", "setdiff_bench/serve/enhancer.proto"]
+        )
+        == 0
+    )
     compiled = descriptor_pb2.FileDescriptorSet.FromString(out.read_bytes()).file[0]
     for message in compiled.message_type:  # protoc's --python_out drops the derived json_name
         for field in message.field:

@@ -37,8 +37,10 @@ LARGE = (144, 256)  # a tick that takes ~0.7 s on one CPU thread, so requests ov
 
 @pytest.fixture(scope="module")
 def server(checkpoint: Path) -> Iterator[RunningServer]:
-    running = start_server(load_enhancer("setdiff", str(checkpoint), device="cpu"),
-                           ServeSettings(port=0, workers=4, max_queue=16, max_sessions=4, max_cameras=4))
+    running = start_server(
+        load_enhancer("setdiff", str(checkpoint), device="cpu"),
+        ServeSettings(port=0, workers=4, max_queue=16, max_sessions=4, max_cameras=4),
+    )
     yield running
     running.stop(grace=5)
 
@@ -50,7 +52,9 @@ def client(server: RunningServer) -> Iterator[EnhancerClient]:
         yield client
 
 
-def test_drive_of_30_ticks_equals_batch_runner(client: EnhancerClient, checkpoint: Path, tmp_path: Path) -> None:
+def test_drive_of_30_ticks_equals_batch_runner(
+    client: EnhancerClient, checkpoint: Path, tmp_path: Path
+) -> None:
     """A 3-camera, 30-tick drive streamed through the server equals `run --method setdiff` on the same views."""
     assert client.healthy()
     version = client.get_version()
@@ -65,8 +69,12 @@ def test_drive_of_30_ticks_equals_batch_runner(client: EnhancerClient, checkpoin
         write_tick_store(tmp_path / "store", references, frames, chooser.select(frames.cameras), tick)
     client.close_session(session)
     merge_index(tmp_path / "store")
-    run_method(tmp_path / "store", tmp_path / "run", RunSettings("setdiff", options={"checkpoint": str(checkpoint)},
-                                                                 metrics=("psnr",), warp="off"), progress=False)
+    run_method(
+        tmp_path / "store",
+        tmp_path / "run",
+        RunSettings("setdiff", options={"checkpoint": str(checkpoint)}, metrics=("psnr",), warp="off"),
+        progress=False,
+    )
     compared = 0
     for tick, images in streamed.items():
         assert images.shape == (3, 32, 48, 3) and images.dtype == np.uint8
@@ -101,8 +109,12 @@ def test_each_bad_input_is_refused_and_the_server_keeps_serving(client: Enhancer
         non_rigid.frames[2].camera.world_to_camera[i] *= 2.0
     short_bytes = client.enhance_request(session, good)
     short_bytes.frames[0].rgb.data = short_bytes.frames[0].rgb.data[:-1]
-    too_many = client.enhance_request(session, Views(torch.cat([good.images, good.images]), [*good.cameras] * 2,
-                                                     torch.cat([good.cmaps, good.cmaps])))
+    too_many = client.enhance_request(
+        session,
+        Views(
+            torch.cat([good.images, good.images]), [*good.cameras] * 2, torch.cat([good.cmaps, good.cmaps])
+        ),
+    )
     unknown = pb.EnhanceRequest(session_uuid="no-such-session", frames=request.frames)
     cases = {
         "wrong image size": (wrong_size, grpc.StatusCode.INVALID_ARGUMENT, "expects 48x32"),
@@ -119,14 +131,17 @@ def test_each_bad_input_is_refused_and_the_server_keeps_serving(client: Enhancer
         assert words in details and "\n" not in details, (name, details)
         assert client.enhance(session, request).shape == (3, 32, 48, 3)  # still serving
     assert _code(lambda: client.close_session("no-such-session"))[0] == grpc.StatusCode.NOT_FOUND
-    assert _code(lambda: client.start_session(Views(good.images, good.cameras)))[0] == \
-        grpc.StatusCode.INVALID_ARGUMENT  # no C-maps and no PLY
+    assert (
+        _code(lambda: client.start_session(Views(good.images, good.cameras)))[0]
+        == grpc.StatusCode.INVALID_ARGUMENT
+    )  # no C-maps and no PLY
     client.close_session(session)
 
 
 def test_bounded_queue_answers_resource_exhausted(checkpoint: Path) -> None:
-    running = start_server(load_enhancer("setdiff", str(checkpoint), device="cpu"),
-                           ServeSettings(port=0, workers=2, max_queue=2))
+    running = start_server(
+        load_enhancer("setdiff", str(checkpoint), device="cpu"), ServeSettings(port=0, workers=2, max_queue=2)
+    )
     try:
         with EnhancerClient(f"127.0.0.1:{running.port}") as client:
             session = client.start_session(recorded_references(LARGE))
@@ -159,8 +174,10 @@ def test_two_concurrent_sessions_are_isolated(client: EnhancerClient, checkpoint
     """Two sessions with different recordings, driven from two threads at once, each get what they would alone."""
     enhancer = load_enhancer("setdiff", str(checkpoint), device="cpu")
     recordings = {"a": recorded_references(seed=1), "b": recorded_references(seed=2)}
-    expected = {key: [StreamSession(enhancer, refs).enhance(tick_frames(t)) for t in range(5)]
-                for key, refs in recordings.items()}
+    expected = {
+        key: [StreamSession(enhancer, refs).enhance(tick_frames(t)) for t in range(5)]
+        for key, refs in recordings.items()
+    }
     sessions = {key: client.start_session(refs) for key, refs in recordings.items()}
     barrier = threading.Barrier(2)
 
@@ -180,12 +197,32 @@ def test_two_concurrent_sessions_are_isolated(client: EnhancerClient, checkpoint
 
 def test_sigterm_finishes_in_flight_requests(checkpoint: Path) -> None:
     env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
-    process = subprocess.Popen([sys.executable, "-m", "setdiff_bench", "serve", "--checkpoint", str(checkpoint),
-                                "--port", "0", "--device", "cpu", "--grace", "60"],
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    process = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "setdiff_bench",
+            "serve",
+            "--checkpoint",
+            str(checkpoint),
+            "--port",
+            "0",
+            "--device",
+            "cpu",
+            "--grace",
+            "60",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
     try:
         line = process.stdout.readline()
-        assert line.startswith("serving on 127.0.0.1:"), (line, process.stderr.read() if process.poll() else "")
+        assert line.startswith("serving on 127.0.0.1:"), (
+            line,
+            process.stderr.read() if process.poll() else "",
+        )
         port = int(line.split(":")[1].split()[0])
         with EnhancerClient(f"127.0.0.1:{port}") as client:
             session = client.start_session(recorded_references(LARGE))
@@ -210,7 +247,9 @@ def test_server_binds_localhost_by_default() -> None:
     assert ServeSettings().host == "127.0.0.1"
 
 
-def test_example_replays_a_store_through_the_server(server: RunningServer, checkpoint: Path, tmp_path: Path) -> None:
+def test_example_replays_a_store_through_the_server(
+    server: RunningServer, checkpoint: Path, tmp_path: Path
+) -> None:
     """examples/drive_packets.py: world cameras and C-maps recovered from a store give the batch runner's images."""
     references = recorded_references()
     chooser = StreamSession(load_enhancer("setdiff", str(checkpoint), device="cpu"), references)
@@ -218,12 +257,28 @@ def test_example_replays_a_store_through_the_server(server: RunningServer, check
         frames = tick_frames(tick)
         write_tick_store(tmp_path / "store", references, frames, chooser.select(frames.cameras), tick)
     merge_index(tmp_path / "store")
-    run_method(tmp_path / "store", tmp_path / "run", RunSettings("setdiff", options={"checkpoint": str(checkpoint)},
-                                                                 metrics=("psnr",), warp="off"), progress=False)
+    run_method(
+        tmp_path / "store",
+        tmp_path / "run",
+        RunSettings("setdiff", options={"checkpoint": str(checkpoint)}, metrics=("psnr",), warp="off"),
+        progress=False,
+    )
     root = Path(__file__).resolve().parents[2]
-    subprocess.run([sys.executable, str(root / "examples" / "drive_packets.py"), "--packets", str(tmp_path / "store"),
-                    "--out", str(tmp_path / "out"), "--address", f"127.0.0.1:{server.port}"], check=True,
-                   env={**os.environ, "PYTHONPATH": str(root), "OMP_NUM_THREADS": "1"}, capture_output=True)
+    subprocess.run(
+        [
+            sys.executable,
+            str(root / "examples" / "drive_packets.py"),
+            "--packets",
+            str(tmp_path / "store"),
+            "--out",
+            str(tmp_path / "out"),
+            "--address",
+            f"127.0.0.1:{server.port}",
+        ],
+        check=True,
+        env={**os.environ, "PYTHONPATH": str(root), "OMP_NUM_THREADS": "1"},
+        capture_output=True,
+    )
     replayed = sorted((tmp_path / "out").rglob("*.png"))
     assert len(replayed) == 9
     worst = 0

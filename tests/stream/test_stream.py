@@ -23,7 +23,9 @@ def _hwc(tensor: torch.Tensor) -> np.ndarray:
     return tensor.permute(1, 2, 0).numpy().astype(np.float32)
 
 
-def write_tick_store(root: Path, references: Views, frames: Views, reference_ids: list[int], tick: int) -> None:
+def write_tick_store(
+    root: Path, references: Views, frames: Views, reference_ids: list[int], tick: int
+) -> None:
     """A prepared-style packet of this tick: the chosen references + the frames, normalised as prepare does."""
     refs = [references.cameras[i] for i in reference_ids]
     cameras = [*refs, *frames.cameras]
@@ -32,17 +34,35 @@ def write_tick_store(root: Path, references: Views, frames: Views, reference_ids
     normalised = normalize_packet(cameras, cmaps, len(refs), alphas=alphas)
     images = uint8_to_float(torch.cat([references.images[reference_ids], frames.images]))
     names = [references.names[i] for i in reference_ids] + list(frames.names)
-    contents = [ViewContent(frame=names[i], sensor="cam", traversal="lane", timestamp_us=None,
-                            camera=normalised.cameras[i], camera_world=cameras[i], image=_hwc(images[i]),
-                            cmap=_hwc(normalised.cmaps[i]), alpha=np.ones((HEIGHT, WIDTH), np.float32),
-                            gt=_hwc(images[i]) if i >= len(refs) else None,
-                            mask=np.ones((HEIGHT, WIDTH), bool) if i >= len(refs) else None,
-                            overlap_score=1.0 if i < len(refs) else None)
-                for i in range(len(cameras))]
-    header = PacketHeader(packet_id=packet_id("stream", "drive", "tick", tick), dataset="synthetic",
-                          protocol="stream", group="tick", split="test", scene="drive", fit_key="lane0",
-                          scale=normalised.scale, recipe="stream-test")
-    write_packet(root, header, contents[:len(refs)], contents[len(refs):])
+    contents = [
+        ViewContent(
+            frame=names[i],
+            sensor="cam",
+            traversal="lane",
+            timestamp_us=None,
+            camera=normalised.cameras[i],
+            camera_world=cameras[i],
+            image=_hwc(images[i]),
+            cmap=_hwc(normalised.cmaps[i]),
+            alpha=np.ones((HEIGHT, WIDTH), np.float32),
+            gt=_hwc(images[i]) if i >= len(refs) else None,
+            mask=np.ones((HEIGHT, WIDTH), bool) if i >= len(refs) else None,
+            overlap_score=1.0 if i < len(refs) else None,
+        )
+        for i in range(len(cameras))
+    ]
+    header = PacketHeader(
+        packet_id=packet_id("stream", "drive", "tick", tick),
+        dataset="synthetic",
+        protocol="stream",
+        group="tick",
+        split="test",
+        scene="drive",
+        fit_key="lane0",
+        scale=normalised.scale,
+        recipe="stream-test",
+    )
+    write_packet(root, header, contents[: len(refs)], contents[len(refs) :])
 
 
 @pytest.mark.parametrize("tick", [0, 7])
@@ -57,8 +77,12 @@ def test_equals_batch_runner_to_the_last_8bit_level(checkpoint: Path, tmp_path: 
 
     write_tick_store(tmp_path / "store", references, frames, chosen, tick)
     merge_index(tmp_path / "store")
-    run_method(tmp_path / "store", tmp_path / "run", RunSettings("setdiff", options={"checkpoint": str(checkpoint)},
-                                                                 metrics=("psnr",), warp="off"), progress=False)
+    run_method(
+        tmp_path / "store",
+        tmp_path / "run",
+        RunSettings("setdiff", options={"checkpoint": str(checkpoint)}, metrics=("psnr",), warp="off"),
+        progress=False,
+    )
     for position, name in enumerate(frames.names):
         written = sorted((tmp_path / "run" / IMAGES_DIR).rglob(Path(name).stem + ".png"))
         written = [p for p in written if p.parent.name == Path(name).parent.name]
@@ -78,8 +102,9 @@ def test_reference_selection_follows_eq2(checkpoint: Path) -> None:
 
 
 def test_bad_ticks_are_refused(checkpoint: Path) -> None:
-    session = StreamSession(load_enhancer("setdiff", str(checkpoint), device="cpu"), recorded_references(),
-                            max_cameras=3)
+    session = StreamSession(
+        load_enhancer("setdiff", str(checkpoint), device="cpu"), recorded_references(), max_cameras=3
+    )
     frames = tick_frames(0)
     with pytest.raises(StreamInputError, match="expects 48x32"):
         session.enhance(Views(torch.zeros(3, 3, 16, 48, dtype=torch.uint8), frames.cameras, frames.cmaps))
@@ -88,7 +113,9 @@ def test_bad_ticks_are_refused(checkpoint: Path) -> None:
     with pytest.raises(StreamInputError, match="NaN"):
         session.enhance(Views(nan, frames.cameras, frames.cmaps))
     with pytest.raises(StreamInputError, match="at most 3"):
-        session.enhance(Views(torch.cat([frames.images, frames.images[:1]]), [*frames.cameras, frames.cameras[0]]))
+        session.enhance(
+            Views(torch.cat([frames.images, frames.images[:1]]), [*frames.cameras, frames.cameras[0]])
+        )
     with pytest.raises(StreamInputError, match="no PLY"):
         session.enhance(Views(frames.images, frames.cameras))
     assert session.enhance(frames).shape == (3, 3, HEIGHT, WIDTH)  # still serving

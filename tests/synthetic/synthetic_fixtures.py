@@ -12,5 +12,3 @@ SEED = 7
 def small_preset() -> Preset:
     """The tiny preset with 3 timesteps (36 frames): same code path, a third of the rendering."""
     return dataclasses.replace(get_preset("tiny"), timesteps=3, holdout_every=3)
-
-

@@ -66,7 +66,9 @@ def test_points_project_onto_matching_colours_in_other_drives(scene_dir):
         difference = np.abs(picture[rows, cols] - colours).max(axis=1)
         match_rates.append(float((difference < 0.12).mean()))
         shuffled = np.random.default_rng(0).permutation(len(colours))
-        baseline_rates.append(float((np.abs(picture[rows, cols] - colours[shuffled]).max(axis=1) < 0.12).mean()))
+        baseline_rates.append(
+            float((np.abs(picture[rows, cols] - colours[shuffled]).max(axis=1) < 0.12).mean())
+        )
     assert match_rates
     assert np.mean(match_rates) > 0.6
     assert np.mean(match_rates) > np.mean(baseline_rates) + 0.25

@@ -33,9 +33,14 @@ def test_layout_on_disk(scene_dir):
     preset = small_preset()
     names = sorted(p.name for p in (scene_dir / "images").iterdir())
     assert len(names) == 4 * 3 * preset.timesteps
-    assert sorted(p.name for p in (scene_dir / "dynamic_masks").iterdir()) == names  # stems are names' stems (.png)
-    assert sorted(p.name for p in (scene_dir / "sparse" / "0").iterdir()) == ["cameras.bin", "images.bin",
-                                                                            "points3D.bin"]
+    assert (
+        sorted(p.name for p in (scene_dir / "dynamic_masks").iterdir()) == names
+    )  # stems are names' stems (.png)
+    assert sorted(p.name for p in (scene_dir / "sparse" / "0").iterdir()) == [
+        "cameras.bin",
+        "images.bin",
+        "points3D.bin",
+    ]
     assert not list(scene_dir.parent.glob(".*"))  # no staging folder left behind
     train = (scene_dir / "train_set.txt").read_text().split()
     test = (scene_dir / "test_set.txt").read_text().split()
@@ -55,9 +60,16 @@ def test_scene_json(scene_dir):
     assert (meta["width"], meta["height"]) == (preset.width, preset.height)
     assert meta["lane_width_m"] == 3.5 and meta["num_lanes"] >= 3
     assert [(t["name"], t["kind"], t["lane_offset"]) for t in meta["traversals"]] == [
-        ("lane0", "straight", 0), ("lane1", "straight", 1), ("lane2", "straight", 2), ("turn", "lane_change", None)]
-    assert [(c["name"], c["yaw_deg"]) for c in meta["cameras"]] == [("front", 0.0), ("front_left", 45.0),
-                                                                   ("front_right", -45.0)]
+        ("lane0", "straight", 0),
+        ("lane1", "straight", 1),
+        ("lane2", "straight", 2),
+        ("turn", "lane_change", None),
+    ]
+    assert [(c["name"], c["yaw_deg"]) for c in meta["cameras"]] == [
+        ("front", 0.0),
+        ("front_left", 45.0),
+        ("front_right", -45.0),
+    ]
     train = set((scene_dir / "train_set.txt").read_text().split())
     for frame in meta["frames"]:
         assert frame["name"] == f"{frame['traversal']}_{frame['camera']}_{frame['index']:03d}.png"

@@ -56,7 +56,9 @@ def test_lane_markings_are_painted_on_lane_boundaries():
     layout = random_layout(np.random.default_rng(3), -10.0, 70.0)
     texture = _road_texture(layout, np.random.default_rng(0), layout.road_right)
     x = np.linspace(0.0, 30.0, 301)
-    on_boundary = texture(x - layout.x_min, np.full_like(x, LANE_WIDTH_M))  # y = 1.75: lane 0 | lane 1 (dashed)
+    on_boundary = texture(
+        x - layout.x_min, np.full_like(x, LANE_WIDTH_M)
+    )  # y = 1.75: lane 0 | lane 1 (dashed)
     lane_centre = texture(x - layout.x_min, np.full_like(x, LANE_WIDTH_M / 2))  # y = 0: middle of lane 0
     white = on_boundary.min(axis=1) > 0.85
     assert 0.2 < white.mean() < 0.45  # dashes: 3 m painted every 9 m
@@ -74,6 +76,7 @@ def test_drives_shift_by_whole_lanes_and_cameras_by_45_degrees(scene_dir):
     turn = lanes["turn"].poses
     assert abs(turn[0, 1]) < 0.3 and turn[-1, 1] > LANE_WIDTH_M - 0.3  # starts in lane 0, ends in lane 1 or 2
     front, left, right = (rig_camera(lanes["lane0"], 1, spec, 80, 48) for spec in RIG)
+
     def yaw(camera):  # heading of the optical axis in the ground plane
         return math.degrees(math.atan2(camera.view_direction[1], camera.view_direction[0]))
 
@@ -104,8 +107,13 @@ def test_dynamic_mask_covers_what_the_vehicle_changes(scene_dir):
         traversal, rest = path.stem.split("_", 1)
         sensor, index = rest.rsplit("_", 1)
         spec = next(s for s in RIG if s.name == sensor)
-        camera = rig_camera(next(t for t in build.traversals if t.name == traversal), int(index), spec,
-                            preset.width, preset.height)
+        camera = rig_camera(
+            next(t for t in build.traversals if t.name == traversal),
+            int(index),
+            spec,
+            preset.width,
+            preset.height,
+        )
         with torch.no_grad():
             static = render(build.world.static, [camera]).rgb[0].clamp(0, 1).permute(1, 2, 0).numpy()
         truth = read_rgb(scene_dir / "images" / (path.stem + ".png"))

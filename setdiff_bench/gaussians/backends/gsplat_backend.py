@@ -19,14 +19,27 @@ from setdiff_bench.gaussians.backends.common import RenderOutput, clip_centres
 from setdiff_bench.gaussians.model import GaussianModel
 
 
-def render(gaussians: GaussianModel, cameras: list[Camera], *, with_geometry: bool, sh_degree: int | None,
-           background: Sequence[float] | None, cmap_bound: float | None, cmap_center: Sequence[float],
-           near: float, far: float, eps2d: float, tile_size: int) -> RenderOutput:
+def render(
+    gaussians: GaussianModel,
+    cameras: list[Camera],
+    *,
+    with_geometry: bool,
+    sh_degree: int | None,
+    background: Sequence[float] | None,
+    cmap_bound: float | None,
+    cmap_center: Sequence[float],
+    near: float,
+    far: float,
+    eps2d: float,
+    tile_size: int,
+) -> RenderOutput:
     """Render with gsplat; see :func:`setdiff_bench.gaussians.render.render` for the arguments."""
     try:
         import gsplat
     except ImportError as exc:
-        raise UsageError("the gsplat backend needs the 'gpu' extra: pip install 'setdiff-bench[gpu]'") from exc
+        raise UsageError(
+            "the gsplat backend needs the 'gpu' extra: pip install 'setdiff-bench[gpu]'"
+        ) from exc
     if not torch.cuda.is_available():
         raise UsageError("the gsplat backend needs a CUDA GPU; use backend='torch' on the CPU")
     g = gaussians if gaussians.device.type == "cuda" else gaussians.to("cuda")
@@ -44,22 +57,50 @@ def render(gaussians: GaussianModel, cameras: list[Camera], *, with_geometry: bo
     else:
         features, mode = colors, "RGB"
     renders, alphas, meta = gsplat.rasterization(
-        g.means, g.quats, g.scales, g.opacities, features, viewmats, Ks, width, height,
-        near_plane=near, far_plane=far, eps2d=eps2d, sh_degree=None, packed=False, tile_size=16,
-        backgrounds=None, render_mode=mode, rasterize_mode="classic")
+        g.means,
+        g.quats,
+        g.scales,
+        g.opacities,
+        features,
+        viewmats,
+        Ks,
+        width,
+        height,
+        near_plane=near,
+        far_plane=far,
+        eps2d=eps2d,
+        sh_degree=None,
+        packed=False,
+        tile_size=16,
+        backgrounds=None,
+        render_mode=mode,
+        rasterize_mode="classic",
+    )
     renders = renders.permute(0, 3, 1, 2)  # (C, D, H, W)
     alpha = alphas.permute(0, 3, 1, 2)
     rgb = renders[:, :3]
     if background is not None:
-        rgb = rgb + (1.0 - alpha) * torch.as_tensor(list(background), device=device, dtype=dtype).view(1, 3, 1, 1)
+        rgb = rgb + (1.0 - alpha) * torch.as_tensor(list(background), device=device, dtype=dtype).view(
+            1, 3, 1, 1
+        )
     means2d = meta.get("means2d")
     if means2d is not None and means2d.requires_grad:
         means2d.retain_grad()
-    per_camera = [{"means2d": CameraScreenPoints(means2d, i) if means2d is not None else None,
-                   "radii": meta["radii"][i], "visible": (meta["radii"][i] > 0).reshape(len(g), -1).any(-1)}
-                  for i in range(len(cameras))]
-    return RenderOutput(rgb=rgb, cmap=renders[:, 3:6] if with_geometry else None,
-                        depth=renders[:, 6:7] if with_geometry else None, alpha=alpha, meta=per_camera)
+    per_camera = [
+        {
+            "means2d": CameraScreenPoints(means2d, i) if means2d is not None else None,
+            "radii": meta["radii"][i],
+            "visible": (meta["radii"][i] > 0).reshape(len(g), -1).any(-1),
+        }
+        for i in range(len(cameras))
+    ]
+    return RenderOutput(
+        rgb=rgb,
+        cmap=renders[:, 3:6] if with_geometry else None,
+        depth=renders[:, 6:7] if with_geometry else None,
+        alpha=alpha,
+        meta=per_camera,
+    )
 
 
 class CameraScreenPoints:

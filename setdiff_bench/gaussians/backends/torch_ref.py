@@ -60,16 +60,36 @@ def quaternion_to_rotation(quats: torch.Tensor) -> torch.Tensor:
     """``(N, 4)`` quaternions ``w, x, y, z`` (any norm) → ``(N, 3, 3)`` rotation matrices."""
     q = torch.nn.functional.normalize(quats, dim=-1)
     w, x, y, z = q.unbind(-1)
-    return torch.stack([
-        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
-    ], dim=-1).reshape(-1, 3, 3)
+    return torch.stack(
+        [
+            1 - 2 * (y * y + z * z),
+            2 * (x * y - w * z),
+            2 * (x * z + w * y),
+            2 * (x * y + w * z),
+            1 - 2 * (x * x + z * z),
+            2 * (y * z - w * x),
+            2 * (x * z - w * y),
+            2 * (y * z + w * x),
+            1 - 2 * (x * x + y * y),
+        ],
+        dim=-1,
+    ).reshape(-1, 3, 3)
 
 
-def project(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor, opacities: torch.Tensor,
-            w2c: torch.Tensor, K: torch.Tensor, width: int, height: int, *, near: float = 0.01,
-            far: float = 1e10, eps2d: float = 0.3) -> Projection:
+def project(
+    means: torch.Tensor,
+    quats: torch.Tensor,
+    scales: torch.Tensor,
+    opacities: torch.Tensor,
+    w2c: torch.Tensor,
+    K: torch.Tensor,
+    width: int,
+    height: int,
+    *,
+    near: float = 0.01,
+    far: float = 1e10,
+    eps2d: float = 0.3,
+) -> Projection:
     """EWA-project Gaussians into one camera.
 
     Args:
@@ -88,8 +108,9 @@ def project(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor, opac
     tx = z_safe * torch.minimum(torch.maximum(x / z_safe, -lim_x_neg), lim_x_pos)
     ty = z_safe * torch.minimum(torch.maximum(y / z_safe, -lim_y_neg), lim_y_pos)
     zeros = torch.zeros_like(z_safe)
-    J = torch.stack([fx / z_safe, zeros, -fx * tx / z_safe**2,
-                     zeros, fy / z_safe, -fy * ty / z_safe**2], dim=-1).reshape(-1, 2, 3)
+    J = torch.stack(
+        [fx / z_safe, zeros, -fx * tx / z_safe**2, zeros, fy / z_safe, -fy * ty / z_safe**2], dim=-1
+    ).reshape(-1, 2, 3)
     rot = quaternion_to_rotation(quats)
     M = rot * scales[:, None, :]  # R S
     cov_world = M @ M.transpose(1, 2)
@@ -119,8 +140,16 @@ def project(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor, opac
     return Projection(means2d, conics, z, opacities, radii, valid)
 
 
-def rasterize(proj: Projection, features: torch.Tensor, width: int, height: int, *, tile_size: int = 8,
-              chunk_elements: int = 1 << 22, max_chunk: int = 64) -> tuple[torch.Tensor, torch.Tensor]:
+def rasterize(
+    proj: Projection,
+    features: torch.Tensor,
+    width: int,
+    height: int,
+    *,
+    tile_size: int = 8,
+    chunk_elements: int = 1 << 22,
+    max_chunk: int = 64,
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Composite per-Gaussian features front to back.
 
     Args:
@@ -145,8 +174,9 @@ def rasterize(proj: Projection, features: torch.Tensor, width: int, height: int,
         # One table row per Gaussian: centre (2), conic (3), opacity (1), features (C), 1 (for alpha).
         # A zero row at index N pads short lists: zero opacity, so zero weight.
         n = features.shape[0]
-        table = torch.cat([proj.means2d, proj.conics, proj.opacities[:, None], features,
-                           features.new_ones(n, 1)], dim=1)
+        table = torch.cat(
+            [proj.means2d, proj.conics, proj.opacities[:, None], features, features.new_ones(n, 1)], dim=1
+        )
         table = torch.cat([table, table.new_zeros(1, table.shape[1])])
         local = torch.arange(pix, device=device)
         offset_x = (local % tile_size).to(dtype) + 0.5
@@ -158,18 +188,31 @@ def rasterize(proj: Projection, features: torch.Tensor, width: int, height: int,
         start = 0
         while start < active:
             batch = max(1, chunk_elements // (pix * max_chunk))
-            tiles = order[start:start + batch][: active - start]
+            tiles = order[start : start + batch][: active - start]
             start += tiles.numel()
-            out[tiles] = _composite_tiles(tiles, tile_starts, tile_counts, sorted_ids, n, table,
-                                          offset_x, offset_y, tiles_x, tile_size, max_chunk, step)
+            out[tiles] = _composite_tiles(
+                tiles,
+                tile_starts,
+                tile_counts,
+                sorted_ids,
+                n,
+                table,
+                offset_x,
+                offset_y,
+                tiles_x,
+                tile_size,
+                max_chunk,
+                step,
+            )
     image = out.reshape(tiles_y, tiles_x, tile_size, tile_size, channels + 1)
     image = image.permute(4, 0, 2, 1, 3).reshape(channels + 1, tiles_y * tile_size, tiles_x * tile_size)
     image = image[:, :height, :width]
     return image[:channels], image[channels:]
 
 
-def _bin_gaussians(proj: Projection, tiles_x: int, tiles_y: int, tile_size: int
-                   ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def _bin_gaussians(
+    proj: Projection, tiles_x: int, tiles_y: int, tile_size: int
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Gaussian ids sorted by (tile, depth), and each tile's start offset and count."""
     device = proj.means2d.device
     with torch.no_grad():
@@ -198,10 +241,20 @@ def _bin_gaussians(proj: Projection, tiles_x: int, tiles_y: int, tile_size: int
     return sorted_ids, tile_starts, tile_counts
 
 
-def _composite_tiles(tiles: torch.Tensor, tile_starts: torch.Tensor, tile_counts: torch.Tensor,
-                     sorted_ids: torch.Tensor, dummy: int, table: torch.Tensor, offset_x: torch.Tensor,
-                     offset_y: torch.Tensor, tiles_x: int, tile_size: int, k_chunk: int,
-                     step: Callable[..., tuple[torch.Tensor, torch.Tensor, torch.Tensor]]) -> torch.Tensor:
+def _composite_tiles(
+    tiles: torch.Tensor,
+    tile_starts: torch.Tensor,
+    tile_counts: torch.Tensor,
+    sorted_ids: torch.Tensor,
+    dummy: int,
+    table: torch.Tensor,
+    offset_x: torch.Tensor,
+    offset_y: torch.Tensor,
+    tiles_x: int,
+    tile_size: int,
+    k_chunk: int,
+    step: Callable[..., tuple[torch.Tensor, torch.Tensor, torch.Tensor]],
+) -> torch.Tensor:
     """Composite a batch of B tiles → ``(B, P, C + 1)`` (features then alpha).
 
     Tiles whose pixels have all terminated, or whose lists are exhausted, leave the batch early.
@@ -250,8 +303,9 @@ def _composite_tiles(tiles: torch.Tensor, tile_starts: torch.Tensor, tile_counts
     return torch.cat(finished_sums).index_select(0, torch.argsort(order))
 
 
-def composite_chunk(px: torch.Tensor, py: torch.Tensor, rows: torch.Tensor, log_t: torch.Tensor,
-                    done: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def composite_chunk(
+    px: torch.Tensor, py: torch.Tensor, rows: torch.Tensor, log_t: torch.Tensor, done: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """One front-to-back step over K depth-sorted Gaussians for B tiles of P pixels.
 
     Args:

@@ -83,8 +83,11 @@ def resolve_autoencoder(source: str | Path) -> Path:
         shipped = packaged_folder(str(source), "autoencoder")
         if shipped is None:
             known = ", ".join(packaged_names("autoencoder")) or "none"
-            raise WeightsError(f"autoencoder folder not found (packaged autoencoders: {known}); "
-                               "train one with `setdiff-bench train autoencoder`", source)
+            raise WeightsError(
+                f"autoencoder folder not found (packaged autoencoders: {known}); "
+                "train one with `setdiff-bench train autoencoder`",
+                source,
+            )
         path = shipped
     for name in (CONFIG_FILE, WEIGHTS_FILE):
         if not (path / name).is_file():
@@ -115,8 +118,11 @@ def load_autoencoder_weights(vae: torch.nn.Module, source: str | Path) -> None:
         raise WeightsError(f"cannot read autoencoder weights: {error}", path) from error
     missing, unexpected = vae.load_state_dict(state, strict=False)
     if missing or unexpected:
-        raise WeightsError(f"autoencoder weights do not match the VAE (missing {len(missing)}, unexpected "
-                           f"{len(unexpected)}, e.g. {(missing or unexpected)[0]})", path)
+        raise WeightsError(
+            f"autoencoder weights do not match the VAE (missing {len(missing)}, unexpected "
+            f"{len(unexpected)}, e.g. {(missing or unexpected)[0]})",
+            path,
+        )
 
 
 # ---------------------------------------------------------------------- data
@@ -166,7 +172,7 @@ def random_crops(frames: torch.Tensor, count: int, crop: int, rng: random.Random
     for _ in range(count):
         image = frames[rng.randrange(len(frames))]
         y, x = rng.randint(0, height - ch), rng.randint(0, width - cw)
-        piece = image[:, y:y + ch, x:x + cw]
+        piece = image[:, y : y + ch, x : x + cw]
         if rng.random() < 0.5:
             piece = piece.flip(-1)
         crops.append(piece)
@@ -190,7 +196,7 @@ def reconstruction_metrics(vae: Any, frames: torch.Tensor, batch: int = 8) -> di
 
     values: dict[str, list[float]] = {"psnr": [], "ssim": []}
     for start in range(0, len(frames), batch):
-        images = frames[start:start + batch].float() / 255.0
+        images = frames[start : start + batch].float() / 255.0
         output, _ = reconstruct(vae, images)
         values["psnr"] += psnr(output, images).tolist()
         values["ssim"] += ssim(output, images).tolist()
@@ -200,14 +206,22 @@ def reconstruction_metrics(vae: Any, frames: torch.Tensor, batch: int = 8) -> di
 @torch.no_grad()
 def latent_std(vae: Any, frames: torch.Tensor, batch: int = 8) -> float:
     """Standard deviation of the unscaled posterior means over ``frames`` (SD's scale rule)."""
-    means = [vae.encode(frames[s:s + batch].float() / 255.0 * 2.0 - 1.0).latent_dist.mean
-             for s in range(0, len(frames), batch)]
+    means = [
+        vae.encode(frames[s : s + batch].float() / 255.0 * 2.0 - 1.0).latent_dist.mean
+        for s in range(0, len(frames), batch)
+    ]
     return float(torch.cat(means).std())
 
 
 # ---------------------------------------------------------------------- training
-def train_autoencoder(packets: str | Path, out_dir: str | Path, settings: AutoencoderTraining, *,
-                      progress: bool = True, command: str | None = None) -> dict[str, Any]:
+def train_autoencoder(
+    packets: str | Path,
+    out_dir: str | Path,
+    settings: AutoencoderTraining,
+    *,
+    progress: bool = True,
+    command: str | None = None,
+) -> dict[str, Any]:
     """Train the tiny autoencoder on a packet store's training frames; returns the manifest.
 
     Resumes from ``out_dir/training_state.pt`` when present (same settings).  The final folder holds
@@ -223,7 +237,9 @@ def train_autoencoder(packets: str | Path, out_dir: str | Path, settings: Autoen
     from setdiff_bench.packets.store import PacketStore  # lazy, like the metrics above
 
     if settings.crop % 8 or settings.crop < 16 or settings.steps < 1 or settings.batch_size < 1:
-        raise UsageError("crop must be a multiple of 8 (>= 16); steps and batch size >= 1", "train autoencoder")
+        raise UsageError(
+            "crop must be a multiple of 8 (>= 16); steps and batch size >= 1", "train autoencoder"
+        )
     out = Path(out_dir)
     store = PacketStore(packets)
     train_frames = ground_truth_frames(store, "train")
@@ -236,8 +252,13 @@ def train_autoencoder(packets: str | Path, out_dir: str | Path, settings: Autoen
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda step: cosine_factor(step, settings.steps))
     start, elapsed = load_state(out / STATE_FILE, settings, vae, optimizer, schedule)
     began = time.perf_counter()
-    bar = tqdm(total=settings.steps, initial=start, disable=not progress, desc="train autoencoder",
-               dynamic_ncols=True)
+    bar = tqdm(
+        total=settings.steps,
+        initial=start,
+        disable=not progress,
+        desc="train autoencoder",
+        dynamic_ncols=True,
+    )
     vae.train()
     for step in range(start, settings.steps):
         rng = random.Random(f"{settings.seed}/{step}")
@@ -256,8 +277,15 @@ def train_autoencoder(packets: str | Path, out_dir: str | Path, settings: Autoen
         if (step + 1) % 25 == 0:
             bar.set_postfix(psnr=f"{-10 * torch.log10(l2.detach().clamp_min(1e-10)).item():.2f}")
         if (step + 1) % settings.checkpoint_every == 0 and step + 1 < settings.steps:
-            save_state(out / STATE_FILE, settings, vae, optimizer, schedule, step + 1,
-                       elapsed + time.perf_counter() - began)
+            save_state(
+                out / STATE_FILE,
+                settings,
+                vae,
+                optimizer,
+                schedule,
+                step + 1,
+                elapsed + time.perf_counter() - began,
+            )
     bar.close()
     vae.eval()
     config = dict(vae.config)
@@ -274,7 +302,9 @@ def train_autoencoder(packets: str | Path, out_dir: str | Path, settings: Autoen
         "test_scenes": sorted(set(store.index[store.index["split"] == "test"]["scene"])),
         "wall_seconds": round(elapsed + time.perf_counter() - began, 1),
         "reconstruction_train": reconstruction_metrics(vae, train_frames.images),
-        "reconstruction_test": None if test_frames is None else reconstruction_metrics(vae, test_frames.images),
+        "reconstruction_test": None
+        if test_frames is None
+        else reconstruction_metrics(vae, test_frames.images),
         "parameters": sum(p.numel() for p in vae.parameters()),
         "scaling_factor": config["scaling_factor"],
     }
@@ -295,17 +325,34 @@ def cosine_factor(step: int, total: int, floor: float = 0.05) -> float:
     return floor + (1.0 - floor) * 0.5 * (1.0 + math.cos(math.pi * progress))
 
 
-def save_state(path: Path, settings: AutoencoderTraining, vae: Any, optimizer: Any, schedule: Any, step: int,
-               elapsed: float) -> None:
+def save_state(
+    path: Path,
+    settings: AutoencoderTraining,
+    vae: Any,
+    optimizer: Any,
+    schedule: Any,
+    step: int,
+    elapsed: float,
+) -> None:
     """The resume point: weights, optimiser and schedule state, step and settings (tensors + plain data)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as temporary:
-        torch.save({"settings": asdict(settings), "step": step, "elapsed": elapsed, "vae": vae.state_dict(),
-                    "optimizer": optimizer.state_dict(), "schedule": schedule.state_dict()}, temporary)
+        torch.save(
+            {
+                "settings": asdict(settings),
+                "step": step,
+                "elapsed": elapsed,
+                "vae": vae.state_dict(),
+                "optimizer": optimizer.state_dict(),
+                "schedule": schedule.state_dict(),
+            },
+            temporary,
+        )
 
 
-def load_state(path: Path, settings: AutoencoderTraining, vae: Any, optimizer: Any,
-               schedule: Any) -> tuple[int, float]:
+def load_state(
+    path: Path, settings: AutoencoderTraining, vae: Any, optimizer: Any, schedule: Any
+) -> tuple[int, float]:
     """Restore a resume point written by :func:`save_state` → ``(step, elapsed seconds)``; ``(0, 0)`` if none."""
     if not path.is_file():
         return 0, 0.0
@@ -314,10 +361,10 @@ def load_state(path: Path, settings: AutoencoderTraining, vae: Any, optimizer: A
     except (OSError, RuntimeError, ValueError) as error:
         raise UsageError(f"cannot read the autoencoder training state: {error}", path) from error
     if state.get("settings") != asdict(settings):
-        raise UsageError("the training state was written with other settings; use another --out or the same "
-                         "options", path)
+        raise UsageError(
+            "the training state was written with other settings; use another --out or the same options", path
+        )
     vae.load_state_dict(state["vae"])
     optimizer.load_state_dict(state["optimizer"])
     schedule.load_state_dict(state["schedule"])
     return int(state["step"]), float(state["elapsed"])
-

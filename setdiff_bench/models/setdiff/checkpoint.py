@@ -80,8 +80,14 @@ def check_compatible(saved: Config, expected: Config, where: str | os.PathLike[s
         raise CheckpointError(f"checkpoint belongs to another configuration: model {key}{detail}", where)
 
 
-def save_checkpoint(folder: str | os.PathLike[str], model: torch.nn.Module, config: Config, *,
-                    optimizer: torch.optim.Optimizer | None = None, step: int | None = None) -> Path:
+def save_checkpoint(
+    folder: str | os.PathLike[str],
+    model: torch.nn.Module,
+    config: Config,
+    *,
+    optimizer: torch.optim.Optimizer | None = None,
+    step: int | None = None,
+) -> Path:
     """Write a checkpoint folder atomically (replacing an existing one of that name).
 
     Args:
@@ -98,7 +104,9 @@ def save_checkpoint(folder: str | os.PathLike[str], model: torch.nn.Module, conf
         config = dataclasses.replace(config, model=model_config)
     with staged_folder(folder) as tmp:
         state = {name: tensor.detach().cpu().contiguous() for name, tensor in model.state_dict().items()}
-        save_file(state, str(tmp / WEIGHTS_FILE), metadata={"format": "setdiff-bench", "config": config.to_json()})
+        save_file(
+            state, str(tmp / WEIGHTS_FILE), metadata={"format": "setdiff-bench", "config": config.to_json()}
+        )
         sort_metadata(tmp / WEIGHTS_FILE)  # same run, same bytes
         os.chmod(tmp / WEIGHTS_FILE, new_file_mode())  # safetensors creates it 0600 whatever the umask
         (tmp / CONFIG_FILE).write_text(config.to_json() + "\n", encoding="utf-8")
@@ -123,18 +131,29 @@ def load_weights(model: torch.nn.Module, checkpoint: str | os.PathLike[str]) -> 
     missing = sorted(set(expected) - set(state))
     unexpected = sorted(set(state) - set(expected))
     if missing or unexpected:
-        raise CheckpointError(f"weights do not match the model: {len(missing)} missing (e.g. {missing[:2]}), "
-                              f"{len(unexpected)} unexpected (e.g. {unexpected[:2]})", path)
+        raise CheckpointError(
+            f"weights do not match the model: {len(missing)} missing (e.g. {missing[:2]}), "
+            f"{len(unexpected)} unexpected (e.g. {unexpected[:2]})",
+            path,
+        )
     for name, tensor in state.items():
         if tuple(tensor.shape) != tuple(expected[name].shape):
-            raise CheckpointError(f"weight {name} has shape {tuple(tensor.shape)}, the model expects "
-                                  f"{tuple(expected[name].shape)}", path)
+            raise CheckpointError(
+                f"weight {name} has shape {tuple(tensor.shape)}, the model expects "
+                f"{tuple(expected[name].shape)}",
+                path,
+            )
     model.load_state_dict(state, strict=True)
 
 
-def load_model(checkpoint: str | os.PathLike[str], *, expected: Config | None = None,
-               method: str | None = None, device: str | torch.device = "cpu",
-               dtype: torch.dtype | None = None) -> tuple[Any, Config]:
+def load_model(
+    checkpoint: str | os.PathLike[str],
+    *,
+    expected: Config | None = None,
+    method: str | None = None,
+    device: str | torch.device = "cpu",
+    dtype: torch.dtype | None = None,
+) -> tuple[Any, Config]:
     """Build the model a checkpoint describes and load its weights.
 
     Args:
@@ -151,7 +170,9 @@ def load_model(checkpoint: str | os.PathLike[str], *, expected: Config | None = 
     if expected is not None:
         check_compatible(config, expected, folder)
     if method is not None and config.model.method != method:
-        raise CheckpointError(f"checkpoint was trained as method {config.model.method!r}, not {method!r}", folder)
+        raise CheckpointError(
+            f"checkpoint was trained as method {config.model.method!r}, not {method!r}", folder
+        )
     model = SetDiffModel(config.model, load_pretrained=False)
     load_weights(model, folder)
     model.to(device=device, dtype=dtype or torch.float32)
@@ -168,8 +189,11 @@ def load_training_state(checkpoint: Path, optimizer: torch.optim.Optimizer) -> i
         state = torch.load(optimizer_path, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as error:  # weights_only refused a global: anything but plain tensors
         refused = next((line.strip() for line in str(error).splitlines() if "GLOBAL" in line), "")
-        raise CheckpointError(f"optimizer state refused by torch.load(weights_only=True), it holds more than "
-                              f"tensors{': ' + refused if refused else ''}", optimizer_path) from None
+        raise CheckpointError(
+            f"optimizer state refused by torch.load(weights_only=True), it holds more than "
+            f"tensors{': ' + refused if refused else ''}",
+            optimizer_path,
+        ) from None
     except (OSError, KeyError, TypeError, ValueError, EOFError, json.JSONDecodeError, RuntimeError) as error:
         raise CheckpointError(f"cannot resume from this checkpoint: {error}", checkpoint) from error
     try:

@@ -51,7 +51,12 @@ SD_TURBO_UNET: dict[str, Any] = {
     "center_input_sample": False,
     "flip_sin_to_cos": True,
     "freq_shift": 0,
-    "down_block_types": ["CrossAttnDownBlock2D", "CrossAttnDownBlock2D", "CrossAttnDownBlock2D", "DownBlock2D"],
+    "down_block_types": [
+        "CrossAttnDownBlock2D",
+        "CrossAttnDownBlock2D",
+        "CrossAttnDownBlock2D",
+        "DownBlock2D",
+    ],
     "mid_block_type": "UNetMidBlock2DCrossAttn",
     "up_block_types": ["UpBlock2D", "CrossAttnUpBlock2D", "CrossAttnUpBlock2D", "CrossAttnUpBlock2D"],
     "only_cross_attention": False,
@@ -137,19 +142,26 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
-def alphas_cumprod(beta_start: float, beta_end: float, beta_schedule: str, num_train_timesteps: int) -> np.ndarray:
+def alphas_cumprod(
+    beta_start: float, beta_end: float, beta_schedule: str, num_train_timesteps: int
+) -> np.ndarray:
     """ᾱ_t for t = 0 … T−1 in float64.
 
     ``scaled_linear``: ``betas = linspace(√beta_start, √beta_end, T)²`` (SD-Turbo); ``linear``:
     ``linspace(beta_start, beta_end, T)``.  ᾱ_t = Π_{s ≤ t} (1 − β_s).
     """
     if beta_schedule == "scaled_linear":
-        betas = np.linspace(math.sqrt(beta_start), math.sqrt(beta_end), num_train_timesteps, dtype=np.float64) ** 2
+        betas = (
+            np.linspace(math.sqrt(beta_start), math.sqrt(beta_end), num_train_timesteps, dtype=np.float64)
+            ** 2
+        )
     elif beta_schedule == "linear":
         betas = np.linspace(beta_start, beta_end, num_train_timesteps, dtype=np.float64)
     else:
-        raise UsageError(f"unsupported beta_schedule {beta_schedule!r} (expected scaled_linear or linear)",
-                         "model.scheduler")
+        raise UsageError(
+            f"unsupported beta_schedule {beta_schedule!r} (expected scaled_linear or linear)",
+            "model.scheduler",
+        )
     return np.cumprod(1.0 - betas)
 
 
@@ -235,24 +247,33 @@ class ModelConfig:
         if self.output_mode not in ("direct", "residual"):
             raise UsageError(f"output_mode must be 'direct' or 'residual', got {self.output_mode!r}", where)
         if self.attention_bias not in ("none", "cmap_distance"):
-            raise UsageError(f"attention_bias must be 'none' or 'cmap_distance', got {self.attention_bias!r}", where)
+            raise UsageError(
+                f"attention_bias must be 'none' or 'cmap_distance', got {self.attention_bias!r}", where
+            )
         if self.attention_bias != "none" and not self.use_geometry:
             raise UsageError("attention_bias needs C-maps: set use_geometry = true", where)
         if self.method not in ("setdiff", "difix"):
             raise UsageError(f"method must be 'setdiff' or 'difix', got {self.method!r}", where)
         if self.prediction not in ("v_prediction", "epsilon"):
-            raise UsageError(f"prediction must be 'v_prediction' or 'epsilon', got {self.prediction!r}", where)
+            raise UsageError(
+                f"prediction must be 'v_prediction' or 'epsilon', got {self.prediction!r}", where
+            )
         if self.vae_decoder not in ("lora", "full", "frozen"):
             raise UsageError(f"vae_decoder must be lora, full or frozen, got {self.vae_decoder!r}", where)
         steps = int(self.scheduler["num_train_timesteps"])
         if not 0 <= self.timestep < steps:
             raise UsageError(f"timestep must be in [0, {steps}), got {self.timestep}", where)
         if len(self.geometry_channels) != 5:
-            raise UsageError(f"geometry_channels must list 5 block widths, got {list(self.geometry_channels)}", where)
+            raise UsageError(
+                f"geometry_channels must list 5 block widths, got {list(self.geometry_channels)}", where
+            )
         inputs = tuple(self.geometry_inputs)
         if not inputs or set(inputs) - {"cmap", "plucker"} or len(set(inputs)) != len(inputs):
-            raise UsageError(f"geometry_inputs must be a non-empty subset of ['cmap', 'plucker'], got {list(inputs)}"
-                             " (use use_geometry = false for none)", where)
+            raise UsageError(
+                f"geometry_inputs must be a non-empty subset of ['cmap', 'plucker'], got {list(inputs)}"
+                " (use use_geometry = false for none)",
+                where,
+            )
         object.__setattr__(self, "geometry_inputs", inputs)
         if not 0.0 <= self.geometry_dropout < 1.0:
             raise UsageError(f"geometry_dropout must be in [0, 1), got {self.geometry_dropout}", where)
@@ -269,8 +290,10 @@ class ModelConfig:
             if self.targets_per_set != 1:
                 bad.append("targets_per_set = 1")
             if bad:
-                raise UsageError(f"method 'difix' is RGB-only with one reference and one target; set {', '.join(bad)}",
-                                 where)
+                raise UsageError(
+                    f"method 'difix' is RGB-only with one reference and one target; set {', '.join(bad)}",
+                    where,
+                )
         factor = self.latent_factor
         if factor & (factor - 1) or factor > 16:
             raise UsageError(f"VAE downsampling factor must be a power of two <= 16, got {factor}", where)
@@ -304,9 +327,27 @@ class ModelConfig:
         Inference knobs (guidance scale, CFG batching, set sizes) and the ``pretrained`` path are
         left out: a checkpoint may be used with other values of those.
         """
-        keep = ("method", "unet", "vae", "scheduler", "timestep", "prediction", "use_geometry",
-                "geometry_inputs", "geometry_channels", "geometry_groups", "cmap_clip", "vae_decoder", "vae_lora_rank",
-                "vae_lora_alpha", "skip_connections", "skip_gamma", "text_length", "output_mode", "attention_bias")
+        keep = (
+            "method",
+            "unet",
+            "vae",
+            "scheduler",
+            "timestep",
+            "prediction",
+            "use_geometry",
+            "geometry_inputs",
+            "geometry_channels",
+            "geometry_groups",
+            "cmap_clip",
+            "vae_decoder",
+            "vae_lora_rank",
+            "vae_lora_alpha",
+            "skip_connections",
+            "skip_gamma",
+            "text_length",
+            "output_mode",
+            "attention_bias",
+        )
         return _jsonable({name: getattr(self, name) for name in keep})
 
     def to_dict(self) -> dict[str, Any]:
@@ -374,9 +415,13 @@ class TrainConfig:
         if self.steps < 0 or self.gradient_accumulation < 1:
             raise UsageError("steps must be >= 0 and gradient_accumulation >= 1", where)
         if not 2 <= self.min_views <= self.max_views:
-            raise UsageError(f"need 2 <= min_views <= max_views, got {self.min_views}, {self.max_views}", where)
+            raise UsageError(
+                f"need 2 <= min_views <= max_views, got {self.min_views}, {self.max_views}", where
+            )
         if self.mixed_precision not in ("auto", "no", "bf16", "fp16"):
-            raise UsageError(f"mixed_precision must be auto, no, bf16 or fp16, got {self.mixed_precision!r}", where)
+            raise UsageError(
+                f"mixed_precision must be auto, no, bf16 or fp16, got {self.mixed_precision!r}", where
+            )
         if self.lpips_net not in ("vgg", "alex"):
             raise UsageError(f"lpips_net must be 'vgg' or 'alex', got {self.lpips_net!r}", where)
         weights = (self.latent_weight, self.l2_weight, self.ssim_weight, self.lpips_weight)
@@ -421,7 +466,9 @@ def load_config(source: str | Path) -> Config:
         if str(source) in packaged:
             path = packaged[str(source)]
         else:
-            raise UsageError(f"config file not found (packaged configs: {', '.join(sorted(packaged))})", source)
+            raise UsageError(
+                f"config file not found (packaged configs: {', '.join(sorted(packaged))})", source
+            )
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as error:
@@ -471,7 +518,9 @@ def model_config_from_dict(data: Mapping[str, Any]) -> ModelConfig:
 
 def _complete_vae(table: Any) -> bool:
     """A saved (checkpoint) config carries the whole VAE table, scale included; a TOML override does not."""
-    return isinstance(table, Mapping) and {"latent_channels", "scaling_factor", "block_out_channels"} <= set(table)
+    return isinstance(table, Mapping) and {"latent_channels", "scaling_factor", "block_out_channels"} <= set(
+        table
+    )
 
 
 def with_overrides(config: Config, **train_overrides: Any) -> Config:

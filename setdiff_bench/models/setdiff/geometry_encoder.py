@@ -36,22 +36,26 @@ class GeometryEncoder(nn.Module):
         groups: GroupNorm groups (reduced to a divisor of each width).
     """
 
-    def __init__(self, widths: Sequence[int], out_channels: int = 4, downsample: int = 8, groups: int = 8) -> None:
+    def __init__(
+        self, widths: Sequence[int], out_channels: int = 4, downsample: int = 8, groups: int = 8
+    ) -> None:
         super().__init__()
         if len(widths) != 5:
             raise ValueError(f"the geometry encoder has five blocks, got widths {list(widths)}")
         halvings = round(math.log2(downsample))
-        if 2 ** halvings != downsample or halvings > 4:
+        if 2**halvings != downsample or halvings > 4:
             raise ValueError(f"downsample must be a power of two <= 16, got {downsample}")
         blocks: list[nn.Module] = []
         previous = GEOMETRY_CHANNELS
         for index, width in enumerate(widths):
             stride = 2 if 1 <= index <= halvings else 1
-            blocks.append(nn.Sequential(
-                nn.Conv2d(previous, width, kernel_size=3, stride=stride, padding=1),
-                nn.GroupNorm(_groups(width, groups), width),
-                nn.SiLU(),
-            ))
+            blocks.append(
+                nn.Sequential(
+                    nn.Conv2d(previous, width, kernel_size=3, stride=stride, padding=1),
+                    nn.GroupNorm(_groups(width, groups), width),
+                    nn.SiLU(),
+                )
+            )
             previous = width
         self.blocks = nn.Sequential(*blocks)
         self.out = nn.Conv2d(previous, out_channels, kernel_size=3, padding=1)
@@ -69,8 +73,13 @@ class GeometryEncoder(nn.Module):
 GEOMETRY_INPUTS = ("cmap", "plucker")
 
 
-def geometry_input(cmaps: torch.Tensor, cameras: Sequence[Camera], *, cmap_clip: float = 0.0,
-                   inputs: Sequence[str] = GEOMETRY_INPUTS) -> torch.Tensor:
+def geometry_input(
+    cmaps: torch.Tensor,
+    cameras: Sequence[Camera],
+    *,
+    cmap_clip: float = 0.0,
+    inputs: Sequence[str] = GEOMETRY_INPUTS,
+) -> torch.Tensor:
     """Stack a view set's C-maps and Plücker rays into Ψ's input.
 
     Args:

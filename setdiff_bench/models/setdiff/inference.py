@@ -36,8 +36,9 @@ def target_chunks(num_targets: int, targets_per_set: int | None) -> list[list[in
     return [list(range(start, min(start + size, num_targets))) for start in range(0, num_targets, size)]
 
 
-def set_packets(packet: Packet, max_references: int | None, targets_per_set: int | None,
-                *, renormalise: bool) -> list[tuple[Packet, list[int]]]:
+def set_packets(
+    packet: Packet, max_references: int | None, targets_per_set: int | None, *, renormalise: bool
+) -> list[tuple[Packet, list[int]]]:
     """The sets a packet is enhanced in: ``(set packet, indices of its targets in the packet)``.
 
     Each set holds the first ``max_references`` references (best first by Eq. 2) and one chunk of
@@ -51,7 +52,9 @@ def set_packets(packet: Packet, max_references: int | None, targets_per_set: int
     whole = len(references) == len(packet.references) and len(chunks) == 1
     sets = []
     for chunk in chunks:
-        subset = packet if whole else replace(packet, references=references, targets=packet.targets.subset(chunk))
+        subset = (
+            packet if whole else replace(packet, references=references, targets=packet.targets.subset(chunk))
+        )
         if renormalise and not whole:
             subset = renormalize(subset)
         sets.append((subset, chunk))
@@ -59,9 +62,15 @@ def set_packets(packet: Packet, max_references: int | None, targets_per_set: int
 
 
 @torch.no_grad()
-def enhance_packet(model: SetDiffModel, packet: Packet, *, guidance_scale: float | None = None,
-                   sets_per_call: int | None = None, max_references: int | None = None,
-                   targets_per_set: int | None = None) -> torch.Tensor:
+def enhance_packet(
+    model: SetDiffModel,
+    packet: Packet,
+    *,
+    guidance_scale: float | None = None,
+    sets_per_call: int | None = None,
+    max_references: int | None = None,
+    targets_per_set: int | None = None,
+) -> torch.Tensor:
     """The packet's M targets enhanced, ``(M, 3, H, W)`` float32 in [0, 1] on the CPU, packet order.
 
     Args:
@@ -90,15 +99,27 @@ def enhance_packet(model: SetDiffModel, packet: Packet, *, guidance_scale: float
     for group in by_size.values():
         step = len(group) if sets_per_call is None else max(1, sets_per_call)
         for start in range(0, len(group), step):
-            part = group[start:start + step]
-            tensors = [view_tensors(subset, use_geometry=config.use_geometry, cmap_clip=config.cmap_clip,
-                                    geometry_inputs=config.geometry_inputs) for subset, _ in part]
+            part = group[start : start + step]
+            tensors = [
+                view_tensors(
+                    subset,
+                    use_geometry=config.use_geometry,
+                    cmap_clip=config.cmap_clip,
+                    geometry_inputs=config.geometry_inputs,
+                )
+                for subset, _ in part
+            ]
             num_refs = tensors[0][2]
             geometry = None if tensors[0][1] is None else torch.stack([g for _, g, _ in tensors])
-            points = (torch.stack([surface_points(subset) for subset, _ in part])
-                      if config.attention_bias != "none" else None)
+            points = (
+                torch.stack([surface_points(subset) for subset, _ in part])
+                if config.attention_bias != "none"
+                else None
+            )
             batch = SetBatch(torch.stack([images for images, _, _ in tensors]), geometry, num_refs, points)
-            enhanced = model.enhance(batch.to(parameter.device, parameter.dtype), guidance_scale=guidance_scale)
+            enhanced = model.enhance(
+                batch.to(parameter.device, parameter.dtype), guidance_scale=guidance_scale
+            )
             ids = [t for _, chunk in part for t in chunk]
             output[ids] = enhanced.reshape(-1, *enhanced.shape[2:]).float().cpu()
     return output

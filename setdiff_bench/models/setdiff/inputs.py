@@ -58,8 +58,11 @@ class SetBatch:
 def check_image_size(height: int, width: int, factor: int, where: str) -> None:
     """Reject sizes the VAE cannot map to a latent grid exactly (no silent padding or resizing)."""
     if height % factor or width % factor:
-        raise PacketError(f"image size {height}x{width} is not divisible by {factor}; resize or crop the packet "
-                          f"to a multiple of {factor} (e.g. 576x1024)", where)
+        raise PacketError(
+            f"image size {height}x{width} is not divisible by {factor}; resize or crop the packet "
+            f"to a multiple of {factor} (e.g. 576x1024)",
+            where,
+        )
 
 
 def check_packet(packet: Packet, factor: int) -> None:
@@ -75,8 +78,14 @@ def check_packet(packet: Packet, factor: int) -> None:
     check_image_size(packet.height, packet.width, factor, where)
 
 
-def view_tensors(packet: Packet, *, use_geometry: bool, cmap_clip: float, max_references: int | None = None,
-                 geometry_inputs: Sequence[str] = GEOMETRY_INPUTS) -> tuple[torch.Tensor, torch.Tensor | None, int]:
+def view_tensors(
+    packet: Packet,
+    *,
+    use_geometry: bool,
+    cmap_clip: float,
+    max_references: int | None = None,
+    geometry_inputs: Sequence[str] = GEOMETRY_INPUTS,
+) -> tuple[torch.Tensor, torch.Tensor | None, int]:
     """All views of a packet, references first.
 
     Returns:
@@ -90,8 +99,9 @@ def view_tensors(packet: Packet, *, use_geometry: bool, cmap_clip: float, max_re
     images = torch.cat([v.images.float() for v in views])
     geometry = None
     if use_geometry:
-        geometry = torch.cat([geometry_input(v.cmaps, v.cameras, cmap_clip=cmap_clip, inputs=geometry_inputs)
-                              for v in views])
+        geometry = torch.cat(
+            [geometry_input(v.cmaps, v.cameras, cmap_clip=cmap_clip, inputs=geometry_inputs) for v in views]
+        )
     return images, geometry, len(references)
 
 
@@ -124,8 +134,15 @@ class TrainingSet:
     target_masks: torch.Tensor
 
 
-def choose_views(num_references: int, num_targets: int, rng: random.Random, *, min_views: int, max_views: int,
-                 max_references: int | None = None) -> tuple[list[int], list[int]]:
+def choose_views(
+    num_references: int,
+    num_targets: int,
+    rng: random.Random,
+    *,
+    min_views: int,
+    max_views: int,
+    max_references: int | None = None,
+) -> tuple[list[int], list[int]]:
     """Random subset and order of a packet's views for one training step.
 
     The set size is uniform in ``[min_views, max_views]`` (capped by what the packet has); references
@@ -157,10 +174,19 @@ def best_reference_per_target(packet: Packet) -> list[int]:
     return [int(np.argmax(row)) for row in scores]
 
 
-def training_set(sample: TrainingSample, rng: random.Random, *, min_views: int, max_views: int,
-                 use_geometry: bool, cmap_clip: float, pairs: bool = False,
-                 geometry_inputs: Sequence[str] = GEOMETRY_INPUTS, with_points: bool = False,
-                 identity_probability: float = 0.0) -> TrainingSet:
+def training_set(
+    sample: TrainingSample,
+    rng: random.Random,
+    *,
+    min_views: int,
+    max_views: int,
+    use_geometry: bool,
+    cmap_clip: float,
+    pairs: bool = False,
+    geometry_inputs: Sequence[str] = GEOMETRY_INPUTS,
+    with_points: bool = False,
+    identity_probability: float = 0.0,
+) -> TrainingSet:
     """Draw the views of one training step from ``sample`` and build the tensors.
 
     A sample with more than ``max_views`` views is subset (:func:`choose_views`); a smaller one (e.g.
@@ -182,15 +208,24 @@ def training_set(sample: TrainingSample, rng: random.Random, *, min_views: int, 
         reference_ids = [best_reference_per_target(packet)[target]] if num_refs else []
         target_ids = [target]
     elif num_refs + num_targets > max_views:
-        reference_ids, target_ids = choose_views(num_refs, num_targets, rng, min_views=min_views, max_views=max_views)
+        reference_ids, target_ids = choose_views(
+            num_refs, num_targets, rng, min_views=min_views, max_views=max_views
+        )
     else:  # already a set of the wanted size (e.g. drawn by the packet store): only permute
-        reference_ids, target_ids = rng.sample(range(num_refs), num_refs), rng.sample(range(num_targets), num_targets)
-    subset = replace(packet, references=_subset(packet.references, reference_ids),
-                     targets=_subset(packet.targets, target_ids))
+        reference_ids, target_ids = (
+            rng.sample(range(num_refs), num_refs),
+            rng.sample(range(num_targets), num_targets),
+        )
+    subset = replace(
+        packet,
+        references=_subset(packet.references, reference_ids),
+        targets=_subset(packet.targets, target_ids),
+    )
     if use_geometry:
         subset = renormalize(subset)
-    images, geometry, n = view_tensors(subset, use_geometry=use_geometry, cmap_clip=cmap_clip,
-                                       geometry_inputs=geometry_inputs)
+    images, geometry, n = view_tensors(
+        subset, use_geometry=use_geometry, cmap_clip=cmap_clip, geometry_inputs=geometry_inputs
+    )
     gt = sample.target_gt[target_ids].float()[None]
     masks = sample.target_masks[target_ids].bool()[None]
     if identity_probability > 0 and rng.random() < identity_probability:
@@ -204,12 +239,19 @@ def renormalize(packet: Packet) -> Packet:
     """Move a (sub)set into its first target's frame with unit camera extent — the packet invariant
     (paper supplement "3D Priors") that inference inputs satisfy; C-maps follow the same map."""
     refs, targets = packet.references, packet.targets
-    moved = normalize_packet((*refs.cameras, *targets.cameras), torch.cat([refs.cmaps, targets.cmaps]), len(refs),
-                             alphas=torch.cat([refs.alphas, targets.alphas]))
+    moved = normalize_packet(
+        (*refs.cameras, *targets.cameras),
+        torch.cat([refs.cmaps, targets.cmaps]),
+        len(refs),
+        alphas=torch.cat([refs.alphas, targets.alphas]),
+    )
     n = len(refs)
-    return replace(packet, scale=packet.scale * moved.scale,
-                   references=replace(refs, cmaps=moved.cmaps[:n], cameras=moved.cameras[:n]),
-                   targets=replace(targets, cmaps=moved.cmaps[n:], cameras=moved.cameras[n:]))
+    return replace(
+        packet,
+        scale=packet.scale * moved.scale,
+        references=replace(refs, cmaps=moved.cmaps[:n], cameras=moved.cameras[:n]),
+        targets=replace(targets, cmaps=moved.cmaps[n:], cameras=moved.cameras[n:]),
+    )
 
 
 def _subset(views: ViewSet, indices: Sequence[int]) -> ViewSet:

@@ -25,7 +25,9 @@ from torch import nn
 from setdiff_bench.metrics.ssim import ssim
 
 
-def latent_loss(predicted: torch.Tensor, target: torch.Tensor, masks: torch.Tensor | None = None) -> torch.Tensor:
+def latent_loss(
+    predicted: torch.Tensor, target: torch.Tensor, masks: torch.Tensor | None = None
+) -> torch.Tensor:
     """Mean squared error between latents ``(K, C, h, w)``, weighted by ``masks`` ``(K, 1, H, W)`` if given."""
     squared = (predicted.float() - target.float()).square()
     if masks is None:
@@ -48,10 +50,20 @@ class ReconstructionLoss(nn.Module):
         WeightsError: ``lpips_weight > 0`` and the LPIPS weights are not available.
     """
 
-    def __init__(self, l2_weight: float = 1.0, ssim_weight: float = 1.0, lpips_weight: float = 1.0,
-                 lpips_net: str = "vgg", device: torch.device | str = "cpu") -> None:
+    def __init__(
+        self,
+        l2_weight: float = 1.0,
+        ssim_weight: float = 1.0,
+        lpips_weight: float = 1.0,
+        lpips_net: str = "vgg",
+        device: torch.device | str = "cpu",
+    ) -> None:
         super().__init__()
-        self.l2_weight, self.ssim_weight, self.lpips_weight = float(l2_weight), float(ssim_weight), float(lpips_weight)
+        self.l2_weight, self.ssim_weight, self.lpips_weight = (
+            float(l2_weight),
+            float(ssim_weight),
+            float(lpips_weight),
+        )
         self.lpips: Any = None
         if self.lpips_weight > 0:
             # lazy: LPIPS (and its weight files) load only when the loss uses it; tests stand in for the module
@@ -60,8 +72,9 @@ class ReconstructionLoss(nn.Module):
             self.lpips = load_lpips(net=lpips_net, device=device)
             self.lpips.requires_grad_(False)
 
-    def forward(self, predicted: torch.Tensor, target: torch.Tensor,
-                masks: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
+    def forward(
+        self, predicted: torch.Tensor, target: torch.Tensor, masks: torch.Tensor | None = None
+    ) -> dict[str, torch.Tensor]:
         """Terms and their weighted sum (key ``"total"``), each a scalar tensor."""
         predicted, target = predicted.float(), target.float()
         if masks is None:

@@ -44,12 +44,20 @@ def training_data_record(store: Any, split: str) -> dict[str, Any]:
         lists ``[seed, index]`` per synthetic scene (empty for other datasets).
     """
     rows = store.index[store.index["split"] == split]
-    hashes = sorted({str(h) for column in FILE_COLUMNS for h in rows[f"{column}_sha256"] if isinstance(h, str) and h})
+    hashes = sorted(
+        {str(h) for column in FILE_COLUMNS for h in rows[f"{column}_sha256"] if isinstance(h, str) and h}
+    )
     digest = hashlib.sha256("\n".join(hashes).encode("ascii")).hexdigest()
     scenes = sorted({str(s) for s in rows["scene"]})
     seeds = [list(pair) for pair in (synthetic_scene_seeds(s) for s in scenes) if pair is not None]
-    return {"split": split, "packets": int(rows["packet_id"].nunique()), "views": len(rows), "scenes": scenes,
-            "synthetic_seeds": seeds, "data_sha256": digest}
+    return {
+        "split": split,
+        "packets": int(rows["packet_id"].nunique()),
+        "views": len(rows),
+        "scenes": scenes,
+        "synthetic_seeds": seeds,
+        "data_sha256": digest,
+    }
 
 
 def read_manifest(folder: Path) -> dict[str, Any]:
@@ -68,9 +76,20 @@ def read_manifest(folder: Path) -> dict[str, Any]:
     return data
 
 
-def record_training_session(out: Path, *, command: str, method: str, config_name: str, seed: int, steps: int,
-                            start_step: int, end_step: int, wall_seconds: float, data: dict[str, Any],
-                            validation: dict[str, float] | None) -> dict[str, Any]:
+def record_training_session(
+    out: Path,
+    *,
+    command: str,
+    method: str,
+    config_name: str,
+    seed: int,
+    steps: int,
+    start_step: int,
+    end_step: int,
+    wall_seconds: float,
+    data: dict[str, Any],
+    validation: dict[str, float] | None,
+) -> dict[str, Any]:
     """Add one training session to ``out/manifest.json`` (created on the first) and return the manifest.
 
     Args:
@@ -92,12 +111,25 @@ def record_training_session(out: Path, *, command: str, method: str, config_name
         if manifest["data"]["data_sha256"] != data["data_sha256"] or manifest["seed"] != seed:
             raise CheckpointError("this training run was started on other data or with another seed", path)
     else:
-        manifest = {"format": MANIFEST_FORMAT, "method": method, "config": config_name, "seed": seed,
-                    "data": data, "sessions": []}
+        manifest = {
+            "format": MANIFEST_FORMAT,
+            "method": method,
+            "config": config_name,
+            "seed": seed,
+            "data": data,
+            "sessions": [],
+        }
     manifest["steps"] = steps
-    manifest["sessions"].append({"command": command, "start_step": start_step, "end_step": end_step,
-                                 "wall_seconds": round(wall_seconds, 1), "code": git_revision(),
-                                 "torch_threads": compute_threads()})
+    manifest["sessions"].append(
+        {
+            "command": command,
+            "start_step": start_step,
+            "end_step": end_step,
+            "wall_seconds": round(wall_seconds, 1),
+            "code": git_revision(),
+            "torch_threads": compute_threads(),
+        }
+    )
     manifest["wall_seconds"] = round(sum(s["wall_seconds"] for s in manifest["sessions"]), 1)
     manifest["validation"] = validation
     write_text_atomic(path, json.dumps(manifest, indent=2, sort_keys=True) + "\n")

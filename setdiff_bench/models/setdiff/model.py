@@ -76,12 +76,21 @@ class SetDiffModel(nn.Module):
         if config.output_mode == "residual":
             nn.init.zeros_(self.unet.conv_out.weight)
             nn.init.zeros_(self.unet.conv_out.bias)
-        self.codec = LatentCodec(networks.vae, skip_connections=config.skip_connections,
-                                 skip_gamma=config.skip_gamma, decoder_training=config.vae_decoder,
-                                 lora_rank=config.vae_lora_rank, lora_alpha=config.vae_lora_alpha)
-        self.geometry_encoder = (GeometryEncoder(config.geometry_channels, config.latent_channels,
-                                                 config.latent_factor, config.geometry_groups)
-                                 if config.use_geometry else None)
+        self.codec = LatentCodec(
+            networks.vae,
+            skip_connections=config.skip_connections,
+            skip_gamma=config.skip_gamma,
+            decoder_training=config.vae_decoder,
+            lora_rank=config.vae_lora_rank,
+            lora_alpha=config.vae_lora_alpha,
+        )
+        self.geometry_encoder = (
+            GeometryEncoder(
+                config.geometry_channels, config.latent_channels, config.latent_factor, config.geometry_groups
+            )
+            if config.use_geometry
+            else None
+        )
         text_shape = (1, config.text_length, config.cross_attention_dim)
         prompt = networks.prompt_embedding
         if prompt is not None and tuple(prompt.shape) != text_shape:
@@ -98,7 +107,9 @@ class SetDiffModel(nn.Module):
     # ------------------------------------------------------------------ stages
     def encode(self, images: torch.Tensor, keep_skips: torch.Tensor | None = None) -> Encoded:
         """``(B·V, 3, H, W)`` in [0, 1] → :class:`Encoded` (scaled posterior means, skips of ``keep_skips``)."""
-        check_image_size(int(images.shape[-2]), int(images.shape[-1]), self.config.latent_factor, "model input")
+        check_image_size(
+            int(images.shape[-2]), int(images.shape[-1]), self.config.latent_factor, "model input"
+        )
         return self.codec.encode(images, keep_skips)
 
     def geometry_latents(self, geometry: torch.Tensor) -> torch.Tensor:
@@ -107,15 +118,21 @@ class SetDiffModel(nn.Module):
             raise RuntimeError("this model has no geometry encoder (use_geometry = false)")
         return self.geometry_encoder(geometry)
 
-    def unet_output(self, unet_input: torch.Tensor, num_views: int,
-                    points: torch.Tensor | None = None) -> torch.Tensor:
+    def unet_output(
+        self, unet_input: torch.Tensor, num_views: int, points: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """One UNet pass at the fixed timestep over ``(B·V, C, h, w)`` sets of ``num_views`` views
         (``points``: ``(B·V, 4, h, w)`` latent-cell surface points for the attention bias, or ``None``)."""
         text = self.text_embedding.to(unet_input.dtype).expand(unet_input.shape[0], -1, -1)
-        timestep = torch.full((unet_input.shape[0],), self.config.timestep, device=unet_input.device,
-                              dtype=torch.long)
-        return self.unet(unet_input, timestep, encoder_hidden_states=text,
-                         cross_attention_kwargs=set_kwargs(num_views, points)).sample
+        timestep = torch.full(
+            (unet_input.shape[0],), self.config.timestep, device=unet_input.device, dtype=torch.long
+        )
+        return self.unet(
+            unet_input,
+            timestep,
+            encoder_hidden_states=text,
+            cross_attention_kwargs=set_kwargs(num_views, points),
+        ).sample
 
     def latent_points(self, points: torch.Tensor | None) -> torch.Tensor | None:
         """Pixel surface points ``(B·V, 4, H, W)`` → latent cells ``(B·V, 4, H/8, W/8)`` (area means),
@@ -137,8 +154,13 @@ class SetDiffModel(nn.Module):
         """Scaled latents ``(K, C, h, w)`` → images ``(K, 3, H, W)`` in [0, 1]."""
         return self.codec.decode(latents, skips)
 
-    def output_images(self, x0: torch.Tensor, latents: torch.Tensor, renders: torch.Tensor,
-                      skips: tuple[torch.Tensor, ...] | None) -> torch.Tensor:
+    def output_images(
+        self,
+        x0: torch.Tensor,
+        latents: torch.Tensor,
+        renders: torch.Tensor,
+        skips: tuple[torch.Tensor, ...] | None,
+    ) -> torch.Tensor:
         """The enhanced images ``(K, 3, H, W)`` of K targets from their x̂0 ``(K, C, h, w)``.
 
         ``direct``: ``D(x̂0)``.  ``residual``: ``clamp(render + D(x̂0) − D(z), 0, 1)`` with ``z`` the
@@ -150,9 +172,16 @@ class SetDiffModel(nn.Module):
         changed, unchanged = self.decode(torch.cat([x0, latents.to(x0.dtype)]), doubled).chunk(2)
         return (renders.to(changed.dtype) + changed - unchanged).clamp(0.0, 1.0)
 
-    def predict_x0(self, latents: torch.Tensor, geometry: torch.Tensor | None, num_views: int, *,
-                   guidance_scale: float = 1.0, geometry_keep: torch.Tensor | None = None,
-                   points: torch.Tensor | None = None) -> torch.Tensor:
+    def predict_x0(
+        self,
+        latents: torch.Tensor,
+        geometry: torch.Tensor | None,
+        num_views: int,
+        *,
+        guidance_scale: float = 1.0,
+        geometry_keep: torch.Tensor | None = None,
+        points: torch.Tensor | None = None,
+    ) -> torch.Tensor:
         """x̂0 for every view, ``(B·V, C, h, w)``.
 
         Args:
@@ -186,8 +215,13 @@ class SetDiffModel(nn.Module):
         return self.to_x0(latents, guided)
 
     # ------------------------------------------------------------------ whole passes
-    def forward(self, batch: SetBatch, *, geometry_keep: torch.Tensor | None = None,
-                decode_index: torch.Tensor | None = None) -> SetPrediction:
+    def forward(
+        self,
+        batch: SetBatch,
+        *,
+        geometry_keep: torch.Tensor | None = None,
+        decode_index: torch.Tensor | None = None,
+    ) -> SetPrediction:
         """Training pass (no CFG): x̂0 of all targets, and decoded images of ``decode_index`` targets.
 
         Args:
@@ -197,7 +231,11 @@ class SetDiffModel(nn.Module):
         """
         sets, views, n = batch.num_sets, batch.num_views, batch.num_references
         images = batch.images.reshape(sets * views, *batch.images.shape[2:])
-        geometry = None if batch.geometry is None else batch.geometry.reshape(sets * views, *batch.geometry.shape[2:])
+        geometry = (
+            None
+            if batch.geometry is None
+            else batch.geometry.reshape(sets * views, *batch.geometry.shape[2:])
+        )
         flat_decode = None
         if decode_index is not None:
             offsets = torch.arange(sets, device=decode_index.device)[:, None] * views
@@ -210,8 +248,12 @@ class SetDiffModel(nn.Module):
         decoded = None
         if flat_decode is not None:
             chosen = flat_decode.to(x0.device)
-            decoded = self.output_images(x0.reshape(sets * views, *x0.shape[2:])[chosen], encoded.latents[chosen],
-                                         images[chosen], encoded.skips)
+            decoded = self.output_images(
+                x0.reshape(sets * views, *x0.shape[2:])[chosen],
+                encoded.latents[chosen],
+                images[chosen],
+                encoded.skips,
+            )
             decoded = decoded.reshape(sets, -1, *decoded.shape[1:])
         return SetPrediction(target_x0=target_x0, decoded=decoded)
 
@@ -225,7 +267,11 @@ class SetDiffModel(nn.Module):
         scale = self.config.guidance_scale if guidance_scale is None else float(guidance_scale)
         sets, views, n = batch.num_sets, batch.num_views, batch.num_references
         images = batch.images.reshape(sets * views, *batch.images.shape[2:])
-        geometry = None if batch.geometry is None else batch.geometry.reshape(sets * views, *batch.geometry.shape[2:])
+        geometry = (
+            None
+            if batch.geometry is None
+            else batch.geometry.reshape(sets * views, *batch.geometry.shape[2:])
+        )
         targets = (torch.arange(sets)[:, None] * views + torch.arange(n, views)[None, :]).reshape(-1)
         encoded = self.encode(images, targets.to(images.device))
         points = None if batch.points is None else batch.points.reshape(sets * views, *batch.points.shape[2:])

@@ -22,8 +22,16 @@ from setdiff_bench.errors import WeightsError
 from setdiff_bench.models.setdiff.autoencoder import load_autoencoder_weights
 from setdiff_bench.models.setdiff.config import ModelConfig
 
-ARCHITECTURE_KEYS = ("in_channels", "out_channels", "block_out_channels", "down_block_types", "up_block_types",
-                     "layers_per_block", "cross_attention_dim", "latent_channels")
+ARCHITECTURE_KEYS = (
+    "in_channels",
+    "out_channels",
+    "block_out_channels",
+    "down_block_types",
+    "up_block_types",
+    "layers_per_block",
+    "cross_attention_dim",
+    "latent_channels",
+)
 
 
 @dataclass
@@ -60,27 +68,35 @@ def load_pretrained_networks(root: Path, config: ModelConfig) -> Networks:
 
     for part in ("unet", "vae", "scheduler"):
         if not (root / part).is_dir():
-            raise WeightsError(f"pretrained folder has no {part}/ sub-folder (expected a diffusers SD-Turbo layout)",
-                               root)
+            raise WeightsError(
+                f"pretrained folder has no {part}/ sub-folder (expected a diffusers SD-Turbo layout)", root
+            )
     check_schedule(root / "scheduler" / "scheduler_config.json", config)
     modules: dict[str, Any] = {}
     for part, cls in (("unet", UNet2DConditionModel), ("vae", AutoencoderKL)):
         try:
-            modules[part] = cls.from_pretrained(root, subfolder=part, local_files_only=True, use_safetensors=True,
-                                                torch_dtype=torch.float32)
+            modules[part] = cls.from_pretrained(
+                root, subfolder=part, local_files_only=True, use_safetensors=True, torch_dtype=torch.float32
+            )
         except (OSError, ValueError, RuntimeError) as error:
             raise WeightsError(f"cannot load {part}: {error}", root / part) from error
         expected = config.unet if part == "unet" else config.vae
         for key in ARCHITECTURE_KEYS:
             if key in expected and _norm(modules[part].config.get(key)) != _norm(expected[key]):
-                raise WeightsError(f"{part} {key} is {modules[part].config.get(key)!r} but the config says "
-                                   f"{expected[key]!r}; use the matching preset", root / part)
+                raise WeightsError(
+                    f"{part} {key} is {modules[part].config.get(key)!r} but the config says "
+                    f"{expected[key]!r}; use the matching preset",
+                    root / part,
+                )
     prompt = None
     if (root / "text_encoder").is_dir() and (root / "tokenizer").is_dir():
         prompt = encode_prompt(root, config.text_prompt, config.text_length)
         if prompt.shape[-1] != config.cross_attention_dim:
-            raise WeightsError(f"text encoder width {prompt.shape[-1]} != UNet cross_attention_dim "
-                               f"{config.cross_attention_dim}", root / "text_encoder")
+            raise WeightsError(
+                f"text encoder width {prompt.shape[-1]} != UNet cross_attention_dim "
+                f"{config.cross_attention_dim}",
+                root / "text_encoder",
+            )
     return Networks(unet=modules["unet"], vae=modules["vae"], prompt_embedding=prompt)
 
 
@@ -92,8 +108,11 @@ def check_schedule(path: Path, config: ModelConfig) -> None:
         raise WeightsError(f"cannot read scheduler config: {error}", path) from error
     for key, value in config.scheduler.items():
         found = data.get(key)
-        same = math.isclose(float(found), float(value), rel_tol=1e-9) if isinstance(value, float) and found is not None \
+        same = (
+            math.isclose(float(found), float(value), rel_tol=1e-9)
+            if isinstance(value, float) and found is not None
             else found == value
+        )
         if not same:
             raise WeightsError(f"scheduler {key} is {found!r} but the model assumes {value!r}", path)
 
@@ -105,7 +124,9 @@ def encode_prompt(root: Path, prompt: str, length: int) -> torch.Tensor:
 
     try:
         tokenizer = AutoTokenizer.from_pretrained(root / "tokenizer", local_files_only=True)
-        encoder = CLIPTextModel.from_pretrained(root / "text_encoder", local_files_only=True, use_safetensors=True)
+        encoder = CLIPTextModel.from_pretrained(
+            root / "text_encoder", local_files_only=True, use_safetensors=True
+        )
     except (OSError, ValueError) as error:
         raise WeightsError(f"cannot load the text encoder / tokenizer: {error}", root) from error
     tokens = tokenizer(prompt, padding="max_length", max_length=length, truncation=True, return_tensors="pt")

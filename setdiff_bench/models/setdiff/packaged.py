@@ -64,8 +64,13 @@ def packaged_models(root: Path | None = None) -> dict[str, PackagedModel]:
     if not root.is_dir():
         return models
     for folder in sorted(p for p in root.iterdir() if p.is_dir()):
-        kind = ("enhancer" if (folder / ENHANCER_WEIGHTS).is_file() else
-                "autoencoder" if (folder / AUTOENCODER_WEIGHTS).is_file() else None)
+        kind = (
+            "enhancer"
+            if (folder / ENHANCER_WEIGHTS).is_file()
+            else "autoencoder"
+            if (folder / AUTOENCODER_WEIGHTS).is_file()
+            else None
+        )
         if kind is None or not (folder / MANIFEST_FILE).is_file():
             continue
         models[folder.name] = PackagedModel(folder.name, kind, folder, read_json(folder / MANIFEST_FILE))
@@ -112,8 +117,12 @@ def file_table(folder: Path, names: list[str]) -> dict[str, str]:
     return {name: sha256_file(folder / name) for name in sorted(names)}
 
 
-def export_enhancer(checkpoint: Path, training_manifest: dict[str, Any], destination: Path,
-                    extra: dict[str, Any] | None = None) -> Path:
+def export_enhancer(
+    checkpoint: Path,
+    training_manifest: dict[str, Any],
+    destination: Path,
+    extra: dict[str, Any] | None = None,
+) -> Path:
     """Copy a checkpoint's weights and config into ``destination`` (replaced atomically) with a manifest.
 
     Args:

@@ -93,16 +93,25 @@ def add_bias_parameters(unet: torch.nn.Module, names: list[str]) -> None:
     for name in names:
         module = modules[name.removesuffix(".processor")]
         if not hasattr(module, BIAS_PARAMETER):
-            module.register_parameter(BIAS_PARAMETER, nn.Parameter(torch.tensor(math.log(BIAS_INITIAL_SCALE))))
+            module.register_parameter(
+                BIAS_PARAMETER, nn.Parameter(torch.tensor(math.log(BIAS_INITIAL_SCALE)))
+            )
 
 
 class SetSelfAttnProcessor:
     """Joint self-attention over the union of all V views' tokens (replaces ``attn1`` processors)."""
 
-    def __call__(self, attn: Any, hidden_states: torch.Tensor, encoder_hidden_states: torch.Tensor | None = None,
-                 attention_mask: torch.Tensor | None = None, temb: torch.Tensor | None = None,
-                 num_views: int | None = None, token_points: torch.Tensor | None = None,
-                 **kwargs: Any) -> torch.Tensor:
+    def __call__(
+        self,
+        attn: Any,
+        hidden_states: torch.Tensor,
+        encoder_hidden_states: torch.Tensor | None = None,
+        attention_mask: torch.Tensor | None = None,
+        temb: torch.Tensor | None = None,
+        num_views: int | None = None,
+        token_points: torch.Tensor | None = None,
+        **kwargs: Any,
+    ) -> torch.Tensor:
         """``hidden_states`` ``(B·V, L, C)`` → ``(B·V, L, C_out)``, attending across the V views of each set.
 
         With ``token_points`` and a layer that has the bias parameter, the logits get the C-map
@@ -112,7 +121,9 @@ class SetSelfAttnProcessor:
         if encoder_hidden_states is not None or attention_mask is not None:
             raise RuntimeError("set mixer replaces self-attention only: got encoder_hidden_states or a mask")
         if hidden_states.ndim != 3:
-            raise RuntimeError(f"set mixer expects (B·V, L, C) tokens, got shape {tuple(hidden_states.shape)}")
+            raise RuntimeError(
+                f"set mixer expects (B·V, L, C) tokens, got shape {tuple(hidden_states.shape)}"
+            )
         batch_views, tokens, _ = hidden_states.shape
         if batch_views % num_views:
             raise RuntimeError(f"UNet batch {batch_views} is not a multiple of the set size {num_views}")
@@ -123,16 +134,21 @@ class SetSelfAttnProcessor:
         value = attn.to_v(hidden_states)
         head_dim = query.shape[-1] // heads
 
-        def to_heads(x: torch.Tensor) -> torch.Tensor:  # (B·V, L, h·d) → (B, h, V·L, d); a view in "(b v)" order
+        def to_heads(
+            x: torch.Tensor,
+        ) -> torch.Tensor:  # (B·V, L, h·d) → (B, h, V·L, d); a view in "(b v)" order
             return x.reshape(sets, num_views * tokens, heads, head_dim).transpose(1, 2)
 
         bias = None
         log_scale = getattr(attn, BIAS_PARAMETER, None)
         if token_points is not None and log_scale is not None:
             points, valid = pool_token_points(token_points, tokens)
-            bias = distance_bias(points.reshape(sets, num_views * tokens, 3), valid.reshape(sets, -1),
-                                 log_scale.exp()).to(query.dtype)
-        mixed = F.scaled_dot_product_attention(to_heads(query), to_heads(key), to_heads(value), attn_mask=bias)
+            bias = distance_bias(
+                points.reshape(sets, num_views * tokens, 3), valid.reshape(sets, -1), log_scale.exp()
+            ).to(query.dtype)
+        mixed = F.scaled_dot_product_attention(
+            to_heads(query), to_heads(key), to_heads(value), attn_mask=bias
+        )
         mixed = mixed.transpose(1, 2).reshape(batch_views, tokens, heads * head_dim).to(query.dtype)
         mixed = attn.to_out[0](mixed)
         mixed = attn.to_out[1](mixed)
@@ -147,19 +163,31 @@ def per_view_processor_class() -> type:
     class PerViewAttnProcessor(AttnProcessor2_0):
         """diffusers' standard SDPA processor, accepting (and ignoring) the set size."""
 
-        def __call__(self, attn: Any, hidden_states: torch.Tensor, encoder_hidden_states: torch.Tensor | None = None,
-                     attention_mask: torch.Tensor | None = None, temb: torch.Tensor | None = None,
-                     num_views: int | None = None, token_points: torch.Tensor | None = None,
-                     **kwargs: Any) -> torch.Tensor:
-            return super().__call__(attn, hidden_states, encoder_hidden_states, attention_mask, temb, **kwargs)
+        def __call__(
+            self,
+            attn: Any,
+            hidden_states: torch.Tensor,
+            encoder_hidden_states: torch.Tensor | None = None,
+            attention_mask: torch.Tensor | None = None,
+            temb: torch.Tensor | None = None,
+            num_views: int | None = None,
+            token_points: torch.Tensor | None = None,
+            **kwargs: Any,
+        ) -> torch.Tensor:
+            return super().__call__(
+                attn, hidden_states, encoder_hidden_states, attention_mask, temb, **kwargs
+            )
 
     return PerViewAttnProcessor
 
 
 def check_self_attention(attn: Any, name: str) -> None:
     """Refuse attention layers with features the set mixer does not implement."""
-    unsupported = [flag for flag in ("spatial_norm", "group_norm", "norm_q", "norm_k")
-                   if getattr(attn, flag, None) is not None]
+    unsupported = [
+        flag
+        for flag in ("spatial_norm", "group_norm", "norm_q", "norm_k")
+        if getattr(attn, flag, None) is not None
+    ]
     if getattr(attn, "residual_connection", False):
         unsupported.append("residual_connection")
     if getattr(attn, "is_cross_attention", False):

@@ -102,8 +102,16 @@ class SampleStream:
     (``None`` as the index for iterables).
     """
 
-    def __init__(self, dataset: Sequence[TrainingSample] | Iterable[TrainingSample], *, seed: int, rank: int = 0,
-                 world: int = 1, start: int = 0, num_workers: int = 0) -> None:
+    def __init__(
+        self,
+        dataset: Sequence[TrainingSample] | Iterable[TrainingSample],
+        *,
+        seed: int,
+        rank: int = 0,
+        world: int = 1,
+        start: int = 0,
+        num_workers: int = 0,
+    ) -> None:
         if not 0 <= rank < world:
             raise ValueError(f"rank {rank} outside a world of {world}")
         self.dataset, self.seed, self.rank, self.world = dataset, seed, rank, world
@@ -137,15 +145,22 @@ class SampleStream:
             positions = range(position, (epoch + 1) * size, self.world)
             indices = [permutation[g - epoch * size] for g in positions]
             if self.num_workers > 0:
-                loader = torch.utils.data.DataLoader(self.dataset, batch_size=None, sampler=indices,  # type: ignore[arg-type]
-                                                     num_workers=self.num_workers, collate_fn=_identity)
+                loader = torch.utils.data.DataLoader(
+                    self.dataset,
+                    batch_size=None,
+                    sampler=indices,  # type: ignore[arg-type]
+                    num_workers=self.num_workers,
+                    collate_fn=_identity,
+                )
                 samples: Iterable[TrainingSample] = loader
             else:
                 samples = (self.dataset[index] for index in indices)  # type: ignore[index]
             for g, index, sample in zip(positions, indices, samples, strict=True):
                 self.last = (g, index)
                 yield sample
-            position = positions[-1] + self.world  # ``positions`` is never empty: position < (epoch + 1) * size
+            position = (
+                positions[-1] + self.world
+            )  # ``positions`` is never empty: position < (epoch + 1) * size
 
     def _cycle(self) -> Iterator[TrainingSample]:
         while True:
@@ -163,9 +178,16 @@ def _identity(sample: Any) -> Any:
     return sample
 
 
-def train(config: Config, dataset: Sequence[TrainingSample] | Iterable[TrainingSample], out_dir: str | Path, *,
-          validation: Sequence[TrainingSample] = (), resume: bool = True, cpu: bool | None = None,
-          progress: bool = True) -> TrainResult:
+def train(
+    config: Config,
+    dataset: Sequence[TrainingSample] | Iterable[TrainingSample],
+    out_dir: str | Path,
+    *,
+    validation: Sequence[TrainingSample] = (),
+    resume: bool = True,
+    cpu: bool | None = None,
+    progress: bool = True,
+) -> TrainResult:
     """Train (or resume training) a model and write checkpoints to ``out_dir``.
 
     Args:
@@ -199,7 +221,9 @@ def train(config: Config, dataset: Sequence[TrainingSample] | Iterable[TrainingS
         previous = resolve_checkpoint(out)
         saved = read_config(previous)
         check_compatible(saved, config, previous)
-        model_config = dataclasses.replace(model_config, learn_text_embedding=saved.model.learn_text_embedding)
+        model_config = dataclasses.replace(
+            model_config, learn_text_embedding=saved.model.learn_text_embedding
+        )
 
     set_seed(tc.seed)
     model = SetDiffModel(model_config, load_pretrained=previous is None)
@@ -210,23 +234,37 @@ def train(config: Config, dataset: Sequence[TrainingSample] | Iterable[TrainingS
         model.unet.enable_gradient_checkpointing()
     model.to(device)
     model.train()
-    optimizer = torch.optim.AdamW(model.trainable_parameters(), lr=tc.learning_rate, betas=tc.adam_betas,
-                                  eps=tc.adam_eps, weight_decay=tc.weight_decay)
+    optimizer = torch.optim.AdamW(
+        model.trainable_parameters(),
+        lr=tc.learning_rate,
+        betas=tc.adam_betas,
+        eps=tc.adam_eps,
+        weight_decay=tc.weight_decay,
+    )
     start = load_training_state(previous, optimizer) if previous is not None else 0
-    reconstruction = (ReconstructionLoss(tc.l2_weight, tc.ssim_weight, tc.lpips_weight, tc.lpips_net, device=device)
-                      if tc.reconstruction_weight > 0 else None)
+    reconstruction = (
+        ReconstructionLoss(tc.l2_weight, tc.ssim_weight, tc.lpips_weight, tc.lpips_net, device=device)
+        if tc.reconstruction_weight > 0
+        else None
+    )
     model, optimizer = accelerator.prepare(model, optimizer)
     core: SetDiffModel = accelerator.unwrap_model(model)
     rank, world = accelerator.process_index, accelerator.num_processes
     per_step = tc.gradient_accumulation * world  # samples per optimiser step, all processes together
-    stream = SampleStream(dataset, seed=tc.seed, rank=rank, world=world, start=start * per_step,
-                          num_workers=tc.num_workers)
+    stream = SampleStream(
+        dataset, seed=tc.seed, rank=rank, world=world, start=start * per_step, num_workers=tc.num_workers
+    )
     main = accelerator.is_main_process
     if main and start > 0:  # records of steps after the checkpoint (a killed run) are redone now
         for name in (LOG_FILE, VALIDATION_FILE, SAMPLES_FILE):
             _truncate_jsonl(out / name, start)
-    bar = tqdm(total=tc.steps, initial=start, disable=not (progress and main), desc=f"train {config.model.method}",
-               dynamic_ncols=True)
+    bar = tqdm(
+        total=tc.steps,
+        initial=start,
+        disable=not (progress and main),
+        desc=f"train {config.model.method}",
+        dynamic_ncols=True,
+    )
     result = TrainResult(step=start, checkpoint=previous or out)
     running: dict[str, float] = {}
     running_steps = 0
@@ -264,25 +302,32 @@ def train(config: Config, dataset: Sequence[TrainingSample] | Iterable[TrainingS
             result.losses = logged
             if main:
                 bar.set_postfix({k: f"{v:.4f}" for k, v in logged.items()})
-                _append_jsonl(out / LOG_FILE, {"step": done, **logged,
-                                               "seconds": round(time.perf_counter() - began, 3)})
+                _append_jsonl(
+                    out / LOG_FILE, {"step": done, **logged, "seconds": round(time.perf_counter() - began, 3)}
+                )
         bar.update(1)
         if validation and (done % tc.validate_every == 0 or done == tc.steps):
             # every process scores its share of the validation samples; the sums are reduced across them
             with accelerator.autocast():
-                totals = validation_totals(core, validation[: tc.validation_packets][rank::world], reconstruction)
+                totals = validation_totals(
+                    core, validation[: tc.validation_packets][rank::world], reconstruction
+                )
             record = {"step": done, **_reduce_means(accelerator, totals)}
             result.validation.append(record)
             if main:
                 _append_jsonl(out / VALIDATION_FILE, record)
-                bar.write(f"step {done}: " + ", ".join(f"{k} {v:.4f}" for k, v in record.items() if k != "step"))
+                bar.write(
+                    f"step {done}: " + ", ".join(f"{k} {v:.4f}" for k, v in record.items() if k != "step")
+                )
         stopping = _any_process(accelerator, stop_requested())
         if done % checkpoint_interval(tc.checkpoint_every, tc.steps) == 0 or done == tc.steps or stopping:
             result.checkpoint = _save(accelerator, core, optimizer, config, out, done)
         if stopping:
             bar.close()
-            raise Interrupted(f"stopped at step {done}/{tc.steps}; checkpoint {result.checkpoint}; "
-                              "rerun the same command to resume")
+            raise Interrupted(
+                f"stopped at step {done}/{tc.steps}; checkpoint {result.checkpoint}; "
+                "rerun the same command to resume"
+            )
     bar.close()
     if result.step == start and previous is None:
         result.checkpoint = _save(accelerator, core, optimizer, config, out, start)
@@ -290,14 +335,30 @@ def train(config: Config, dataset: Sequence[TrainingSample] | Iterable[TrainingS
     return result
 
 
-def _micro_step(model: Any, core: SetDiffModel, sample: TrainingSample, rng: random.Random, config: Config,
-                reconstruction: ReconstructionLoss | None, accelerator: Any) -> dict[str, float]:
+def _micro_step(
+    model: Any,
+    core: SetDiffModel,
+    sample: TrainingSample,
+    rng: random.Random,
+    config: Config,
+    reconstruction: ReconstructionLoss | None,
+    accelerator: Any,
+) -> dict[str, float]:
     """Forward + backward of one training set; returns the loss terms as floats."""
     tc, mc = config.train, config.model
     device = accelerator.device
-    drawn = training_set(sample, rng, min_views=tc.min_views, max_views=tc.max_views, use_geometry=mc.use_geometry,
-                         cmap_clip=mc.cmap_clip, pairs=mc.method == "difix", geometry_inputs=mc.geometry_inputs,
-                         with_points=mc.attention_bias != "none", identity_probability=tc.identity_fraction)
+    drawn = training_set(
+        sample,
+        rng,
+        min_views=tc.min_views,
+        max_views=tc.max_views,
+        use_geometry=mc.use_geometry,
+        cmap_clip=mc.cmap_clip,
+        pairs=mc.method == "difix",
+        geometry_inputs=mc.geometry_inputs,
+        with_points=mc.attention_bias != "none",
+        identity_probability=tc.identity_fraction,
+    )
     batch = drawn.batch.to(device)
     keep = None
     if mc.use_geometry:
@@ -328,15 +389,17 @@ def _micro_step(model: Any, core: SetDiffModel, sample: TrainingSample, rng: ran
 
 
 @torch.no_grad()
-def validate(model: SetDiffModel, samples: Sequence[TrainingSample],
-             reconstruction: ReconstructionLoss | None = None) -> dict[str, float]:
+def validate(
+    model: SetDiffModel, samples: Sequence[TrainingSample], reconstruction: ReconstructionLoss | None = None
+) -> dict[str, float]:
     """Mean masked PSNR and SSIM (and LPIPS when the loss has it loaded) of enhanced vs ground-truth targets."""
     return _means(validation_totals(model, samples, reconstruction))
 
 
 @torch.no_grad()
-def validation_totals(model: SetDiffModel, samples: Sequence[TrainingSample],
-                      reconstruction: ReconstructionLoss | None = None) -> dict[str, tuple[float, int]]:
+def validation_totals(
+    model: SetDiffModel, samples: Sequence[TrainingSample], reconstruction: ReconstructionLoss | None = None
+) -> dict[str, tuple[float, int]]:
     """Per metric, the sum over every target of ``samples`` and the number of targets (for reduction across
     processes): ``psnr`` and ``ssim`` (masked), ``lpips`` when the loss has LPIPS loaded."""
     was_training = model.training
@@ -362,7 +425,11 @@ def validation_totals(model: SetDiffModel, samples: Sequence[TrainingSample],
 
 def _means(totals: Mapping[str, tuple[float, float]]) -> dict[str, float]:
     """``{metric: (sum, count)}`` → ``{metric: mean}``, leaving out metrics with no or non-finite values."""
-    return {name: float(total / count) for name, (total, count) in totals.items() if count > 0 and math.isfinite(total)}
+    return {
+        name: float(total / count)
+        for name, (total, count) in totals.items()
+        if count > 0 and math.isfinite(total)
+    }
 
 
 def _reduce_means(accelerator: Any, totals: dict[str, tuple[float, int]]) -> dict[str, float]:
@@ -398,7 +465,9 @@ def _any_process(accelerator: Any, flag: bool) -> bool:
     """``flag`` or-ed over the processes, so that every rank stops (and saves) at the same step."""
     if accelerator.num_processes == 1:
         return flag
-    return bool(accelerator.reduce(torch.tensor([float(flag)], device=accelerator.device), reduction="sum") > 0)
+    return bool(
+        accelerator.reduce(torch.tensor([float(flag)], device=accelerator.device), reduction="sum") > 0
+    )
 
 
 def _gather_list(accelerator: Any, items: list[Any]) -> list[Any]:

@@ -30,8 +30,18 @@ import torch
 from torch import nn
 
 LORA_ADAPTER = "vae_decoder"
-LORA_SUFFIXES = ("conv1", "conv2", "conv_in", "conv_shortcut", "conv", "conv_out", "to_q", "to_k", "to_v",
-                 "to_out.0")
+LORA_SUFFIXES = (
+    "conv1",
+    "conv2",
+    "conv_in",
+    "conv_shortcut",
+    "conv",
+    "conv_out",
+    "to_q",
+    "to_k",
+    "to_v",
+    "to_out.0",
+)
 SKIP_INIT = 1e-5
 
 
@@ -52,8 +62,16 @@ class Encoded:
 class LatentCodec(nn.Module):
     """Frozen-encoder / trainable-decoder VAE wrapper (see the module docstring)."""
 
-    def __init__(self, vae: Any, *, skip_connections: bool, skip_gamma: float = 1.0, decoder_training: str = "lora",
-                 lora_rank: int = 4, lora_alpha: float = 8.0) -> None:
+    def __init__(
+        self,
+        vae: Any,
+        *,
+        skip_connections: bool,
+        skip_gamma: float = 1.0,
+        decoder_training: str = "lora",
+        lora_rank: int = 4,
+        lora_alpha: float = 8.0,
+    ) -> None:
         super().__init__()
         self.vae = vae
         self.scaling_factor = float(vae.config.scaling_factor)
@@ -64,8 +82,10 @@ class LatentCodec(nn.Module):
         if skip_connections:
             encoder_in = [int(block.resnets[0].in_channels) for block in vae.encoder.down_blocks][::-1]
             decoder_in = [int(block.resnets[0].in_channels) for block in vae.decoder.up_blocks]
-            self.skip_convs = nn.ModuleList(nn.Conv2d(c_in, c_out, kernel_size=1, bias=False)
-                                            for c_in, c_out in zip(encoder_in, decoder_in))
+            self.skip_convs = nn.ModuleList(
+                nn.Conv2d(c_in, c_out, kernel_size=1, bias=False)
+                for c_in, c_out in zip(encoder_in, decoder_in)
+            )
             for conv in self.skip_convs:
                 nn.init.constant_(conv.weight, SKIP_INIT)
         if decoder_training == "lora":
@@ -75,9 +95,13 @@ class LatentCodec(nn.Module):
     def _add_decoder_lora(self, rank: int, alpha: float) -> None:
         from peft import LoraConfig
 
-        targets = [name for name, module in self.vae.named_modules()
-                   if name.startswith("decoder.") and isinstance(module, nn.Conv2d | nn.Linear)
-                   and any(name == suffix or name.endswith("." + suffix) for suffix in LORA_SUFFIXES)]
+        targets = [
+            name
+            for name, module in self.vae.named_modules()
+            if name.startswith("decoder.")
+            and isinstance(module, nn.Conv2d | nn.Linear)
+            and any(name == suffix or name.endswith("." + suffix) for suffix in LORA_SUFFIXES)
+        ]
         config = LoraConfig(r=rank, lora_alpha=alpha, init_lora_weights="gaussian", target_modules=targets)
         self.vae.add_adapter(config, adapter_name=LORA_ADAPTER)
 
@@ -128,7 +152,9 @@ class LatentCodec(nn.Module):
         ``skips`` are the matching views' encoder activations (required with skip connections).
         """
         if self.skip_convs is not None and skips is None:
-            raise ValueError("this decoder has skip connections: pass the encoder activations of the same views")
+            raise ValueError(
+                "this decoder has skip connections: pass the encoder activations of the same views"
+            )
         decoder = self.vae.decoder
         sample = latents / self.scaling_factor + self.shift_factor
         if self.vae.post_quant_conv is not None:
