@@ -47,10 +47,10 @@ from setdiff_bench.types import Frame, Scene
 
 from .common import (
     dataset_root,
-    discover_scenes,
     fit_camera_to_image,
     natural_key,
     require_dir,
+    require_scenes,
     select_scenes,
 )
 
@@ -277,12 +277,7 @@ def is_colmap_scene(folder: Path) -> bool:
 
 
 def _scene_dirs(base: Path) -> dict[str, Path]:
-    found = discover_scenes(base, is_colmap_scene)
-    if not found:
-        raise DatasetError(
-            "no COLMAP scenes found (expected <scene>/sparse/0/{cameras,images}.{bin,txt})", base
-        )
-    return found
+    return require_scenes(base, is_colmap_scene, "COLMAP", "<scene>/sparse/0/{cameras,images}.{bin,txt}")
 
 
 def list_scenes(root: str | os.PathLike[str]) -> list[str]:

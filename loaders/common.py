@@ -99,6 +99,17 @@ def discover_scenes(root: Path, is_scene: Callable[[Path], bool], *, max_depth: 
     }
 
 
+def require_scenes(
+    root: Path, is_scene: Callable[[Path], bool], dataset: str, expected: str, *, max_depth: int = 3
+) -> dict[str, Path]:
+    """:func:`discover_scenes`, raising :class:`DatasetError` ``no <dataset> scenes found (expected <expected>)``
+    when there are none."""
+    found = discover_scenes(root, is_scene, max_depth=max_depth)
+    if not found:
+        raise DatasetError(f"no {dataset} scenes found (expected {expected})", root)
+    return found
+
+
 def scene_key(root: Path, scene_dir: Path) -> str:
     """Scene name: the path of ``scene_dir`` relative to ``root`` (POSIX), or the folder name if equal."""
     if scene_dir == root:

@@ -45,7 +45,7 @@ from setdiff_bench.io.paths import resolve_inside
 from setdiff_bench.types import Frame, Scene
 
 from .colmap import DISTORTION_POLICIES, DistortionPolicy
-from .common import dataset_root, discover_scenes, fit_camera_to_image, natural_key, select_scenes
+from .common import dataset_root, fit_camera_to_image, natural_key, require_scenes, select_scenes
 
 WorldFrame = Literal["colmap", "file"]
 PINHOLE_MODELS = ("PINHOLE", "SIMPLE_PINHOLE")
@@ -290,10 +290,7 @@ def is_nerfstudio_scene(folder: Path) -> bool:
 
 
 def _scene_dirs(base: Path) -> dict[str, Path]:
-    found = discover_scenes(base, is_nerfstudio_scene)
-    if not found:
-        raise DatasetError("no nerfstudio scenes found (expected <scene>/transforms.json)", base)
-    return found
+    return require_scenes(base, is_nerfstudio_scene, "nerfstudio", "<scene>/transforms.json")
 
 
 def list_scenes(root: str | os.PathLike[str]) -> list[str]:

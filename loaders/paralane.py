@@ -50,10 +50,10 @@ from .colmap import DistortionPolicy, read_colmap_model
 from .common import (
     check_image_matches_camera,
     dataset_root,
-    discover_scenes,
     image_size,
     natural_key,
     require_dir,
+    require_scenes,
     select_scenes,
 )
 
@@ -76,10 +76,9 @@ def _clip_dirs(scene_dir: Path) -> list[Path]:
 
 
 def _scene_dirs(base: Path) -> dict[str, Path]:
-    found = discover_scenes(base, lambda folder: bool(_clip_dirs(folder)), max_depth=2)
-    if not found:
-        raise DatasetError("no Para-Lane scenes found (expected scene_<i>/clip_<k>/sparse/0)", base)
-    return found
+    return require_scenes(
+        base, lambda folder: bool(_clip_dirs(folder)), "Para-Lane", "scene_<i>/clip_<k>/sparse/0", max_depth=2
+    )
 
 
 def list_scenes(root: str | os.PathLike[str]) -> list[str]:

@@ -26,7 +26,7 @@ from setdiff_bench.errors import DatasetError
 from setdiff_bench.types import Frame, Scene
 
 from .colmap import DistortionPolicy
-from .common import dataset_root, discover_scenes, select_scenes
+from .common import dataset_root, require_scenes, select_scenes
 from .euvs import MaskPolicy, load_layout
 
 FORMAT = "setdiff-synthetic/1"
@@ -39,12 +39,9 @@ def is_synthetic_scene(folder: Path) -> bool:
 
 
 def _scene_dirs(base: Path) -> dict[str, Path]:
-    found = discover_scenes(base, is_synthetic_scene)
-    if not found:
-        raise DatasetError(
-            "no synthetic scenes found (expected <scene>/scene.json and <scene>/test_set.txt)", base
-        )
-    return found
+    return require_scenes(
+        base, is_synthetic_scene, "synthetic", "<scene>/scene.json and <scene>/test_set.txt"
+    )
 
 
 def list_scenes(root: str | os.PathLike[str]) -> list[str]:
