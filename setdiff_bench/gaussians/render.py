@@ -94,6 +94,7 @@ def _render_torch(g: GaussianModel, cams: list[Camera], options: RenderOptions) 
     device, dtype = g.means.device, g.means.dtype
     height, width = cams[0].height, cams[0].width
     scales, opacities, quats = g.scales, g.opacities, g.quats
+    near, far, eps2d = options.near, options.far, options.eps2d
     cmap_points = (
         clip_centres(g.means, options.cmap_bound, options.cmap_center) if options.with_geometry else None
     )
@@ -101,17 +102,7 @@ def _render_torch(g: GaussianModel, cams: list[Camera], options: RenderOptions) 
     for cam in cams:
         w2c, K = camera_tensors(cam, device, dtype)
         proj = torch_ref.project(
-            g.means,
-            quats,
-            scales,
-            opacities,
-            w2c,
-            K,
-            width,
-            height,
-            near=options.near,
-            far=options.far,
-            eps2d=options.eps2d,
+            g.means, quats, scales, opacities, w2c, K, width, height, near=near, far=far, eps2d=eps2d
         )
         center = -w2c[:3, :3].T @ w2c[:3, 3]
         colors = g.colors(center, options.sh_degree)
