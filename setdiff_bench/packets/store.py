@@ -30,7 +30,7 @@ from __future__ import annotations
 import os
 import shutil
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +40,7 @@ import torch
 
 from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import PacketError, SetDiffBenchError
-from setdiff_bench.geometry import normalize_packet
+from setdiff_bench.geometry import renormalize
 from setdiff_bench.io.atomic import sha256_file, staged_folder
 from setdiff_bench.io.images import read_exr, read_mask, read_rgb, to_tensor_chw, write_exr, write_png
 from setdiff_bench.packets.index import (
@@ -455,19 +455,3 @@ class PacketTrainingDataset(torch.utils.data.Dataset):
             "epoch": self.epoch,
         }
         return TrainingSample(packet=packet, target_gt=gt, target_masks=masks)
-
-
-def renormalize(packet: Packet) -> Packet:
-    """The packet moved so its first target is the identity and its camera extent is 1 (C-maps follow)."""
-    refs, tgts = packet.references, packet.targets
-    cameras = (*refs.cameras, *tgts.cameras)
-    cmaps = torch.cat([refs.cmaps, tgts.cmaps])
-    alphas = torch.cat([refs.alphas, tgts.alphas])
-    moved = normalize_packet(cameras, cmaps, len(refs), alphas=alphas)
-    n = len(refs)
-    return replace(
-        packet,
-        scale=packet.scale * moved.scale,
-        references=replace(refs, cmaps=moved.cmaps[:n], cameras=moved.cameras[:n]),
-        targets=replace(tgts, cmaps=moved.cmaps[n:], cameras=moved.cameras[n:]),
-    )
