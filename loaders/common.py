@@ -6,10 +6,12 @@ parses only the header, so checking thousands of frames costs milliseconds, not 
 
 from __future__ import annotations
 
+import json
 import os
 import re
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
+from typing import Any
 
 import OpenImageIO as oiio
 
@@ -147,6 +149,17 @@ def select_scenes(
         if match not in chosen:
             chosen.append(match)
     return chosen
+
+
+def read_json(path: Path, what: str = "file") -> Any:
+    """The parsed JSON document at ``path``; :class:`DatasetError` naming the line and column of a syntax error,
+    or ``cannot read <what>`` for an unreadable file."""
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise DatasetError(f"invalid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}", path) from exc
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DatasetError(f"cannot read {what} ({exc.__class__.__name__})", path) from exc
 
 
 def read_name_list(path: Path, *, allow_empty: bool = False) -> list[str]:

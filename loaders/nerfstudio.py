@@ -28,7 +28,6 @@ without pulling in nerfstudio itself.
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import warnings
@@ -45,7 +44,7 @@ from setdiff_bench.io.paths import resolve_inside
 from setdiff_bench.types import Frame, Scene
 
 from .colmap import DISTORTION_POLICIES, DistortionPolicy
-from .common import dataset_root, fit_camera_to_image, natural_key, require_scenes, select_scenes
+from .common import dataset_root, fit_camera_to_image, natural_key, read_json, require_scenes, select_scenes
 
 WorldFrame = Literal["colmap", "file"]
 PINHOLE_MODELS = ("PINHOLE", "SIMPLE_PINHOLE")
@@ -114,14 +113,7 @@ def read_transforms(
     transforms = Path(path)
     if not transforms.is_file():
         raise DatasetError("missing transforms.json", transforms)
-    try:
-        meta = json.loads(transforms.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise DatasetError(
-            f"invalid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}", transforms
-        ) from exc
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DatasetError(f"cannot read file ({exc.__class__.__name__})", transforms) from exc
+    meta = read_json(transforms)
     if not isinstance(meta, dict) or not isinstance(meta.get("frames"), list):
         raise DatasetError("expected a JSON object with a 'frames' list", transforms)
     if not meta["frames"]:

@@ -15,7 +15,6 @@ Frame order: traversal order of ``scene.json``, then camera order of ``scene.jso
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Iterable, Mapping
 from dataclasses import replace
@@ -26,7 +25,7 @@ from setdiff_bench.errors import DatasetError
 from setdiff_bench.types import Frame, Scene
 
 from .colmap import DistortionPolicy
-from .common import dataset_root, require_scenes, select_scenes
+from .common import dataset_root, read_json, require_scenes, select_scenes
 from .euvs import MaskPolicy, load_layout
 
 FORMAT = "setdiff-synthetic/1"
@@ -51,12 +50,7 @@ def list_scenes(root: str | os.PathLike[str]) -> list[str]:
 
 def read_scene_json(path: Path) -> dict[str, Any]:
     """Parse and check the top level of ``scene.json``."""
-    try:
-        meta = json.loads(path.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise DatasetError(f"invalid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}", path) from exc
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DatasetError(f"cannot read file ({exc.__class__.__name__})", path) from exc
+    meta = read_json(path)
     if not isinstance(meta, dict):
         raise DatasetError("expected a JSON object", path)
     if meta.get("format") != FORMAT:
