@@ -51,7 +51,7 @@ from .common import (
     natural_key,
     require_dir,
     require_scenes,
-    select_scenes,
+    selected_scene_dirs,
 )
 
 DistortionPolicy = Literal["keep", "ignore", "error"]
@@ -309,8 +309,7 @@ def load_scenes(
     base = dataset_root(root)
     found = _scene_dirs(base)
     out = []
-    for name in select_scenes(list(found), scenes, base, "colmap"):
-        scene_dir = found[name]
+    for name, scene_dir in selected_scene_dirs(found, scenes, base, "colmap"):
         sparse = find_sparse_dir(scene_dir)
         assert sparse is not None
         model = read_colmap_model(sparse, distortion=distortion)

@@ -162,6 +162,13 @@ def read_json(path: Path, what: str = "file") -> Any:
         raise DatasetError(f"cannot read {what} ({exc.__class__.__name__})", path) from exc
 
 
+def selected_scene_dirs(
+    found: dict[str, Path], requested: Iterable[str] | None, root: Path, dataset: str
+) -> list[tuple[str, Path]]:
+    """``(name, folder)`` of the scenes :func:`select_scenes` picks from ``found`` (name → folder)."""
+    return [(name, found[name]) for name in select_scenes(list(found), requested, root, dataset)]
+
+
 def read_name_list(path: Path, *, allow_empty: bool = False) -> list[str]:
     """Read a split file: one image name per line, blank lines and surrounding spaces ignored.
 

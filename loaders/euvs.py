@@ -59,7 +59,7 @@ from .common import (
     read_name_list,
     require_dir,
     require_scenes,
-    select_scenes,
+    selected_scene_dirs,
 )
 
 MaskPolicy = Literal["require_test", "optional", "none"]
@@ -164,8 +164,7 @@ def load_scenes(
     base = dataset_root(root)
     found = _scene_dirs(base)
     out = []
-    for name in select_scenes(list(found), scenes, base, "euvs"):
-        scene_dir = found[name]
+    for name, scene_dir in selected_scene_dirs(found, scenes, base, "euvs"):
         if level is not None:
             scene_level, source = level, "given"
         else:

@@ -44,7 +44,14 @@ from setdiff_bench.io.paths import resolve_inside
 from setdiff_bench.types import Frame, Scene
 
 from .colmap import DISTORTION_POLICIES, DistortionPolicy
-from .common import dataset_root, fit_camera_to_image, natural_key, read_json, require_scenes, select_scenes
+from .common import (
+    dataset_root,
+    fit_camera_to_image,
+    natural_key,
+    read_json,
+    require_scenes,
+    selected_scene_dirs,
+)
 
 WorldFrame = Literal["colmap", "file"]
 PINHOLE_MODELS = ("PINHOLE", "SIMPLE_PINHOLE")
@@ -307,8 +314,7 @@ def load_scenes(
     base = dataset_root(root)
     found = _scene_dirs(base)
     out = []
-    for name in select_scenes(list(found), scenes, base, "nerfstudio"):
-        scene_dir = found[name]
+    for name, scene_dir in selected_scene_dirs(found, scenes, base, "nerfstudio"):
         entries = read_transforms(
             scene_dir / "transforms.json",
             images_dir=images_dir,

@@ -54,7 +54,7 @@ from .common import (
     natural_key,
     require_dir,
     require_scenes,
-    select_scenes,
+    selected_scene_dirs,
 )
 
 MaskPolarity = Literal["foreground", "keep"]
@@ -141,8 +141,7 @@ def load_scenes(
     base = dataset_root(root)
     found = _scene_dirs(base)
     out = []
-    for name in select_scenes(list(found), scenes, base, "paralane"):
-        scene_dir = found[name]
+    for name, scene_dir in selected_scene_dirs(found, scenes, base, "paralane"):
         frames: list[tuple[tuple, Frame]] = []
         lidar: dict[str, dict[str, np.ndarray]] = {}
         lanes: dict[str, int] = {}

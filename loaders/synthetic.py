@@ -25,7 +25,7 @@ from setdiff_bench.errors import DatasetError
 from setdiff_bench.types import Frame, Scene
 
 from .colmap import DistortionPolicy
-from .common import dataset_root, read_json, require_scenes, select_scenes
+from .common import dataset_root, read_json, require_scenes, selected_scene_dirs
 from .euvs import MaskPolicy, load_layout
 
 FORMAT = "setdiff-synthetic/1"
@@ -79,8 +79,8 @@ def load_scenes(
     base = dataset_root(root)
     found = _scene_dirs(base)
     return [
-        _load_one(found[name], name, masks, distortion)
-        for name in select_scenes(list(found), scenes, base, "synthetic")
+        _load_one(scene_dir, name, masks, distortion)
+        for name, scene_dir in selected_scene_dirs(found, scenes, base, "synthetic")
     ]
 
 
