@@ -58,8 +58,12 @@ def patched_set_attention(wrapper: Callable[[ProcessorCall], ProcessorCall]) -> 
         set_mixer.SetSelfAttnProcessor.__call__ = original
 
 
-def zeroed(original: ProcessorCall) -> ProcessorCall:
-    """A processor whose output is zero (diffusers passes ``num_views`` only to a named parameter)."""
+ProcessorBody = Callable[[Any, Any, torch.Tensor, int | None, dict[str, Any]], torch.Tensor]
+
+
+def processor_call(body: ProcessorBody) -> ProcessorCall:
+    """A processor ``__call__`` with the parameters diffusers looks for (it passes ``num_views`` only to a named
+    parameter) that calls ``body(self, attn, hidden_states, num_views, kwargs)``."""
 
     def call(
         self: Any,
@@ -71,9 +75,20 @@ def zeroed(original: ProcessorCall) -> ProcessorCall:
         num_views: int | None = None,
         **kwargs: Any,
     ) -> torch.Tensor:
-        return 0.0 * original(self, attn, hidden_states, num_views=num_views)
+        return body(self, attn, hidden_states, num_views, kwargs)
 
     return call
+
+
+def zeroed(original: ProcessorCall) -> ProcessorCall:
+    """A processor whose output is zero."""
+
+    def body(
+        self: Any, attn: Any, hidden_states: torch.Tensor, num_views: int | None, kwargs: dict[str, Any]
+    ) -> torch.Tensor:
+        return 0.0 * original(self, attn, hidden_states, num_views=num_views)
+
+    return processor_call(body)
 
 
 def token_points(points: torch.Tensor, tokens: int) -> tuple[torch.Tensor, torch.Tensor, float]:
@@ -101,15 +116,8 @@ def attention_stats(
     """A processor that appends, per layer, the statistics listed in the module docstring."""
 
     def wrap(original: ProcessorCall) -> ProcessorCall:
-        def call(
-            self: Any,
-            attn: Any,
-            hidden_states: torch.Tensor,
-            encoder_hidden_states: Any = None,
-            attention_mask: Any = None,
-            temb: Any = None,
-            num_views: int | None = None,
-            **kwargs: Any,
+        def body(
+            self: Any, attn: Any, hidden_states: torch.Tensor, num_views: int | None, kwargs: dict[str, Any]
         ) -> torch.Tensor:
             assert num_views is not None
             views, tokens = num_views, hidden_states.shape[1]
@@ -155,7 +163,7 @@ def attention_stats(
             record.append(stats)
             return original(self, attn, hidden_states, num_views=num_views, **kwargs)
 
-        return call
+        return processor_call(body)
 
     return wrap
 

@@ -47,11 +47,11 @@ from setdiff_bench.types import Frame, Scene
 
 from .common import (
     dataset_root,
-    discover_scenes,
     fit_camera_to_image,
     natural_key,
     require_dir,
-    select_scenes,
+    require_scenes,
+    selected_scene_dirs,
 )
 
 DistortionPolicy = Literal["keep", "ignore", "error"]
@@ -277,12 +277,7 @@ def is_colmap_scene(folder: Path) -> bool:
 
 
 def _scene_dirs(base: Path) -> dict[str, Path]:
-    found = discover_scenes(base, is_colmap_scene)
-    if not found:
-        raise DatasetError(
-            "no COLMAP scenes found (expected <scene>/sparse/0/{cameras,images}.{bin,txt})", base
-        )
-    return found
+    return require_scenes(base, is_colmap_scene, "COLMAP", "<scene>/sparse/0/{cameras,images}.{bin,txt}")
 
 
 def list_scenes(root: str | os.PathLike[str]) -> list[str]:
@@ -314,8 +309,7 @@ def load_scenes(
     base = dataset_root(root)
     found = _scene_dirs(base)
     out = []
-    for name in select_scenes(list(found), scenes, base, "colmap"):
-        scene_dir = found[name]
+    for name, scene_dir in selected_scene_dirs(found, scenes, base, "colmap"):
         sparse = find_sparse_dir(scene_dir)
         assert sparse is not None
         model = read_colmap_model(sparse, distortion=distortion)

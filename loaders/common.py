@@ -6,10 +6,12 @@ parses only the header, so checking thousands of frames costs milliseconds, not 
 
 from __future__ import annotations
 
+import json
 import os
 import re
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
+from typing import Any
 
 import OpenImageIO as oiio
 
@@ -99,6 +101,17 @@ def discover_scenes(root: Path, is_scene: Callable[[Path], bool], *, max_depth: 
     }
 
 
+def require_scenes(
+    root: Path, is_scene: Callable[[Path], bool], dataset: str, expected: str, *, max_depth: int = 3
+) -> dict[str, Path]:
+    """:func:`discover_scenes`, raising :class:`DatasetError` ``no <dataset> scenes found (expected <expected>)``
+    when there are none."""
+    found = discover_scenes(root, is_scene, max_depth=max_depth)
+    if not found:
+        raise DatasetError(f"no {dataset} scenes found (expected {expected})", root)
+    return found
+
+
 def scene_key(root: Path, scene_dir: Path) -> str:
     """Scene name: the path of ``scene_dir`` relative to ``root`` (POSIX), or the folder name if equal."""
     if scene_dir == root:
@@ -136,6 +149,24 @@ def select_scenes(
         if match not in chosen:
             chosen.append(match)
     return chosen
+
+
+def read_json(path: Path, what: str = "file") -> Any:
+    """The parsed JSON document at ``path``; :class:`DatasetError` naming the line and column of a syntax error,
+    or ``cannot read <what>`` for an unreadable file."""
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise DatasetError(f"invalid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}", path) from exc
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DatasetError(f"cannot read {what} ({exc.__class__.__name__})", path) from exc
+
+
+def selected_scene_dirs(
+    found: dict[str, Path], requested: Iterable[str] | None, root: Path, dataset: str
+) -> list[tuple[str, Path]]:
+    """``(name, folder)`` of the scenes :func:`select_scenes` picks from ``found`` (name → folder)."""
+    return [(name, found[name]) for name in select_scenes(list(found), requested, root, dataset)]
 
 
 def read_name_list(path: Path, *, allow_empty: bool = False) -> list[str]:

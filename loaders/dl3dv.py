@@ -41,7 +41,13 @@ from setdiff_bench.io.paths import resolve_inside
 from setdiff_bench.types import Frame, Scene
 
 from .colmap import DistortionPolicy, find_sparse_dir, read_colmap_model
-from .common import dataset_root, find_scene_dirs, fit_camera_to_image, natural_key, select_scenes
+from .common import (
+    dataset_root,
+    find_scene_dirs,
+    fit_camera_to_image,
+    natural_key,
+    selected_scene_dirs,
+)
 from .nerfstudio import read_transforms
 
 PoseSource = Literal["auto", "colmap", "transforms"]
@@ -111,8 +117,7 @@ def load_scenes(
     base = dataset_root(root)
     found = _scene_dirs(base, images_dir)
     out = []
-    for name in select_scenes(list(found), scenes, base, "dl3dv"):
-        scene_dir = found[name]
+    for name, scene_dir in selected_scene_dirs(found, scenes, base, "dl3dv"):
         data_dir = _data_dir(scene_dir, images_dir)
         assert data_dir is not None
         sparse = _sparse(data_dir)

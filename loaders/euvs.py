@@ -53,13 +53,13 @@ from .colmap import DistortionPolicy, read_colmap_model
 from .common import (
     check_image_matches_camera,
     dataset_root,
-    discover_scenes,
     image_size,
     mask_name_for,
     natural_key,
     read_name_list,
     require_dir,
-    select_scenes,
+    require_scenes,
+    selected_scene_dirs,
 )
 
 MaskPolicy = Literal["require_test", "optional", "none"]
@@ -132,10 +132,7 @@ def read_gt_poses(path: Path) -> dict[str, np.ndarray]:
 
 
 def _scene_dirs(base: Path) -> dict[str, Path]:
-    found = discover_scenes(base, is_euvs_scene)
-    if not found:
-        raise DatasetError("no EUVS scenes found (expected <scene>/test_set.txt and <scene>/sparse/0)", base)
-    return found
+    return require_scenes(base, is_euvs_scene, "EUVS", "<scene>/test_set.txt and <scene>/sparse/0")
 
 
 def list_scenes(root: str | os.PathLike[str]) -> list[str]:
@@ -167,8 +164,7 @@ def load_scenes(
     base = dataset_root(root)
     found = _scene_dirs(base)
     out = []
-    for name in select_scenes(list(found), scenes, base, "euvs"):
-        scene_dir = found[name]
+    for name, scene_dir in selected_scene_dirs(found, scenes, base, "euvs"):
         if level is not None:
             scene_level, source = level, "given"
         else:

@@ -28,7 +28,6 @@ without pulling in nerfstudio itself.
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import warnings
@@ -45,7 +44,14 @@ from setdiff_bench.io.paths import resolve_inside
 from setdiff_bench.types import Frame, Scene
 
 from .colmap import DISTORTION_POLICIES, DistortionPolicy
-from .common import dataset_root, discover_scenes, fit_camera_to_image, natural_key, select_scenes
+from .common import (
+    dataset_root,
+    fit_camera_to_image,
+    natural_key,
+    read_json,
+    require_scenes,
+    selected_scene_dirs,
+)
 
 WorldFrame = Literal["colmap", "file"]
 PINHOLE_MODELS = ("PINHOLE", "SIMPLE_PINHOLE")
@@ -114,14 +120,7 @@ def read_transforms(
     transforms = Path(path)
     if not transforms.is_file():
         raise DatasetError("missing transforms.json", transforms)
-    try:
-        meta = json.loads(transforms.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise DatasetError(
-            f"invalid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}", transforms
-        ) from exc
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DatasetError(f"cannot read file ({exc.__class__.__name__})", transforms) from exc
+    meta = read_json(transforms)
     if not isinstance(meta, dict) or not isinstance(meta.get("frames"), list):
         raise DatasetError("expected a JSON object with a 'frames' list", transforms)
     if not meta["frames"]:
@@ -290,10 +289,7 @@ def is_nerfstudio_scene(folder: Path) -> bool:
 
 
 def _scene_dirs(base: Path) -> dict[str, Path]:
-    found = discover_scenes(base, is_nerfstudio_scene)
-    if not found:
-        raise DatasetError("no nerfstudio scenes found (expected <scene>/transforms.json)", base)
-    return found
+    return require_scenes(base, is_nerfstudio_scene, "nerfstudio", "<scene>/transforms.json")
 
 
 def list_scenes(root: str | os.PathLike[str]) -> list[str]:
@@ -318,8 +314,7 @@ def load_scenes(
     base = dataset_root(root)
     found = _scene_dirs(base)
     out = []
-    for name in select_scenes(list(found), scenes, base, "nerfstudio"):
-        scene_dir = found[name]
+    for name, scene_dir in selected_scene_dirs(found, scenes, base, "nerfstudio"):
         entries = read_transforms(
             scene_dir / "transforms.json",
             images_dir=images_dir,

@@ -28,7 +28,6 @@ dependency here).  ``v1.0-trainval``'s ``sample_data.json`` is large: loading it
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -40,7 +39,7 @@ from setdiff_bench.errors import DatasetError, ImageError
 from setdiff_bench.io.paths import resolve_inside
 from setdiff_bench.types import Frame, Scene
 
-from .common import dataset_root, image_size, natural_key, select_scenes
+from .common import dataset_root, image_size, natural_key, read_json, select_scenes
 
 VERSIONS = ("v1.0-mini", "v1.0-trainval", "v1.0-test")
 REQUIRED_TABLES = ("scene", "sample", "sample_data", "calibrated_sensor", "sensor", "ego_pose")
@@ -89,12 +88,7 @@ def load_table(tables: Path, name: str) -> list[dict[str, Any]]:
     path = tables / f"{name}.json"
     if not path.is_file():
         raise DatasetError(f"missing nuScenes table {name}.json", path)
-    try:
-        records = json.loads(path.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise DatasetError(f"invalid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}", path) from exc
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DatasetError(f"cannot read table ({exc.__class__.__name__})", path) from exc
+    records = read_json(path, "table")
     if not isinstance(records, list) or not all(
         isinstance(r, dict) and isinstance(r.get("token"), str) for r in records
     ):

@@ -50,11 +50,11 @@ from .colmap import DistortionPolicy, read_colmap_model
 from .common import (
     check_image_matches_camera,
     dataset_root,
-    discover_scenes,
     image_size,
     natural_key,
     require_dir,
-    select_scenes,
+    require_scenes,
+    selected_scene_dirs,
 )
 
 MaskPolarity = Literal["foreground", "keep"]
@@ -76,10 +76,9 @@ def _clip_dirs(scene_dir: Path) -> list[Path]:
 
 
 def _scene_dirs(base: Path) -> dict[str, Path]:
-    found = discover_scenes(base, lambda folder: bool(_clip_dirs(folder)), max_depth=2)
-    if not found:
-        raise DatasetError("no Para-Lane scenes found (expected scene_<i>/clip_<k>/sparse/0)", base)
-    return found
+    return require_scenes(
+        base, lambda folder: bool(_clip_dirs(folder)), "Para-Lane", "scene_<i>/clip_<k>/sparse/0", max_depth=2
+    )
 
 
 def list_scenes(root: str | os.PathLike[str]) -> list[str]:
@@ -142,8 +141,7 @@ def load_scenes(
     base = dataset_root(root)
     found = _scene_dirs(base)
     out = []
-    for name in select_scenes(list(found), scenes, base, "paralane"):
-        scene_dir = found[name]
+    for name, scene_dir in selected_scene_dirs(found, scenes, base, "paralane"):
         frames: list[tuple[tuple, Frame]] = []
         lidar: dict[str, dict[str, np.ndarray]] = {}
         lanes: dict[str, int] = {}

@@ -15,7 +15,6 @@ Frame order: traversal order of ``scene.json``, then camera order of ``scene.jso
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Iterable, Mapping
 from dataclasses import replace
@@ -26,7 +25,7 @@ from setdiff_bench.errors import DatasetError
 from setdiff_bench.types import Frame, Scene
 
 from .colmap import DistortionPolicy
-from .common import dataset_root, discover_scenes, select_scenes
+from .common import dataset_root, read_json, require_scenes, selected_scene_dirs
 from .euvs import MaskPolicy, load_layout
 
 FORMAT = "setdiff-synthetic/1"
@@ -39,12 +38,9 @@ def is_synthetic_scene(folder: Path) -> bool:
 
 
 def _scene_dirs(base: Path) -> dict[str, Path]:
-    found = discover_scenes(base, is_synthetic_scene)
-    if not found:
-        raise DatasetError(
-            "no synthetic scenes found (expected <scene>/scene.json and <scene>/test_set.txt)", base
-        )
-    return found
+    return require_scenes(
+        base, is_synthetic_scene, "synthetic", "<scene>/scene.json and <scene>/test_set.txt"
+    )
 
 
 def list_scenes(root: str | os.PathLike[str]) -> list[str]:
@@ -54,12 +50,7 @@ def list_scenes(root: str | os.PathLike[str]) -> list[str]:
 
 def read_scene_json(path: Path) -> dict[str, Any]:
     """Parse and check the top level of ``scene.json``."""
-    try:
-        meta = json.loads(path.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as exc:
-        raise DatasetError(f"invalid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}", path) from exc
-    except (OSError, UnicodeDecodeError) as exc:
-        raise DatasetError(f"cannot read file ({exc.__class__.__name__})", path) from exc
+    meta = read_json(path)
     if not isinstance(meta, dict):
         raise DatasetError("expected a JSON object", path)
     if meta.get("format") != FORMAT:
@@ -88,8 +79,8 @@ def load_scenes(
     base = dataset_root(root)
     found = _scene_dirs(base)
     return [
-        _load_one(found[name], name, masks, distortion)
-        for name in select_scenes(list(found), scenes, base, "synthetic")
+        _load_one(scene_dir, name, masks, distortion)
+        for name, scene_dir in selected_scene_dirs(found, scenes, base, "synthetic")
     ]
 
 

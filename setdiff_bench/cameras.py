@@ -161,13 +161,7 @@ class Camera:
         source: str = "",
     ) -> Camera:
         """From an OpenCV-axes camera-to-world ``(4, 4)`` or ``(3, 4)`` matrix."""
-        c2w = numeric_array(c2w, "camera-to-world", source or "camera")
-        if c2w.shape == (3, 4):
-            c2w = np.vstack([c2w, [0.0, 0.0, 0.0, 1.0]])
-        if c2w.shape != (4, 4):
-            raise CameraError(f"camera-to-world must be 4x4, got shape {c2w.shape}", source or "camera")
-        if not np.isfinite(c2w).all():
-            raise CameraError("camera has NaN or infinite values", source or "camera")
+        c2w = _finite_c2w(c2w, source or "camera")
         check_rotation(c2w[:3, :3], source or "camera")
         with float_errors_raised(source or "camera"):
             w2c = invert_rigid(c2w)
@@ -185,13 +179,8 @@ class Camera:
         source: str = "",
     ) -> Camera:
         """From an OpenGL/Blender/nerfstudio camera-to-world (x right, y up, z back)."""
-        c2w = numeric_array(c2w, "camera-to-world", source or "camera")
-        if c2w.shape == (3, 4):
-            c2w = np.vstack([c2w, [0.0, 0.0, 0.0, 1.0]])
-        if c2w.shape != (4, 4):
-            raise CameraError(f"camera-to-world must be 4x4, got shape {c2w.shape}", source or "camera")
-        if not np.isfinite(c2w).all():  # before the product, which would warn about inf · 0
-            raise CameraError("camera has NaN or infinite values", source or "camera")
+        # checked before the product, which would warn about inf · 0
+        c2w = _finite_c2w(c2w, source or "camera")
         with float_errors_raised(source or "camera"):
             c2w = c2w @ OPENGL_TO_OPENCV
         return cls.from_c2w(c2w, K, width, height, distortion=distortion, source=source)
@@ -345,6 +334,19 @@ def check_rotation(R: np.ndarray, where: str) -> None:
     det = float(np.linalg.det(R))
     if det < 0:
         raise CameraError(f"rotation has determinant {det:.4f} (a reflection, expected +1)", where)
+
+
+def _finite_c2w(c2w: object, source: str) -> np.ndarray:
+    """A camera-to-world ``(4, 4)`` matrix from a ``(4, 4)`` or ``(3, 4)`` one; :class:`CameraError` for another
+    shape or a NaN or infinite value."""
+    c2w = numeric_array(c2w, "camera-to-world", source)
+    if c2w.shape == (3, 4):
+        c2w = np.vstack([c2w, [0.0, 0.0, 0.0, 1.0]])
+    if c2w.shape != (4, 4):
+        raise CameraError(f"camera-to-world must be 4x4, got shape {c2w.shape}", source)
+    if not np.isfinite(c2w).all():
+        raise CameraError("camera has NaN or infinite values", source)
+    return c2w
 
 
 def invert_rigid(T: np.ndarray) -> np.ndarray:

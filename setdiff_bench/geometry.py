@@ -7,13 +7,14 @@ and return float32 torch tensors for image-shaped outputs, numpy for small per-c
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Literal
 
 import numpy as np
 import torch
 
 from setdiff_bench.cameras import Camera
+from setdiff_bench.types import Packet
 
 OVERLAP_ALPHA = 0.8
 OVERLAP_BETA = 0.2
@@ -188,3 +189,22 @@ def _at_size(camera: Camera, height: int | None, width: int | None) -> Camera:
     if (height, width) == (camera.height, camera.width):
         return camera
     return camera.resized(width, height)
+
+
+def renormalize(packet: Packet) -> Packet:
+    """Move a (sub)set into its first target's frame with unit camera extent — the packet invariant
+    (paper supplement "3D Priors") that inference inputs satisfy; C-maps follow the same map."""
+    refs, targets = packet.references, packet.targets
+    moved = normalize_packet(
+        (*refs.cameras, *targets.cameras),
+        torch.cat([refs.cmaps, targets.cmaps]),
+        len(refs),
+        alphas=torch.cat([refs.alphas, targets.alphas]),
+    )
+    n = len(refs)
+    return replace(
+        packet,
+        scale=packet.scale * moved.scale,
+        references=replace(refs, cmaps=moved.cmaps[:n], cameras=moved.cameras[:n]),
+        targets=replace(targets, cmaps=moved.cmaps[n:], cameras=moved.cameras[n:]),
+    )

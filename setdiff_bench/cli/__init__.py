@@ -4,9 +4,9 @@ A verb module defines ``VERB`` (its name), ``HELP`` (one line), ``add_arguments(
 ``run(args) -> int``.  Verb modules import nothing heavy at module level, so ``--help`` is fast.
 
 Options that several verbs share are declared here, once, so that they are spelled, defaulted and
-explained alike: :func:`add_device_argument` (``--device``, default ``auto``) and
-:func:`add_progress_argument` (``--no-progress``).  Older spellings stay accepted, hidden from
-``--help``, for one release.
+explained alike: :func:`add_device_argument` (``--device``, default ``auto``),
+:func:`add_progress_argument` (``--no-progress``) and :func:`add_option_argument` (``-o KEY=VALUE``).
+Older spellings stay accepted, hidden from ``--help``, for one release.
 """
 
 from __future__ import annotations
@@ -27,3 +27,11 @@ def add_progress_argument(parser: argparse.ArgumentParser, *old_names: str) -> N
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
     for name in old_names:
         parser.add_argument(name, dest="no_progress", action="store_true", help=argparse.SUPPRESS)
+
+
+def add_option_argument(
+    parser: argparse.ArgumentParser, help: str, names: tuple[str, ...] = ("-o", "--option")
+) -> None:
+    """A repeatable ``KEY=VALUE`` flag (``-o/--option`` unless ``names`` says otherwise), collected as a list
+    of strings (``args.option``) for :func:`setdiff_bench.cli.list.parse_option`; ``help`` explains it."""
+    parser.add_argument(*names, action="append", default=[], metavar="KEY=VALUE", help=help)

@@ -97,6 +97,18 @@ def _run_args(args: argparse.Namespace) -> list[str]:
     return [*extra, "--no-progress"] if args.no_progress else extra
 
 
+def _run_command(
+    args: argparse.Namespace, checkpoint: str | Path, out: Path, *options: str
+) -> list[str | Path]:
+    """The ``run`` verb's arguments for SetDiff (``checkpoint``) on the test split of ``args.packets``, writing
+    to ``out``; ``options`` are passed as ``-o`` method options."""
+    command: list[str | Path] = ["run", "--method", "setdiff", "--checkpoint", checkpoint]
+    command += ["--packets", args.packets, "--split", "test", "--out", out]
+    for option in options:
+        command += ["-o", option]
+    return [*command, *_run_args(args)]
+
+
 def _geometry(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocation: str) -> dict[str, Path]:
     from setdiff_bench.evaluation.paths import METRICS_FILE
     from setdiff_bench.models.setdiff.config import config_toml_data, write_config_toml
@@ -129,20 +141,7 @@ def _geometry(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocati
         runs = work / "runs" / variant.key
         pipeline.run(
             f"run {variant.key}",
-            [
-                "run",
-                "--method",
-                "setdiff",
-                "--checkpoint",
-                checkpoints,
-                "--packets",
-                args.packets,
-                "--split",
-                "test",
-                "--out",
-                runs,
-                *_run_args(args),
-            ],
+            _run_command(args, checkpoints, runs),
         )
         results[variant.key] = ablation.pooled_means(runs / METRICS_FILE)
     frame = ablation.geometry_frame(results)
@@ -164,24 +163,7 @@ def _setsize(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocatio
         runs = work / "runs" / f"{refs}+{targets}"
         pipeline.run(
             f"run {refs}+{targets}",
-            [
-                "run",
-                "--method",
-                "setdiff",
-                "--checkpoint",
-                args.checkpoint,
-                "--packets",
-                args.packets,
-                "--split",
-                "test",
-                "--out",
-                runs,
-                "-o",
-                f"max_references={refs}",
-                "-o",
-                f"targets_per_set={targets}",
-                *_run_args(args),
-            ],
+            _run_command(args, args.checkpoint, runs, f"max_references={refs}", f"targets_per_set={targets}"),
         )
         results[(refs, targets)] = ablation.pooled_means(runs / METRICS_FILE)
     frame = ablation.setsize_frame(results)

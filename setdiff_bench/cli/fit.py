@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from setdiff_bench.cli import add_device_argument, add_progress_argument
+from setdiff_bench.cli import add_device_argument, add_option_argument, add_progress_argument
 
 VERB = "fit"
 HELP = "fit 3D Gaussian Splatting to a scene's training frames and write the standard PLY"
@@ -32,14 +32,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="read the scene through this dataset's loader (with --root and -o options)",
     )
     parser.add_argument("--root", type=Path, default=None, help="dataset folder for --dataset")
-    parser.add_argument(
-        "-o",
-        "--option",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="loader option, e.g. -o missing=skip, -o images_dir=images_4",
-    )
+    add_option_argument(parser, "loader option, e.g. -o missing=skip, -o images_dir=images_4")
     parser.add_argument(
         "--init",
         default="auto",

@@ -21,6 +21,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from setdiff_bench.cli import add_option_argument
 from setdiff_bench.errors import UsageError
 
 VERB = "list"
@@ -125,13 +126,8 @@ def _scenes_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="NAME",
         help="only this scene (repeatable); default all",
     )
-    parser.add_argument(
-        "-o",
-        "--option",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="loader option, value parsed as JSON when valid (e.g. -o level=1, -o version=v1.0-mini)",
+    add_option_argument(
+        parser, "loader option, value parsed as JSON when valid (e.g. -o level=1, -o version=v1.0-mini)"
     )
     parser.add_argument("--names-only", action="store_true", help="print scene names without loading them")
     parser.add_argument("--json", action="store_true", help="one JSON object per scene instead of a table")

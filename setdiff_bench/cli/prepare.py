@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from setdiff_bench.cli import add_device_argument, add_progress_argument
+from setdiff_bench.cli import add_device_argument, add_option_argument, add_progress_argument
 
 VERB = "prepare"
 HELP = "turn a dataset and 3DGS fits into render/ground-truth packets for a protocol"
@@ -67,13 +67,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="renderer (auto: gsplat on CUDA when installed, else torch)",
     )
     add_device_argument(parser, "the torch backend's device")
-    parser.add_argument(
-        "--loader-option",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a loader option of the protocol (value parsed as JSON when it parses, "
+    add_option_argument(
+        parser,
+        "override a loader option of the protocol (value parsed as JSON when it parses, "
         'e.g. level=1, version="v1.0-mini")',
+        names=("--loader-option",),
     )
     parser.add_argument(
         "--cmap-precision",

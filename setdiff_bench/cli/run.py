@@ -19,7 +19,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from setdiff_bench.cli import add_device_argument, add_progress_argument
+from setdiff_bench.cli import add_device_argument, add_option_argument, add_progress_argument
 
 VERB = "run"
 HELP = "enhance every packet of a store with one method and score it (PSNR, SSIM, LPIPS; warp error)"
@@ -48,14 +48,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--from", dest="source", default=None, help="folder of images for --method precomputed"
     )
-    parser.add_argument(
-        "-o",
-        "--option",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="method option, value parsed as JSON when valid (e.g. -o tolerance=0.05)",
-    )
+    add_option_argument(parser, "method option, value parsed as JSON when valid (e.g. -o tolerance=0.05)")
     parser.add_argument(
         "--metrics",
         default="standard",

@@ -28,6 +28,7 @@ import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -40,6 +41,7 @@ from setdiff_bench.gaussians.optim import GaussianParameters, exponential_lr
 from setdiff_bench.gaussians.render import render
 from setdiff_bench.io.atomic import atomic_path, sha256_file, write_text_atomic
 from setdiff_bench.runtime.devices import resolve_device
+from setdiff_bench.types import Scene
 
 CHECKPOINT_FORMAT = "setdiff-fit-checkpoint/1"
 STATE_TENSORS = "fit_state.safetensors"
@@ -534,19 +536,16 @@ def fit_scene(
     loss)`` is called after every optimiser step (progress reports from worker processes).
     """
     from setdiff_bench.gaussians.fit_data import load_fit_scene, load_fit_views, select_fit_frames
-    from setdiff_bench.gaussians.ply import write_ply
 
     scene = load_fit_scene(scene_dir, dataset=dataset, scene=scene_name, options=loader_options)
     names = select_fit_frames(scene, frames)
     views = load_fit_views(scene, names, downscale=downscale)
-    from setdiff_bench.gaussians.triangulate import initial_points
-
-    points, colors = initial_points(scene, views, init)
-    result = fit_gaussians(
+    return fit_views_to_ply(
+        scene,
         views,
         config,
-        points=points,
-        colors=colors,
+        out_ply,
+        init=init,
         device=device,
         checkpoint_dir=checkpoint_dir,
         checkpoint_every=checkpoint_every,
@@ -554,5 +553,24 @@ def fit_scene(
         progress=progress,
         on_iteration=on_iteration,
     )
+
+
+def fit_views_to_ply(
+    scene: Scene,
+    views: Sequence[FitView],
+    config: FitConfig,
+    out_ply: str | os.PathLike[str],
+    *,
+    init: str = "auto",
+    **fit_options: Any,
+) -> FitResult:
+    """Fit ``views`` of ``scene`` from its initial points (``init``:
+    :func:`setdiff_bench.gaussians.triangulate.initial_points`; sparse points, else triangulated from the poses)
+    and write the standard 3DGS PLY to ``out_ply``; ``fit_options`` go to :func:`fit_gaussians`."""
+    from setdiff_bench.gaussians.ply import write_ply
+    from setdiff_bench.gaussians.triangulate import initial_points
+
+    points, colors = initial_points(scene, views, init)
+    result = fit_gaussians(views, config, points=points, colors=colors, **fit_options)
     write_ply(out_ply, result.model)
     return result

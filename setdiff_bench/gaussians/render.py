@@ -17,7 +17,7 @@ import torch
 from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import UsageError
 from setdiff_bench.gaussians.backends import gsplat_backend, torch_ref
-from setdiff_bench.gaussians.backends.common import RenderOutput, clip_centres
+from setdiff_bench.gaussians.backends.common import RenderOptions, RenderOutput, clip_centres
 from setdiff_bench.gaussians.model import GaussianModel
 
 Backend = Literal["torch", "gsplat"]
@@ -62,35 +62,22 @@ def render(
     sizes = {(c.height, c.width) for c in cams}
     if len(sizes) != 1:
         raise UsageError(f"all cameras of one render call must share a size, got {sorted(sizes)}")
+    options = RenderOptions(
+        with_geometry=with_geometry,
+        sh_degree=sh_degree,
+        background=background,
+        cmap_bound=cmap_bound,
+        cmap_center=cmap_center,
+        near=near,
+        far=far,
+        eps2d=eps2d,
+        tile_size=tile_size,
+    )
     if backend == "gsplat":
-        return gsplat_backend.render(
-            gaussians,
-            cams,
-            with_geometry=with_geometry,
-            sh_degree=sh_degree,
-            background=background,
-            cmap_bound=cmap_bound,
-            cmap_center=cmap_center,
-            near=near,
-            far=far,
-            eps2d=eps2d,
-            tile_size=tile_size,
-        )
+        return gsplat_backend.render(gaussians, cams, options)
     if backend != "torch":
         raise UsageError(f"unknown render backend {backend!r}; use 'torch' or 'gsplat'")
-    return _render_torch(
-        gaussians,
-        cams,
-        with_geometry,
-        sh_degree,
-        background,
-        cmap_bound,
-        cmap_center,
-        near,
-        far,
-        eps2d,
-        tile_size,
-    )
+    return _render_torch(gaussians, cams, options)
 
 
 def camera_tensors(
@@ -103,23 +90,14 @@ def camera_tensors(
     )
 
 
-def _render_torch(
-    g: GaussianModel,
-    cams: list[Camera],
-    with_geometry: bool,
-    sh_degree: int | None,
-    background: Sequence[float] | None,
-    cmap_bound: float | None,
-    cmap_center: Sequence[float],
-    near: float,
-    far: float,
-    eps2d: float,
-    tile_size: int,
-) -> RenderOutput:
+def _render_torch(g: GaussianModel, cams: list[Camera], options: RenderOptions) -> RenderOutput:
     device, dtype = g.means.device, g.means.dtype
     height, width = cams[0].height, cams[0].width
     scales, opacities, quats = g.scales, g.opacities, g.quats
-    cmap_points = clip_centres(g.means, cmap_bound, cmap_center) if with_geometry else None
+    near, far, eps2d = options.near, options.far, options.eps2d
+    cmap_points = (
+        clip_centres(g.means, options.cmap_bound, options.cmap_center) if options.with_geometry else None
+    )
     rgbs, cmaps, depths, alphas, meta = [], [], [], [], []
     for cam in cams:
         w2c, K = camera_tensors(cam, device, dtype)
@@ -127,26 +105,26 @@ def _render_torch(
             g.means, quats, scales, opacities, w2c, K, width, height, near=near, far=far, eps2d=eps2d
         )
         center = -w2c[:3, :3].T @ w2c[:3, 3]
-        colors = g.colors(center, sh_degree)
-        if with_geometry:
+        colors = g.colors(center, options.sh_degree)
+        if options.with_geometry:
             features = torch.cat([colors, cmap_points, proj.depths[:, None]], dim=1)
         else:
             features = colors
-        image, alpha = torch_ref.rasterize(proj, features, width, height, tile_size=tile_size)
+        image, alpha = torch_ref.rasterize(proj, features, width, height, tile_size=options.tile_size)
         rgb = image[:3]
-        if background is not None:
-            bg = torch.as_tensor(list(background), device=device, dtype=dtype).view(3, 1, 1)
+        if options.background is not None:
+            bg = torch.as_tensor(list(options.background), device=device, dtype=dtype).view(3, 1, 1)
             rgb = rgb + (1.0 - alpha) * bg
         rgbs.append(rgb)
         alphas.append(alpha)
-        if with_geometry:
+        if options.with_geometry:
             cmaps.append(image[3:6])
             depths.append(image[6:7])
         meta.append({"means2d": proj.means2d, "radii": proj.radii, "visible": proj.visible})
     return RenderOutput(
         rgb=torch.stack(rgbs),
-        cmap=torch.stack(cmaps) if with_geometry else None,
-        depth=torch.stack(depths) if with_geometry else None,
+        cmap=torch.stack(cmaps) if options.with_geometry else None,
+        depth=torch.stack(depths) if options.with_geometry else None,
         alpha=torch.stack(alphas),
         meta=meta,
     )

@@ -141,12 +141,19 @@ def staging_dir(parent: str | os.PathLike[str], prefix: str, suffix: str = "") -
 
 
 @contextlib.contextmanager
-def staged_folder(destination: str | os.PathLike[str]) -> Iterator[Path]:
+def staged_folder(
+    destination: str | os.PathLike[str], prefix: str | None = None, suffix: str = ".tmp"
+) -> Iterator[Path]:
     """Build a folder that replaces ``destination`` whole: yields a staging folder beside it, which is swapped
-    in when the block ends normally (:func:`replace_folder`) and deleted when it raises."""
+    in when the block ends normally (:func:`replace_folder`) and deleted when it raises.
+
+    The staging folder is named ``<prefix><random><suffix>``; ``prefix`` defaults to ``.<name>.``.
+    """
     destination = Path(destination)
     destination.parent.mkdir(parents=True, exist_ok=True)
-    staging = staging_dir(destination.parent, prefix=f".{destination.name}.", suffix=".tmp")
+    if prefix is None:
+        prefix = f".{destination.name}."
+    staging = staging_dir(destination.parent, prefix=prefix, suffix=suffix)
     try:
         yield staging
         replace_folder(staging, destination)

@@ -49,11 +49,10 @@ import numpy as np
 import torch
 
 from setdiff_bench.errors import DatasetError, ProtocolError, UsageError
-from setdiff_bench.gaussians.fit import FitConfig, fit_gaussians
+from setdiff_bench.gaussians.fit import FitConfig, fit_views_to_ply
 from setdiff_bench.gaussians.fit_data import load_fit_views
-from setdiff_bench.gaussians.ply import read_ply, write_ply
+from setdiff_bench.gaussians.ply import read_ply
 from setdiff_bench.gaussians.render import render
-from setdiff_bench.gaussians.triangulate import initial_points
 from setdiff_bench.geometry import normalize_packet
 from setdiff_bench.io.atomic import sha256_file
 from setdiff_bench.io.images import read_mask, read_rgb, to_numpy_hwc
@@ -163,18 +162,16 @@ class FitSource:
         device = resolve_device(self.fit_device)
         views = load_fit_views(scene, [f.name for f in fit_frames], downscale=self.downscale)
 
-        points, colors = initial_points(scene, views)  # sparse points, else triangulated from the poses
-        result = fit_gaussians(
+        fit_views_to_ply(
+            scene,
             views,
             config,
-            points=points,
-            colors=colors,
+            target,
             device=device,
             checkpoint_dir=target.with_suffix(".ckpt"),
             checkpoint_every=1000,
             progress=self.progress,
         )
-        write_ply(target, result.model)
         shutil.rmtree(target.with_suffix(".ckpt"), ignore_errors=True)
         self.trained += 1
 

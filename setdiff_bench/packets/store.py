@@ -30,7 +30,7 @@ from __future__ import annotations
 import os
 import shutil
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -40,8 +40,8 @@ import torch
 
 from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import PacketError, SetDiffBenchError
-from setdiff_bench.geometry import normalize_packet
-from setdiff_bench.io.atomic import sha256_file, staging_dir
+from setdiff_bench.geometry import renormalize
+from setdiff_bench.io.atomic import sha256_file, staged_folder
 from setdiff_bench.io.images import read_exr, read_mask, read_rgb, to_tensor_chw, write_exr, write_png
 from setdiff_bench.packets.index import (
     FILE_COLUMNS,
@@ -117,23 +117,16 @@ def write_packet(
     """Write one packet folder atomically; returns its index rows.
 
     The folder is built under ``packets/.tmp-<id>-<random>`` (files, then the fragment ``index.parquet``)
-    and renamed to ``packets/<id>`` (replacing an incomplete or outdated one).
+    and swapped in as ``packets/<id>`` (replacing an incomplete or outdated one; :func:`staged_folder`).
     """
     base = root / PACKETS_DIR
     base.mkdir(parents=True, exist_ok=True)
     remove_temporaries(root, header.packet_id)
-    tmp = staging_dir(base, prefix=f"{TEMP_PREFIX}{header.packet_id}-")
-    try:
+    final = packet_dir(root, header.packet_id)
+    with staged_folder(final, prefix=f"{TEMP_PREFIX}{header.packet_id}-", suffix="") as tmp:
         rows = [_write_view(root, tmp, header, "ref", i, v) for i, v in enumerate(references)]
         rows += [_write_view(root, tmp, header, "target", i, v) for i, v in enumerate(targets)]
         write_rows(tmp / INDEX_FILE, rows, atomic=False)
-        final = packet_dir(root, header.packet_id)
-        if final.exists():
-            shutil.rmtree(final)
-        os.rename(tmp, final)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
     return rows
 
 
@@ -462,19 +455,3 @@ class PacketTrainingDataset(torch.utils.data.Dataset):
             "epoch": self.epoch,
         }
         return TrainingSample(packet=packet, target_gt=gt, target_masks=masks)
-
-
-def renormalize(packet: Packet) -> Packet:
-    """The packet moved so its first target is the identity and its camera extent is 1 (C-maps follow)."""
-    refs, tgts = packet.references, packet.targets
-    cameras = (*refs.cameras, *tgts.cameras)
-    cmaps = torch.cat([refs.cmaps, tgts.cmaps])
-    alphas = torch.cat([refs.alphas, tgts.alphas])
-    moved = normalize_packet(cameras, cmaps, len(refs), alphas=alphas)
-    n = len(refs)
-    return replace(
-        packet,
-        scale=packet.scale * moved.scale,
-        references=replace(refs, cmaps=moved.cmaps[:n], cameras=moved.cameras[:n]),
-        targets=replace(tgts, cmaps=moved.cmaps[n:], cameras=moved.cameras[n:]),
-    )

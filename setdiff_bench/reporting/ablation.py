@@ -135,25 +135,23 @@ def ordering_geometry(frame: pd.DataFrame) -> list[str]:
 
 def ordering_setsize(results: Mapping[tuple[int, int], Mapping[str, float]]) -> list[str]:
     """Whether more references / more targets help, as in the paper's Table 6."""
+    comparisons = (  # (larger set, smaller set, what the paper found)
+        ((3, 1), (1, 1), "better"),
+        ((3, 6), (3, 1), "better for PSNR/SSIM, LPIPS within 0.001"),
+    )
     notes = []
     for metric in METRICS:
         label = get_metric(metric).label
         sign = 1.0 if get_metric(metric).higher_is_better else -1.0
-        one, three = results.get((1, 1)), results.get((3, 1))
-        if one and three:
-            gain = sign * (three[metric] - one[metric])
-            notes.append(
-                f"{label}: 3+1 vs 1+1 {'better' if gain > 0 else 'not better'} "
-                f"({three[metric]:.4f} vs {one[metric]:.4f}; paper: better)"
-            )
-        small, large = results.get((3, 1)), results.get((3, 6))
-        if small and large:
-            gain = sign * (large[metric] - small[metric])
-            notes.append(
-                f"{label}: 3+6 vs 3+1 {'better' if gain > 0 else 'not better'} "
-                f"({large[metric]:.4f} vs {small[metric]:.4f}; paper: better for PSNR/SSIM, "
-                f"LPIPS within 0.001)"
-            )
+        for new_size, old_size, paper in comparisons:
+            new, old = results.get(new_size), results.get(old_size)
+            if new and old:
+                gain = sign * (new[metric] - old[metric])
+                notes.append(
+                    f"{label}: {new_size[0]}+{new_size[1]} vs {old_size[0]}+{old_size[1]} "
+                    f"{'better' if gain > 0 else 'not better'} "
+                    f"({new[metric]:.4f} vs {old[metric]:.4f}; paper: {paper})"
+                )
     return notes
 
 

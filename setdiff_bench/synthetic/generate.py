@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,7 +20,7 @@ import torch
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.gaussians.model import GaussianModel
-from setdiff_bench.io.atomic import staging_dir, write_text_atomic
+from setdiff_bench.io.atomic import staged_folder, write_text_atomic
 from setdiff_bench.io.images import write_png
 from setdiff_bench.synthetic.capture import CapturedFrame, capture_drive
 from setdiff_bench.synthetic.colmap_writer import ColmapImage, write_colmap_model
@@ -248,13 +247,6 @@ def generate_scene(
     root.mkdir(parents=True, exist_ok=True)
     build = build_scene(preset, seed, index)
     frames = render_frames(build, progress, device)
-    staging = staging_dir(root, prefix=f".{final.name}.", suffix=".tmp")
-    try:
+    with staged_folder(final) as staging:
         write_scene(build, frames, staging)
-        if final.exists():
-            shutil.rmtree(final)
-        os.replace(staging, final)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
     return final

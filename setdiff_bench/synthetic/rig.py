@@ -71,13 +71,7 @@ def straight_drive(
     )
     y = lane * lane_width + wander
     heading = np.arctan2(np.gradient(y), step_m) if steps > 1 else np.zeros(steps)
-    return Traversal(
-        name,
-        "straight",
-        lane,
-        np.stack([x, y, heading], axis=1),
-        CAMERA_HEIGHT_M + float(rng.uniform(-0.03, 0.03)),
-    )
+    return _traversal(name, "straight", lane, x, y, heading, rng)
 
 
 def lane_change_drive(
@@ -92,10 +86,23 @@ def lane_change_drive(
     y = target * lane_width * f * f * (3 - 2 * f)
     dydx = target * lane_width * 6 * f * (1 - f) / (stop - start)
     heading = np.arctan(dydx)
+    return _traversal(name, "lane_change", None, x, y, heading, rng)
+
+
+def _traversal(
+    name: str,
+    kind: str,
+    lane_offset: int | None,
+    x: np.ndarray,
+    y: np.ndarray,
+    heading: np.ndarray,
+    rng: np.random.Generator,
+) -> Traversal:
+    """A :class:`Traversal` of the ego path ``(x, y, heading)``; draws the camera height's jitter (±3 cm)."""
     return Traversal(
         name,
-        "lane_change",
-        None,
+        kind,
+        lane_offset,
         np.stack([x, y, heading], axis=1),
         CAMERA_HEIGHT_M + float(rng.uniform(-0.03, 0.03)),
     )

@@ -32,6 +32,22 @@ class RenderOutput:
     meta: list[dict[str, torch.Tensor]] = field(default_factory=list)
 
 
+@dataclass(frozen=True)
+class RenderOptions:
+    """The settings of one render call, as every backend takes them (see
+    :func:`setdiff_bench.gaussians.render.render` for their meaning and defaults)."""
+
+    with_geometry: bool
+    sh_degree: int | None
+    background: Sequence[float] | None
+    cmap_bound: float | None
+    cmap_center: Sequence[float]
+    near: float
+    far: float
+    eps2d: float
+    tile_size: int
+
+
 def clip_centres(means: torch.Tensor, bound: float | None, center: Sequence[float]) -> torch.Tensor:
     """Gaussian centres ``(N, 3)`` clipped to ``center ± bound`` (no-op when ``bound`` is None)."""
     if bound is None:

@@ -8,31 +8,16 @@ differ from the torch backend in one documented place: it clamps α at 0.999 ins
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 import numpy as np
 import torch
 
 from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import UsageError
-from setdiff_bench.gaussians.backends.common import RenderOutput, clip_centres
+from setdiff_bench.gaussians.backends.common import RenderOptions, RenderOutput, clip_centres
 from setdiff_bench.gaussians.model import GaussianModel
 
 
-def render(
-    gaussians: GaussianModel,
-    cameras: list[Camera],
-    *,
-    with_geometry: bool,
-    sh_degree: int | None,
-    background: Sequence[float] | None,
-    cmap_bound: float | None,
-    cmap_center: Sequence[float],
-    near: float,
-    far: float,
-    eps2d: float,
-    tile_size: int,
-) -> RenderOutput:
+def render(gaussians: GaussianModel, cameras: list[Camera], options: RenderOptions) -> RenderOutput:
     """Render with gsplat; see :func:`setdiff_bench.gaussians.render.render` for the arguments."""
     try:
         import gsplat
@@ -49,9 +34,9 @@ def render(
     viewmats = torch.tensor(np.stack([c.w2c for c in cameras]), device=device, dtype=dtype)
     Ks = torch.tensor(np.stack([c.K for c in cameras]), device=device, dtype=dtype)
     centers = torch.linalg.inv(viewmats)[:, :3, 3]
-    colors = torch.stack([g.colors(center, sh_degree) for center in centers])  # (C, N, 3)
-    if with_geometry:
-        points = clip_centres(g.means, cmap_bound, cmap_center)
+    colors = torch.stack([g.colors(center, options.sh_degree) for center in centers])  # (C, N, 3)
+    if options.with_geometry:
+        points = clip_centres(g.means, options.cmap_bound, options.cmap_center)
         features = torch.cat([colors, points.expand(len(cameras), -1, -1)], dim=-1)
         mode = "RGB+D"
     else:
@@ -66,9 +51,9 @@ def render(
         Ks,
         width,
         height,
-        near_plane=near,
-        far_plane=far,
-        eps2d=eps2d,
+        near_plane=options.near,
+        far_plane=options.far,
+        eps2d=options.eps2d,
         sh_degree=None,
         packed=False,
         tile_size=16,
@@ -79,10 +64,10 @@ def render(
     renders = renders.permute(0, 3, 1, 2)  # (C, D, H, W)
     alpha = alphas.permute(0, 3, 1, 2)
     rgb = renders[:, :3]
-    if background is not None:
-        rgb = rgb + (1.0 - alpha) * torch.as_tensor(list(background), device=device, dtype=dtype).view(
-            1, 3, 1, 1
-        )
+    if options.background is not None:
+        rgb = rgb + (1.0 - alpha) * torch.as_tensor(
+            list(options.background), device=device, dtype=dtype
+        ).view(1, 3, 1, 1)
     means2d = meta.get("means2d")
     if means2d is not None and means2d.requires_grad:
         means2d.retain_grad()
@@ -96,8 +81,8 @@ def render(
     ]
     return RenderOutput(
         rgb=rgb,
-        cmap=renders[:, 3:6] if with_geometry else None,
-        depth=renders[:, 6:7] if with_geometry else None,
+        cmap=renders[:, 3:6] if options.with_geometry else None,
+        depth=renders[:, 6:7] if options.with_geometry else None,
         alpha=alpha,
         meta=per_camera,
     )

@@ -15,7 +15,7 @@ import numpy as np
 import torch
 
 from setdiff_bench.errors import PacketError
-from setdiff_bench.geometry import max_pairwise_distance, normalize_packet, overlap_score_matrix
+from setdiff_bench.geometry import max_pairwise_distance, overlap_score_matrix, renormalize
 from setdiff_bench.models.setdiff.geometry_encoder import GEOMETRY_INPUTS, geometry_input
 from setdiff_bench.types import Packet, TrainingSample, ViewSet
 
@@ -233,25 +233,6 @@ def training_set(
     points = surface_points(subset)[None] if with_points else None
     batch = SetBatch(images[None], None if geometry is None else geometry[None], n, points)
     return TrainingSet(batch=batch, target_gt=gt, target_masks=masks)
-
-
-def renormalize(packet: Packet) -> Packet:
-    """Move a (sub)set into its first target's frame with unit camera extent — the packet invariant
-    (paper supplement "3D Priors") that inference inputs satisfy; C-maps follow the same map."""
-    refs, targets = packet.references, packet.targets
-    moved = normalize_packet(
-        (*refs.cameras, *targets.cameras),
-        torch.cat([refs.cmaps, targets.cmaps]),
-        len(refs),
-        alphas=torch.cat([refs.alphas, targets.alphas]),
-    )
-    n = len(refs)
-    return replace(
-        packet,
-        scale=packet.scale * moved.scale,
-        references=replace(refs, cmaps=moved.cmaps[:n], cameras=moved.cameras[:n]),
-        targets=replace(targets, cmaps=moved.cmaps[n:], cameras=moved.cameras[n:]),
-    )
 
 
 def _subset(views: ViewSet, indices: Sequence[int]) -> ViewSet:

@@ -230,18 +230,12 @@ class SetDiffModel(nn.Module):
             decode_index: target indices (in ``[0, M)``, same for all sets) to decode; ``None`` = none.
         """
         sets, views, n = batch.num_sets, batch.num_views, batch.num_references
-        images = batch.images.reshape(sets * views, *batch.images.shape[2:])
-        geometry = (
-            None
-            if batch.geometry is None
-            else batch.geometry.reshape(sets * views, *batch.geometry.shape[2:])
-        )
+        images, geometry, points = _merged_views(batch)
         flat_decode = None
         if decode_index is not None:
             offsets = torch.arange(sets, device=decode_index.device)[:, None] * views
             flat_decode = (offsets + n + decode_index[None, :].to(offsets.device)).reshape(-1)
         encoded = self.encode(images, flat_decode)
-        points = None if batch.points is None else batch.points.reshape(sets * views, *batch.points.shape[2:])
         x0 = self.predict_x0(encoded.latents, geometry, views, geometry_keep=geometry_keep, points=points)
         x0 = x0.reshape(sets, views, *x0.shape[1:])
         target_x0 = x0[:, n:]
@@ -266,15 +260,9 @@ class SetDiffModel(nn.Module):
         """
         scale = self.config.guidance_scale if guidance_scale is None else float(guidance_scale)
         sets, views, n = batch.num_sets, batch.num_views, batch.num_references
-        images = batch.images.reshape(sets * views, *batch.images.shape[2:])
-        geometry = (
-            None
-            if batch.geometry is None
-            else batch.geometry.reshape(sets * views, *batch.geometry.shape[2:])
-        )
+        images, geometry, points = _merged_views(batch)
         targets = (torch.arange(sets)[:, None] * views + torch.arange(n, views)[None, :]).reshape(-1)
         encoded = self.encode(images, targets.to(images.device))
-        points = None if batch.points is None else batch.points.reshape(sets * views, *batch.points.shape[2:])
         x0 = self.predict_x0(encoded.latents, geometry, views, guidance_scale=scale, points=points)
         chosen = targets.to(x0.device)
         decoded = self.output_images(x0[chosen], encoded.latents[chosen], images[chosen], encoded.skips)
@@ -283,3 +271,15 @@ class SetDiffModel(nn.Module):
     def trainable_parameters(self) -> list[nn.Parameter]:
         """UNet (fully), Ψ, the decoder per ``vae_decoder`` (LoRA/full), skip convs, a learned text embedding."""
         return [p for p in self.parameters() if p.requires_grad]
+
+
+def _merged_views(batch: SetBatch) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
+    """``(images, geometry, points)`` of ``batch`` with its set and view axes merged: ``(B, V, ...)`` →
+    ``(B·V, ...)`` (``None`` stays ``None``)."""
+
+    flat = batch.num_sets * batch.num_views
+
+    def merged(x: torch.Tensor | None) -> torch.Tensor | None:
+        return None if x is None else x.reshape(flat, *x.shape[2:])
+
+    return batch.images.reshape(flat, *batch.images.shape[2:]), merged(batch.geometry), merged(batch.points)
