@@ -34,14 +34,16 @@ import torch.nn.functional as F
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import machine
+from setdiff_bench.metrics.psnr import psnr
 from setdiff_bench.models.setdiff.checkpoint import load_model
 from setdiff_bench.models.setdiff.inference import enhance_packet
 from setdiff_bench.packets.store import PacketStore
 
 
-def psnr(image: torch.Tensor, truth: torch.Tensor) -> float:
-    """PSNR (dB) over all values of two equally shaped tensors in [0, 1]."""
-    return -10.0 * torch.log10(((image - truth) ** 2).mean().clamp_min(1e-12)).item()
+def pooled_psnr(image: torch.Tensor, truth: torch.Tensor) -> float:
+    """PSNR (dB) over all values of two equally shaped tensors in [0, 1] (one MSE over everything, via
+    :func:`setdiff_bench.metrics.psnr.psnr`)."""
+    return float(psnr(image.reshape(1, 1, 1, -1), truth.reshape(1, 1, 1, -1))[0])
 
 
 def packet_measures(model: Any, store: PacketStore, packet_id: str) -> dict[str, float]:
@@ -53,16 +55,16 @@ def packet_measures(model: Any, store: PacketStore, packet_id: str) -> dict[str,
     alone = enhance_packet(model, packet, max_references=0)
     change, error = enhanced - render, truth - render
     return {
-        "identity_psnr": statistics.fmean(psnr(render[m], truth[m]) for m in range(len(truth))),
-        "enhanced_psnr": statistics.fmean(psnr(enhanced[m], truth[m]) for m in range(len(truth))),
-        "no_reference_psnr": statistics.fmean(psnr(alone[m], truth[m]) for m in range(len(truth))),
-        "change_psnr": statistics.fmean(psnr(enhanced[m], render[m]) for m in range(len(truth))),
+        "identity_psnr": statistics.fmean(pooled_psnr(render[m], truth[m]) for m in range(len(truth))),
+        "enhanced_psnr": statistics.fmean(pooled_psnr(enhanced[m], truth[m]) for m in range(len(truth))),
+        "no_reference_psnr": statistics.fmean(pooled_psnr(alone[m], truth[m]) for m in range(len(truth))),
+        "change_psnr": statistics.fmean(pooled_psnr(enhanced[m], render[m]) for m in range(len(truth))),
         "change_error_correlation": float(
             (change * error).sum() / (change.norm() * error.norm()).clamp_min(1e-12)
         ),
         "best_step": float((change * error).sum() / (change * change).sum().clamp_min(1e-12)),
-        "lowpass_identity_psnr": psnr(F.avg_pool2d(render, 8), F.avg_pool2d(truth, 8)),
-        "lowpass_enhanced_psnr": psnr(F.avg_pool2d(enhanced, 8), F.avg_pool2d(truth, 8)),
+        "lowpass_identity_psnr": pooled_psnr(F.avg_pool2d(render, 8), F.avg_pool2d(truth, 8)),
+        "lowpass_enhanced_psnr": pooled_psnr(F.avg_pool2d(enhanced, 8), F.avg_pool2d(truth, 8)),
     }
 
 

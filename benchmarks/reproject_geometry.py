@@ -39,6 +39,7 @@ from benchmarks.common import machine
 from setdiff_bench.enhancers.reproject import ReprojectEnhancer, cmap_points, snap_to_rays
 from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.gaussians.render import render
+from setdiff_bench.metrics.psnr import psnr
 from setdiff_bench.packets.store import PacketStore, row_camera
 from setdiff_bench.synthetic.generate import build_scene
 from setdiff_bench.synthetic.presets import get_preset
@@ -46,10 +47,11 @@ from setdiff_bench.types import Packet
 
 
 def masked_psnr(image: torch.Tensor, truth: torch.Tensor, mask: torch.Tensor) -> float:
-    """PSNR (dB) of ``(3, H, W)`` images in [0, 1] over the pixels where ``mask`` ``(1, H, W)`` is true."""
-    weight = mask.expand_as(image).float()
-    mse = float(((image - truth) ** 2 * weight).sum() / weight.sum().clamp_min(1.0))
-    return -10.0 * torch.log10(torch.tensor(max(mse, 1e-12))).item()
+    """PSNR (dB) of ``(3, ...)`` images in [0, 1] over the pixels where ``mask`` ``(1, ...)`` is true
+    (:func:`setdiff_bench.metrics.psnr.psnr` on one image; flat ``(3, P)`` pixel lists are accepted)."""
+    shape = (1, image.shape[0], 1, -1)
+    masks = mask.float().reshape(1, 1, 1, -1)
+    return float(psnr(image.reshape(shape), truth.reshape(shape), masks)[0])
 
 
 def world_model(scenes: Path, scene: str, cache: dict[str, GaussianModel]) -> GaussianModel:
@@ -105,7 +107,7 @@ def packet_measures(
     for m in range(len(packet.targets)):
         target_points, target_valid = points[n + m].reshape(3, -1).T, valid[n + m].reshape(-1)
         for r in range(n):
-            colour, found = enhancer._gather(
+            colour, found = enhancer.gather(
                 target_points,
                 (cameras[r],),
                 geometry[r : r + 1],

@@ -207,14 +207,14 @@ class ReprojectEnhancer:
             flat = output[m].reshape(3, -1)  # a view: writes go to output
             for start in range(0, points.shape[0], cfg.pixel_chunk):
                 stop = min(start + cfg.pixel_chunk, points.shape[0])
-                colour, found = self._gather(
+                colour, found = self.gather(
                     points[start:stop], refs.cameras, ref_geometry, ref_images, weights[m]
                 )
                 keep = found & valid[start:stop]
                 flat[:, start:stop] = torch.where(keep[None], colour, flat[:, start:stop])
         return output.clamp(0.0, 1.0).cpu()
 
-    def _gather(
+    def gather(
         self,
         points: torch.Tensor,
         cameras: tuple[Camera, ...],

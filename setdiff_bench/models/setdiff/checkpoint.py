@@ -5,7 +5,7 @@ and ``trainer.json`` (step count).
 Every weight of the model is saved — UNet, VAE (with LoRA and skip convs), Ψ, text embedding — so a
 checkpoint is self-contained: loading needs neither the pretrained SD-Turbo folder nor the random
 seed.  Folders are written under a temporary name and renamed into place, so a killed process never
-leaves a half-written checkpoint.  A training run keeps ``OUT/checkpoints/step-XXXXXXXX/`` folders and
+leaves a half-written checkpoint.  A training run keeps ``OUT/checkpoints/step-<8-digit step>/`` folders (e.g. ``step-00001500``) and
 names the newest one in ``OUT/latest``; any function here taking a checkpoint also accepts ``OUT``.
 """
 
