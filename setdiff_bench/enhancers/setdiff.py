@@ -7,6 +7,7 @@ All references and targets of a packet are enhanced jointly in one set (see
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 from typing import Any
 
@@ -76,7 +77,7 @@ class ModelEnhancer:
 
 def load_enhancer(
     method: str,
-    checkpoint: str | None,
+    checkpoint: str | None = None,
     *,
     device: str | None = None,
     dtype: str | None = None,
@@ -128,23 +129,6 @@ def load_enhancer(
     )
 
 
-def create(
-    checkpoint: str | None = None,
-    device: str | None = None,
-    dtype: str | None = None,
-    guidance_scale: float | None = None,
-    sets_per_call: int | None = None,
-    max_references: int | None = None,
-    targets_per_set: int | None = None,
-) -> ModelEnhancer:
-    """Factory of ``--method setdiff`` (``-o max_references=N -o targets_per_set=M`` set the set sizes)."""
-    return load_enhancer(
-        "setdiff",
-        checkpoint,
-        device=device,
-        dtype=dtype,
-        guidance_scale=guidance_scale,
-        sets_per_call=sets_per_call,
-        max_references=max_references,
-        targets_per_set=targets_per_set,
-    )
+#: Factory of ``--method setdiff``: :func:`load_enhancer` for the method (``-o max_references=N
+#: -o targets_per_set=M`` set the set sizes); the registry reads its options from the signature.
+create = functools.partial(load_enhancer, "setdiff")
