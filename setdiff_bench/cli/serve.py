@@ -6,6 +6,7 @@ See :mod:`setdiff_bench.serve.server` for the RPCs and behaviour under bad input
 from __future__ import annotations
 
 import argparse
+from dataclasses import fields
 
 from setdiff_bench.cli import add_device_argument
 from setdiff_bench.serve.settings import DEFAULT_HOST, ServeSettings
@@ -18,6 +19,14 @@ DESCRIPTION = (
     f"Binds to {DEFAULT_HOST} by default. SIGTERM finishes in-flight requests and exits."
 )
 
+#: The integer settings that must be >= 1: each is an option ``--name`` whose help starts with this text.
+LIMITS: dict[str, str] = {
+    "workers": "RPC threads",
+    "max_queue": "most RPCs in the server at once; more get RESOURCE_EXHAUSTED",
+    "max_sessions": "",
+    "max_cameras": "most frames per tick",
+}
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     defaults = ServeSettings()
@@ -27,24 +36,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--port", type=int, default=defaults.port, help="TCP port; 0 = a free one (default %(default)s)"
     )
-    parser.add_argument(
-        "--workers", type=int, default=defaults.workers, help="RPC threads (default %(default)s)"
-    )
-    parser.add_argument(
-        "--max-queue",
-        type=int,
-        default=defaults.max_queue,
-        help="most RPCs in the server at once; more get RESOURCE_EXHAUSTED (default %(default)s)",
-    )
-    parser.add_argument(
-        "--max-sessions", type=int, default=defaults.max_sessions, help="(default %(default)s)"
-    )
-    parser.add_argument(
-        "--max-cameras",
-        type=int,
-        default=defaults.max_cameras,
-        help="most frames per tick (default %(default)s)",
-    )
+    for name, what in LIMITS.items():
+        parser.add_argument(
+            f"--{name.replace('_', '-')}",
+            type=int,
+            default=getattr(defaults, name),
+            help=f"{what} (default %(default)s)".lstrip(),
+        )
     parser.add_argument(
         "--grace",
         type=float,
@@ -68,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     from setdiff_bench.runtime.devices import resolve_device
     from setdiff_bench.serve.server import pid_line, serve_until_signalled, start_server
 
-    for name in ("workers", "max_queue", "max_sessions", "max_cameras"):
+    for name in LIMITS:
         if getattr(args, name) < 1:
             raise UsageError(f"must be >= 1, got {getattr(args, name)}", f"--{name.replace('_', '-')}")
     if not 0 <= args.port <= 65535:
@@ -76,16 +74,7 @@ def run(args: argparse.Namespace) -> int:
     enhancer = load_enhancer(
         args.method, args.checkpoint, device=resolve_device(args.device), dtype=args.dtype
     )
-    settings = ServeSettings(
-        host=args.host,
-        port=args.port,
-        workers=args.workers,
-        max_queue=args.max_queue,
-        max_sessions=args.max_sessions,
-        max_cameras=args.max_cameras,
-        grace=args.grace,
-        cache_reference_latents=args.cache_reference_latents,
-    )
+    settings = ServeSettings(**{field.name: getattr(args, field.name) for field in fields(ServeSettings)})
     running = start_server(enhancer, settings)
     print(pid_line(running, args.host), flush=True)
     serve_until_signalled(running, args.grace)
