@@ -1,4 +1,4 @@
-"""Helpers shared by the dataset loaders: scene discovery and selection, name lists, image headers.
+"""Helpers shared by the dataset loaders: scene discovery and selection, frame order, name lists, image headers.
 
 Image sizes are read from file headers through OpenImageIO (``ImageInput.open(...).spec()``), which
 parses only the header, so checking thousands of frames costs milliseconds, not full decodes.
@@ -18,6 +18,7 @@ import OpenImageIO as oiio
 from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import DatasetError, ImageError
 from setdiff_bench.io.native_stderr import native_stderr_filtered
+from setdiff_bench.types import Frame
 
 PathLike = str | os.PathLike[str]
 
@@ -42,6 +43,11 @@ def natural_key(text: str) -> tuple[tuple[int, int | str], ...]:
             parts.append((1, chunk))
     parts.append((2, text))
     return tuple(parts)
+
+
+def frames_by_key(keyed: Iterable[tuple[Any, Frame]]) -> tuple[Frame, ...]:
+    """The frames of ``(sort key, frame)`` pairs in key order (a stable sort: equal keys keep their order)."""
+    return tuple(frame for _, frame in sorted(keyed, key=lambda item: item[0]))
 
 
 def require_dir(path: Path, what: str) -> Path:

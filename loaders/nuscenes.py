@@ -39,7 +39,7 @@ from setdiff_bench.errors import DatasetError, ImageError
 from setdiff_bench.io.paths import resolve_inside
 from setdiff_bench.types import Frame, Scene
 
-from .common import dataset_root, image_size, natural_key, read_json, select_scenes
+from .common import dataset_root, frames_by_key, image_size, natural_key, read_json, select_scenes
 
 VERSIONS = ("v1.0-mini", "v1.0-trainval", "v1.0-test")
 REQUIRED_TABLES = ("scene", "sample", "sample_data", "calibrated_sensor", "sensor", "ego_pose")
@@ -245,14 +245,13 @@ def load_scenes(
                 frame = _frame(record, channel, t, dataroot, check_images)
                 order = CAMERA_CHANNELS.index(channel) if channel in CAMERA_CHANNELS else len(CAMERA_CHANNELS)
                 frames.append(((frame.timestamp_us, order, channel, token), frame))
-        frames.sort(key=lambda item: item[0])
         log = logs.rows.get(scene.get("log_token")) if logs else None
         out.append(
             Scene(
                 dataset="nuscenes",
                 name=name,
                 root=dataroot,
-                frames=tuple(f for _, f in frames),
+                frames=frames_by_key(frames),
                 metadata={
                     "version": tables.name,
                     "scene_token": scene["token"],

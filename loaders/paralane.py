@@ -50,6 +50,7 @@ from .colmap import DistortionPolicy, read_colmap_model
 from .common import (
     check_image_matches_camera,
     dataset_root,
+    frames_by_key,
     image_size,
     natural_key,
     require_dir,
@@ -150,13 +151,12 @@ def load_scenes(
             lanes[clip_dir.name] = lane
             clip_frames, lidar[clip_dir.name] = _load_clip(clip_dir, lane, mask_polarity, distortion)
             frames.extend(clip_frames)
-        frames.sort(key=lambda item: item[0])
         out.append(
             Scene(
                 dataset="paralane",
                 name=name,
                 root=scene_dir,
-                frames=tuple(f for _, f in frames),
+                frames=frames_by_key(frames),
                 metadata={
                     "lanes": lanes,
                     "lidar_poses": lidar,

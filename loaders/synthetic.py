@@ -25,7 +25,7 @@ from setdiff_bench.errors import DatasetError
 from setdiff_bench.types import Frame, Scene
 
 from .colmap import DistortionPolicy
-from .common import dataset_root, read_json, require_scenes, selected_scene_dirs
+from .common import dataset_root, frames_by_key, read_json, require_scenes, selected_scene_dirs
 from .euvs import MaskPolicy, load_layout
 
 FORMAT = "setdiff-synthetic/1"
@@ -112,7 +112,6 @@ def _load_one(scene_dir: Path, name: str, masks: MaskPolicy, distortion: Distort
         if entry is None:
             raise DatasetError(f"no entry for frame {frame.name!r}", json_path)
         keyed.append(_annotate(frame, entry, traversals, cameras, json_path))
-    keyed.sort(key=lambda item: item[0])
     scene_meta = {
         key: meta.get(key)
         for key in (
@@ -129,7 +128,7 @@ def _load_one(scene_dir: Path, name: str, masks: MaskPolicy, distortion: Distort
     }
     return replace(
         layout,
-        frames=tuple(frame for _, frame in keyed),
+        frames=frames_by_key(keyed),
         metadata={**layout.metadata, **scene_meta, "scene_json": str(json_path)},
     )
 
