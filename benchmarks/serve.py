@@ -37,7 +37,7 @@ from benchmarks.common import machine, write_result
 from setdiff_bench.enhancers.setdiff import load_enhancer
 from setdiff_bench.evaluation.stream import StreamSession
 from setdiff_bench.serve.client import EnhancerClient
-from tests.stream.stream_fixtures import recorded_references, save_tiny_checkpoint, tick_frames
+from tests.stream.stream_fixtures import recorded_references, save_tiny_checkpoint, serve_argv, tick_frames
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -80,14 +80,7 @@ def start_served(checkpoint: Path, *extra: str, device: str = "cpu") -> tuple[su
             "-c",
             "import torch, sys; torch.set_num_threads(1); "
             "from setdiff_bench.cli.main import main; sys.exit(main(sys.argv[1:]))",
-            "serve",
-            "--checkpoint",
-            str(checkpoint),
-            "--port",
-            "0",
-            "--device",
-            device,
-            *extra,
+            *serve_argv(checkpoint, *extra, device=device),
         ],
         stdout=subprocess.PIPE,
         text=True,

@@ -12,7 +12,14 @@ import pandas as pd
 import pytest
 
 from setdiff_bench.cli.main import main
-from setdiff_bench.evaluation.paths import ENHANCER_FILE, FRAGMENTS_DIR, MANIFEST_FILE, METRICS_FILE, RUN_FILE
+from setdiff_bench.evaluation.paths import (
+    ENHANCER_FILE,
+    FRAGMENTS_DIR,
+    KEY_COLUMNS,
+    MANIFEST_FILE,
+    METRICS_FILE,
+    RUN_FILE,
+)
 from setdiff_bench.io.images import read_image_raw
 from setdiff_bench.pipeline.demo import METHODS, SUMMARY_FILE
 from setdiff_bench.pipeline.stages import LEDGER_FILE
@@ -158,18 +165,7 @@ def test_demo_per_target_metrics_and_images(demo_out: Path) -> None:
     counts = set()
     for method in METHODS:
         frame = pd.read_parquet(runs / method / METRICS_FILE)
-        assert {
-            "dataset",
-            "protocol",
-            "group",
-            "split",
-            "scene",
-            "frame",
-            "method",
-            "psnr",
-            "ssim",
-            "lpips",
-        } <= set(frame.columns)
+        assert {*KEY_COLUMNS, "psnr", "ssim", "lpips"} <= set(frame.columns)
         assert (frame["split"] == "test").all() and (frame["method"] == method).all()
         assert frame[["psnr", "ssim", "lpips"]].notna().all().all()
         counts.add(len(frame))

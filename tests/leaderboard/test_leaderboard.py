@@ -28,6 +28,7 @@ from setdiff_bench.reporting.leaderboard import (
     to_frame,
     write_leaderboard,
 )
+from tests.run.store_fixtures import leaderboard_argv
 
 
 def images(
@@ -322,26 +323,8 @@ def test_leaderboard_cli(
     lb_store: Path, lb_runs: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "lb"
-    assert (
-        main(
-            [
-                "leaderboard",
-                "--dataset",
-                "synthetic",
-                "--runs",
-                str(lb_runs),
-                "--out",
-                str(out),
-                "--plots",
-                "--grids",
-                "2",
-                "--packets",
-                str(lb_store),
-                "--with-reported",
-            ]
-        )
-        == 0
-    )
+    options = ("--plots", "--grids", "2", "--packets", str(lb_store), "--with-reported")
+    assert main(leaderboard_argv("synthetic", lb_runs, out, *options)) == 0
     captured = capsys.readouterr()
     assert "the paper reports no numbers for dataset 'synthetic'" in captured.err
     names = sorted(p.name for p in out.iterdir())

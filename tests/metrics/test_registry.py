@@ -29,17 +29,12 @@ def test_directions() -> None:
     }
 
 
-# The tables' label, decimals and arrow of every metric, written out by hand (the leaderboards' format).
+# The tables' label, decimals and arrow of every metric, written out by hand (the leaderboards' format):
+# every variant of a metric is displayed as the metric.
 DISPLAY = {
-    "psnr": ("PSNR", 2, "↑"),
-    "psnr_euvs": ("PSNR", 2, "↑"),
-    "ssim": ("SSIM", 3, "↑"),
-    "ssim_same": ("SSIM", 3, "↑"),
-    "ssim_euvs": ("SSIM", 3, "↑"),
-    "lpips": ("LPIPS", 3, "↓"),
-    "lpips_vgg": ("LPIPS", 3, "↓"),
-    "lpips_vgg_unscaled": ("LPIPS", 3, "↓"),
-    "lpips_euvs": ("LPIPS", 3, "↓"),
+    **dict.fromkeys(("psnr", "psnr_euvs"), ("PSNR", 2, "↑")),
+    **dict.fromkeys(("ssim", "ssim_same", "ssim_euvs"), ("SSIM", 3, "↑")),
+    **dict.fromkeys(("lpips", "lpips_vgg", "lpips_vgg_unscaled", "lpips_euvs"), ("LPIPS", 3, "↓")),
     "warp": ("Warp", 1, "↓"),
     "cos_dinov2": ("Cos", 3, "↑"),
     "final_score": ("Final", 3, "↑"),

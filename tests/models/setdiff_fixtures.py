@@ -56,15 +56,17 @@ def view_set(
     )
 
 
+#: The dataset, protocol and group of every packet these helpers make or write.
+UNIT_LABELS: dict[str, str] = {"dataset": "test", "protocol": "unit", "group": "g"}
+
+
 def make_packet(num_refs: int, num_targets: int, size: tuple[int, int] = (32, 32), seed: int = 0) -> Packet:
     """A packet of random smooth images, random C-maps and distinct real cameras."""
     generator = torch.Generator().manual_seed(seed)
     height, width = size
     return Packet(
         packet_id=f"p{seed}",
-        dataset="test",
-        protocol="unit",
-        group="g",
+        **UNIT_LABELS,
         split="train",
         scene="s",
         references=view_set("ref", num_refs, height, width, generator, 0.05),
@@ -83,6 +85,17 @@ def make_sample(
     packet.targets.images = (blurred + 0.1 * torch.randn(gt.shape, generator=generator)).clamp(0, 1)
     masks = torch.ones(num_targets, 1, size[0], size[1], dtype=torch.bool)
     return TrainingSample(packet=packet, target_gt=gt, target_masks=masks)
+
+
+#: Model overrides that make the tiny architecture a Difix-style baseline: RGB only, one reference per target.
+DIFIX: dict[str, object] = {
+    "method": "difix",
+    "prediction": "epsilon",
+    "use_geometry": False,
+    "max_references": 1,
+    "targets_per_set": 1,
+    "skip_connections": True,
+}
 
 
 def tiny_config(**model_overrides: object) -> Config:
@@ -174,3 +187,8 @@ method = "setdiff"
 vae_decoder = "full"
 skip_connections = true
 """
+
+
+def train_argv(config: Path | str, packets: Path | str, out: Path | str, *options: str) -> list[str]:
+    """The words of ``setdiff-bench train --config C --packets P --out O`` followed by ``options``."""
+    return ["train", "--config", str(config), "--packets", str(packets), "--out", str(out), *options]

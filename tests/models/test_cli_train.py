@@ -15,7 +15,7 @@ import pytest
 from setdiff_bench.cli.main import main
 from setdiff_bench.models.setdiff.checkpoint import read_config, resolve_checkpoint
 from setdiff_bench.models.setdiff.manifest import MANIFEST_FILE
-from tests.models.setdiff_fixtures import TINY_SETDIFF_MODEL_TOML, make_sample
+from tests.models.setdiff_fixtures import TINY_SETDIFF_MODEL_TOML, make_sample, train_argv
 
 CONFIG = (
     TINY_SETDIFF_MODEL_TOML
@@ -83,19 +83,7 @@ def test_train_verb(tmp_path: Path, fake_store: type[FakeStore], capsys: pytest.
     config = tmp_path / "tiny.toml"
     config.write_text(CONFIG)
     out = tmp_path / "run"
-    code = main(
-        [
-            "train",
-            "--config",
-            str(config),
-            "--packets",
-            str(tmp_path / "packets"),
-            "--out",
-            str(out),
-            "--no-progress",
-            "--cpu",
-        ]
-    )
+    code = main(train_argv(config, tmp_path / "packets", out, "--no-progress", "--cpu"))
     assert code == 0
     assert fake_store.calls == [("training_dataset", ("train", 2, 4, 0))]
     printed = capsys.readouterr().out
@@ -104,23 +92,7 @@ def test_train_verb(tmp_path: Path, fake_store: type[FakeStore], capsys: pytest.
     assert checkpoint.name == "step-00000002"
     assert read_config(checkpoint).train.steps == 2
     # running again resumes (nothing left to do) and --steps extends the run
-    assert (
-        main(
-            [
-                "train",
-                "--config",
-                str(config),
-                "--packets",
-                "p",
-                "--out",
-                str(out),
-                "--no-progress",
-                "--steps",
-                "3",
-            ]
-        )
-        == 0
-    )
+    assert main(train_argv(config, "p", out, "--no-progress", "--steps", "3")) == 0
     assert resolve_checkpoint(out).name == "step-00000003"
     manifest = json.loads((out / MANIFEST_FILE).read_text())
     assert [(s["start_step"], s["end_step"]) for s in manifest["sessions"]] == [(0, 2), (2, 3)]
@@ -136,12 +108,10 @@ def test_train_verb(tmp_path: Path, fake_store: type[FakeStore], capsys: pytest.
 def test_train_verb_errors(
     tmp_path: Path, fake_store: type[FakeStore], capsys: pytest.CaptureFixture[str]
 ) -> None:
-    code = main(
-        ["train", "--config", str(tmp_path / "missing.toml"), "--packets", "p", "--out", str(tmp_path)]
-    )
+    code = main(train_argv(tmp_path / "missing.toml", "p", tmp_path))
     assert code == 2
     assert "config file not found" in capsys.readouterr().err
     bad = tmp_path / "bad.toml"
     bad.write_text("[model]\npreset = 'tiny'\nunknown_key = 1\n")
-    assert main(["train", "--config", str(bad), "--packets", "p", "--out", str(tmp_path / "o")]) == 2
+    assert main(train_argv(bad, "p", tmp_path / "o")) == 2
     assert "unknown keys ['unknown_key']" in capsys.readouterr().err

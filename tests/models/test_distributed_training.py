@@ -26,7 +26,7 @@ from safetensors.torch import load_file
 from setdiff_bench.models.setdiff.checkpoint import WEIGHTS_FILE, resolve_checkpoint
 from setdiff_bench.models.setdiff.manifest import MANIFEST_FILE
 from setdiff_bench.models.setdiff.train import LOG_FILE, SAMPLES_FILE, VALIDATION_FILE
-from tests.models.setdiff_fixtures import TINY_SETDIFF_MODEL_TOML
+from tests.models.setdiff_fixtures import TINY_SETDIFF_MODEL_TOML, train_argv
 from tests.run.store_fixtures import StoreSpec, build_store
 
 STEPS = 8
@@ -55,17 +55,7 @@ def free_port() -> int:
 
 
 def train_command(config: Path, store: Path, out: Path, processes: int) -> list[str]:
-    verb = [
-        "train",
-        "--config",
-        str(config),
-        "--packets",
-        str(store),
-        "--out",
-        str(out),
-        "--cpu",
-        "--no-progress",
-    ]
+    verb = train_argv(config, store, out, "--cpu", "--no-progress")
     if processes == 1:
         return [sys.executable, "-m", "setdiff_bench", *verb]
     # --multi_gpu on a machine without CUDA: torch.distributed with the gloo backend, one process per rank

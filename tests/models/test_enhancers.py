@@ -13,16 +13,7 @@ from setdiff_bench.errors import CheckpointError, UsageError
 from setdiff_bench.models.setdiff.checkpoint import save_checkpoint
 from setdiff_bench.models.setdiff.inference import enhance_packet
 from setdiff_bench.models.setdiff.model import SetDiffModel
-from tests.models.setdiff_fixtures import make_packet, tiny_config
-
-DIFIX = {
-    "method": "difix",
-    "prediction": "epsilon",
-    "use_geometry": False,
-    "max_references": 1,
-    "targets_per_set": 1,
-    "skip_connections": True,
-}
+from tests.models.setdiff_fixtures import DIFIX, make_packet, tiny_config
 
 
 def saved(tmp_path: Path, **overrides: object) -> tuple[Path, SetDiffModel]:

@@ -23,7 +23,7 @@ from setdiff_bench.models.setdiff.inference import enhance_packet
 from setdiff_bench.models.setdiff.inputs import surface_points, training_set
 from setdiff_bench.models.setdiff.model import SetDiffModel
 from setdiff_bench.models.setdiff.set_mixer import BIAS_DISTANCE_CAP, distance_bias, token_grid
-from tests.models.setdiff_fixtures import make_packet, make_sample
+from tests.models.setdiff_fixtures import make_packet, make_sample, train_argv
 from tests.models.test_store_training import write_store
 
 
@@ -200,18 +200,7 @@ def test_missing_autoencoder_is_one_clear_error(tmp_path: Path, capsys: pytest.C
     config = tmp_path / "c.toml"
     config.write_text('[model]\npreset = "tiny"\nautoencoder = "no_such_autoencoder"\n')
     write_store(tmp_path / "packets")
-    code = main(
-        [
-            "train",
-            "--config",
-            str(config),
-            "--packets",
-            str(tmp_path / "packets"),
-            "--out",
-            str(tmp_path / "run"),
-            "--no-progress",
-        ]
-    )
+    code = main(train_argv(config, tmp_path / "packets", tmp_path / "run", "--no-progress"))
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "no_such_autoencoder" in err[0] and "autoencoder" in err[0]
     assert not (tmp_path / "run").exists()

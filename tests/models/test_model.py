@@ -13,7 +13,7 @@ from setdiff_bench.models.setdiff.config import model_config_from_dict
 from setdiff_bench.models.setdiff.inference import enhance_packet, set_packets
 from setdiff_bench.models.setdiff.inputs import SetBatch, renormalize, view_tensors
 from setdiff_bench.models.setdiff.model import SetDiffModel
-from tests.models.setdiff_fixtures import make_packet
+from tests.models.setdiff_fixtures import DIFIX, make_packet
 
 # docs/model.md, "SD-Turbo schedule at t = 199": SD-Turbo scaled_linear schedule at t = 199.
 ALPHA_BAR_199 = 0.7552384
@@ -174,14 +174,7 @@ def test_sets_in_a_batch_do_not_mix(model: SetDiffModel) -> None:
 
 
 def test_difix_pairs_first_reference_with_each_target() -> None:
-    model = tiny_model(
-        method="difix",
-        prediction="epsilon",
-        use_geometry=False,
-        max_references=1,
-        targets_per_set=1,
-        skip_connections=True,
-    )
+    model = tiny_model(**DIFIX)
     packet = make_packet(3, 3)
     output = enhance_packet(model, packet)
     for target in range(3):

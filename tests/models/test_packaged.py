@@ -6,6 +6,7 @@ from __future__ import annotations
 import hashlib
 import json
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 import pytest
@@ -84,6 +85,16 @@ def test_scene_seeds_are_parsed_from_synthetic_names_only() -> None:
     assert synthetic_scene_seeds("scene-0061") is None and synthetic_scene_seeds("street_00") is None
 
 
+#: What every session of the runs below records alike: ``train --config tiny_setdiff`` with seed 0.
+TINY_SESSION: dict[str, Any] = {
+    "command": "setdiff-bench train --config tiny_setdiff",
+    "method": "setdiff",
+    "config_name": "tiny_setdiff",
+    "seed": 0,
+    "wall_seconds": 1.0,
+}
+
+
 def _training_run(folder: Path, steps: int, finished: int) -> Path:
     """A training output folder as ``train`` leaves it: checkpoints, ``latest`` and ``manifest.json``."""
     model, config = perturbed_model()
@@ -99,14 +110,10 @@ def _training_run(folder: Path, steps: int, finished: int) -> Path:
     }
     record_training_session(
         folder,
-        command="setdiff-bench train --config tiny_setdiff",
-        method="setdiff",
-        config_name="tiny_setdiff",
-        seed=0,
+        **TINY_SESSION,
         steps=steps,
         start_step=0,
         end_step=finished,
-        wall_seconds=1.0,
         data=data,
         validation={"psnr": 20.0},
     )
@@ -166,17 +173,7 @@ def test_training_manifest_refuses_other_data(tmp_path: Path) -> None:
     other = {**manifest["data"], "data_sha256": "1" * 64}
     with pytest.raises(CheckpointError, match="other data"):
         record_training_session(
-            run,
-            command="c",
-            method="setdiff",
-            config_name="c",
-            seed=0,
-            steps=2,
-            start_step=2,
-            end_step=2,
-            wall_seconds=0.0,
-            data=other,
-            validation=None,
+            run, **TINY_SESSION, steps=2, start_step=2, end_step=2, data=other, validation=None
         )
     assert pd.Series(
         [s["end_step"] for s in json.loads((run / MANIFEST_FILE).read_text())["sessions"]]

@@ -14,7 +14,7 @@ from setdiff_bench.models.setdiff.inputs import training_set
 from setdiff_bench.packets.index import merge_index
 from setdiff_bench.packets.store import PacketHeader, PacketStore, ViewContent, write_packet
 from setdiff_bench.types import ViewSet
-from tests.models.setdiff_fixtures import make_sample
+from tests.models.setdiff_fixtures import UNIT_LABELS, make_sample, train_argv
 
 CONFIG = """
 [model]
@@ -61,9 +61,7 @@ def write_store(root: Path) -> None:
         sample = make_sample(3, 3, seed=seed)
         header = PacketHeader(
             packet_id=f"{split}-0",
-            dataset="test",
-            protocol="unit",
-            group="g",
+            **UNIT_LABELS,
             split=split,
             scene=f"s{seed}",
             fit_key="fit",
@@ -84,22 +82,7 @@ def test_train_on_a_packet_store_and_enhance(tmp_path: Path) -> None:
     config = tmp_path / "tiny.toml"
     config.write_text(CONFIG)
     out = tmp_path / "run"
-    assert (
-        main(
-            [
-                "train",
-                "--config",
-                str(config),
-                "--packets",
-                str(tmp_path / "packets"),
-                "--out",
-                str(out),
-                "--cpu",
-                "--no-progress",
-            ]
-        )
-        == 0
-    )
+    assert main(train_argv(config, tmp_path / "packets", out, "--cpu", "--no-progress")) == 0
     assert resolve_checkpoint(out).name == "step-00000002"
     assert (out / "validation.jsonl").read_text().count("psnr") == 1
     store = PacketStore(tmp_path / "packets")

@@ -23,7 +23,7 @@ from setdiff_bench.models.setdiff.inference import enhance_packet
 from setdiff_bench.models.setdiff.inputs import choose_views, training_set
 from setdiff_bench.models.setdiff.model import SetDiffModel
 from setdiff_bench.models.setdiff.train import train
-from tests.models.setdiff_fixtures import make_sample, tiny_config
+from tests.models.setdiff_fixtures import DIFIX, make_sample, tiny_config
 
 
 def with_train(config: Config, **changes: object) -> Config:
@@ -117,17 +117,7 @@ def test_lpips_term_is_never_dropped_silently(tmp_path: Path, monkeypatch: pytes
 
 
 def test_difix_trains_on_pairs(tmp_path: Path) -> None:
-    config = with_train(
-        tiny_config(
-            method="difix",
-            prediction="epsilon",
-            use_geometry=False,
-            max_references=1,
-            targets_per_set=1,
-            skip_connections=True,
-        ),
-        steps=2,
-    )
+    config = with_train(tiny_config(**DIFIX), steps=2)
     result = train(config, [make_sample(3, 2)], tmp_path, progress=False)
     model, saved = load_model(result.checkpoint, method="difix")
     assert saved.model.method == "difix"

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from setdiff_bench.models.setdiff.checkpoint import resolve_checkpoint
 from setdiff_bench.models.setdiff.train import checkpoint_interval
+from tests.models.setdiff_fixtures import train_argv
 from tests.models.test_store_training import write_store
 
 STEPS = 40
@@ -57,15 +58,7 @@ def test_interrupted_training_checkpoints_and_resumes(tmp_path: Path) -> None:
         sys.executable,
         "-m",
         "setdiff_bench",
-        "train",
-        "--config",
-        str(tmp_path / "tiny.toml"),
-        "--packets",
-        str(tmp_path / "packets"),
-        "--out",
-        str(out),
-        "--cpu",
-        "--no-progress",
+        *train_argv(tmp_path / "tiny.toml", tmp_path / "packets", out, "--cpu", "--no-progress"),
     ]
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     process = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

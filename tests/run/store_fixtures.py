@@ -173,3 +173,23 @@ def files_of(folder: Path, patterns: Sequence[str] = ("images/**/*.png",)) -> di
         for p in sorted(folder.glob(pattern))
         if p.is_file()
     }
+
+
+def run_argv(method: str, packets: Path, out: Path, *options: str) -> list[str]:
+    """The words of ``setdiff-bench run --method M --packets P --out O --no-progress`` and ``options``."""
+    return [
+        "run",
+        "--method",
+        method,
+        "--packets",
+        str(packets),
+        "--out",
+        str(out),
+        "--no-progress",
+        *options,
+    ]
+
+
+def leaderboard_argv(dataset: str, runs: Path, out: Path, *options: str) -> list[str]:
+    """The words of ``setdiff-bench leaderboard --dataset D --runs R --out O`` and ``options``."""
+    return ["leaderboard", "--dataset", dataset, "--runs", str(runs), "--out", str(out), *options]

@@ -21,6 +21,7 @@ from setdiff_bench.reporting.leaderboard import (
     load_runs,
     render_markdown,
 )
+from tests.run.store_fixtures import leaderboard_argv
 
 
 @pytest.fixture
@@ -105,20 +106,5 @@ def test_evaluate_and_leaderboard_commands(run_copy: Path, store: Path, tmp_path
     assert (run_copy / PROFILES_DIR / "paper" / GROUPS_FILE).is_file()
     dataset = pd.read_parquet(run_copy / METRICS_FILE)["dataset"].iloc[0]
     out = tmp_path / "boards"
-    assert (
-        main(
-            [
-                "leaderboard",
-                "--dataset",
-                dataset,
-                "--runs",
-                str(run_copy),
-                "--out",
-                str(out),
-                "--format",
-                "md",
-            ]
-        )
-        == 0
-    )
+    assert main(leaderboard_argv(dataset, run_copy, out, "--format", "md")) == 0
     assert "evaluation profile: paper" in (out / f"{dataset}.md").read_text()

@@ -23,6 +23,7 @@ from skimage.metrics import structural_similarity
 from setdiff_bench.cli.main import main
 from setdiff_bench.enhancers.identity import IdentityEnhancer
 from setdiff_bench.errors import ImageError, UsageError
+from setdiff_bench.evaluation import paths
 from setdiff_bench.evaluation.paths import IMAGES_DIR, MANIFEST_FILE, METRICS_FILE, RUN_FILE, SEQUENCES_FILE
 from setdiff_bench.evaluation.run import (
     EnhancerOutputError,
@@ -37,21 +38,12 @@ from setdiff_bench.packets.index import INDEX_FILE
 from setdiff_bench.packets.store import PacketStore
 from tests.enhancers.plugin_fixtures import install_plugin
 from tests.metrics.lpips_numpy import lpips_numpy
-from tests.run.store_fixtures import StoreSpec, build_store, files_of
+from tests.run.store_fixtures import StoreSpec, build_store, files_of, run_argv
 
 ONE_THREAD = {**os.environ, "OMP_NUM_THREADS": "1"}  # subprocesses: tiny images, busy machine
+#: A run's metrics.parquet columns: the key columns the evaluation declares, then the scores and the image.
 COLUMNS = [
-    "dataset",
-    "protocol",
-    "group",
-    "split",
-    "scene",
-    "frame",
-    "sensor",
-    "timestamp_us",
-    "packet_id",
-    "view",
-    "method",
+    *paths.KEY_COLUMNS,
     "psnr",
     "ssim",
     "lpips",
@@ -200,20 +192,7 @@ def test_precomputed_missing_frames_are_listed(
     ):
         run_method(store, tmp_path / "pre", RunSettings("precomputed", {"source": str(copy)}), progress=False)
     assert not list((tmp_path / "pre").glob("fragments/*"))
-    code = main(
-        [
-            "run",
-            "--method",
-            "precomputed",
-            "--from",
-            str(copy),
-            "--packets",
-            str(store),
-            "--out",
-            str(tmp_path / "pre_cli"),
-            "--no-progress",
-        ]
-    )
+    code = main(run_argv("precomputed", store, tmp_path / "pre_cli", "--from", str(copy)))
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "2 of 12 target frames have no precomputed image" in err[0]
 
@@ -293,18 +272,7 @@ def test_concurrent_shard_processes_into_one_new_folder(
                 sys.executable,
                 "-m",
                 "setdiff_bench",
-                "run",
-                "--method",
-                "identity",
-                "--packets",
-                str(store),
-                "--out",
-                str(out),
-                "--shard",
-                f"{i}/2",
-                "--device",
-                "cpu",
-                "--no-progress",
+                *run_argv("identity", store, out, "--shard", f"{i}/2", "--device", "cpu"),
             ],
             cwd=Path(__file__).parents[2],
             env=ONE_THREAD,
@@ -361,23 +329,7 @@ def test_cli_run_and_one_line_errors(
     store: Path, identity_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "cli"
-    assert (
-        main(
-            [
-                "run",
-                "--method",
-                "identity",
-                "--packets",
-                str(store),
-                "--out",
-                str(out),
-                "--device",
-                "cpu",
-                "--no-progress",
-            ]
-        )
-        == 0
-    )
+    assert main(run_argv("identity", store, out, "--device", "cpu")) == 0
     assert "enhanced 4 packets" in capsys.readouterr().out
     same_results(identity_run, out)
     for argv, fragment in (
@@ -393,23 +345,7 @@ def test_cli_run_and_one_line_errors(
 
 def test_plugin_method_runs(store: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.syspath_prepend(str(install_plugin(tmp_path / "site")))
-    assert (
-        main(
-            [
-                "run",
-                "--method",
-                "darken",
-                "-o",
-                "factor=0.5",
-                "--packets",
-                str(store),
-                "--out",
-                str(tmp_path / "darken"),
-                "--no-progress",
-            ]
-        )
-        == 0
-    )
+    assert main(run_argv("darken", store, tmp_path / "darken", "-o", "factor=0.5")) == 0
     metrics = pd.read_parquet(tmp_path / "darken" / METRICS_FILE)
     assert set(metrics["method"]) == {"darken"} and len(metrics) == 12
     targets = store_rows(store)
@@ -472,24 +408,6 @@ def test_run_verb_takes_a_shipped_model_by_name(store: Path, tmp_path: Path) -> 
     from setdiff_bench.cli.main import main
 
     out = tmp_path / "difix"
-    assert (
-        main(
-            [
-                "run",
-                "--method",
-                "difix",
-                "--checkpoint",
-                "tiny_difix",
-                "--packets",
-                str(store),
-                "--out",
-                str(out),
-                "--metrics",
-                "psnr",
-                "--no-progress",
-            ]
-        )
-        == 0
-    )
+    assert main(run_argv("difix", store, out, "--checkpoint", "tiny_difix", "--metrics", "psnr")) == 0
     assert json.loads((out / RUN_FILE).read_text())["options"] == {"checkpoint": "tiny_difix"}
     assert len(pd.read_parquet(out / METRICS_FILE)) > 0

@@ -21,7 +21,7 @@ import pytest
 from setdiff_bench.evaluation.paths import FRAGMENTS_DIR, METRICS_FILE
 from setdiff_bench.evaluation.run import comparable_metrics, fragment_path
 from setdiff_bench.packets.store import PacketStore
-from tests.run.store_fixtures import StoreSpec, build_store
+from tests.run.store_fixtures import StoreSpec, build_store, leaderboard_argv, run_argv
 
 SHARDS = 4
 PAUSE_S = 0.4
@@ -95,35 +95,11 @@ class Cli:
 
 
 def run_args(store: Path, out: Path, *extra: str) -> list[str]:
-    return [
-        "run",
-        "--method",
-        "slowcopy",
-        "--packets",
-        str(store),
-        "--out",
-        str(out),
-        "--metrics",
-        "psnr,ssim",
-        "--no-progress",
-        *extra,
-    ]
+    return run_argv("slowcopy", store, out, "--metrics", "psnr,ssim", *extra)
 
 
 def leaderboard_args(runs: Path, out: Path) -> list[str]:
-    return [
-        "leaderboard",
-        "--dataset",
-        "synthetic",
-        "--runs",
-        str(runs),
-        "--out",
-        str(out),
-        "--format",
-        "parquet,md",
-        "--metrics",
-        "psnr,ssim",
-    ]
+    return leaderboard_argv("synthetic", runs, out, "--format", "parquet,md", "--metrics", "psnr,ssim")
 
 
 @pytest.fixture(scope="module")

@@ -34,32 +34,30 @@ def corrupt_last_packet(store: Path, tmp_path: Path) -> tuple[Path, Path]:
     return copy, victim
 
 
-def test_corrupt_file_is_found_before_any_work(store: Path, tmp_path: Path) -> None:
+def run_on_corrupt_store(store: Path, tmp_path: Path, *, verify: bool) -> tuple[PacketError, int, Path]:
+    """``run`` identity on a copy of ``store`` with one truncated file: the error, how many packets the
+    enhancer saw before it, and the truncated file."""
     copy, victim = corrupt_last_packet(store, tmp_path)
     enhancer = CountingIdentity()
-    with pytest.raises(PacketError) as error:
+    with pytest.raises(PacketError, match="SHA-256 mismatch") as error:
         run_method(
             copy,
             tmp_path / "out",
             RunSettings(method="identity", device="cpu"),
             progress=False,
             enhancer=enhancer,
+            verify=verify,
         )
-    assert enhancer.calls == 0 and error.value.path == str(victim)
-    assert "SHA-256 mismatch" in error.value.problem and "before any work" in error.value.problem
+    return error.value, enhancer.calls, victim
+
+
+def test_corrupt_file_is_found_before_any_work(store: Path, tmp_path: Path) -> None:
+    error, calls, victim = run_on_corrupt_store(store, tmp_path, verify=True)
+    assert calls == 0 and error.path == str(victim)
+    assert "SHA-256 mismatch" in error.problem and "before any work" in error.problem
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").rglob("*.parquet"))
 
 
 def test_without_the_check_the_run_finds_it_late(store: Path, tmp_path: Path) -> None:
-    copy, _ = corrupt_last_packet(store, tmp_path)
-    enhancer = CountingIdentity()
-    with pytest.raises(PacketError, match="SHA-256 mismatch"):
-        run_method(
-            copy,
-            tmp_path / "out",
-            RunSettings(method="identity", device="cpu"),
-            progress=False,
-            enhancer=enhancer,
-            verify=False,
-        )
-    assert enhancer.calls > 0  # packets before the corrupt one were enhanced first
+    _, calls, _ = run_on_corrupt_store(store, tmp_path, verify=False)
+    assert calls > 0  # packets before the corrupt one were enhanced first

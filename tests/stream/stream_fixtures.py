@@ -1,4 +1,5 @@
-"""A small recorded drive in world coordinates and a tiny SetDiff checkpoint, for the stream tests."""
+"""A small recorded drive in world coordinates, its ticks as packets for the batch runner, and a tiny SetDiff
+checkpoint, for the stream tests (and benchmarks/serve.py)."""
 
 from __future__ import annotations
 
@@ -9,7 +10,12 @@ import numpy as np
 import torch
 
 from setdiff_bench.cameras import Camera
+from setdiff_bench.evaluation.run import RunSettings, run_method
 from setdiff_bench.evaluation.stream import Views
+from setdiff_bench.geometry import normalize_packet
+from setdiff_bench.io.images import uint8_to_float
+from setdiff_bench.packets.index import merge_index, packet_id
+from setdiff_bench.packets.store import PacketHeader, ViewContent, write_packet
 
 HEIGHT, WIDTH = 32, 48
 #: The rig: (name, yaw in degrees) of the three cameras of every tick.
@@ -82,6 +88,69 @@ def tick_frames(tick: int, size: tuple[int, int] = (HEIGHT, WIDTH)) -> Views:
         seed=100 + tick,
         names=[f"{name}/{tick:06d}.png" for name, _ in RIG],
     )
+
+
+def hwc(tensor: torch.Tensor) -> np.ndarray:
+    """A ``(C, H, W)`` tensor as a float32 ``(H, W, C)`` array."""
+    return tensor.permute(1, 2, 0).numpy().astype(np.float32)
+
+
+def write_tick_store(
+    root: Path, references: Views, frames: Views, reference_ids: list[int], tick: int
+) -> None:
+    """A prepared-style packet of this tick: the chosen references + the frames, normalised as prepare does."""
+    refs = [references.cameras[i] for i in reference_ids]
+    cameras = [*refs, *frames.cameras]
+    cmaps = torch.cat([references.cmaps[reference_ids], frames.cmaps])
+    alphas = torch.ones(len(cameras), 1, HEIGHT, WIDTH)
+    normalised = normalize_packet(cameras, cmaps, len(refs), alphas=alphas)
+    images = uint8_to_float(torch.cat([references.images[reference_ids], frames.images]))
+    names = [references.names[i] for i in reference_ids] + list(frames.names)
+    contents = [
+        ViewContent(
+            frame=names[i],
+            sensor="cam",
+            traversal="lane",
+            timestamp_us=None,
+            camera=normalised.cameras[i],
+            camera_world=cameras[i],
+            image=hwc(images[i]),
+            cmap=hwc(normalised.cmaps[i]),
+            alpha=np.ones((HEIGHT, WIDTH), np.float32),
+            gt=hwc(images[i]) if i >= len(refs) else None,
+            mask=np.ones((HEIGHT, WIDTH), bool) if i >= len(refs) else None,
+            overlap_score=1.0 if i < len(refs) else None,
+        )
+        for i in range(len(cameras))
+    ]
+    header = PacketHeader(
+        packet_id=packet_id("stream", "drive", "tick", tick),
+        dataset="synthetic",
+        protocol="stream",
+        group="tick",
+        split="test",
+        scene="drive",
+        fit_key="lane0",
+        scale=normalised.scale,
+        recipe="stream-test",
+    )
+    write_packet(root, header, contents[: len(refs)], contents[len(refs) :])
+
+
+def run_batch(store: Path, out: Path, checkpoint: Path) -> None:
+    """Index a store of :func:`write_tick_store` packets and ``run --method setdiff`` on it (PSNR only, no warp)."""
+    merge_index(store)
+    run_method(
+        store,
+        out,
+        RunSettings("setdiff", options={"checkpoint": str(checkpoint)}, metrics=("psnr",), warp="off"),
+        progress=False,
+    )
+
+
+def serve_argv(checkpoint: Path, *options: str, device: str = "cpu") -> list[str]:
+    """The words of ``setdiff-bench serve --checkpoint C --port 0 --device D`` (a free port) and ``options``."""
+    return ["serve", "--checkpoint", str(checkpoint), "--port", "0", "--device", device, *options]
 
 
 def save_tiny_checkpoint(folder: Path) -> Path:

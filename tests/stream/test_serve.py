@@ -19,17 +19,21 @@ import torch
 
 from setdiff_bench.enhancers.setdiff import load_enhancer
 from setdiff_bench.evaluation.paths import IMAGES_DIR
-from setdiff_bench.evaluation.run import RunSettings, run_method
 from setdiff_bench.evaluation.stream import StreamSession, Views
 from setdiff_bench.io.images import read_rgb
-from setdiff_bench.packets.index import merge_index
 from setdiff_bench.serve import enhancer_pb2 as pb
 from setdiff_bench.serve.client import EnhancerClient
 from setdiff_bench.serve.server import RunningServer, start_server
 from setdiff_bench.serve.settings import ServeSettings
 from setdiff_bench.serve.wire import to_array
-from tests.stream.stream_fixtures import RIG, recorded_references, tick_frames
-from tests.stream.test_stream import write_tick_store
+from tests.stream.stream_fixtures import (
+    RIG,
+    recorded_references,
+    run_batch,
+    serve_argv,
+    tick_frames,
+    write_tick_store,
+)
 
 TICKS = 30
 LARGE = (144, 256)  # a tick that takes ~0.7 s on one CPU thread, so requests overlap
@@ -68,13 +72,7 @@ def test_drive_of_30_ticks_equals_batch_runner(
         streamed[tick] = client.enhance(session, frames)
         write_tick_store(tmp_path / "store", references, frames, chooser.select(frames.cameras), tick)
     client.close_session(session)
-    merge_index(tmp_path / "store")
-    run_method(
-        tmp_path / "store",
-        tmp_path / "run",
-        RunSettings("setdiff", options={"checkpoint": str(checkpoint)}, metrics=("psnr",), warp="off"),
-        progress=False,
-    )
+    run_batch(tmp_path / "store", tmp_path / "run", checkpoint)
     compared = 0
     for tick, images in streamed.items():
         assert images.shape == (3, 32, 48, 3) and images.dtype == np.uint8
@@ -198,20 +196,7 @@ def test_two_concurrent_sessions_are_isolated(client: EnhancerClient, checkpoint
 def test_sigterm_finishes_in_flight_requests(checkpoint: Path) -> None:
     env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
     process = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "setdiff_bench",
-            "serve",
-            "--checkpoint",
-            str(checkpoint),
-            "--port",
-            "0",
-            "--device",
-            "cpu",
-            "--grace",
-            "60",
-        ],
+        [sys.executable, "-m", "setdiff_bench", *serve_argv(checkpoint, "--grace", "60")],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -256,13 +241,7 @@ def test_example_replays_a_store_through_the_server(
     for tick in range(3):
         frames = tick_frames(tick)
         write_tick_store(tmp_path / "store", references, frames, chooser.select(frames.cameras), tick)
-    merge_index(tmp_path / "store")
-    run_method(
-        tmp_path / "store",
-        tmp_path / "run",
-        RunSettings("setdiff", options={"checkpoint": str(checkpoint)}, metrics=("psnr",), warp="off"),
-        progress=False,
-    )
+    run_batch(tmp_path / "store", tmp_path / "run", checkpoint)
     root = Path(__file__).resolve().parents[2]
     subprocess.run(
         [

@@ -10,59 +10,18 @@ import torch
 
 from setdiff_bench.enhancers.setdiff import load_enhancer
 from setdiff_bench.evaluation.paths import IMAGES_DIR
-from setdiff_bench.evaluation.run import RunSettings, run_method
 from setdiff_bench.evaluation.stream import StreamInputError, StreamSession, Views
-from setdiff_bench.geometry import normalize_packet
 from setdiff_bench.io.images import read_rgb, uint8_to_float
-from setdiff_bench.packets.index import merge_index, packet_id
-from setdiff_bench.packets.store import PacketHeader, ViewContent, write_packet
-from tests.stream.stream_fixtures import HEIGHT, WIDTH, recorded_references, rig_camera, tick_frames
-
-
-def _hwc(tensor: torch.Tensor) -> np.ndarray:
-    return tensor.permute(1, 2, 0).numpy().astype(np.float32)
-
-
-def write_tick_store(
-    root: Path, references: Views, frames: Views, reference_ids: list[int], tick: int
-) -> None:
-    """A prepared-style packet of this tick: the chosen references + the frames, normalised as prepare does."""
-    refs = [references.cameras[i] for i in reference_ids]
-    cameras = [*refs, *frames.cameras]
-    cmaps = torch.cat([references.cmaps[reference_ids], frames.cmaps])
-    alphas = torch.ones(len(cameras), 1, HEIGHT, WIDTH)
-    normalised = normalize_packet(cameras, cmaps, len(refs), alphas=alphas)
-    images = uint8_to_float(torch.cat([references.images[reference_ids], frames.images]))
-    names = [references.names[i] for i in reference_ids] + list(frames.names)
-    contents = [
-        ViewContent(
-            frame=names[i],
-            sensor="cam",
-            traversal="lane",
-            timestamp_us=None,
-            camera=normalised.cameras[i],
-            camera_world=cameras[i],
-            image=_hwc(images[i]),
-            cmap=_hwc(normalised.cmaps[i]),
-            alpha=np.ones((HEIGHT, WIDTH), np.float32),
-            gt=_hwc(images[i]) if i >= len(refs) else None,
-            mask=np.ones((HEIGHT, WIDTH), bool) if i >= len(refs) else None,
-            overlap_score=1.0 if i < len(refs) else None,
-        )
-        for i in range(len(cameras))
-    ]
-    header = PacketHeader(
-        packet_id=packet_id("stream", "drive", "tick", tick),
-        dataset="synthetic",
-        protocol="stream",
-        group="tick",
-        split="test",
-        scene="drive",
-        fit_key="lane0",
-        scale=normalised.scale,
-        recipe="stream-test",
-    )
-    write_packet(root, header, contents[: len(refs)], contents[len(refs) :])
+from tests.stream.stream_fixtures import (
+    HEIGHT,
+    WIDTH,
+    hwc,
+    recorded_references,
+    rig_camera,
+    run_batch,
+    tick_frames,
+    write_tick_store,
+)
 
 
 @pytest.mark.parametrize("tick", [0, 7])
@@ -76,19 +35,13 @@ def test_equals_batch_runner_to_the_last_8bit_level(checkpoint: Path, tmp_path: 
     streamed = session.enhance(frames)
 
     write_tick_store(tmp_path / "store", references, frames, chosen, tick)
-    merge_index(tmp_path / "store")
-    run_method(
-        tmp_path / "store",
-        tmp_path / "run",
-        RunSettings("setdiff", options={"checkpoint": str(checkpoint)}, metrics=("psnr",), warp="off"),
-        progress=False,
-    )
+    run_batch(tmp_path / "store", tmp_path / "run", checkpoint)
     for position, name in enumerate(frames.names):
         written = sorted((tmp_path / "run" / IMAGES_DIR).rglob(Path(name).stem + ".png"))
         written = [p for p in written if p.parent.name == Path(name).parent.name]
         assert len(written) == 1, written
         batch = np.rint(read_rgb(written[0]) * 255).astype(np.int16)
-        ours = np.rint(_hwc(streamed[position]).clip(0, 1) * 255).astype(np.int16)
+        ours = np.rint(hwc(streamed[position]).clip(0, 1) * 255).astype(np.int16)
         assert np.abs(batch - ours).max() == 0
 
 
