@@ -16,7 +16,7 @@ import torch
 
 from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import UsageError
-from setdiff_bench.gaussians.backends import gsplat_backend, torch_ref
+from setdiff_bench.gaussians.backends import cpu_rasterizer, gsplat_backend, torch_ref
 from setdiff_bench.gaussians.backends.common import RenderOptions, RenderOutput, clip_centres
 from setdiff_bench.gaussians.model import GaussianModel
 
@@ -110,7 +110,8 @@ def _render_torch(g: GaussianModel, cams: list[Camera], options: RenderOptions) 
             features = torch.cat([colors, cmap_points, proj.depths[:, None]], dim=1)
         else:
             features = colors
-        image, alpha = torch_ref.rasterize(proj, features, width, height, tile_size=options.tile_size)
+        rasterize = cpu_rasterizer.rasterize if cpu_rasterizer.handles(features) else torch_ref.rasterize
+        image, alpha = rasterize(proj, features, width, height, tile_size=options.tile_size)
         rgb = image[:3]
         if options.background is not None:
             bg = torch.as_tensor(list(options.background), device=device, dtype=dtype).view(3, 1, 1)

@@ -169,7 +169,7 @@ def rasterize(
     pix = tile_size * tile_size
     out = torch.zeros(num_tiles, pix, channels + 1, device=device, dtype=dtype)
 
-    sorted_ids, tile_starts, tile_counts = _bin_gaussians(proj, tiles_x, tiles_y, tile_size)
+    sorted_ids, tile_starts, tile_counts = bin_gaussians(proj, tiles_x, tiles_y, tile_size)
     if sorted_ids.numel():
         # One table row per Gaussian: centre (2), conic (3), opacity (1), features (C), 1 (for alpha).
         # A zero row at index N pads short lists: zero opacity, so zero weight.
@@ -210,7 +210,7 @@ def rasterize(
     return image[:channels], image[channels:]
 
 
-def _bin_gaussians(
+def bin_gaussians(
     proj: Projection, tiles_x: int, tiles_y: int, tile_size: int
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Gaussian ids sorted by (tile, depth), and each tile's start offset and count."""
