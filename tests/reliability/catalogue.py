@@ -126,6 +126,41 @@ def street_copy(tmp: Path, world: World) -> tuple[Path, Path]:
     return root, root / STREET_SCENE
 
 
+def broken_street(tmp: Path, world: World, name: str, breaker: Callable[[Path], object]) -> Call:
+    """``prepare`` on a street copy whose scene file ``name`` was changed by ``breaker``, naming that file."""
+    root, scene = street_copy(tmp, world)
+    breaker(scene / name)
+    return Call(prepare_argv(root, tmp / "out"), str(scene / name))
+
+
+def broken_packet(
+    tmp: Path, world: World, name: str, breaker: Callable[[Path], object], *, rehashed: bool = False
+) -> Call:
+    """``run`` on a store copy whose first packet's file ``name`` was changed by ``breaker`` (the index
+    re-hashed when ``rehashed``), naming that file."""
+    store = copy(world.store, tmp / "store")
+    packet = first_packet(store)
+    breaker(packet / name)
+    if rehashed:
+        rehash(store, packet)
+    return Call(run_argv(store, tmp / "out"), str(packet / name))
+
+
+def resume_argv(config: str, world: World, run: Path) -> list[str]:
+    """``train --config config`` resuming the training folder ``run`` on the train store."""
+    return [
+        "train",
+        "--config",
+        config,
+        "--packets",
+        str(world.train_store),
+        "--out",
+        str(run),
+        "--cpu",
+        "--no-progress",
+    ]
+
+
 def render_argv(sparse: Path, out: Path, ply: Path) -> list[str]:
     return ["render", "--ply", str(ply), "--colmap", str(sparse), "--out", str(out)]
 
@@ -184,12 +219,20 @@ def euvs_scene(tmp: Path) -> tuple[Path, Path]:
     return root, scene.folder
 
 
-def nuscenes(tmp: Path, edit: Callable[[object], None] | None = None) -> tuple[Path, object]:
+def nuscenes_call(tmp: Path, table: str, edit: Callable[[object], None] | None = None) -> Call:
+    """``list scenes`` on a nuScenes fixture changed by ``edit``, naming its table ``table``.json."""
     fixture = build_nuscenes(tmp / "nuscenes", np.random.default_rng(9))
     if edit is not None:
         edit(fixture)
     fixture.write()
-    return fixture.root, fixture
+    return Call(list_argv("nuscenes", fixture.root), str(fixture.root / "v1.0-mini" / f"{table}.json"))
+
+
+def bad_sample_data(tmp: Path, token: str, key: str, value: str) -> Call:
+    """:func:`nuscenes_call` where the sample_data record ``token`` has ``key`` set to ``value``."""
+    return nuscenes_call(
+        tmp, "sample_data", lambda nu: nu.record("sample_data", token).__setitem__(key, value)
+    )
 
 
 class Exploit:
@@ -261,10 +304,7 @@ def _(tmp: Path, world: World) -> Call:
     "image is 40x30 (WxH) but its camera is 48x32",
 )
 def _(tmp: Path, world: World) -> Call:
-    root, scene = street_copy(tmp, world)
-    victim = scene / "images" / "lane1_front_000.png"
-    png_of_size(victim, 40, 30)
-    return Call(prepare_argv(root, tmp / "out"), str(victim))
+    return broken_street(tmp, world, "images/lane1_front_000.png", lambda png: png_of_size(png, 40, 30))
 
 
 @case(
@@ -387,10 +427,9 @@ def _(tmp: Path, world: World) -> Call:
     "truncated or corrupt COLMAP binary file",
 )
 def _(tmp: Path, world: World) -> Call:
-    root, scene = street_copy(tmp, world)
-    cameras = scene / "sparse" / "0" / "cameras.bin"
-    cameras.write_bytes(cameras.read_bytes()[:-3])
-    return Call(prepare_argv(root, tmp / "out"), str(cameras))
+    return broken_street(
+        tmp, world, "sparse/0/cameras.bin", lambda cameras: cameras.write_bytes(cameras.read_bytes()[:-3])
+    )
 
 
 @case("invalid-json", "loaders", "transforms.json cut in the middle", "DatasetError", "invalid JSON at line")
@@ -444,13 +483,7 @@ def _(tmp: Path, world: World) -> Call:
     "which is not in ego_pose.json",
 )
 def _(tmp: Path, world: World) -> Call:
-    root, _ = nuscenes(
-        tmp,
-        lambda nu: nu.record("sample_data", "scene0_CAM_FRONT_LEFT_2").__setitem__(
-            "ego_pose_token", "no-such-pose"
-        ),
-    )
-    return Call(list_argv("nuscenes", root), str(root / "v1.0-mini" / "sample_data.json"))
+    return bad_sample_data(tmp, "scene0_CAM_FRONT_LEFT_2", "ego_pose_token", "no-such-pose")
 
 
 @case(
@@ -461,13 +494,7 @@ def _(tmp: Path, world: World) -> Call:
     "escapes the dataset root",
 )
 def _(tmp: Path, world: World) -> Call:
-    root, _ = nuscenes(
-        tmp,
-        lambda nu: nu.record("sample_data", "scene0_CAM_FRONT_0").__setitem__(
-            "filename", "../../outside/x.jpg"
-        ),
-    )
-    return Call(list_argv("nuscenes", root), str(root / "v1.0-mini" / "sample_data.json"))
+    return bad_sample_data(tmp, "scene0_CAM_FRONT_0", "filename", "../../outside/x.jpg")
 
 
 @case(
@@ -478,9 +505,9 @@ def _(tmp: Path, world: World) -> Call:
     "missing nuScenes table ego_pose.json",
 )
 def _(tmp: Path, world: World) -> Call:
-    root, _ = nuscenes(tmp)
-    (root / "v1.0-mini" / "ego_pose.json").unlink()
-    return Call(list_argv("nuscenes", root), str(root / "v1.0-mini" / "ego_pose.json"))
+    call = nuscenes_call(tmp, "ego_pose")
+    Path(call.names).unlink()
+    return call
 
 
 @case("nuscenes-quaternion", "loaders", "a nuScenes ego_pose rotation of norm 1.01", "CameraError", "norm")
@@ -489,8 +516,7 @@ def _(tmp: Path, world: World) -> Call:
         pose = nu.record("ego_pose", "ego_scene0_CAM_BACK_1")
         pose["rotation"] = [v * 1.01 for v in pose["rotation"]]
 
-    root, _ = nuscenes(tmp, edit)
-    return Call(list_argv("nuscenes", root), str(root / "v1.0-mini" / "ego_pose.json"))
+    return nuscenes_call(tmp, "ego_pose", edit)
 
 
 @case("empty-split-file", "loaders", "an empty EUVS test_set.txt", "DatasetError", "split file is empty")
@@ -586,14 +612,12 @@ def _(tmp: Path, world: World) -> Call:
     "disagrees with the set files",
 )
 def _(tmp: Path, world: World) -> Call:
-    root, scene = street_copy(tmp, world)
-    edit_json(
-        scene / "scene.json",
-        lambda meta: meta["frames"][0].__setitem__(
-            "split", "train" if meta["frames"][0]["split"] == "test" else "test"
-        ),
-    )
-    return Call(prepare_argv(root, tmp / "out"), str(scene / "scene.json"))
+
+    def flip_split(meta):  # type: ignore[no-untyped-def]
+        frame = meta["frames"][0]
+        frame["split"] = "train" if frame["split"] == "test" else "test"
+
+    return broken_street(tmp, world, "scene.json", lambda scene_json: edit_json(scene_json, flip_split))
 
 
 @case(
@@ -645,11 +669,10 @@ def _(tmp: Path, world: World) -> Call:
     "header declares",
 )
 def _(tmp: Path, world: World) -> Call:
-    root, scene = street_copy(tmp, world)
-    fit = scene / "fits" / "lane0.ply"
-    data = fit.read_bytes()
-    fit.write_bytes(data[: len(data) - 4 * 62])  # one vertex short
-    return Call(prepare_argv(root, tmp / "out"), str(fit))
+    # one vertex (62 float32 properties) short
+    return broken_street(
+        tmp, world, "fits/lane0.ply", lambda fit: fit.write_bytes(fit.read_bytes()[: -4 * 62])
+    )
 
 
 @case("ply-nan", "ply", "a 3DGS PLY with a NaN mean", "SetDiffBenchError", "NaN")
@@ -724,10 +747,7 @@ def _(tmp: Path, world: World) -> Call:
     "packet file missing",
 )
 def _(tmp: Path, world: World) -> Call:
-    store = copy(world.store, tmp / "store")
-    victim = first_packet(store) / "ref_00_rgb.png"
-    victim.unlink()
-    return Call(run_argv(store, tmp / "out"), str(victim))
+    return broken_packet(tmp, world, "ref_00_rgb.png", Path.unlink)
 
 
 @case(
@@ -738,10 +758,7 @@ def _(tmp: Path, world: World) -> Call:
     "SHA-256 mismatch",
 )
 def _(tmp: Path, world: World) -> Call:
-    store = copy(world.store, tmp / "store")
-    victim = first_packet(store) / "tgt_00_gt.png"
-    png_of_size(victim, 48, 32)
-    return Call(run_argv(store, tmp / "out"), str(victim))
+    return broken_packet(tmp, world, "tgt_00_gt.png", lambda png: png_of_size(png, 48, 32))
 
 
 @case(
@@ -752,12 +769,14 @@ def _(tmp: Path, world: World) -> Call:
     "expected 4 channels, found 3",
 )
 def _(tmp: Path, world: World) -> Call:
-    store = copy(world.store, tmp / "store")
-    packet = first_packet(store)
-    victim = packet / "ref_00_cmap.exr"
-    write_exr(victim, np.zeros((32, 48, 3), np.float32), ("X", "Y", "Z"))
-    rehash(store, packet)
-    return Call(run_argv(store, tmp / "out"), str(victim))
+    three_channels = np.zeros((32, 48, 3), np.float32)
+    return broken_packet(
+        tmp,
+        world,
+        "ref_00_cmap.exr",
+        lambda exr: write_exr(exr, three_channels, ("X", "Y", "Z")),
+        rehashed=True,
+    )
 
 
 @case(
@@ -768,12 +787,7 @@ def _(tmp: Path, world: World) -> Call:
     "image is 40x30 (WxH) but its camera is 48x32",
 )
 def _(tmp: Path, world: World) -> Call:
-    store = copy(world.store, tmp / "store")
-    packet = first_packet(store)
-    victim = packet / "ref_01_rgb.png"
-    png_of_size(victim, 40, 30)
-    rehash(store, packet)
-    return Call(run_argv(store, tmp / "out"), str(victim))
+    return broken_packet(tmp, world, "ref_01_rgb.png", lambda png: png_of_size(png, 40, 30), rehashed=True)
 
 
 @case(
@@ -892,20 +906,7 @@ def _(tmp: Path, world: World) -> Call:
 )
 def _(tmp: Path, world: World) -> Call:
     run = copy(world.setdiff_run, tmp / "run")
-    return Call(
-        [
-            "train",
-            "--config",
-            "tiny_difix",
-            "--packets",
-            str(world.train_store),
-            "--out",
-            str(run),
-            "--cpu",
-            "--no-progress",
-        ],
-        str(run / "checkpoints" / "step-00000001"),
-    )
+    return Call(resume_argv("tiny_difix", world, run), str(run / "checkpoints" / "step-00000001"))
 
 
 @case(
@@ -996,20 +997,7 @@ def _(tmp: Path, world: World) -> Call:
     run = copy(world.setdiff_run, tmp / "run")
     optimizer = run / "checkpoints" / "step-00000001" / "optimizer.pt"
     torch.save({"state": Exploit(tmp / PWNED)}, optimizer)
-    return Call(
-        [
-            "train",
-            "--config",
-            "tiny_setdiff",
-            "--packets",
-            str(world.train_store),
-            "--out",
-            str(run),
-            "--cpu",
-            "--no-progress",
-        ],
-        str(optimizer),
-    )
+    return Call(resume_argv("tiny_setdiff", world, run), str(optimizer))
 
 
 # ====================================================================== command-line arguments
