@@ -39,7 +39,8 @@ from tests.loaders.loader_fixtures import (
     write_image,
     write_transforms,
 )
-from tests.reliability.world import STREET_SCENE, World, copy, edit_rows, first_packet, rehash
+from tests.packets.packet_fixtures import prepare_argv as synthetic_prepare_argv
+from tests.reliability.world import STREET_SCENE, World, copy, edit_rows, first_packet, rehash, run_argv
 
 #: Marker a malicious pickle would create if it were ever executed (checked absent after each case).
 PWNED = "PWNED"
@@ -86,38 +87,8 @@ def case(id: str, area: str, input: str, error: str, problem: str):
 
 # ---------------------------------------------------------------------- helpers
 def prepare_argv(root: Path, out: Path, *extra: str, fits: Path | None = None) -> list[str]:
-    return [
-        "prepare",
-        "synthetic",
-        "--root",
-        str(root),
-        "--fits",
-        str(fits or root),
-        "--out",
-        str(out),
-        "--quiet",
-        *extra,
-    ]
-
-
-def run_argv(store: Path, out: Path, *extra: str, method: str = "identity") -> list[str]:
-    return [
-        "run",
-        "--method",
-        method,
-        "--packets",
-        str(store),
-        "--out",
-        str(out),
-        "--device",
-        "cpu",
-        "--no-progress",
-        "--metrics",
-        "psnr",
-        "--warp-cache",
-        "none",
-        *extra,
-    ]
+    """Quiet ``prepare synthetic`` (see :func:`tests.packets.packet_fixtures.prepare_argv`)."""
+    return synthetic_prepare_argv(root, out, "--quiet", *extra, fits=fits)
 
 
 def street_copy(tmp: Path, world: World) -> tuple[Path, Path]:
