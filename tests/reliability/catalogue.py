@@ -25,10 +25,10 @@ import numpy as np
 import pyarrow.parquet as pq
 import torch
 
-from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.gaussians.ply import write_ply
 from setdiff_bench.io.images import write_exr
 from setdiff_bench.packets.index import INDEX_FILE
+from tests.gaussians.gaussian_fixtures import random_model
 from tests.loaders.loader_fixtures import (
     build_nuscenes,
     intrinsics,
@@ -603,19 +603,8 @@ def _(tmp: Path, world: World) -> Call:
 
 
 # ====================================================================== PLY
-def small_model(n: int = 20, degree: int = 1) -> GaussianModel:
-    g = torch.Generator().manual_seed(3)
-    return GaussianModel(
-        torch.randn(n, 3, generator=g),
-        torch.randn(n, 4, generator=g),
-        torch.randn(n, 3, generator=g),
-        torch.randn(n, generator=g),
-        torch.randn(n, (degree + 1) ** 2, 3, generator=g),
-    )
-
-
 def ply_bytes(tmp: Path) -> bytes:
-    write_ply(tmp / "model.ply", small_model())
+    write_ply(tmp / "model.ply", random_model(degree=1))
     return (tmp / "model.ply").read_bytes()
 
 
@@ -648,7 +637,7 @@ def _(tmp: Path, world: World) -> Call:
 
 @case("ply-nan", "ply", "a 3DGS PLY with a NaN mean", "SetDiffBenchError", "NaN")
 def _(tmp: Path, world: World) -> Call:
-    model = small_model(degree=0)
+    model = random_model(degree=0)
     model.means[3, 1] = float("nan")
     bad = tmp / "nan.ply"
     write_ply(bad, model)
