@@ -111,10 +111,15 @@ def _rejected(root: Path, error: type[SetDiffBenchError], path: Path, problem: s
     assert problem in text, text
 
 
-def test_empty_test_set(euvs_root):
+@pytest.mark.parametrize(
+    ("text", "problem"),
+    [("\n\n", "empty"), ("trav_99_channel_1_img_001.jpg\n", "no pose")],
+    ids=["empty", "name_without_pose"],
+)
+def test_bad_test_set(euvs_root, text, problem):
     root, fixture = euvs_root
-    (fixture.folder / "test_set.txt").write_text("\n\n")
-    _rejected(root, DatasetError, fixture.folder / "test_set.txt", "empty")
+    (fixture.folder / "test_set.txt").write_text(text)
+    _rejected(root, DatasetError, fixture.folder / "test_set.txt", problem)
 
 
 def test_duplicate_frame_name_in_test_set(euvs_root):
@@ -146,12 +151,6 @@ def test_missing_image_file(euvs_root):
     missing = fixture.folder / "images" / "trav_6_channel_2_img_001.jpg"
     missing.unlink()
     _rejected(root, ImageError, missing, "not found")
-
-
-def test_test_name_without_pose(euvs_root):
-    root, fixture = euvs_root
-    (fixture.folder / "test_set.txt").write_text("trav_99_channel_1_img_001.jpg\n")
-    _rejected(root, DatasetError, fixture.folder / "test_set.txt", "no pose")
 
 
 def test_gt_pose_quaternion_norm_off(euvs_root):
