@@ -83,12 +83,6 @@ def fuzz(strategy: st.SearchStrategy[Any], check: Callable[[Any], None], example
     return seen
 
 
-#: Each parser's two runs: the default one, and the slow suite's.
-RUNS = pytest.mark.parametrize(
-    "slow", [pytest.param(False, id="default"), pytest.param(True, marks=pytest.mark.slow, id="10k")]
-)
-
-
 def fuzz_all(strategy: st.SearchStrategy[Any], check: Callable[[Any], None], *, slow: bool) -> None:
     """:func:`fuzz` with the run's number of examples (:data:`SLOW_EXAMPLES` when ``slow``, else
     :data:`DEFAULT_EXAMPLES`), asserting hypothesis generated that many."""
@@ -294,7 +288,9 @@ def check_nuscenes(root: Path, tables: dict[str, list[dict]]) -> Callable[[tuple
     ],
     ids=["ply", "colmap_text", "transforms_json", "nuscenes_tables"],
 )
-@RUNS
+@pytest.mark.parametrize(
+    "slow", [pytest.param(False, id="default"), pytest.param(True, marks=pytest.mark.slow, id="10k")]
+)
 def test_fuzz(case: str, fuzzed, slow: bool, request: pytest.FixtureRequest) -> None:  # type: ignore[no-untyped-def]
     """A parser's inputs (its module fixture ``case`` → strategy and check): only ``SetDiffBenchError``
     escapes, with a one-line message."""
