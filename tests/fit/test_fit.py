@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import pytest
@@ -12,6 +14,7 @@ import torch
 from setdiff_bench.errors import CheckpointError, UsageError
 from setdiff_bench.gaussians.fit import (
     FitConfig,
+    FitResult,
     fit_gaussians,
     initial_model,
     photometric_loss,
@@ -21,6 +24,14 @@ from setdiff_bench.gaussians.fit_data import FitView
 from setdiff_bench.gaussians.ply import read_ply, write_ply
 from setdiff_bench.gaussians.render import render
 from setdiff_bench.synthetic.presets import get_preset
+from setdiff_bench.types import Scene
+
+
+def _fit(scene: Scene, views: Sequence[FitView], config: FitConfig, **options: Any) -> FitResult:
+    """``fit_gaussians`` of ``views`` from ``scene``'s sparse points and colours, without a progress bar."""
+    return fit_gaussians(
+        views, config, points=scene.points3d, colors=scene.points_rgb, progress=False, **options
+    )
 
 
 def masked_l1(model, views) -> float:
@@ -39,9 +50,7 @@ def test_tiny_preset_fit_halves_the_l1_loss(tiny_scene, tiny_views, tmp_path):
     config = get_preset("tiny").fit
     assert config.iterations <= 60
     start = initial_model(tiny_views, tiny_scene.points3d, tiny_scene.points_rgb, config)
-    result = fit_gaussians(
-        tiny_views, config, points=tiny_scene.points3d, colors=tiny_scene.points_rgb, progress=False
-    )
+    result = _fit(tiny_scene, tiny_views, config)
     before, after = masked_l1(start, tiny_views), masked_l1(result.model, tiny_views)
     assert after <= 0.5 * before, (before, after)
     assert len(result.losses) == config.iterations and np.isfinite(result.losses).all()
@@ -95,22 +104,11 @@ def _short_config() -> FitConfig:
 
 def test_resume_gives_the_uninterrupted_result(tiny_scene, tiny_views, tmp_path):
     config = _short_config()
-    points, colors = tiny_scene.points3d, tiny_scene.points_rgb
-    straight = fit_gaussians(tiny_views, config, points=points, colors=colors, progress=False)
+    straight = _fit(tiny_scene, tiny_views, config)
     assert straight.events and any(e["split"] + e["cloned"] > 0 for e in straight.events)
-    partial = fit_gaussians(
-        tiny_views,
-        config,
-        points=points,
-        colors=colors,
-        progress=False,
-        checkpoint_dir=tmp_path / "ckpt",
-        stop_after=7,
-    )
+    partial = _fit(tiny_scene, tiny_views, config, checkpoint_dir=tmp_path / "ckpt", stop_after=7)
     assert len(partial.losses) == 7
-    resumed = fit_gaussians(
-        tiny_views, config, points=points, colors=colors, progress=False, checkpoint_dir=tmp_path / "ckpt"
-    )
+    resumed = _fit(tiny_scene, tiny_views, config, checkpoint_dir=tmp_path / "ckpt")
     assert resumed.start_iteration == 8 and len(resumed.losses) == 9
     assert partial.losses + resumed.losses == straight.losses
     for name, value in straight.model.tensors().items():
@@ -119,43 +117,16 @@ def test_resume_gives_the_uninterrupted_result(tiny_scene, tiny_views, tmp_path)
 
 def test_checkpoint_of_another_configuration_is_refused(tiny_scene, tiny_views, tmp_path):
     config = _short_config()
-    fit_gaussians(
-        tiny_views[:2],
-        config,
-        points=tiny_scene.points3d,
-        colors=tiny_scene.points_rgb,
-        progress=False,
-        checkpoint_dir=tmp_path,
-        stop_after=2,
-    )
+    _fit(tiny_scene, tiny_views[:2], config, checkpoint_dir=tmp_path, stop_after=2)
     with pytest.raises(CheckpointError, match="different fit configuration"):
-        fit_gaussians(
-            tiny_views[:2],
-            dataclasses.replace(config, lr_opacity=0.01),
-            points=tiny_scene.points3d,
-            colors=tiny_scene.points_rgb,
-            progress=False,
-            checkpoint_dir=tmp_path,
+        _fit(
+            tiny_scene, tiny_views[:2], dataclasses.replace(config, lr_opacity=0.01), checkpoint_dir=tmp_path
         )
     with pytest.raises(CheckpointError, match="different training frames"):
-        fit_gaussians(
-            tiny_views[1:],
-            config,
-            points=tiny_scene.points3d,
-            colors=tiny_scene.points_rgb,
-            progress=False,
-            checkpoint_dir=tmp_path,
-        )
+        _fit(tiny_scene, tiny_views[1:], config, checkpoint_dir=tmp_path)
     (tmp_path / "fit_state.safetensors").write_bytes(b"garbage")
     with pytest.raises(CheckpointError, match="does not match"):
-        fit_gaussians(
-            tiny_views[:2],
-            config,
-            points=tiny_scene.points3d,
-            colors=tiny_scene.points_rgb,
-            progress=False,
-            checkpoint_dir=tmp_path,
-        )
+        _fit(tiny_scene, tiny_views[:2], config, checkpoint_dir=tmp_path)
 
 
 def flat_json(config: FitConfig) -> dict[str, object]:
@@ -182,24 +153,13 @@ def test_fit_config_json_round_trips_in_both_shapes():
 
 def test_checkpoint_with_the_old_flat_configuration_resumes(tiny_scene, tiny_views, tmp_path):
     config = _short_config()
-    points, colors = tiny_scene.points3d, tiny_scene.points_rgb
-    straight = fit_gaussians(tiny_views[:3], config, points=points, colors=colors, progress=False)
-    fit_gaussians(
-        tiny_views[:3],
-        config,
-        points=points,
-        colors=colors,
-        progress=False,
-        checkpoint_dir=tmp_path,
-        stop_after=5,
-    )
+    straight = _fit(tiny_scene, tiny_views[:3], config)
+    _fit(tiny_scene, tiny_views[:3], config, checkpoint_dir=tmp_path, stop_after=5)
     state_path = tmp_path / "fit_state.json"
     state = json.loads(state_path.read_text())
     state["config"] = flat_json(config)
     state_path.write_text(json.dumps(state))
-    resumed = fit_gaussians(
-        tiny_views[:3], config, points=points, colors=colors, progress=False, checkpoint_dir=tmp_path
-    )
+    resumed = _fit(tiny_scene, tiny_views[:3], config, checkpoint_dir=tmp_path)
     assert resumed.start_iteration == 6
     for name, value in straight.model.tensors().items():
         assert torch.equal(value, resumed.model.tensors()[name]), name

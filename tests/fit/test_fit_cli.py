@@ -3,30 +3,23 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 from setdiff_bench.cli.main import main
 from setdiff_bench.gaussians.ply import read_ply
 
 
+def fit_argv(scene: Path, out: Path, *extra: str, checkpoint: Path | None = None) -> list[str]:
+    """``setdiff-bench fit`` arguments fitting ``scene`` into ``out`` without a progress bar, then ``extra``;
+    with ``checkpoint``, a CPU fit checkpointing there."""
+    on_cpu = ["--device", "cpu", "--checkpoint", str(checkpoint)] if checkpoint else []
+    return ["fit", "--scene", str(scene), "--out", str(out), "--no-progress", *on_cpu, *extra]
+
+
 def test_fit_writes_a_standard_ply(tiny_scene_dir, tmp_path, capsys):
     out = tmp_path / "model.ply"
     code = main(
-        [
-            "fit",
-            "--scene",
-            str(tiny_scene_dir),
-            "--out",
-            str(out),
-            "--preset",
-            "tiny",
-            "--iterations",
-            "4",
-            "--device",
-            "cpu",
-            "--no-progress",
-            "--checkpoint",
-            str(tmp_path / "ckpt"),
-        ]
+        fit_argv(tiny_scene_dir, out, "--preset", "tiny", "--iterations", "4", checkpoint=tmp_path / "ckpt")
     )
     assert code == 0
     model = read_ply(out)
@@ -41,45 +34,25 @@ def test_fit_writes_a_standard_ply(tiny_scene_dir, tmp_path, capsys):
 def test_fit_on_an_explicit_frame_list(tiny_scene_dir, tmp_path):
     frames = "lane1_front_000.png,lane1_front_001.png"
     code = main(
-        [
-            "fit",
-            "--scene",
-            str(tiny_scene_dir),
-            "--out",
-            str(tmp_path / "m.ply"),
+        fit_argv(
+            tiny_scene_dir,
+            tmp_path / "m.ply",
             "--frames",
             frames,
             "--iterations",
             "2",
-            "--device",
-            "cpu",
-            "--no-progress",
-            "--checkpoint",
-            str(tmp_path / "c"),
-        ]
+            checkpoint=tmp_path / "c",
+        )
     )
     assert code == 0
     assert json.loads((tmp_path / "c" / "fit_state.json").read_text())["views"] == frames.split(",")
 
 
 def test_fit_errors_are_one_line(tiny_scene_dir, tmp_path, capsys):
-    code = main(
-        ["fit", "--scene", str(tmp_path / "missing"), "--out", str(tmp_path / "m.ply"), "--no-progress"]
-    )
+    code = main(fit_argv(tmp_path / "missing", tmp_path / "m.ply"))
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and "missing" in err
-    code = main(
-        [
-            "fit",
-            "--scene",
-            str(tiny_scene_dir),
-            "--out",
-            str(tmp_path / "m.ply"),
-            "--frames",
-            "nope.png",
-            "--no-progress",
-        ]
-    )
+    code = main(fit_argv(tiny_scene_dir, tmp_path / "m.ply", "--frames", "nope.png"))
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and "nope.png" in err
     assert not (tmp_path / "m.ply").exists()

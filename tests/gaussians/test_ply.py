@@ -9,19 +9,8 @@ import pytest
 import torch
 
 from setdiff_bench.errors import PlyError
-from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.gaussians.ply import read_ply, write_ply
-
-
-def random_model(n: int = 20, degree: int = 3) -> GaussianModel:
-    g = torch.Generator().manual_seed(3)
-    return GaussianModel(
-        torch.randn(n, 3, generator=g),
-        torch.randn(n, 4, generator=g),
-        torch.randn(n, 3, generator=g),
-        torch.randn(n, generator=g),
-        torch.randn(n, (degree + 1) ** 2, 3, generator=g),
-    )
+from tests.gaussians.gaussian_fixtures import ply_header, ply_property_names, random_model
 
 
 @pytest.mark.parametrize("degree", [0, 1, 3])
@@ -37,16 +26,12 @@ def test_round_trip_bit_exact(tmp_path: Path, degree: int, normals: bool) -> Non
 def inria_ply_bytes(xyz, f_dc, f_rest, opacity, scale, rot) -> bytes:
     """The layout of graphdeco-inria gaussian_model.save_ply, written independently with numpy."""
     n = xyz.shape[0]
-    names = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
-    names += [f"f_rest_{i}" for i in range(f_rest.shape[1])]
-    names += ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+    names = ply_property_names(f_rest.shape[1], normals=True)
     dtype = [(name, "<f4") for name in names]
     table = np.concatenate([xyz, np.zeros_like(xyz), f_dc, f_rest, opacity, scale, rot], axis=1)
     elements = np.empty(n, dtype=dtype)
     elements[:] = list(map(tuple, table))
-    header = "ply\nformat binary_little_endian 1.0\n" + f"element vertex {n}\n"
-    header += "".join(f"property float {name}\n" for name in names) + "end_header\n"
-    return header.encode() + elements.tobytes()
+    return ply_header("binary_little_endian", n, names).encode() + elements.tobytes()
 
 
 def test_reads_inria_layout_written_by_hand(tmp_path: Path) -> None:
@@ -72,25 +57,9 @@ def test_reads_inria_layout_written_by_hand(tmp_path: Path) -> None:
 
 
 def test_reads_ascii(tmp_path: Path) -> None:
-    names = [
-        "x",
-        "y",
-        "z",
-        "f_dc_0",
-        "f_dc_1",
-        "f_dc_2",
-        "opacity",
-        "scale_0",
-        "scale_1",
-        "scale_2",
-        "rot_0",
-        "rot_1",
-        "rot_2",
-        "rot_3",
-    ]
-    header = "ply\nformat ascii 1.0\nelement vertex 2\n" + "".join(f"property float {n}\n" for n in names)
+    header = ply_header("ascii", 2, ply_property_names())
     rows = ["1 2 3 0.1 0.2 0.3 -1 -2 -2 -2 1 0 0 0", "4 5 6 0 0 0 2 -1 -1 -1 0 1 0 0"]
-    (tmp_path / "a.ply").write_text(header + "end_header\n" + "\n".join(rows) + "\n")
+    (tmp_path / "a.ply").write_text(header + "\n".join(rows) + "\n")
     model = read_ply(tmp_path / "a.ply")
     assert model.means.tolist() == [[1, 2, 3], [4, 5, 6]]
     assert model.sh_degree == 0

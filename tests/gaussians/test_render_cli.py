@@ -39,18 +39,29 @@ def write_model(folder: Path, *, radial: float | None = None) -> None:
     rec.write_binary(str(folder))
 
 
-def test_render_verb_writes_views_and_resumes(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    write_model(tmp_path / "sparse")
-    write_ply(tmp_path / "scene.ply", random_scene(200, seed=1))
-    args = [
+def write_inputs(tmp_path: Path, gaussians: int, *, radial: float | None = None) -> None:
+    """``tmp_path/sparse`` (:func:`write_model`) and ``tmp_path/scene.ply`` (a random scene of ``gaussians``)."""
+    write_model(tmp_path / "sparse", radial=radial)
+    write_ply(tmp_path / "scene.ply", random_scene(gaussians, seed=1))
+
+
+def render_args(tmp_path: Path, *extra: str, ply: str = "scene.ply", out: str = "out") -> list[str]:
+    """``render`` arguments: ``tmp_path/ply`` seen by the model ``tmp_path/sparse``, into ``tmp_path/out``."""
+    return [
         "render",
         "--ply",
-        str(tmp_path / "scene.ply"),
+        str(tmp_path / ply),
         "--colmap",
         str(tmp_path / "sparse"),
         "--out",
-        str(tmp_path / "out"),
+        str(tmp_path / out),
+        *extra,
     ]
+
+
+def test_render_verb_writes_views_and_resumes(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    write_inputs(tmp_path, 200)
+    args = render_args(tmp_path)
     assert main(args) == 0
     for view in ("view_1", "view_2"):
         for name in ("rgb.png", "cmap.exr", "depth.exr", "alpha.png"):
@@ -70,36 +81,13 @@ def test_render_verb_writes_views_and_resumes(tmp_path: Path, capsys: pytest.Cap
 
 
 def test_render_verb_bad_input_is_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    write_model(tmp_path / "sparse")
-    write_ply(tmp_path / "scene.ply", random_scene(10, seed=1))
-    code = main(
-        [
-            "render",
-            "--ply",
-            str(tmp_path / "scene.ply"),
-            "--colmap",
-            str(tmp_path / "sparse"),
-            "--out",
-            str(tmp_path / "out"),
-            "--images",
-            "nope.jpg",
-        ]
-    )
+    write_inputs(tmp_path, 10)
+    code = main(render_args(tmp_path, "--images", "nope.jpg"))
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "nope.jpg" in err[0] and "sparse" in err[0]
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
     (tmp_path / "broken.ply").write_bytes(b"ply\nformat ascii 1.0\n")
-    code = main(
-        [
-            "render",
-            "--ply",
-            str(tmp_path / "broken.ply"),
-            "--colmap",
-            str(tmp_path / "sparse"),
-            "--out",
-            str(tmp_path / "out2"),
-        ]
-    )
+    code = main(render_args(tmp_path, ply="broken.ply", out="out2"))
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "broken.ply" in err[0]
 
@@ -108,24 +96,8 @@ def test_distorted_camera_is_rendered_as_its_pinhole_and_said_so(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """Regression: a SIMPLE_RADIAL camera was rendered as a pinhole image without a word."""
-    write_model(tmp_path / "sparse", radial=0.08)
-    write_ply(tmp_path / "scene.ply", random_scene(200, seed=1))
-    assert (
-        main(
-            [
-                "render",
-                "--ply",
-                str(tmp_path / "scene.ply"),
-                "--colmap",
-                str(tmp_path / "sparse"),
-                "--out",
-                str(tmp_path / "out"),
-                "--downscale",
-                "2",
-            ]
-        )
-        == 0
-    )
+    write_inputs(tmp_path, 200, radial=0.08)
+    assert main(render_args(tmp_path, "--downscale", "2")) == 0
     assert "2 of 2 camera(s) have lens distortion" in capsys.readouterr().err
     rgb = read_image_raw(tmp_path / "out" / "view_1" / "rgb.png", "uint8")
     assert rgb.shape[:2] == (15, 20)  # --downscale 2 of 40x30

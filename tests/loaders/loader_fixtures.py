@@ -318,6 +318,16 @@ NU_OFFSETS_US = {"CAM_FRONT": 0, "CAM_FRONT_LEFT": 12_500, "CAM_BACK": 37_500}
 EGO_FROM_FORWARD_CAMERA = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 
 
+def nuscenes_tables(logfile: str, vehicle: str, location: str) -> dict[str, list[dict]]:
+    """The seven nuScenes tables the loader reads, empty but for the one ``log0`` record."""
+    tables: dict[str, list[dict]] = {
+        k: [] for k in ("log", "scene", "sample", "sample_data", "sensor", "calibrated_sensor", "ego_pose")
+    }
+    log = {"token": "log0", "logfile": logfile, "vehicle": vehicle, "date_captured": "2018-07-24"}
+    tables["log"].append({**log, "location": location})
+    return tables
+
+
 @dataclass
 class NuFrame:
     """What the test knows about one camera sample_data: its points and where they must appear."""
@@ -348,18 +358,7 @@ class NuScenesFixture:
 def build_nuscenes(root: Path, rng: np.random.Generator, *, sweeps_between: int = 2) -> NuScenesFixture:
     """Two scenes of one log; three cameras (keyframes at 2 Hz + sweeps) and a lidar; moving ego."""
     K = intrinsics(fx=20.0, fy=20.0, cx=16.0, cy=12.0)
-    tables: dict[str, list[dict]] = {
-        k: [] for k in ("log", "scene", "sample", "sample_data", "sensor", "calibrated_sensor", "ego_pose")
-    }
-    tables["log"].append(
-        {
-            "token": "log0",
-            "logfile": "n015-2018-07-24-11-22-45+0800",
-            "vehicle": "n015",
-            "date_captured": "2018-07-24",
-            "location": "singapore-onenorth",
-        }
-    )
+    tables = nuscenes_tables("n015-2018-07-24-11-22-45+0800", "n015", "singapore-onenorth")
     calib: dict[str, tuple[np.ndarray, np.ndarray, str]] = {}
     for channel in [*NU_CAMERAS, "LIDAR_TOP"]:
         is_camera = channel != "LIDAR_TOP"

@@ -101,36 +101,41 @@ def test_frames_outside_set_files_train_and_mask_optional(tmp_path):
 
 
 # ---------------------------------------------------------------------- bad input, one test per case
-def _one_line(error: SetDiffBenchError, path: Path, problem: str) -> None:
-    text = str(error)
+def _rejected(root: Path, error: type[SetDiffBenchError], path: Path, problem: str, **options: str) -> None:
+    """Loading ``root`` raises ``error``: one line naming ``path`` and ``problem``."""
+    with pytest.raises(error) as info:
+        load_scenes("euvs", root, **options)
+    text = str(info.value)
     assert "\n" not in text
     assert str(path) in text, text
     assert problem in text, text
 
 
-def test_empty_test_set(euvs_root):
+@pytest.mark.parametrize(
+    ("text", "problem"),
+    [("\n\n", "empty"), ("trav_99_channel_1_img_001.jpg\n", "no pose")],
+    ids=["empty", "name_without_pose"],
+)
+def test_bad_test_set(euvs_root, text, problem):
     root, fixture = euvs_root
-    (fixture.folder / "test_set.txt").write_text("\n\n")
-    with pytest.raises(DatasetError) as info:
-        load_scenes("euvs", root)
-    _one_line(info.value, fixture.folder / "test_set.txt", "empty")
+    (fixture.folder / "test_set.txt").write_text(text)
+    _rejected(root, DatasetError, fixture.folder / "test_set.txt", problem)
 
 
 def test_duplicate_frame_name_in_test_set(euvs_root):
     root, fixture = euvs_root
     (fixture.folder / "test_set.txt").write_text("\n".join([*fixture.test, fixture.test[0]]) + "\n")
-    with pytest.raises(DatasetError) as info:
-        load_scenes("euvs", root)
-    _one_line(info.value, fixture.folder / "test_set.txt", "duplicate frame name")
+    _rejected(root, DatasetError, fixture.folder / "test_set.txt", "duplicate frame name")
 
 
 def test_test_image_without_mask(euvs_root):
     root, fixture = euvs_root
     (fixture.folder / "dynamic_masks" / "trav_11_channel_1_img_002.png").unlink()
-    with pytest.raises(DatasetError) as info:
-        load_scenes("euvs", root)
-    _one_line(
-        info.value, fixture.folder / "dynamic_masks", "has no dynamic mask 'trav_11_channel_1_img_002.png'"
+    _rejected(
+        root,
+        DatasetError,
+        fixture.folder / "dynamic_masks",
+        "has no dynamic mask 'trav_11_channel_1_img_002.png'",
     )
     load_scenes("euvs", root, masks="optional")  # explicitly optional: accepted
 
@@ -138,26 +143,14 @@ def test_test_image_without_mask(euvs_root):
 def test_image_size_differs_from_camera(euvs_root):
     root, fixture = euvs_root
     bad = write_image(fixture.folder / "images" / "trav_6_channel_1_img_002.jpg", 33, 24)
-    with pytest.raises(ImageError) as info:
-        load_scenes("euvs", root)
-    _one_line(info.value, bad, "33x24")
+    _rejected(root, ImageError, bad, "33x24")
 
 
 def test_missing_image_file(euvs_root):
     root, fixture = euvs_root
     missing = fixture.folder / "images" / "trav_6_channel_2_img_001.jpg"
     missing.unlink()
-    with pytest.raises(ImageError) as info:
-        load_scenes("euvs", root)
-    _one_line(info.value, missing, "not found")
-
-
-def test_test_name_without_pose(euvs_root):
-    root, fixture = euvs_root
-    (fixture.folder / "test_set.txt").write_text("trav_99_channel_1_img_001.jpg\n")
-    with pytest.raises(DatasetError) as info:
-        load_scenes("euvs", root)
-    _one_line(info.value, fixture.folder / "test_set.txt", "no pose")
+    _rejected(root, ImageError, missing, "not found")
 
 
 def test_gt_pose_quaternion_norm_off(euvs_root):
@@ -168,15 +161,17 @@ def test_gt_pose_quaternion_norm_off(euvs_root):
     fields[1:5] = [repr(float(v) * 1.002) for v in fields[1:5]]
     lines[0] = " ".join(fields)
     path.write_text("\n".join(lines))
-    with pytest.raises(CameraError) as info:
-        load_scenes("euvs", root)
-    _one_line(info.value, path, "norm")
+    _rejected(root, CameraError, path, "norm")
 
 
 def test_image_name_escaping_the_dataset(tmp_path):
     rng = np.random.default_rng(14)
     names = ("a.jpg", "../escape.jpg")
     write_euvs_scene(tmp_path / "s", rng, names=names, test=("a.jpg",), masks=False, gt_poses=False)
-    with pytest.raises(DatasetError) as info:
-        load_scenes("euvs", tmp_path, masks="none")
-    _one_line(info.value, tmp_path / "s" / "sparse" / "0" / "images.bin", "escapes the dataset root")
+    _rejected(
+        tmp_path,
+        DatasetError,
+        tmp_path / "s" / "sparse" / "0" / "images.bin",
+        "escapes the dataset root",
+        masks="none",
+    )

@@ -241,6 +241,22 @@ def write_dataset(root: Path, seeds: tuple[int, ...] = (11, 12, 13)) -> dict[str
     return {f"street_{i:02d}": write_scene(root / f"street_{i:02d}", seed) for i, seed in enumerate(seeds)}
 
 
+def prepare_argv(root: Path, out: Path, *extra: str, fits: Path | None = None) -> list[str]:
+    """``setdiff-bench`` arguments preparing the synthetic dataset ``root`` into ``out`` (fits found under
+    ``fits``, by default ``root`` itself), then ``extra``."""
+    return [
+        "prepare",
+        "synthetic",
+        "--root",
+        str(root),
+        "--fits",
+        str(fits or root),
+        "--out",
+        str(out),
+        *extra,
+    ]
+
+
 def tree_bytes(root: Path) -> dict[str, bytes]:
     """Every file under ``root`` (relative POSIX path → bytes)."""
     return {p.relative_to(root).as_posix(): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}

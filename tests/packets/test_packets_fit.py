@@ -11,6 +11,7 @@ import pytest
 from setdiff_bench.gaussians.ply import read_ply
 from setdiff_bench.packets.prepare import prepare
 from setdiff_bench.packets.store import PacketStore
+from tests.packets.packet_fixtures import prepare_argv
 
 
 def test_fit_mode_trains_once_and_reuses_the_fit(street, tmp_path):
@@ -32,7 +33,7 @@ def test_synth_tiny_preset_end_to_end(tmp_path):
     data, out = tmp_path / "data", tmp_path / "packets"
     for command in (
         ["synth", "--preset", "tiny", "--out", str(data), "--no-progress"],
-        ["prepare", "synthetic", "--root", str(data), "--fits", str(data), "--out", str(out), "--quiet"],
+        prepare_argv(data, out, "--quiet"),
     ):
         done = subprocess.run(
             [sys.executable, "-m", "setdiff_bench", *command], capture_output=True, text=True

@@ -16,7 +16,7 @@ import pytest
 from setdiff_bench.packets.index import INDEX_FILE, PACKETS_DIR
 from setdiff_bench.packets.prepare import prepare
 from setdiff_bench.packets.shards import Shard
-from tests.packets.packet_fixtures import tree_bytes
+from tests.packets.packet_fixtures import prepare_argv, tree_bytes
 
 
 def snapshot(root: Path) -> dict[str, tuple[int, int, bytes]]:
@@ -50,21 +50,7 @@ def test_second_run_does_nothing(prepared, street):
 
 
 def _cli(root: Path, out: Path, *extra: str) -> subprocess.Popen:
-    command = [
-        sys.executable,
-        "-m",
-        "setdiff_bench",
-        "prepare",
-        "synthetic",
-        "--root",
-        str(root),
-        "--fits",
-        str(root),
-        "--out",
-        str(out),
-        "--quiet",
-        *extra,
-    ]
+    command = [sys.executable, "-m", "setdiff_bench", *prepare_argv(root, out, "--quiet", *extra)]
     return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
 
 
@@ -126,19 +112,6 @@ def test_bad_shard_is_one_line_error(shard, street, tmp_path, capsys):
     from setdiff_bench.cli.main import main
 
     root, _ = street
-    code = main(
-        [
-            "prepare",
-            "synthetic",
-            "--root",
-            str(root),
-            "--fits",
-            str(root),
-            "--out",
-            str(tmp_path),
-            "--shard",
-            shard,
-        ]
-    )
+    code = main(prepare_argv(root, tmp_path, "--shard", shard))
     err = capsys.readouterr().err.strip()
     assert code == 2 and "--shard" in err and len(err.splitlines()) == 1

@@ -14,6 +14,7 @@ from setdiff_bench.cli.main import main
 from setdiff_bench.errors import PacketError
 from setdiff_bench.packets.index import INDEX_FILE, SCHEMA
 from setdiff_bench.packets.store import PacketStore
+from tests.packets.packet_fixtures import prepare_argv
 
 
 def test_index_columns_and_exr_format(prepared):
@@ -122,80 +123,29 @@ def test_cli_errors_are_one_line(street, tmp_path, capsys):
     root, _ = street
     empty = tmp_path / "fits"
     empty.mkdir()
-    code = main(
-        ["prepare", "synthetic", "--root", str(root), "--fits", str(empty), "--out", str(tmp_path / "o")]
-    )
+    code = main(prepare_argv(root, tmp_path / "o", fits=empty))
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1
     assert str(empty / "street_00" / "lane0.ply") in err and "missing 3DGS fit" in err
     assert not (tmp_path / "o" / INDEX_FILE).exists()
 
-    code = main(
-        [
-            "prepare",
-            "synthetic",
-            "--root",
-            str(root),
-            "--fits",
-            str(root),
-            "--out",
-            str(tmp_path / "o"),
-            "--protocol",
-            "euvs",
-        ]
-    )
+    code = main(prepare_argv(root, tmp_path / "o", "--protocol", "euvs"))
     err = capsys.readouterr().err.strip()
     assert code == 2 and "is for dataset 'euvs', not 'synthetic'" in err and len(err.splitlines()) == 1
 
-    code = main(
-        [
-            "prepare",
-            "synthetic",
-            "--root",
-            str(tmp_path / "missing"),
-            "--fits",
-            str(root),
-            "--out",
-            str(tmp_path / "o"),
-        ]
-    )
+    code = main(prepare_argv(tmp_path / "missing", tmp_path / "o", fits=root))
     err = capsys.readouterr().err.strip()
     assert code == 2 and "missing" in err and len(err.splitlines()) == 1
 
     bad = tmp_path / "bad_fits" / "street_00" / "lane0.ply"
     bad.parent.mkdir(parents=True)
     bad.write_bytes(b"ply\nformat ascii 1.0\nelement vertex 1\nend_header\n")
-    code = main(
-        [
-            "prepare",
-            "synthetic",
-            "--root",
-            str(root),
-            "--fits",
-            str(tmp_path / "bad_fits"),
-            "--scene",
-            "street_00",
-            "--out",
-            str(tmp_path / "o"),
-        ]
-    )
+    code = main(prepare_argv(root, tmp_path / "o", "--scene", "street_00", fits=tmp_path / "bad_fits"))
     err = capsys.readouterr().err.strip()
     assert code == 2 and str(bad) in err and len(err.splitlines()) == 1
 
     with pytest.raises(SystemExit) as exit_info:
-        main(
-            [
-                "prepare",
-                "synthetic",
-                "--root",
-                str(root),
-                "--fits",
-                str(root),
-                "--fit",
-                "--out",
-                str(tmp_path),
-            ]
-        )
+        main(prepare_argv(root, tmp_path, "--fit"))
     assert exit_info.value.code == 2
 
 
@@ -226,43 +176,11 @@ def test_declared_test_scenes_replace_the_protocol_split(street, tmp_path, capsy
     60/40 rule would make street_02 the test scene)."""
     root, _ = street
     out = tmp_path / "o"
-    assert (
-        main(
-            [
-                "prepare",
-                "synthetic",
-                "--root",
-                str(root),
-                "--fits",
-                str(root),
-                "--out",
-                str(out),
-                "--split",
-                "test",
-                "--test-scene",
-                "street_00",
-                "--quiet",
-            ]
-        )
-        == 0
-    )
+    assert main(prepare_argv(root, out, "--split", "test", "--test-scene", "street_00", "--quiet")) == 0
     index = PacketStore(out).index
     assert set(index["scene"]) == {"street_00"} and set(index["split"]) == {"test"}
     capsys.readouterr()
-    code = main(
-        [
-            "prepare",
-            "synthetic",
-            "--root",
-            str(root),
-            "--fits",
-            str(root),
-            "--out",
-            str(tmp_path / "x"),
-            "--test-scene",
-            "street_09",
-        ]
-    )
+    code = main(prepare_argv(root, tmp_path / "x", "--test-scene", "street_09"))
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1
     assert "no scene 'street_09'" in err and "street_00, street_01, street_02" in err

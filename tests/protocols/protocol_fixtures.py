@@ -38,18 +38,7 @@ def write_nuscenes(
     channels: tuple[str, ...] = ("CAM_FRONT", "CAM_BACK"),
 ) -> Path:
     """One scene ``scene-0001`` whose cameras fire at ``T0 + keyframes_s`` (samples) and ``T0 + sweeps_s``."""
-    tables: dict[str, list[dict]] = {
-        k: [] for k in ("log", "scene", "sample", "sample_data", "sensor", "calibrated_sensor", "ego_pose")
-    }
-    tables["log"].append(
-        {
-            "token": "log0",
-            "logfile": "n000-fixture",
-            "vehicle": "n000",
-            "date_captured": "2018-07-24",
-            "location": "boston-seaport",
-        }
-    )
+    tables = loader_fixtures.nuscenes_tables("n000-fixture", "n000", "boston-seaport")
     keys = [seconds_to_us(s) for s in keyframes_s]
     samples = [f"sample{i}" for i in range(len(keys))]
     for i, (token, stamp) in enumerate(zip(samples, keys)):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import random
 import re
+import tomllib
 from fractions import Fraction
 from pathlib import Path
 
@@ -15,6 +16,11 @@ from setdiff_bench.protocols.scene_split import SceneSplit
 
 FIRST_DL3DV_TEST = "0a78c25f77c1ba1d1a3f07c18c9735ae1254a9a71290734b8836eefbefaadbc7"
 LAST_DL3DV_TEST = "efdf19ca82bba7bccc73f64273405d077abd61dd2f5339a0a642bc75d7d900ec"
+#: (base, old, new, message) of every case of invalid_protocols.toml.
+INVALID_PROTOCOLS = [
+    (case["base"], case["old"], case["new"], case["message"])
+    for case in tomllib.loads((Path(__file__).parent / "invalid_protocols.toml").read_text())["case"]
+]
 
 
 def test_packaged_protocols_state_the_papers_settings():
@@ -54,19 +60,18 @@ def test_packaged_protocols_state_the_papers_settings():
     ]
 
 
+def shuffled_test_scenes(split: SceneSplit, names: list[str], seed: int) -> list[str]:
+    """The scenes ``split`` makes test when given ``names`` in an order shuffled with ``seed`` (sorted)."""
+    shuffled = names[:]
+    random.Random(seed).shuffle(shuffled)
+    return sorted(n for n, s in split.assign(shuffled).items() if s == "test")
+
+
 def test_interleaved_split_is_sixty_forty_and_order_independent():
     split = load_protocol("euvs").split
     assert split.test_fraction == Fraction(2, 5)
     names = [f"scene_{i:02d}" for i in range(10)]
-    shuffled = names[:]
-    random.Random(1).shuffle(shuffled)
-    assignment = split.assign(shuffled)
-    assert sorted(n for n, s in assignment.items() if s == "test") == [
-        "scene_02",
-        "scene_04",
-        "scene_07",
-        "scene_09",
-    ]
+    assert shuffled_test_scenes(split, names, seed=1) == ["scene_02", "scene_04", "scene_07", "scene_09"]
     many = split.assign([f"Level {1 + i % 3}/loc_{i:03d}" for i in range(104)])
     assert sum(s == "test" for s in many.values()) == 41  # ⌊104 · 2/5⌋
     assert split.assign(["only"]) == {"only": "train"}
@@ -76,9 +81,7 @@ def test_interleaved_split_is_sixty_forty_and_order_independent():
 def test_every_fifth_sorted_scene_is_a_nuscenes_test_scene():
     split = load_protocol("nuscenes").split
     names = [f"scene-{i:04d}" for i in range(1, 21)]
-    random.Random(2).shuffle(names)
-    assignment = split.assign(names)
-    assert sorted(n for n, s in assignment.items() if s == "test") == [
+    assert shuffled_test_scenes(split, names, seed=2) == [
         "scene-0005",
         "scene-0010",
         "scene-0015",
@@ -105,111 +108,7 @@ def mutated(tmp_path: Path, old: str, new: str, base: str = "euvs") -> Path:
     return path
 
 
-@pytest.mark.parametrize(
-    ("base", "old", "new", "message"),
-    [
-        ("euvs", 'name = "euvs"', 'name = "euvs"\ncolour = 1', "colour: unknown key"),
-        ("euvs", "alpha = 0.8", 'alpha = "high"', "references.alpha: expected a number"),
-        (
-            "euvs",
-            'rule = "test_set"\nfit_key = "level2"',
-            'rule = "nope"\nfit_key = "level2"',
-            "groups[1].rule: expected one of",
-        ),
-        ("euvs", "test_views = 16", "", "packets.test_views: missing required key"),
-        ("euvs", "test = 8", "test = 16", "references.test: N = 16 leaves no target"),
-        ("euvs", "test_fraction = [2, 5]", "test_fraction = [5, 2]", "split.test_fraction"),
-        ("euvs", "[split]", "[split\n", "invalid TOML"),
-        ("euvs", 'fit_key = "level1"', 'fit_key = "a/b"', "groups[0].fit_key: must not contain"),
-        ("paralane", "target_lane = 1", "target_lane = 0", "groups[0].target_lane: must differ"),
-        (
-            "nuscenes",
-            "target_window = [10, 11]",
-            "target_window = [9, 11]",
-            "groups[0].target_window: overlaps",
-        ),
-        (
-            "nuscenes",
-            "target_window = [10, 11]",
-            "target_window = [11, 10]",
-            "groups[0].target_window: expected",
-        ),
-        (
-            "synthetic",
-            'targets = { split = "test", lane_offset = 1',
-            'targets = { colour = "test", lane_offset = 1',
-            "groups[0].targets.colour: unknown key",
-        ),
-        (
-            "dl3dv",
-            'file = "splits/dl3dv_3dgs_enhancer_test.txt"',
-            'file = "splits/missing.txt"',
-            "split.file",
-        ),
-        ("dl3dv", "views = 3", "views = 1", "groups[0].views: expected an integer >= 2"),
-        ("euvs", 'title = "EUVS', 'colour = 1\ntitle = "EUVS', "leaderboard.colour: unknown key"),
-        (
-            "euvs",
-            '{ group = "level2", label = "Setting 2" }',
-            '{ group = "level9", label = "Setting 2" }',
-            "leaderboard.blocks[1].group: no group 'level9' in this protocol; groups: level1, level2, level3",
-        ),
-        (
-            "euvs",
-            '{ group = "level2", label = "Setting 2" }',
-            '{ group = "level1", label = "Setting 2" }',
-            "leaderboard.blocks: group 'level1' appears twice",
-        ),
-        (
-            "euvs",
-            '{ group = "level2", label = "Setting 2" }',
-            '{ group = "level2" }',
-            "leaderboard.blocks[1].label: missing required key",
-        ),
-        (
-            "euvs",
-            '{ group = "level2", label = "Setting 2" }',
-            '{ label = "Setting 2" }',
-            "leaderboard.blocks[1].group: missing required key (or pooled = true)",
-        ),
-        (
-            "nuscenes",
-            "{ pooled = true, label",
-            "{ pooled = false, label",
-            "leaderboard.blocks[0].pooled: expected true",
-        ),
-        (
-            "nuscenes",
-            "{ pooled = true, label",
-            '{ pooled = true, group = "10-11s", label',
-            "leaderboard.blocks[0].pooled: a block has either group or pooled = true",
-        ),
-        (
-            "nuscenes",
-            'sequence_metrics = ["warp"]',
-            'sequence_metrics = ["psnr"]',
-            "leaderboard.sequence_metrics: unknown sequence metric 'psnr'",
-        ),
-        (
-            "euvs",
-            'reported_tables = ["table1_euvs"]',
-            'reported_tables = ["table4_dl3dv"]',
-            "leaderboard.reported_tables: no reported table 'table4_dl3dv' of dataset 'euvs'",
-        ),
-        (
-            "euvs",
-            'reported_tables = ["table1_euvs"]',
-            'reported_tables = ["table1_euvs"]\nmetrics = ["psnr", "warp"]',
-            "leaderboard.metrics: unknown image metric 'warp'",
-        ),
-        (
-            "paralane",
-            '    { group = "single", label = "Single-lane shift" },\n    { group = "double", label = "Double-lane shift" },\n',
-            "",
-            "leaderboard.blocks: expected a non-empty list of tables",
-        ),
-    ],
-)
+@pytest.mark.parametrize(("base", "old", "new", "message"), INVALID_PROTOCOLS)
 def test_invalid_protocol_files_name_the_file_and_key(tmp_path, base, old, new, message):
     path = mutated(tmp_path, old, new, base)
     if base == "dl3dv":  # keep the split list reachable from the copy

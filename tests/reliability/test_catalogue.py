@@ -13,10 +13,8 @@ from pathlib import Path
 import pytest
 
 from setdiff_bench.cli.main import main
-from tests.reliability.catalogue import CASES, PWNED, Case
+from tests.reliability.catalogue import CASES, DOC, PWNED, Case
 from tests.reliability.world import World, tree_state
-
-DOC = Path(__file__).parents[2] / "docs" / "reliability.md"
 
 
 def invoke(argv: list[str]) -> int:

@@ -35,8 +35,8 @@ from setdiff_bench.evaluation.run import RunSettings, comparable_metrics, run_me
 from setdiff_bench.packets.index import PACKETS_DIR
 from setdiff_bench.packets.prepare import prepare
 from setdiff_bench.runtime.threads import torch_threads
-from tests.packets.packet_fixtures import tree_bytes
-from tests.reliability.world import World, tree_state
+from tests.packets.packet_fixtures import prepare_argv, tree_bytes
+from tests.reliability.world import World, run_argv, tree_state
 from tests.run.store_fixtures import StoreSpec, build_store, files_of
 
 REPO = Path(__file__).parents[2]
@@ -59,13 +59,14 @@ class CrashLog:
 
 def crash_and_resume(
     command: Callable[[Path, int], list[str]],
-    fresh_folder: Callable[[int], Path],
+    folders: Path,
     done: Callable[[Path], int],
+    verify: Callable[[Path], None],
     *,
+    total: int,
     kills: int,
     window_s: float,
-    rng: random.Random,
-    verify: Callable[[Path], None],
+    seed: int,
     max_attempts: int = 60,
 ) -> CrashLog:
     """SIGKILL ``command`` ``kills`` times at random moments of its work, resuming it in the same folder.
@@ -74,18 +75,26 @@ def crash_and_resume(
     launched, temporary files included), uniformly in ``[0, window_s]``.
 
     Args:
-        command: ``(folder, attempt) -> argv`` of the process writing into ``folder``.
-        fresh_folder: ``(index) -> folder`` for a new output folder (used when a process finished unkilled).
+        command: ``(folder, attempt) -> setdiff-bench arguments`` of the process writing into ``folder``.
+        folders: output folders are ``<folders>_0``, ``<folders>_1``, … (a new one is used when a process
+            finished unkilled).
         done: how many result units (packets) the folder holds complete.
         verify: called on every folder once a resumed command has completed it.
+        total: the result units of a complete folder (no kill may find more).
+        seed: of the random kill moments.
     """
+
+    def fresh_folder(index: int) -> Path:
+        return folders.with_name(f"{folders.name}_{index}")
+
+    rng = random.Random(seed)
     log = CrashLog()
     folder = fresh_folder(0)
     log.folders.append(folder)
     for attempt in range(max_attempts):
         at_launch = tree_state([folder])
         process = subprocess.Popen(
-            command(folder, attempt),
+            [sys.executable, "-m", "setdiff_bench", *command(folder, attempt)],
             cwd=REPO,
             env=ENV,
             stdout=subprocess.PIPE,
@@ -111,6 +120,7 @@ def crash_and_resume(
         assert process.returncode == 0, stderr
         verify(folder)
         if len(log.kills) >= kills:
+            assert all(d <= total for _, d in log.kills)
             return log
         folder = fresh_folder(len(log.folders))  # finished before the kill: start over elsewhere
         log.folders.append(folder)
@@ -143,21 +153,7 @@ def prepare_crashes(
         workers = (
             ["--workers", "2"] if attempt % 3 == 2 else []
         )  # now and then, killed with its worker processes
-        return [
-            sys.executable,
-            "-m",
-            "setdiff_bench",
-            "prepare",
-            "synthetic",
-            "--root",
-            str(world.street),
-            "--fits",
-            str(world.street),
-            "--out",
-            str(folder),
-            "--quiet",
-            *workers,
-        ]
+        return prepare_argv(world.street, folder, "--quiet", *workers)
 
     def done(folder: Path) -> int:
         packets = folder / "packets"
@@ -167,17 +163,9 @@ def prepare_crashes(
         no_temporaries(folder)
         assert tree_bytes(folder) == expected
 
-    log = crash_and_resume(
-        command,
-        lambda i: tmp_path / f"store_{i}",
-        done,
-        kills=kills,
-        window_s=seconds,
-        rng=random.Random(seed),
-        verify=verify,
+    return crash_and_resume(
+        command, tmp_path / "store", done, verify, total=total, kills=kills, window_s=seconds, seed=seed
     )
-    assert all(d <= total for _, d in log.kills)
-    return log
 
 
 def test_prepare_killed_twice_resumes_byte_identical(
@@ -238,25 +226,7 @@ def run_crashes(
     total = len(expected_fragments)
 
     def command(folder: Path, attempt: int) -> list[str]:
-        return [
-            sys.executable,
-            "-m",
-            "setdiff_bench",
-            "run",
-            "--method",
-            RUN_METHOD,
-            "--packets",
-            str(store),
-            "--out",
-            str(folder),
-            "--device",
-            "cpu",
-            "--metrics",
-            RUN_METRICS,
-            "--warp-cache",
-            "none",
-            "--no-progress",
-        ]
+        return run_argv(store, folder, method=RUN_METHOD, metrics=RUN_METRICS)
 
     def done(folder: Path) -> int:
         return sum(1 for p in folder.glob("fragments/*.parquet") if not p.name.startswith("."))
@@ -273,17 +243,9 @@ def run_crashes(
         assert comparable_manifest(folder) == expected_manifest
         assert sorted(p.name for p in folder.iterdir()) == sorted(p.name for p in reference.iterdir())
 
-    log = crash_and_resume(
-        command,
-        lambda i: tmp_path / f"run_{i}",
-        done,
-        kills=kills,
-        window_s=seconds,
-        rng=random.Random(seed),
-        verify=verify,
+    return crash_and_resume(
+        command, tmp_path / "run", done, verify, total=total, kills=kills, window_s=seconds, seed=seed
     )
-    assert all(d <= total for _, d in log.kills)
-    return log
 
 
 def test_run_killed_twice_resumes_byte_identical(run_reference, tmp_path: Path) -> None:

@@ -35,11 +35,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from setdiff_bench.errors import SetDiffBenchError
-from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.gaussians.ply import read_ply, write_ply
 from setdiff_bench.loaders.colmap import read_colmap_model
 from setdiff_bench.loaders.nerfstudio import read_transforms
 from setdiff_bench.loaders.nuscenes import load_scenes as load_nuscenes
+from tests.gaussians.gaussian_fixtures import ply_header, ply_property_names, random_model
 from tests.loaders.loader_fixtures import (
     build_nuscenes,
     intrinsics,
@@ -83,25 +83,19 @@ def fuzz(strategy: st.SearchStrategy[Any], check: Callable[[Any], None], example
     return seen
 
 
-def assert_count(seen: int, examples: int) -> None:
+def fuzz_all(strategy: st.SearchStrategy[Any], check: Callable[[Any], None], *, slow: bool) -> None:
+    """:func:`fuzz` with the run's number of examples (:data:`SLOW_EXAMPLES` when ``slow``, else
+    :data:`DEFAULT_EXAMPLES`), asserting hypothesis generated that many."""
+    examples = SLOW_EXAMPLES if slow else DEFAULT_EXAMPLES
+    seen = fuzz(strategy, check, examples, slow=slow)
     assert seen >= examples, f"hypothesis generated {seen} inputs, fewer than {examples}"
 
 
 # ---------------------------------------------------------------------- PLY
 def ply_bases(folder: Path) -> list[bytes]:
     g = torch.Generator().manual_seed(3)
-
-    def model(n: int, degree: int) -> GaussianModel:
-        return GaussianModel(
-            torch.randn(n, 3, generator=g),
-            torch.randn(n, 4, generator=g),
-            torch.randn(n, 3, generator=g),
-            torch.randn(n, generator=g),
-            torch.randn(n, (degree + 1) ** 2, 3, generator=g),
-        )
-
-    write_ply(folder / "a.ply", model(4, 1))
-    write_ply(folder / "b.ply", model(3, 0), normals=False)
+    write_ply(folder / "a.ply", random_model(4, 1, g))
+    write_ply(folder / "b.ply", random_model(3, 0, g), normals=False)
     little = (folder / "b.ply").read_bytes()
     head, body = little.split(b"end_header\n", 1)
     big = (
@@ -140,17 +134,6 @@ def check_ply(path: Path) -> Callable[[bytes], None]:
         read_ply(path)
 
     return check
-
-
-def test_fuzz_ply(ply_case) -> None:
-    path, bases = ply_case
-    assert_count(fuzz(ply_inputs(bases), check_ply(path), DEFAULT_EXAMPLES, slow=False), DEFAULT_EXAMPLES)
-
-
-@pytest.mark.slow
-def test_fuzz_ply_10k(ply_case) -> None:
-    path, bases = ply_case
-    assert_count(fuzz(ply_inputs(bases), check_ply(path), SLOW_EXAMPLES, slow=True), SLOW_EXAMPLES)
 
 
 # ---------------------------------------------------------------------- COLMAP text
@@ -222,19 +205,6 @@ def check_colmap(folder: Path) -> Callable[[dict[str, bytes]], None]:
     return check
 
 
-def test_fuzz_colmap_text(colmap_case) -> None:
-    folder, bases = colmap_case
-    assert_count(
-        fuzz(colmap_inputs(bases), check_colmap(folder), DEFAULT_EXAMPLES, slow=False), DEFAULT_EXAMPLES
-    )
-
-
-@pytest.mark.slow
-def test_fuzz_colmap_text_10k(colmap_case) -> None:
-    folder, bases = colmap_case
-    assert_count(fuzz(colmap_inputs(bases), check_colmap(folder), SLOW_EXAMPLES, slow=True), SLOW_EXAMPLES)
-
-
 # ---------------------------------------------------------------------- transforms.json
 @pytest.fixture(scope="module")
 def transforms_case(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[Any]]:
@@ -273,21 +243,6 @@ def check_transforms(path: Path) -> Callable[[bytes], None]:
     return check
 
 
-def test_fuzz_transforms_json(transforms_case) -> None:
-    path, bases = transforms_case
-    assert_count(
-        fuzz(transforms_inputs(bases), check_transforms(path), DEFAULT_EXAMPLES, slow=False), DEFAULT_EXAMPLES
-    )
-
-
-@pytest.mark.slow
-def test_fuzz_transforms_json_10k(transforms_case) -> None:
-    path, bases = transforms_case
-    assert_count(
-        fuzz(transforms_inputs(bases), check_transforms(path), SLOW_EXAMPLES, slow=True), SLOW_EXAMPLES
-    )
-
-
 # ---------------------------------------------------------------------- nuScenes tables
 @pytest.fixture(scope="module")
 def nuscenes_case(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, list[dict]]]:
@@ -322,46 +277,29 @@ def check_nuscenes(root: Path, tables: dict[str, list[dict]]) -> Callable[[tuple
     return check
 
 
-def test_fuzz_nuscenes_tables(nuscenes_case) -> None:
-    root, tables = nuscenes_case
-    assert_count(
-        fuzz(nuscenes_inputs(tables), check_nuscenes(root, tables), DEFAULT_EXAMPLES, slow=False),
-        DEFAULT_EXAMPLES,
-    )
-
-
-@pytest.mark.slow
-def test_fuzz_nuscenes_tables_10k(nuscenes_case) -> None:
-    root, tables = nuscenes_case
-    assert_count(
-        fuzz(nuscenes_inputs(tables), check_nuscenes(root, tables), SLOW_EXAMPLES, slow=True), SLOW_EXAMPLES
-    )
+# ---------------------------------------------------------------------- the fuzz runs
+@pytest.mark.parametrize(
+    "case, fuzzed",
+    [
+        ("ply_case", lambda path, bases: (ply_inputs(bases), check_ply(path))),
+        ("colmap_case", lambda folder, bases: (colmap_inputs(bases), check_colmap(folder))),
+        ("transforms_case", lambda path, bases: (transforms_inputs(bases), check_transforms(path))),
+        ("nuscenes_case", lambda root, tables: (nuscenes_inputs(tables), check_nuscenes(root, tables))),
+    ],
+    ids=["ply", "colmap_text", "transforms_json", "nuscenes_tables"],
+)
+@pytest.mark.parametrize(
+    "slow", [pytest.param(False, id="default"), pytest.param(True, marks=pytest.mark.slow, id="10k")]
+)
+def test_fuzz(case: str, fuzzed, slow: bool, request: pytest.FixtureRequest) -> None:  # type: ignore[no-untyped-def]
+    """A parser's inputs (its module fixture ``case`` → strategy and check): only ``SetDiffBenchError``
+    escapes, with a one-line message."""
+    strategy, check = fuzzed(*request.getfixturevalue(case))
+    fuzz_all(strategy, check, slow=slow)
 
 
 # ---------------------------------------------------------------------- regressions
-PLY_HEADER = (
-    "ply\nformat ascii 1.0\nelement vertex 1\n"
-    + "".join(
-        f"property float {n}\n"
-        for n in (
-            "x",
-            "y",
-            "z",
-            "f_dc_0",
-            "f_dc_1",
-            "f_dc_2",
-            "opacity",
-            "scale_0",
-            "scale_1",
-            "scale_2",
-            "rot_0",
-            "rot_1",
-            "rot_2",
-            "rot_3",
-        )
-    )
-    + "end_header\n"
-)
+PLY_HEADER = ply_header("ascii", 1, ply_property_names())
 
 
 @pytest.mark.parametrize(

@@ -8,7 +8,8 @@
 * ``setdiff_run``: a ``train`` output folder holding one tiny SetDiff checkpoint (``latest``,
   ``model.safetensors``, ``optimizer.pt``, ``trainer.json``), built on first use (diffusers import ~5 s).
 
-Also small helpers that change one thing in a copy: rewrite packet index rows, re-hash a packet's files.
+Also the ``run`` command line the tests give, and small helpers that change one thing in a copy: rewrite
+packet index rows, re-hash a packet's files.
 """
 
 from __future__ import annotations
@@ -85,6 +86,29 @@ class World:
             for name in ("street", "store", "train_store", "setdiff_run")
             if (self.base / name).exists()
         ]
+
+
+def run_argv(
+    store: Path, out: Path, *extra: str, method: str = "identity", metrics: str = "psnr"
+) -> list[str]:
+    """``setdiff-bench run`` arguments on ``store`` into ``out``: CPU, no progress, no warp cache, then ``extra``."""
+    return [
+        "run",
+        "--method",
+        method,
+        "--packets",
+        str(store),
+        "--out",
+        str(out),
+        "--device",
+        "cpu",
+        "--no-progress",
+        "--metrics",
+        metrics,
+        "--warp-cache",
+        "none",
+        *extra,
+    ]
 
 
 def copy(source: Path, destination: Path) -> Path:
