@@ -113,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
         )
     except StageFailed as failure:
         return failure.code
-    this_run = sum(s["rerun_seconds"] if s["resumed"] else s["seconds"] for s in summary["stages"])
+    this_run = summary["this_run_seconds"]
     print(
         f"demo finished: {summary['total_seconds'] / 60:.1f} min of stage work, {this_run / 60:.1f} min in this run: "
         f"{args.out / 'README.md'}"

@@ -7,6 +7,7 @@ import json
 import os
 import stat
 import subprocess
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -17,7 +18,7 @@ from setdiff_bench.cli.main import main
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.atomic import sha256_file
 from setdiff_bench.pipeline.demo import SUMMARY_FILE
-from setdiff_bench.pipeline.stages import LEDGER_FILE, Pipeline, StageFailed
+from setdiff_bench.pipeline.stages import LEDGER_FILE, Pipeline, StageFailed, StageRecord
 from setdiff_bench.reporting.publish import PROVENANCE_FILE, publish
 
 REVISION = "0123456789abcdef0123456789abcdef01234567"
@@ -139,3 +140,53 @@ def test_stage_ledger_keeps_original_and_interrupted_times(
     assert (resumed.seconds, resumed.resumed, resumed.rerun_seconds) == (100.0, True, 60.0)  # 40 s + 60 s
     later = Pipeline(cwd=tmp_path, quiet=True, ledger=ledger).run("train", ["train", "--out", "c"])
     assert (later.seconds, later.resumed, later.rerun_seconds) == (100.0, True, 2.0)
+
+
+def test_concurrent_lanes_run_at_once_with_split_threads_and_keep_lane_order(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Two lanes start together (a barrier only two simultaneous processes can pass), each process gets
+    half the threads and ``--no-progress``; a failing stage is raised after the other lane finished."""
+    monkeypatch.setenv("SETDIFF_THREADS", "4")
+    both_running = threading.Barrier(2, timeout=10)
+    seen: list[tuple[str, str]] = []
+
+    def fake_run(argv: list[str], **kwargs: object) -> FakeProcess:
+        verb_args = argv[3:]
+        env = kwargs["env"]
+        assert isinstance(env, dict)
+        seen.append((" ".join(verb_args), env["SETDIFF_THREADS"]))
+        if verb_args[1] in ("first", "slow"):
+            both_running.wait()
+        return FakeProcess(1 if verb_args[1] == "broken" else 0)
+
+    monkeypatch.setattr(stages.subprocess, "run", fake_run)
+    pipeline = Pipeline(cwd=tmp_path, quiet=True, ledger=tmp_path / LEDGER_FILE)
+    records = pipeline.run_concurrently(
+        [[("a", ["run", "first"]), ("b", ["run", "second"])], [("c", ["run", "slow"])]]
+    )
+    assert [(r.name, r.group, r.lane) for r in records] == [("a", 0, 0), ("b", 0, 0), ("c", 0, 1)]
+    assert [r.name for r in pipeline.records] == ["a", "b", "c"]
+    assert sorted(seen) == [
+        ("run first --no-progress", "2"),
+        ("run second --no-progress", "2"),
+        ("run slow --no-progress", "2"),
+    ]
+    assert len(json.loads((tmp_path / LEDGER_FILE).read_text())) == 3
+    with pytest.raises(StageFailed, match="'d'"):
+        pipeline.run_concurrently([[("d", ["run", "broken"])], [("e", ["run", "fine"])]])
+    assert [r.name for r in pipeline.records] == ["a", "b", "c", "e"]
+
+
+def test_elapsed_time_counts_a_concurrent_group_as_its_longest_lane() -> None:
+    pipeline = Pipeline(
+        records=[
+            StageRecord("synth", "s", 100.0),
+            StageRecord("run a", "a", 20.0, group=0, lane=0),
+            StageRecord("run b", "b", 30.0, resumed=True, rerun_seconds=1.0, group=0, lane=0),
+            StageRecord("run c", "c", 45.0, group=0, lane=1),
+            StageRecord("leaderboard", "l", 5.0),
+        ]
+    )
+    assert pipeline.elapsed_seconds() == 100.0 + max(20.0 + 30.0, 45.0) + 5.0
+    assert pipeline.elapsed_seconds(this_run=True) == 100.0 + max(20.0 + 1.0, 45.0) + 5.0

@@ -35,6 +35,16 @@ constexpr float kTransmittanceMin = 1e-4f;
 
 struct Tiling {
     int width, height, tile_size, tiles_x, tiles_y;
+
+    // Calls fn(x, y, pixel) for every image pixel of a tile, row by row (pixel = y * width + x).
+    template <typename Fn>
+    void for_each_pixel(int64_t tile, Fn&& fn) const {
+        const int x0 = static_cast<int>(tile % tiles_x) * tile_size, y0 = static_cast<int>(tile / tiles_x) * tile_size;
+        const int x1 = std::min(x0 + tile_size, width), y1 = std::min(y0 + tile_size, height);
+        for (int y = y0; y < y1; ++y) {
+            for (int x = x0; x < x1; ++x) fn(x, y, static_cast<int64_t>(y) * width + x);
+        }
+    }
 };
 
 // One Gaussian of a tile's list, gathered contiguously so the per-pixel loops read memory in order.
@@ -99,41 +109,33 @@ int setdiff_rasterize_forward(int64_t num_gaussians, int channels, const float* 
     const int threads = thread_count(num_threads);
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
     for (int64_t tile = 0; tile < num_tiles; ++tile) {
-        const int tx = static_cast<int>(tile % tiling.tiles_x), ty = static_cast<int>(tile / tiling.tiles_x);
         const int64_t start = tile_starts[tile], count = tile_counts[tile];
         std::vector<float> acc(channels);
         std::vector<Splat> splats;
         gather_tile(means2d, conics, opacities, sorted_ids + start, count, splats);
-        for (int iy = 0; iy < tiling.tile_size; ++iy) {
-            const int y = ty * tiling.tile_size + iy;
-            if (y >= tiling.height) break;
-            for (int ix = 0; ix < tiling.tile_size; ++ix) {
-                const int x = tx * tiling.tile_size + ix;
-                if (x >= tiling.width) break;
-                const float px = x + 0.5f, py = y + 0.5f;
-                std::fill(acc.begin(), acc.end(), 0.0f);
-                float transmittance = 1.0f;
-                int32_t position_after_last = 0;
-                for (int64_t k = 0; k < count; ++k) {
-                    float dx, dy, sigma, raw;
-                    const float alpha = splat_alpha(splats[k], px, py, &dx, &dy, &sigma, &raw);
-                    if (alpha == 0.0f) continue;
-                    const float next_t = transmittance * (1.0f - alpha);
-                    if (next_t < kTransmittanceMin) break;
-                    const float weight = alpha * transmittance;
-                    const float* f = features + splats[k].id * channels;
-                    for (int ch = 0; ch < channels; ++ch) acc[ch] += weight * f[ch];
-                    transmittance = next_t;
-                    position_after_last = static_cast<int32_t>(k + 1);
-                }
-                const int64_t pixel = static_cast<int64_t>(y) * tiling.width + x;
-                float* out = image + pixel * channels;
-                for (int ch = 0; ch < channels; ++ch) out[ch] = acc[ch];
-                alpha_out[pixel] = 1.0f - transmittance;
-                final_t[pixel] = transmittance;
-                stop[pixel] = position_after_last;
+        tiling.for_each_pixel(tile, [&](int x, int y, int64_t pixel) {
+            const float px = x + 0.5f, py = y + 0.5f;
+            std::fill(acc.begin(), acc.end(), 0.0f);
+            float transmittance = 1.0f;
+            int32_t position_after_last = 0;
+            for (int64_t k = 0; k < count; ++k) {
+                float dx, dy, sigma, raw;
+                const float alpha = splat_alpha(splats[k], px, py, &dx, &dy, &sigma, &raw);
+                if (alpha == 0.0f) continue;
+                const float next_t = transmittance * (1.0f - alpha);
+                if (next_t < kTransmittanceMin) break;
+                const float weight = alpha * transmittance;
+                const float* f = features + splats[k].id * channels;
+                for (int ch = 0; ch < channels; ++ch) acc[ch] += weight * f[ch];
+                transmittance = next_t;
+                position_after_last = static_cast<int32_t>(k + 1);
             }
-        }
+            float* out = image + pixel * channels;
+            for (int ch = 0; ch < channels; ++ch) out[ch] = acc[ch];
+            alpha_out[pixel] = 1.0f - transmittance;
+            final_t[pixel] = transmittance;
+            stop[pixel] = position_after_last;
+        });
     }
     return 0;
 }
@@ -164,63 +166,49 @@ int setdiff_rasterize_backward(int64_t num_gaussians, int channels, const float*
         std::vector<Splat> splats;
 #pragma omp for schedule(static)
         for (int64_t tile = 0; tile < num_tiles; ++tile) {
-            const int tx = static_cast<int>(tile % tiling.tiles_x), ty = static_cast<int>(tile / tiling.tiles_x);
             const int64_t start = tile_starts[tile];
             int64_t longest = 0;  // only the part of the list that some pixel composited
-            for (int iy = 0; iy < tiling.tile_size; ++iy) {
-                const int y = ty * tiling.tile_size + iy;
-                for (int ix = 0; ix < tiling.tile_size && y < tiling.height; ++ix) {
-                    const int x = tx * tiling.tile_size + ix;
-                    if (x < tiling.width) longest = std::max<int64_t>(longest, stop[static_cast<int64_t>(y) * tiling.width + x]);
-                }
-            }
+            tiling.for_each_pixel(tile, [&](int, int, int64_t pixel) { longest = std::max<int64_t>(longest, stop[pixel]); });
             gather_tile(means2d, conics, opacities, sorted_ids + start, longest, splats);
-            for (int iy = 0; iy < tiling.tile_size; ++iy) {
-                const int y = ty * tiling.tile_size + iy;
-                if (y >= tiling.height) break;
-                for (int ix = 0; ix < tiling.tile_size; ++ix) {
-                    const int x = tx * tiling.tile_size + ix;
-                    if (x >= tiling.width) break;
-                    const int64_t pixel = static_cast<int64_t>(y) * tiling.width + x;
-                    const float px = x + 0.5f, py = y + 0.5f;
-                    const float* g_image = grad_image + pixel * channels;
-                    const float g_alpha = grad_alpha[pixel];
-                    std::fill(behind.begin(), behind.end(), 0.0f);
-                    float behind_alpha = 0.0f;  // sum over Gaussians behind of w_j
-                    float transmittance_after = final_t[pixel];
-                    for (int64_t k = static_cast<int64_t>(stop[pixel]) - 1; k >= 0; --k) {
-                        const Splat& splat = splats[k];
-                        const int64_t g = splat.id;
-                        float dx, dy, sigma, raw;
-                        const float alpha = splat_alpha(splat, px, py, &dx, &dy, &sigma, &raw);
-                        if (alpha == 0.0f) continue;
-                        const float one_minus = 1.0f - alpha;
-                        const float transmittance = transmittance_after / one_minus;  // T_i, before Gaussian i
-                        const float weight = alpha * transmittance;
-                        const float* f = features + g * channels;
-                        float* gr = grad.data() + g * row;
-                        float d_alpha = 0.0f;
-                        for (int ch = 0; ch < channels; ++ch) {
-                            gr[6 + ch] += weight * g_image[ch];
-                            d_alpha += g_image[ch] * (transmittance * f[ch] - behind[ch] / one_minus);
-                            behind[ch] += weight * f[ch];
-                        }
-                        d_alpha += g_alpha * (transmittance - behind_alpha / one_minus);
-                        behind_alpha += weight;
-                        transmittance_after = transmittance;
-                        if (raw <= kAlphaMax) {  // alpha = o exp(-sigma) here (not clamped)
-                            const float expo = std::exp(-sigma);
-                            const float d_sigma = -d_alpha * alpha;
-                            gr[0] += -d_sigma * (splat.a * dx + splat.b * dy);
-                            gr[1] += -d_sigma * (splat.b * dx + splat.c * dy);
-                            gr[2] += d_sigma * 0.5f * dx * dx;
-                            gr[3] += d_sigma * dx * dy;
-                            gr[4] += d_sigma * 0.5f * dy * dy;
-                            gr[5] += d_alpha * expo;
-                        }
+            tiling.for_each_pixel(tile, [&](int x, int y, int64_t pixel) {
+                const float px = x + 0.5f, py = y + 0.5f;
+                const float* g_image = grad_image + pixel * channels;
+                const float g_alpha = grad_alpha[pixel];
+                std::fill(behind.begin(), behind.end(), 0.0f);
+                float behind_alpha = 0.0f;  // sum over Gaussians behind of w_j
+                float transmittance_after = final_t[pixel];
+                for (int64_t k = static_cast<int64_t>(stop[pixel]) - 1; k >= 0; --k) {
+                    const Splat& splat = splats[k];
+                    const int64_t g = splat.id;
+                    float dx, dy, sigma, raw;
+                    const float alpha = splat_alpha(splat, px, py, &dx, &dy, &sigma, &raw);
+                    if (alpha == 0.0f) continue;
+                    const float one_minus = 1.0f - alpha;
+                    const float transmittance = transmittance_after / one_minus;  // T_i, before Gaussian i
+                    const float weight = alpha * transmittance;
+                    const float* f = features + g * channels;
+                    float* gr = grad.data() + g * row;
+                    float d_alpha = 0.0f;
+                    for (int ch = 0; ch < channels; ++ch) {
+                        gr[6 + ch] += weight * g_image[ch];
+                        d_alpha += g_image[ch] * (transmittance * f[ch] - behind[ch] / one_minus);
+                        behind[ch] += weight * f[ch];
+                    }
+                    d_alpha += g_alpha * (transmittance - behind_alpha / one_minus);
+                    behind_alpha += weight;
+                    transmittance_after = transmittance;
+                    if (raw <= kAlphaMax) {  // alpha = o exp(-sigma) here (not clamped)
+                        const float expo = raw / splat.opacity;  // exp(-sigma)
+                        const float d_sigma = -d_alpha * alpha;
+                        gr[0] += -d_sigma * (splat.a * dx + splat.b * dy);
+                        gr[1] += -d_sigma * (splat.b * dx + splat.c * dy);
+                        gr[2] += d_sigma * 0.5f * dx * dx;
+                        gr[3] += d_sigma * dx * dy;
+                        gr[4] += d_sigma * 0.5f * dy * dy;
+                        gr[5] += d_alpha * expo;
                     }
                 }
-            }
+            });
         }
     }
     for (int64_t g = 0; g < num_gaussians; ++g) {
