@@ -62,8 +62,9 @@ ProcessorBody = Callable[[Any, Any, torch.Tensor, int | None, dict[str, Any]], t
 
 
 def processor_call(body: ProcessorBody) -> ProcessorCall:
-    """A processor ``__call__`` with the parameters diffusers looks for (it passes ``num_views`` only to a named
-    parameter) that calls ``body(self, attn, hidden_states, num_views, kwargs)``."""
+    """A processor ``__call__`` with the parameters diffusers looks for (it passes ``num_views`` and
+    ``token_points`` only to named parameters) that calls ``body(self, attn, hidden_states, num_views,
+    kwargs)``; ``kwargs`` holds ``token_points`` when the model sends them (the C-map distance bias)."""
 
     def call(
         self: Any,
@@ -73,8 +74,11 @@ def processor_call(body: ProcessorBody) -> ProcessorCall:
         attention_mask: Any = None,
         temb: Any = None,
         num_views: int | None = None,
+        token_points: torch.Tensor | None = None,
         **kwargs: Any,
     ) -> torch.Tensor:
+        if token_points is not None:
+            kwargs["token_points"] = token_points
         return body(self, attn, hidden_states, num_views, kwargs)
 
     return call
@@ -160,6 +164,7 @@ def attention_stats(
                         chance = near.sum(-1)[rows].float() / total
                         stats["correspondence_lift"] = float(mass.sum() / chance.sum())
                         stats["corresponding_tokens"] = float(near.sum(-1)[rows].float().mean())
+                        stats["footprint"] = footprint  # packet units: the "near" radius
             record.append(stats)
             return original(self, attn, hidden_states, num_views=num_views, **kwargs)
 
