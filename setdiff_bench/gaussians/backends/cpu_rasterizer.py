@@ -64,11 +64,12 @@ def mode() -> str:
 def handles(features: torch.Tensor) -> bool:
     """Whether compositing these ``(N, C)`` features goes through the native kernel."""
     setting = mode()
-    if setting == "torch" or features.device.type != "cpu" or features.dtype != torch.float32:
-        if setting == "native" and (features.device.type != "cpu" or features.dtype != torch.float32):
-            raise UsageError(
-                f"{MODE_ENV}=native handles CPU float32 only, got {features.device} {features.dtype}"
-            )
+    supported = features.device.type == "cpu" and features.dtype == torch.float32
+    if setting == "native" and not supported:
+        raise UsageError(
+            f"{MODE_ENV}=native handles CPU float32 only, got {features.device} {features.dtype}"
+        )
+    if setting == "torch" or not supported:
         return False
     library = load()
     if library is None and setting == "native":
