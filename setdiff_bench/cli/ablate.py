@@ -1,11 +1,14 @@
 """``setdiff-bench ablate geometry|setsize``: the paper's Tables 5 and 6 on a packet store.
 
-    setdiff-bench ablate geometry --packets P --out DIR [--config tiny_setdiff] [--steps N]
-    setdiff-bench ablate setsize --packets P --checkpoint CKPT --out DIR [--sizes 1+1,2+1,3+1,3+2,3+4,3+6]
+    setdiff-bench ablate geometry --packets P --out DIR [--config tiny_setdiff] [--steps N] [--seed S ...]
+    setdiff-bench ablate setsize --packets P --checkpoint CKPT [--checkpoint CKPT ...] --out DIR
+                                 [--sizes 1+1,2+1,3+1,3+2,3+4,3+6]
 
 ``geometry`` trains four SetDiff variants (no geometry, C-maps only, camera poses only, both) with
 the same config, seed and steps, and runs each on the test packets; ``setsize`` runs one trained
-SetDiff at several N + M set sizes.  Every stage is an ordinary ``setdiff-bench`` command (listed in
+SetDiff at several N + M set sizes.  Repeating ``--seed`` (geometry: every variant is trained once
+per seed) or ``--checkpoint`` (set size: one model per training seed) makes each cell the mean over
+models, with the spread and each model's values beside it.  Every stage is an ordinary ``setdiff-bench`` command (listed in
 the output tables) and resumes, so an interrupted ablation continues where it stopped.  Tables go to
 ``<out>/ablation_geometry.{md,tex,parquet}`` and ``<out>/ablation_setsize.{md,tex,parquet}``;
 checkpoints and runs to ``--work`` (default ``<out>/work``).
@@ -37,12 +40,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     geometry.add_argument(
         "--steps", type=int, default=None, help="training steps per variant (default: the config's)"
     )
-    geometry.add_argument("--seed", type=int, default=None, help="training seed (default: the config's)")
+    geometry.add_argument(
+        "--seed",
+        type=int,
+        action="append",
+        default=None,
+        help="training seed (default: the config's); repeat to train every variant once per seed",
+    )
     setsize = sub.add_parser(
         "setsize", help="score one trained SetDiff at several reference + target set sizes"
     )
     setsize.add_argument(
-        "--checkpoint", required=True, type=Path, help="trained SetDiff (setdiff-bench train --out)"
+        "--checkpoint",
+        required=True,
+        type=Path,
+        action="append",
+        help="trained SetDiff (setdiff-bench train --out); repeat for models of other training seeds",
     )
     setsize.add_argument("--sizes", default="1+1,2+1,3+1,3+2,3+4,3+6", help="comma list of N+M set sizes")
     for study in (geometry, setsize):
@@ -84,9 +97,10 @@ def _invocation(args: argparse.Namespace) -> str:
     if args.study == "geometry":
         parts += ["--config", args.config]
         parts += ["--steps", args.steps] if args.steps is not None else []
-        parts += ["--seed", args.seed] if args.seed is not None else []
+        parts += [part for seed in args.seed or () for part in ("--seed", seed)]
     else:
-        parts += ["--checkpoint", args.checkpoint, "--sizes", args.sizes]
+        parts += [part for checkpoint in args.checkpoint for part in ("--checkpoint", checkpoint)]
+        parts += ["--sizes", args.sizes]
     parts += ["--work", args.work] if args.work else []
     parts += ["--device", args.device] if args.device != "auto" else []
     return "setdiff-bench " + shlex.join(str(p) for p in parts)
@@ -119,37 +133,52 @@ def _geometry(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocati
         from setdiff_bench.errors import UsageError
 
         raise UsageError('the geometry ablation needs a SetDiff config (method = "setdiff")', args.config)
-    results = {}
-    for variant in ablation.GEOMETRY_VARIANTS:
-        data = {"model": {**base["model"], **variant.overrides}, "train": dict(base["train"])}
-        if args.steps is not None:
-            data["train"]["steps"] = args.steps
-        if args.seed is not None:
-            data["train"]["seed"] = args.seed
-        config = write_config_toml(
-            work / "configs" / f"{variant.key}.toml",
-            data,
-            f"Geometry ablation variant '{variant.label}' of {args.config}",
-        )
-        checkpoints = work / "checkpoints" / variant.key
-        train = ["train", "--config", config, "--packets", args.packets, "--out", checkpoints]
-        if args.device == "cpu":  # train runs where accelerate puts it: CUDA when available unless told cpu
-            train += ["--device", "cpu"]
-        if args.no_progress:
-            train.append("--no-progress")
-        pipeline.run(f"train {variant.key}", train)
-        runs = work / "runs" / variant.key
-        pipeline.run(
-            f"run {variant.key}",
-            _run_command(args, checkpoints, runs),
-        )
-        results[variant.key] = ablation.pooled_means(runs / METRICS_FILE)
-    frame = ablation.geometry_frame(results)
+    seeds: list[int | None] = list(args.seed or [None])
+    per_model: list[dict[str, dict[str, float]]] = []
+    for seed in seeds:
+        results = {}
+        for variant in ablation.GEOMETRY_VARIANTS:
+            key = variant.key if len(seeds) == 1 else f"{variant.key}_seed{seed}"
+            data = {"model": {**base["model"], **variant.overrides}, "train": dict(base["train"])}
+            if args.steps is not None:
+                data["train"]["steps"] = args.steps
+            if seed is not None:
+                data["train"]["seed"] = seed
+            config = write_config_toml(
+                work / "configs" / f"{key}.toml",
+                data,
+                f"Geometry ablation variant '{variant.label}' of {args.config}",
+            )
+            checkpoints = work / "checkpoints" / key
+            train = ["train", "--config", config, "--packets", args.packets, "--out", checkpoints]
+            if args.device == "cpu":  # train runs where accelerate puts it: CUDA when available unless told
+                train += ["--device", "cpu"]
+            if args.no_progress:
+                train.append("--no-progress")
+            pipeline.run(f"train {key}", train)
+            runs = work / "runs" / key
+            pipeline.run(f"run {key}", _run_command(args, checkpoints, runs))
+            results[variant.key] = ablation.pooled_means(runs / METRICS_FILE)
+        per_model.append(results)
+    models = [f"seed {seed}" if seed is not None else f"seed of {args.config}" for seed in seeds]
+    labels = {variant.key: variant.label for variant in ablation.GEOMETRY_VARIANTS}
+    frame = ablation.geometry_frame(ablation.mean_over_models(per_model))
     caption = "Geometric grounding ablation on the synthetic streets (paper Table 5 shape)"
     commands = f"`{invocation}`, which ran:\n\n" + pipeline.commands_markdown()
-    markdown = ablation.geometry_markdown(frame, ablation.ordering_geometry(frame), commands, caption)
+    markdown = ablation.geometry_markdown(
+        frame,
+        ablation.ordering_geometry(frame),
+        commands,
+        caption,
+        ablation.spread_notes(per_model, labels, models),
+    )
     return ablation.write_tables(
-        args.out, "ablation_geometry", frame, markdown, ablation.geometry_latex(frame, caption)
+        args.out,
+        "ablation_geometry",
+        frame,
+        markdown,
+        ablation.geometry_latex(frame, caption),
+        ablation.per_model_frame(per_model, labels, models),
     )
 
 
@@ -158,21 +187,39 @@ def _setsize(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocatio
     from setdiff_bench.reporting import ablation
 
     sizes = ablation.parse_sizes(args.sizes)
-    results = {}
-    for refs, targets in sizes:
-        runs = work / "runs" / f"{refs}+{targets}"
-        pipeline.run(
-            f"run {refs}+{targets}",
-            _run_command(args, args.checkpoint, runs, f"max_references={refs}", f"targets_per_set={targets}"),
-        )
-        results[(refs, targets)] = ablation.pooled_means(runs / METRICS_FILE)
-    frame = ablation.setsize_frame(results)
+    checkpoints: list[Path] = args.checkpoint
+    per_model: list[dict[tuple[int, int], dict[str, float]]] = []
+    for index, checkpoint in enumerate(checkpoints):
+        results = {}
+        for refs, targets in sizes:
+            key = f"{refs}+{targets}" if len(checkpoints) == 1 else f"model{index}/{refs}+{targets}"
+            runs = work / "runs" / key
+            pipeline.run(
+                f"run {key}",
+                _run_command(args, checkpoint, runs, f"max_references={refs}", f"targets_per_set={targets}"),
+            )
+            results[(refs, targets)] = ablation.pooled_means(runs / METRICS_FILE)
+        per_model.append(results)
+    means = ablation.mean_over_models(per_model)
+    models = [str(checkpoint) for checkpoint in checkpoints]
+    labels = {size: ablation.size_label(size) for size in sizes}
+    frame = ablation.setsize_frame(means)
     caption = "Set-size ablation on the synthetic streets (paper Table 6, one row per set size)"
     commands = f"`{invocation}`, which ran:\n\n" + pipeline.commands_markdown()
-    targets = int(next(iter(results.values()))["targets"])
+    targets = int(next(iter(means.values()))["targets"])
     markdown = ablation.setsize_markdown(
-        frame, ablation.ordering_setsize(results), commands, caption, targets
+        frame,
+        ablation.ordering_setsize(means, per_model),
+        commands,
+        caption,
+        targets,
+        ablation.spread_notes(per_model, labels, models),
     )
     return ablation.write_tables(
-        args.out, "ablation_setsize", frame, markdown, ablation.setsize_latex(frame, caption)
+        args.out,
+        "ablation_setsize",
+        frame,
+        markdown,
+        ablation.setsize_latex(frame, caption),
+        ablation.per_model_frame(per_model, labels, models),
     )

@@ -28,7 +28,7 @@ Presets (``--preset``):
 * ``tiny``: tiny scenes (80×48) — a smoke test (CI runs it with and without ``--train``).  Its
   numbers mean nothing.
 * ``default``: the ``default`` synthetic preset's 2 test scenes at 256×144 with the shipped models
-  (about 8 minutes on 2 CPU cores, measured in README.md); with ``--train``, all 6 scenes and short CPU
+  (about 5 minutes on 2 CPU cores, measured in README.md); with ``--train``, all 6 scenes and short CPU
   training.
 * ``full``: the ``large`` synthetic preset (8 scenes at 512×288); meant for ``--train`` on a GPU.
 """
@@ -104,7 +104,7 @@ DEMO_PRESETS: dict[str, DemoPreset] = {
     ),
     "default": DemoPreset(
         "default",
-        "the 2 test scenes at 256x144 with the shipped models (about 8 minutes "
+        "the 2 test scenes at 256x144 with the shipped models (about 5 minutes "
         "on 2 CPU cores); with --train all 6 scenes and short CPU training",
         "default",
         None,

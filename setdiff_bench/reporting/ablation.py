@@ -8,7 +8,10 @@
   targets are scored at every size, so columns differ only in how much each target sees.
 
 Each cell is the mean of per-target values over the whole test split (all groups pooled), like
-the paper's tables.  The Markdown and LaTeX (booktabs) tables are written by the leaderboard's writers
+the paper's tables.  Several trained models (training seeds: ``ablate geometry --seed 0 --seed 1``,
+``ablate setsize --checkpoint A --checkpoint B``) make each cell the mean over models; the spread
+(max − min over models) and, for set sizes, each model's own paired gain are printed under the table,
+and every model's values go to ``<stem>_per_model.parquet`` (one row per model, row and metric).  The Markdown and LaTeX (booktabs) tables are written by the leaderboard's writers
 (:func:`setdiff_bench.reporting.leaderboard.pooled_table`), so cells, bold and headers follow the metric specs
 exactly as in the leaderboards; the Markdown adds the paper's numbers (DL3DV) below for orientation —
 never mixed into our rows — and the exact commands that produced them.  The set-size table has one row
@@ -18,9 +21,10 @@ shape.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypeVar
 
 import pandas as pd
 import pyarrow as pa
@@ -59,6 +63,8 @@ GEOMETRY_VARIANTS: tuple[GeometryVariant, ...] = (
     GeometryVariant("both", "Both", {"use_geometry": True, "geometry_inputs": ["cmap", "plucker"]}),
 )
 
+Key = TypeVar("Key", bound=Hashable)
+
 SET_SIZES: tuple[tuple[int, int], ...] = ((1, 1), (2, 1), (3, 1), (3, 2), (3, 4), (3, 6))
 
 
@@ -88,6 +94,46 @@ def pooled_means(metrics_file: Path, split: str = "test") -> dict[str, float]:
     if not len(frame):
         raise SetDiffBenchError(f"no {split} targets in the run", metrics_file)
     return {m: float(frame[m].mean()) for m in METRICS} | {"targets": float(len(frame))}
+
+
+def mean_over_models(per_model: Sequence[Mapping[Key, Mapping[str, float]]]) -> dict[Key, dict[str, float]]:
+    """Row key → metric → mean over the models (training seeds) that have the row; ``targets`` is kept."""
+    keys = list(dict.fromkeys(key for model in per_model for key in model))
+    means = {}
+    for key in keys:
+        own = [model[key] for model in per_model if key in model]
+        means[key] = {m: sum(r[m] for r in own) / len(own) for m in METRICS} | {"targets": own[0]["targets"]}
+    return means
+
+
+def spread_notes(
+    per_model: Sequence[Mapping[Key, Mapping[str, float]]], label: Mapping[Key, str], models: Sequence[str]
+) -> list[str]:
+    """One line per metric: the spread (max − min over models) of each row's value; none for one model."""
+    if len(per_model) < 2:
+        return []
+    notes = [f"Each cell is the mean over {len(per_model)} trained models ({', '.join(models)})."]
+    for metric in METRICS:
+        spec = get_metric(metric)
+        cells = []
+        for key, text in label.items():
+            values = [model[key][metric] for model in per_model if key in model]
+            cells.append(f"{text} {max(values) - min(values):.{spec.decimals + 1}f}")
+        notes.append(f"{spec.label} spread (max − min over models): {', '.join(cells)}.")
+    return notes
+
+
+def per_model_frame(
+    per_model: Sequence[Mapping[Key, Mapping[str, float]]], label: Mapping[Key, str], models: Sequence[str]
+) -> pd.DataFrame:
+    """Long table of every model's pooled means: columns ``model``, ``row``, ``metric``, ``value``."""
+    rows = [
+        {"model": name, "row": label[key], "metric": get_metric(metric).label, "value": float(values[metric])}
+        for name, model in zip(models, per_model)
+        for key, values in model.items()
+        for metric in METRICS
+    ]
+    return pd.DataFrame(rows, columns=["model", "row", "metric", "value"])
 
 
 def geometry_frame(results: Mapping[str, Mapping[str, float]]) -> pd.DataFrame:
@@ -133,8 +179,13 @@ def ordering_geometry(frame: pd.DataFrame) -> list[str]:
     return notes
 
 
-def ordering_setsize(results: Mapping[tuple[int, int], Mapping[str, float]]) -> list[str]:
-    """Whether more references / more targets help, as in the paper's Table 6."""
+def ordering_setsize(
+    results: Mapping[tuple[int, int], Mapping[str, float]],
+    per_model: Sequence[Mapping[tuple[int, int], Mapping[str, float]]] = (),
+) -> list[str]:
+    """Whether more references / more targets help, as in the paper's Table 6.  ``results`` holds the means;
+    with two or more ``per_model`` results each comparison also gives every model's own (paired) gain and
+    in how many models the larger set is better."""
     comparisons = (  # (larger set, smaller set, what the paper found)
         ((3, 1), (1, 1), "better"),
         ((3, 6), (3, 1), "better for PSNR/SSIM, LPIPS within 0.001"),
@@ -147,10 +198,21 @@ def ordering_setsize(results: Mapping[tuple[int, int], Mapping[str, float]]) -> 
             new, old = results.get(new_size), results.get(old_size)
             if new and old:
                 gain = sign * (new[metric] - old[metric])
+                paired = [
+                    sign * (model[new_size][metric] - model[old_size][metric])
+                    for model in per_model
+                    if new_size in model and old_size in model
+                ]
+                per_seed = (
+                    f"; gain per model {', '.join(f'{g:+.4f}' for g in paired)}, "
+                    f"better in {sum(g > 0 for g in paired)} of {len(paired)}"
+                    if len(paired) > 1
+                    else ""
+                )
                 notes.append(
                     f"{label}: {new_size[0]}+{new_size[1]} vs {old_size[0]}+{old_size[1]} "
                     f"{'better' if gain > 0 else 'not better'} "
-                    f"({new[metric]:.4f} vs {old[metric]:.4f}; paper: {paper})"
+                    f"({new[metric]:.4f} vs {old[metric]:.4f}{per_seed}; paper: {paper})"
                 )
     return notes
 
@@ -177,11 +239,11 @@ def paper_board(table: str, title: str) -> Leaderboard:
     return pooled_table(title, rows, METRICS, row_header=header, best=best)
 
 
-def geometry_board(frame: pd.DataFrame, caption: str) -> Leaderboard:
-    """Table 5 for the writers: one row per variant, best per column in bold."""
+def geometry_board(frame: pd.DataFrame, caption: str, notes: Sequence[str] = ()) -> Leaderboard:
+    """Table 5 for the writers: one row per variant, best per column in bold; ``notes`` go under it."""
     rows = [pooled_row(row["grounding"], {m: row[m] for m in METRICS}) for _, row in frame.iterrows()]
-    notes = [f"Pooled over {int(frame['targets'].iloc[0])} test targets per variant."]
-    return pooled_table(caption, rows, METRICS, row_header=GEOMETRY_HEADER, notes=notes)
+    pooled = [f"Pooled over {int(frame['targets'].iloc[0])} test targets per variant.", *notes]
+    return pooled_table(caption, rows, METRICS, row_header=GEOMETRY_HEADER, notes=pooled)
 
 
 def setsize_board(frame: pd.DataFrame, caption: str, notes: Sequence[str] = ()) -> Leaderboard:
@@ -210,11 +272,14 @@ def _document(board: Leaderboard, ordering: Sequence[str], paper: Leaderboard, c
     return "\n".join(lines)
 
 
-def geometry_markdown(frame: pd.DataFrame, notes: Sequence[str], commands: str, caption: str) -> str:
+def geometry_markdown(
+    frame: pd.DataFrame, notes: Sequence[str], commands: str, caption: str, spread: Sequence[str] = ()
+) -> str:
+    """``notes``: the ordering against the paper; ``spread``: :func:`spread_notes` (under the table)."""
     paper = paper_board(
         "table5_geometry_ablation", "Paper, Table 5 (DL3DV; for orientation, not comparable numbers)"
     )
-    return _document(geometry_board(frame, caption), notes, paper, commands)
+    return _document(geometry_board(frame, caption, spread), notes, paper, commands)
 
 
 def geometry_latex(frame: pd.DataFrame, caption: str) -> str:
@@ -222,12 +287,20 @@ def geometry_latex(frame: pd.DataFrame, caption: str) -> str:
 
 
 def setsize_markdown(
-    frame: pd.DataFrame, notes: Sequence[str], commands: str, caption: str, targets: int
+    frame: pd.DataFrame,
+    notes: Sequence[str],
+    commands: str,
+    caption: str,
+    targets: int,
+    spread: Sequence[str] = (),
 ) -> str:
+    """``notes``: the ordering against the paper; ``spread``: :func:`spread_notes` (under the table)."""
     paper = paper_board(
         "table6_setsize_ablation", "Paper, Table 6 (DL3DV; for orientation, not comparable numbers)"
     )
-    board = setsize_board(frame, caption, [f"Every set size scores the same {targets} test targets."])
+    board = setsize_board(
+        frame, caption, [f"Every set size scores the same {targets} test targets.", *spread]
+    )
     return _document(board, notes, paper, commands)
 
 
@@ -235,12 +308,20 @@ def setsize_latex(frame: pd.DataFrame, caption: str) -> str:
     return render_latex(setsize_board(frame, caption))
 
 
-def write_tables(out: Path, stem: str, frame: pd.DataFrame, markdown: str, latex: str) -> dict[str, Path]:
-    """``<out>/<stem>.{md,tex,parquet}``, each written atomically."""
+def write_tables(
+    out: Path, stem: str, frame: pd.DataFrame, markdown: str, latex: str, per_model: pd.DataFrame
+) -> dict[str, Path]:
+    """``<out>/<stem>.{md,tex,parquet}`` and ``<out>/<stem>_per_model.parquet``, each written atomically."""
     out.mkdir(parents=True, exist_ok=True)
-    paths = {"md": out / f"{stem}.md", "latex": out / f"{stem}.tex", "parquet": out / f"{stem}.parquet"}
+    paths = {
+        "md": out / f"{stem}.md",
+        "latex": out / f"{stem}.tex",
+        "parquet": out / f"{stem}.parquet",
+        "per_model": out / f"{stem}_per_model.parquet",
+    }
     write_text_atomic(paths["md"], markdown)
     write_text_atomic(paths["latex"], latex)
-    with atomic_path(paths["parquet"]) as tmp:
-        pq.write_table(pa.Table.from_pandas(frame, preserve_index=False), tmp)
+    for key, table in (("parquet", frame), ("per_model", per_model)):
+        with atomic_path(paths[key]) as tmp:
+            pq.write_table(pa.Table.from_pandas(table, preserve_index=False), tmp)
     return paths

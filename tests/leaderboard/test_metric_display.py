@@ -120,3 +120,34 @@ def test_a_metric_column_without_a_spec_is_refused() -> None:
     frame = leaderboard_of_the_same_numbers().assign(psnr_mine=1.0)
     with pytest.raises(UsageError, match="unknown metric"):  # no spec: no header, decimals or direction
         build_leaderboard("nuscenes", frame, metrics=["psnr_mine"])
+
+
+def test_several_models_give_means_spread_and_paired_gains() -> None:
+    seed0 = {
+        (1, 1): {"psnr": 20.0, "ssim": 0.70, "lpips": 0.20, "targets": 8.0},
+        (3, 1): {"psnr": 20.5, "ssim": 0.72, "lpips": 0.19, "targets": 8.0},
+    }
+    seed1 = {
+        (1, 1): {"psnr": 21.0, "ssim": 0.74, "lpips": 0.22, "targets": 8.0},
+        (3, 1): {"psnr": 20.9, "ssim": 0.75, "lpips": 0.21, "targets": 8.0},
+    }
+    means = ablation.mean_over_models([seed0, seed1])
+    expected = {(1, 1): (20.5, 0.72, 0.21), (3, 1): (20.7, 0.735, 0.2)}  # by hand
+    for size, values in expected.items():
+        assert means[size]["targets"] == 8.0
+        assert all(abs(means[size][m] - v) < 1e-12 for m, v in zip(("psnr", "ssim", "lpips"), values))
+    ordering = ablation.ordering_setsize(means, [seed0, seed1])
+    # PSNR gains by hand: +0.5 (seed 0), -0.1 (seed 1); LPIPS is lower-is-better, so +0.01 in both
+    assert ordering[0].startswith(
+        "PSNR: 3+1 vs 1+1 better (20.7000 vs 20.5000; gain per model +0.5000, -0.1000"
+    )
+    assert "better in 1 of 2" in ordering[0]
+    assert "gain per model +0.0100, +0.0100, better in 2 of 2" in ordering[2]
+    labels = {(1, 1): "1 + 1", (3, 1): "3 + 1"}
+    notes = ablation.spread_notes([seed0, seed1], labels, ["seed 0", "seed 1"])
+    assert notes[0] == "Each cell is the mean over 2 trained models (seed 0, seed 1)."
+    assert notes[1] == "PSNR spread (max − min over models): 1 + 1 1.000, 3 + 1 0.400."
+    assert ablation.spread_notes([seed0], labels, ["seed 0"]) == []
+    frame = ablation.per_model_frame([seed0, seed1], labels, ["seed 0", "seed 1"])
+    assert len(frame) == 12 and list(frame.columns) == ["model", "row", "metric", "value"]
+    assert frame.iloc[0].tolist() == ["seed 0", "1 + 1", "PSNR", 20.0]
