@@ -162,24 +162,14 @@ def _geometry(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocati
         per_model.append(results)
     models = [f"seed {seed}" if seed is not None else f"seed of {args.config}" for seed in seeds]
     labels = {variant.key: variant.label for variant in ablation.GEOMETRY_VARIANTS}
-    frame = ablation.geometry_frame(ablation.mean_over_models(per_model))
+    models_results = ablation.ModelResults(per_model, labels, models)
+    frame = ablation.geometry_frame(models_results.means())
     caption = "Geometric grounding ablation on the synthetic streets (paper Table 5 shape)"
     commands = f"`{invocation}`, which ran:\n\n" + pipeline.commands_markdown()
-    markdown = ablation.geometry_markdown(
-        frame,
-        ablation.ordering_geometry(frame),
-        commands,
-        caption,
-        ablation.spread_notes(per_model, labels, models),
-    )
-    return ablation.write_tables(
-        args.out,
-        "ablation_geometry",
-        frame,
-        markdown,
-        ablation.geometry_latex(frame, caption),
-        ablation.per_model_frame(per_model, labels, models),
-    )
+    ordering = ablation.ordering_geometry(frame)
+    markdown = ablation.geometry_markdown(frame, ordering, commands, caption, models_results.spread_notes())
+    latex = ablation.geometry_latex(frame, caption)
+    return ablation.write_tables(args.out, "ablation_geometry", frame, markdown, latex, models_results)
 
 
 def _setsize(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocation: str) -> dict[str, Path]:
@@ -200,26 +190,15 @@ def _setsize(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocatio
             )
             results[(refs, targets)] = ablation.pooled_means(runs / METRICS_FILE)
         per_model.append(results)
-    means = ablation.mean_over_models(per_model)
-    models = [str(checkpoint) for checkpoint in checkpoints]
     labels = {size: ablation.size_label(size) for size in sizes}
+    models_results = ablation.ModelResults(per_model, labels, [str(checkpoint) for checkpoint in checkpoints])
+    means = models_results.means()
     frame = ablation.setsize_frame(means)
     caption = "Set-size ablation on the synthetic streets (paper Table 6, one row per set size)"
     commands = f"`{invocation}`, which ran:\n\n" + pipeline.commands_markdown()
     targets = int(next(iter(means.values()))["targets"])
-    markdown = ablation.setsize_markdown(
-        frame,
-        ablation.ordering_setsize(means, per_model),
-        commands,
-        caption,
-        targets,
-        ablation.spread_notes(per_model, labels, models),
-    )
-    return ablation.write_tables(
-        args.out,
-        "ablation_setsize",
-        frame,
-        markdown,
-        ablation.setsize_latex(frame, caption),
-        ablation.per_model_frame(per_model, labels, models),
-    )
+    ordering = ablation.ordering_setsize(means, per_model)
+    spread = models_results.spread_notes()
+    markdown = ablation.setsize_markdown(frame, ordering, commands, caption, targets, spread)
+    latex = ablation.setsize_latex(frame, caption)
+    return ablation.write_tables(args.out, "ablation_setsize", frame, markdown, latex, models_results)

@@ -24,7 +24,7 @@ from __future__ import annotations
 from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TypeVar
+from typing import Generic, TypeVar
 
 import pandas as pd
 import pyarrow as pa
@@ -134,6 +134,30 @@ def per_model_frame(
         for metric in METRICS
     ]
     return pd.DataFrame(rows, columns=["model", "row", "metric", "value"])
+
+
+@dataclass(frozen=True)
+class ModelResults(Generic[Key]):
+    """One study's pooled means for each trained model (training seed).
+
+    Attributes:
+        per_model: ``per_model[i][row]`` → metric → value (plus ``targets``), one mapping per model.
+        labels: row key → its label in the tables (e.g. ``(3, 1)`` → ``"3 + 1"``).
+        models: one name per model (a seed, a checkpoint path).
+    """
+
+    per_model: Sequence[Mapping[Key, Mapping[str, float]]]
+    labels: Mapping[Key, str]
+    models: Sequence[str]
+
+    def means(self) -> dict[Key, dict[str, float]]:
+        return mean_over_models(self.per_model)
+
+    def spread_notes(self) -> list[str]:
+        return spread_notes(self.per_model, self.labels, self.models)
+
+    def frame(self) -> pd.DataFrame:
+        return per_model_frame(self.per_model, self.labels, self.models)
 
 
 def geometry_frame(results: Mapping[str, Mapping[str, float]]) -> pd.DataFrame:
@@ -309,9 +333,10 @@ def setsize_latex(frame: pd.DataFrame, caption: str) -> str:
 
 
 def write_tables(
-    out: Path, stem: str, frame: pd.DataFrame, markdown: str, latex: str, per_model: pd.DataFrame
+    out: Path, stem: str, frame: pd.DataFrame, markdown: str, latex: str, results: ModelResults
 ) -> dict[str, Path]:
-    """``<out>/<stem>.{md,tex,parquet}`` and ``<out>/<stem>_per_model.parquet``, each written atomically."""
+    """``<out>/<stem>.{md,tex,parquet}`` and every model's values (``results``) in
+    ``<out>/<stem>_per_model.parquet``, each written atomically."""
     out.mkdir(parents=True, exist_ok=True)
     paths = {
         "md": out / f"{stem}.md",
@@ -321,7 +346,7 @@ def write_tables(
     }
     write_text_atomic(paths["md"], markdown)
     write_text_atomic(paths["latex"], latex)
-    for key, table in (("parquet", frame), ("per_model", per_model)):
+    for key, table in (("parquet", frame), ("per_model", results.frame())):
         with atomic_path(paths[key]) as tmp:
             pq.write_table(pa.Table.from_pandas(table, preserve_index=False), tmp)
     return paths
