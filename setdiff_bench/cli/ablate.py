@@ -8,10 +8,10 @@
 the same config, seed and steps, and runs each on the test packets; ``setsize`` runs one trained
 SetDiff at several N + M set sizes.  Repeating ``--seed`` (geometry: every variant is trained once
 per seed) or ``--checkpoint`` (set size: one model per training seed) makes each cell the mean over
-models, with the spread and each model's values beside it.  Every stage is an ordinary ``setdiff-bench`` command (listed in
-the output tables) and resumes, so an interrupted ablation continues where it stopped.  Tables go to
-``<out>/ablation_geometry.{md,tex,parquet}`` and ``<out>/ablation_setsize.{md,tex,parquet}``;
-checkpoints and runs to ``--work`` (default ``<out>/work``).
+the models, with the spread under the table and each model's values in ``*_per_model.parquet``.
+Every stage is an ordinary ``setdiff-bench`` command (listed in the output tables) and resumes, so an
+interrupted ablation continues where it stopped.  Tables go to ``<out>/ablation_geometry.{md,tex,parquet}``
+and ``<out>/ablation_setsize.{md,tex,parquet}``; checkpoints and runs to ``--work`` (default ``<out>/work``).
 """
 
 from __future__ import annotations
@@ -197,7 +197,7 @@ def _setsize(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocatio
     caption = "Set-size ablation on the synthetic streets (paper Table 6, one row per set size)"
     commands = f"`{invocation}`, which ran:\n\n" + pipeline.commands_markdown()
     targets = int(next(iter(means.values()))["targets"])
-    ordering = ablation.ordering_setsize(means, per_model)
+    ordering = ablation.ordering_setsize(means, models_results.per_model)
     spread = models_results.spread_notes()
     markdown = ablation.setsize_markdown(frame, ordering, commands, caption, targets, spread)
     latex = ablation.setsize_latex(frame, caption)
