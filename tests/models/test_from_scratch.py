@@ -1,5 +1,5 @@
 """Pieces that let a from-scratch SetDiff use its set: the toolkit's tiny autoencoder, the identity-at-
-initialisation output, identity training samples and the C-map distance attention bias."""
+initialisation output, identity and masked-copy training samples and the C-map distance attention bias."""
 
 from __future__ import annotations
 
@@ -20,7 +20,13 @@ from setdiff_bench.models.setdiff.autoencoder import (
 )
 from setdiff_bench.models.setdiff.config import model_config_from_dict
 from setdiff_bench.models.setdiff.inference import enhance_packet
-from setdiff_bench.models.setdiff.inputs import surface_points, training_set
+from setdiff_bench.models.setdiff.inputs import (
+    HOLE_AREA,
+    HOLE_VALUE,
+    cut_holes,
+    surface_points,
+    training_set,
+)
 from setdiff_bench.models.setdiff.model import SetDiffModel
 from setdiff_bench.models.setdiff.set_mixer import BIAS_DISTANCE_CAP, distance_bias, token_grid
 from tests.models.setdiff_fixtures import make_packet, make_sample, train_argv
@@ -88,6 +94,39 @@ def test_identity_samples_feed_ground_truth_as_input() -> None:
     assert torch.equal(always.batch.images[0, n:], always.target_gt[0])
     assert torch.equal(always.batch.images[0, :n], never.batch.images[0, :n])
     assert not torch.equal(never.batch.images[0, n:], never.target_gt[0])
+
+
+def test_cut_holes_fills_one_rectangle_per_view_around_a_surface_pixel() -> None:
+    """A 40x60 view whose only surface pixel is (30, 50): the hole is a grey rectangle containing it."""
+    images = torch.zeros(2, 3, 40, 60)
+    alphas = torch.zeros(2, 1, 40, 60)
+    alphas[:, :, 30, 50] = 1.0
+    out = cut_holes(images, alphas, random.Random(3))
+    assert torch.equal(images, torch.zeros(2, 3, 40, 60))  # the input is not modified
+    for view in range(2):
+        hole = out[view, 0] == HOLE_VALUE
+        rows, cols = torch.nonzero(hole, as_tuple=True)
+        top, bottom, left, right = int(rows.min()), int(rows.max()), int(cols.min()), int(cols.max())
+        assert int(hole.sum()) == (bottom - top + 1) * (right - left + 1)  # a full rectangle
+        assert top <= 30 <= bottom and left <= 50 <= right
+        area = (bottom - top + 1) * (right - left + 1) / (40 * 60)
+        assert 0.5 * HOLE_AREA[0] <= area <= 1.5 * HOLE_AREA[1]  # rounding and the border clip
+        assert torch.equal(out[view, :, ~hole], images[view, :, ~hole])
+        assert torch.equal(out[view, 1:][:, hole], out[view, 0][hole].expand(2, -1))
+
+
+def test_masked_copy_samples_cut_the_target_renders_only() -> None:
+    sample = make_sample(2, 3)
+    kwargs = {"min_views": 5, "max_views": 5, "use_geometry": True, "cmap_clip": 10.0}
+    masked = training_set(sample, random.Random(7), masked_copy_probability=0.999999, **kwargs)
+    plain = training_set(sample, random.Random(7), **kwargs)
+    n = masked.batch.num_references
+    assert torch.equal(masked.batch.images[0, :n], plain.batch.images[0, :n])
+    assert torch.equal(masked.batch.geometry, plain.batch.geometry)
+    assert torch.equal(masked.target_gt, plain.target_gt)
+    changed = (masked.batch.images[0, n:] != plain.batch.images[0, n:]).any(dim=1)  # (M, H, W)
+    assert all(bool(changed[view].any()) for view in range(changed.shape[0]))
+    assert torch.all(masked.batch.images[0, n:].permute(1, 0, 2, 3)[:, changed] == HOLE_VALUE)
 
 
 def test_distance_bias_by_hand() -> None:

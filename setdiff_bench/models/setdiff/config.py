@@ -380,6 +380,9 @@ class TrainConfig:
             needed for sets of 8–12 views at 576×1024 on 80 GB GPUs.
         identity_fraction: probability per set of an identity sample (every target's input replaced by
             its ground truth: a clean view must come back unchanged); 0 = off (the paper).
+        masked_copy_fraction: probability per set of a masked-copy sample (every target render loses
+            a rectangle, its geometry kept, so the content must come from the references); drawn
+            after, and exclusive of, the identity sample; 0 = off (the paper).
     """
 
     steps: int = 40_000
@@ -407,11 +410,16 @@ class TrainConfig:
     num_workers: int = 0
     gradient_checkpointing: bool = False
     identity_fraction: float = 0.0
+    masked_copy_fraction: float = 0.0
 
     def __post_init__(self) -> None:
         where = "[train]"
         if not 0.0 <= self.identity_fraction < 1.0:
             raise UsageError(f"identity_fraction must be in [0, 1), got {self.identity_fraction}", where)
+        if not 0.0 <= self.masked_copy_fraction < 1.0:
+            raise UsageError(
+                f"masked_copy_fraction must be in [0, 1), got {self.masked_copy_fraction}", where
+            )
         if self.steps < 0 or self.gradient_accumulation < 1:
             raise UsageError("steps must be >= 0 and gradient_accumulation >= 1", where)
         if not 2 <= self.min_views <= self.max_views:

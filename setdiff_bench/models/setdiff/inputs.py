@@ -186,6 +186,7 @@ def training_set(
     geometry_inputs: Sequence[str] = GEOMETRY_INPUTS,
     with_points: bool = False,
     identity_probability: float = 0.0,
+    masked_copy_probability: float = 0.0,
 ) -> TrainingSet:
     """Draw the views of one training step from ``sample`` and build the tensors.
 
@@ -199,6 +200,10 @@ def training_set(
         with_points: also build the surface points of the attention bias (:func:`surface_points`).
         identity_probability: with this probability the set is an *identity sample*: every target's
             input is its own ground truth, so the model learns to leave a clean view unchanged.
+        masked_copy_probability: with this probability (drawn only when the set is not an identity
+            sample) the set is a *masked-copy sample*: every target's render loses a rectangle
+            (:func:`cut_holes`) while its C-map and rays stay, so the supervised content there can only
+            come from the references that see the same surface.
     """
     packet = sample.packet
     check_packet(packet, 1)
@@ -230,9 +235,51 @@ def training_set(
     masks = sample.target_masks[target_ids].bool()[None]
     if identity_probability > 0 and rng.random() < identity_probability:
         images = torch.cat([images[:n], gt[0]])
+    elif masked_copy_probability > 0 and rng.random() < masked_copy_probability:
+        images = torch.cat([images[:n], cut_holes(images[n:], subset.targets.alphas.float(), rng)])
     points = surface_points(subset)[None] if with_points else None
     batch = SetBatch(images[None], None if geometry is None else geometry[None], n, points)
     return TrainingSet(batch=batch, target_gt=gt, target_masks=masks)
+
+
+#: Pixel value of a masked-copy hole (mid grey; the C-map and rays of the hole are kept).
+HOLE_VALUE = 0.5
+#: A masked-copy hole covers this fraction of the image area (uniform), with aspect w/h in HOLE_ASPECT.
+HOLE_AREA = (0.08, 0.25)
+HOLE_ASPECT = (0.5, 2.0)
+
+
+def cut_holes(images: torch.Tensor, alphas: torch.Tensor, rng: random.Random) -> torch.Tensor:
+    """One rectangular hole per view, filled with :data:`HOLE_VALUE` (the masked-copy task).
+
+    The hole's centre is a random pixel with a surface (alpha > :data:`SURFACE_ALPHA`; any pixel when
+    the view has none), so the hole covers geometry that references can see; its area and aspect are
+    uniform in :data:`HOLE_AREA` and :data:`HOLE_ASPECT`, clipped at the image border.
+
+    Args:
+        images: ``(M, 3, H, W)`` target renders in [0, 1].
+        alphas: ``(M, 1, H, W)`` their accumulated opacity.
+        rng: the training step's random source.
+
+    Returns:
+        A copy of ``images`` with the holes filled.
+    """
+    out = images.clone()
+    height, width = images.shape[-2:]
+    for view in range(images.shape[0]):
+        area = rng.uniform(*HOLE_AREA) * height * width
+        aspect = rng.uniform(*HOLE_ASPECT)
+        hole_h = max(1, min(height, round((area / aspect) ** 0.5)))
+        hole_w = max(1, min(width, round((area * aspect) ** 0.5)))
+        surface = torch.nonzero(alphas[view, 0] > SURFACE_ALPHA)
+        if len(surface):
+            row, col = (int(v) for v in surface[rng.randrange(len(surface))])
+        else:
+            row, col = rng.randrange(height), rng.randrange(width)
+        top = min(max(row - hole_h // 2, 0), height - hole_h)
+        left = min(max(col - hole_w // 2, 0), width - hole_w)
+        out[view, :, top : top + hole_h, left : left + hole_w] = HOLE_VALUE
+    return out
 
 
 def _subset(views: ViewSet, indices: Sequence[int]) -> ViewSet:

@@ -358,6 +358,7 @@ def _micro_step(
         geometry_inputs=mc.geometry_inputs,
         with_points=mc.attention_bias != "none",
         identity_probability=tc.identity_fraction,
+        masked_copy_probability=tc.masked_copy_fraction,
     )
     batch = drawn.batch.to(device)
     keep = None
