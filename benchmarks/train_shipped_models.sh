@@ -11,16 +11,16 @@
 # WORK_DIR (default runs/shipped) receives scenes, packets and training runs; EXPORT_DIR (default
 # WORK_DIR/weights) the exported model folders — pass setdiff_bench/models/setdiff/weights to replace the shipped
 # ones.  Every step resumes when the script is run again.  On 2 CPU cores: about 15 minutes of scenes and
-# packets (the 14 fits, two at a time: about 7 min), then the two trainings side by side,
-# one torch thread each (SetDiff about 3.4 s per step, DiFix about 2.5 s per step when they have the machine
-# to themselves).  The same machine and thread count give byte-identical weights; see README
+# packets (the 14 fits, two at a time: about 7 min), then the two trainings side by side, one torch thread
+# each: the shipped models took 114 min (SetDiff, 2250 steps) and 47 min (DiFix), sharing the machine with
+# other jobs part of the time.  The same machine and thread count give byte-identical weights; see README
 # "Reproducibility" for what differs elsewhere.
 set -euo pipefail
 work=${1:-runs/shipped}
 export_dir=${2:-$work/weights}
 export SETDIFF_THREADS=${SETDIFF_THREADS:-1}
 bench="python3 -m setdiff_bench"
-steps=1500
+steps=2250
 
 test_scenes=(--test-scene scene_0000_02 --test-scene scene_0000_04 --test-scene scene_0000_07)
 
