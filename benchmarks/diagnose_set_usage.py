@@ -20,7 +20,7 @@ and, per set-mixer layer (one pass without guidance, the whole packet as one set
 Usage (on the demo's packets and the shipped model)::
 
     python benchmarks/diagnose_set_usage.py --packets runs/demo/work/packets --checkpoint tiny_setdiff \
-        --group lane+2 --packets-max 2 --out benchmarks/results/set_usage_tiny_setdiff_11scenes_lane2.json
+        --group lane+2 --packets-max 2 --out benchmarks/results/set_usage_tiny_setdiff_step2250_lane2.json
 """
 
 from __future__ import annotations
