@@ -11,6 +11,9 @@ and, per set-mixer layer (one pass without guidance, the whole packet as one set
 
 * ``own_view``: the share of attention mass a token puts on its own view (1/V = no preference);
 * ``entropy``: the attention's normalised entropy (1 = uniform over all V·L tokens);
+* ``content_logit_std``: the spread (std over keys, mean over queries and heads) of the content logits
+  q·k/√d, before any geometry bias: below ~1 a softmax over thousands of tokens stays near uniform
+  whatever the keys hold; ``query_key_weight_norm``: ‖W_q‖·‖W_k‖ (Frobenius), its scale;
 * ``reference_mass``: the mass a target token puts on reference tokens, over the references' share of
   the tokens (1 = no preference for references);
 * ``correspondence_lift``: the mass a target token puts on the reference tokens that see the same
@@ -131,6 +134,7 @@ def attention_stats(
             query = query.reshape(sets, views * tokens, heads, dim).transpose(1, 2)
             key = key.reshape(sets, views * tokens, heads, dim).transpose(1, 2)
             logits = query @ key.transpose(-1, -2) / dim**0.5
+            content_logit_std = float(logits.float().std(dim=-1).mean())
             log_scale = getattr(attn, set_mixer.BIAS_PARAMETER, None)
             if kwargs.get("token_points") is not None and log_scale is not None:  # the C-map distance bias
                 bias_points, bias_valid = set_mixer.pool_token_points(kwargs["token_points"], tokens)
@@ -148,6 +152,8 @@ def attention_stats(
                 "tokens_per_view": float(tokens),
                 "own_view": float((weights * own).sum(-1).mean()),
                 "entropy": float(entropy / math.log(total)),
+                "content_logit_std": content_logit_std,
+                "query_key_weight_norm": float(attn.to_q.weight.norm() * attn.to_k.weight.norm()),
             }
             is_ref = view_of < references
             target_rows = weights[~is_ref]
