@@ -11,6 +11,8 @@ and, per set-mixer layer (one pass without guidance, the whole packet as one set
 
 * ``own_view``: the share of attention mass a token puts on its own view (1/V = no preference);
 * ``entropy``: the attention's normalised entropy (1 = uniform over all V·L tokens);
+* ``set_mixer_drift_from_init`` (once per model): how far each set-mixer projection moved from its
+  initialisation (relative Frobenius change);
 * ``content_logit_std``: the spread (std over keys, mean over queries and heads) of the content logits
   q·k/√d, before any geometry bias: below ~1 a softmax over thousands of tokens stays near uniform
   whatever the keys hold; ``query_key_weight_norm``: ‖W_q‖·‖W_k‖ (Frobenius), its scale;
@@ -179,6 +181,24 @@ def attention_stats(
     return wrap
 
 
+def set_mixer_drift(model: Any, config: Any) -> dict[str, float]:
+    """Relative change ``‖W − W0‖ / ‖W0‖`` (Frobenius) of every set-mixer projection from its
+    initialisation, which training rebuilds from its seed (``accelerate.utils.set_seed(seed)``, then the
+    model), so W0 here is the trained model's own starting point (a different start would give ≈ √2)."""
+    from accelerate.utils import set_seed
+
+    from setdiff_bench.models.setdiff.model import SetDiffModel
+
+    set_seed(config.train.seed)
+    initial = dict(SetDiffModel(config.model, load_pretrained=True).unet.named_parameters())
+    drift = {}
+    for name, trained in model.unet.named_parameters():
+        if ".attn1." in name and name.endswith(".weight") and name in initial:
+            start = initial[name].detach()
+            drift[name] = round(float((trained.detach() - start).norm() / start.norm()), 4)
+    return drift
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--packets", required=True, help="packet store")
@@ -191,7 +211,8 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     store = PacketStore(args.packets)
-    model = load_model(args.checkpoint)[0].eval()
+    model, config = load_model(args.checkpoint)[:2]
+    model = model.eval()
     ids = [pid for pid in store.packet_ids("test") if f"__{args.group}__" in pid][: args.packets_max]
     rows = []
     with torch.no_grad():
@@ -230,7 +251,13 @@ def main() -> None:
             row["uniform_over_views"] = round(1.0 / (len(packet.references) + len(packet.targets)), 4)
             rows.append(row)
     text = json.dumps(
-        {"checkpoint": args.checkpoint, "packets": str(args.packets), "group": args.group, "rows": rows},
+        {
+            "checkpoint": args.checkpoint,
+            "packets": str(args.packets),
+            "group": args.group,
+            "set_mixer_drift_from_init": set_mixer_drift(model, config),
+            "rows": rows,
+        },
         indent=1,
     )
     print(text)
