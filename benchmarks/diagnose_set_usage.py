@@ -47,6 +47,7 @@ from setdiff_bench.models.setdiff import set_mixer
 from setdiff_bench.models.setdiff.checkpoint import load_model
 from setdiff_bench.models.setdiff.inference import enhance_packet
 from setdiff_bench.models.setdiff.inputs import surface_points
+from setdiff_bench.models.setdiff.train import initial_model
 from setdiff_bench.packets.store import PacketStore
 
 ProcessorCall = Callable[..., torch.Tensor]
@@ -182,15 +183,10 @@ def attention_stats(
 
 
 def set_mixer_drift(model: Any, config: Any) -> dict[str, float]:
-    """Relative change ``‖W − W0‖ / ‖W0‖`` (Frobenius) of every set-mixer projection from its
-    initialisation, which training rebuilds from its seed (``accelerate.utils.set_seed(seed)``, then the
-    model), so W0 here is the trained model's own starting point (a different start would give ≈ √2)."""
-    from accelerate.utils import set_seed
-
-    from setdiff_bench.models.setdiff.model import SetDiffModel
-
-    set_seed(config.train.seed)
-    initial = dict(SetDiffModel(config.model, load_pretrained=True).unet.named_parameters())
+    """Relative change ``‖W − W0‖ / ‖W0‖`` (Frobenius) of every set-mixer projection from W0, the
+    initial weights training built from the same config and seed (:func:`train.initial_model`; a
+    different start would give ≈ √2)."""
+    initial = dict(initial_model(config.model, config.train.seed).unet.named_parameters())
     drift = {}
     for name, trained in model.unet.named_parameters():
         if ".attn1." in name and name.endswith(".weight") and name in initial:

@@ -57,7 +57,7 @@ from setdiff_bench.models.setdiff.checkpoint import (
     save_checkpoint,
     step_folder,
 )
-from setdiff_bench.models.setdiff.config import Config
+from setdiff_bench.models.setdiff.config import Config, ModelConfig
 from setdiff_bench.models.setdiff.inference import enhance_packet
 from setdiff_bench.models.setdiff.inputs import training_set
 from setdiff_bench.models.setdiff.losses import ReconstructionLoss, latent_loss
@@ -204,7 +204,7 @@ def train(
         WeightsError: LPIPS (loss weight > 0) or pretrained weights are missing.
     """
     from accelerate import Accelerator
-    from accelerate.utils import DistributedDataParallelKwargs, set_seed
+    from accelerate.utils import DistributedDataParallelKwargs
     from tqdm.auto import tqdm
 
     tc = config.train
@@ -225,8 +225,7 @@ def train(
             model_config, learn_text_embedding=saved.model.learn_text_embedding
         )
 
-    set_seed(tc.seed)
-    model = SetDiffModel(model_config, load_pretrained=previous is None)
+    model = initial_model(model_config, tc.seed, load_pretrained=previous is None)
     config = dataclasses.replace(config, model=model.config)  # saved with the resolved text-embedding choice
     if previous is not None:
         load_weights(model, previous)
@@ -333,6 +332,16 @@ def train(
         result.checkpoint = _save(accelerator, core, optimizer, config, out, start)
     accelerator.wait_for_everyone()
     return result
+
+
+def initial_model(model_config: ModelConfig, seed: int, *, load_pretrained: bool = True) -> SetDiffModel:
+    """The model a training run with ``seed`` starts from: every random source is seeded
+    (``accelerate.utils.set_seed``) right before the networks are built, so the same config and seed
+    rebuild the same initial weights (e.g. to measure how far training moved them)."""
+    from accelerate.utils import set_seed
+
+    set_seed(seed)
+    return SetDiffModel(model_config, load_pretrained=load_pretrained)
 
 
 def _micro_step(
