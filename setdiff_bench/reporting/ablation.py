@@ -68,6 +68,24 @@ Key = TypeVar("Key", bound=Hashable)
 SET_SIZES: tuple[tuple[int, int], ...] = ((1, 1), (2, 1), (3, 1), (3, 2), (3, 4), (3, 6))
 
 
+def parse_variants(text: str | None) -> tuple[GeometryVariant, ...]:
+    """``"none,both"`` → those variants of :data:`GEOMETRY_VARIANTS`, in the paper's row order; ``None``:
+    all four."""
+    if text is None:
+        return GEOMETRY_VARIANTS
+    known = {variant.key: variant for variant in GEOMETRY_VARIANTS}
+    wanted = [part.strip() for part in text.split(",") if part.strip()]
+    unknown = [key for key in wanted if key not in known]
+    if unknown or not wanted:
+        raise UsageError(
+            f"geometry variant {unknown[0]!r} is unknown (choose from {', '.join(known)})"
+            if unknown
+            else f"no geometry variant given (choose from {', '.join(known)})",
+            "--variants",
+        )
+    return tuple(variant for variant in GEOMETRY_VARIANTS if variant.key in wanted)
+
+
 def parse_sizes(text: str) -> tuple[tuple[int, int], ...]:
     """``"1+1,3+6"`` → ``((1, 1), (3, 6))``."""
     sizes = []
@@ -188,8 +206,13 @@ def setsize_frame(results: Mapping[tuple[int, int], Mapping[str, float]]) -> pd.
     return pd.DataFrame(rows)
 
 
-def ordering_geometry(frame: pd.DataFrame) -> list[str]:
-    """Plain-language comparison with the paper's Table 5 ordering (None worst, Both best)."""
+def ordering_geometry(
+    frame: pd.DataFrame, per_model: Sequence[Mapping[str, Mapping[str, float]]] = ()
+) -> list[str]:
+    """Plain-language comparison with the paper's Table 5 ordering (None worst, Both best).  With both
+    rows present, each metric also compares Both with None; with two or more ``per_model`` results
+    (``variant key`` → metric → value, one mapping per training seed) that line gives every model's own
+    paired gain and in how many models Both is better."""
     notes = []
     by = frame.set_index("variant")
     for metric in METRICS:
@@ -199,6 +222,27 @@ def ordering_geometry(frame: pd.DataFrame) -> list[str]:
         notes.append(
             f"{spec.label}: best {by.loc[better, 'grounding']}, worst {by.loc[worse, 'grounding']} "
             f"(paper: best Both, worst None)"
+        )
+    if not {"both", "none"} <= set(by.index):
+        return notes
+    for metric in METRICS:
+        spec = get_metric(metric)
+        sign = 1.0 if spec.higher_is_better else -1.0
+        both, none = float(by.loc["both", metric]), float(by.loc["none", metric])
+        paired = [
+            sign * (model["both"][metric] - model["none"][metric])
+            for model in per_model
+            if "both" in model and "none" in model
+        ]
+        per_seed = (
+            f"; gain per model {', '.join(f'{g:+.4f}' for g in paired)}, "
+            f"better in {sum(g > 0 for g in paired)} of {len(paired)}"
+            if len(paired) > 1
+            else ""
+        )
+        notes.append(
+            f"{spec.label}: Both vs None {'better' if sign * (both - none) > 0 else 'not better'} "
+            f"({both:.4f} vs {none:.4f}{per_seed}; paper: better)"
         )
     return notes
 

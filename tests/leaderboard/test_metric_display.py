@@ -151,3 +151,36 @@ def test_several_models_give_means_spread_and_paired_gains() -> None:
     frame = ablation.per_model_frame([seed0, seed1], labels, ["seed 0", "seed 1"])
     assert len(frame) == 12 and list(frame.columns) == ["model", "row", "metric", "value"]
     assert frame.iloc[0].tolist() == ["seed 0", "1 + 1", "PSNR", 20.0]
+
+
+def test_geometry_ordering_compares_both_with_none_per_model() -> None:
+    seed0 = {
+        "none": {"psnr": 20.0, "ssim": 0.70, "lpips": 0.20, "targets": 8.0},
+        "both": {"psnr": 20.3, "ssim": 0.69, "lpips": 0.18, "targets": 8.0},
+    }
+    seed1 = {
+        "none": {"psnr": 21.0, "ssim": 0.74, "lpips": 0.22, "targets": 8.0},
+        "both": {"psnr": 20.8, "ssim": 0.75, "lpips": 0.21, "targets": 8.0},
+    }
+    frame = ablation.geometry_frame(ablation.mean_over_models([seed0, seed1]))
+    assert frame["variant"].tolist() == ["none", "both"]
+    ordering = ablation.ordering_geometry(frame, [seed0, seed1])
+    # means by hand: PSNR none 20.5, both 20.55; gains +0.3 (seed 0) and -0.2 (seed 1)
+    assert ordering[3] == (
+        "PSNR: Both vs None better (20.5500 vs 20.5000; gain per model +0.3000, -0.2000, better in 1 of 2;"
+        " paper: better)"
+    )
+    # SSIM: -0.01 and +0.01, mean tie 0.72 vs 0.72 -> not better; LPIPS lower is better: +0.02, +0.01
+    assert ordering[4].startswith("SSIM: Both vs None not better (0.7200 vs 0.7200;")
+    assert "gain per model +0.0200, +0.0100, better in 2 of 2" in ordering[5]
+    assert len(ablation.ordering_geometry(frame.iloc[:1])) == 3  # without Both there is no Both-vs-None line
+
+
+def test_geometry_variants_parse_in_the_papers_order() -> None:
+    assert [v.key for v in ablation.parse_variants("both, none")] == ["none", "both"]
+    assert ablation.parse_variants(None) == ablation.GEOMETRY_VARIANTS
+    with pytest.raises(UsageError, match="variant 'depth' is unknown") as error:
+        ablation.parse_variants("none,depth")
+    assert error.value.one_line().startswith("--variants")
+    with pytest.raises(UsageError, match="no geometry variant given"):
+        ablation.parse_variants(" , ")

@@ -884,6 +884,24 @@ def _(tmp: Path, world: World) -> Call:
     )
 
 
+@case("ablate-unknown-geometry-variant")
+def _(tmp: Path, world: World) -> Call:
+    return Call(
+        [
+            "ablate",
+            "geometry",
+            "--variants",
+            "none,depth",
+            "--packets",
+            str(world.store),
+            "--out",
+            str(tmp / "out"),
+            "--no-progress",
+        ],
+        "--variants",
+    )
+
+
 @case("demo-zero-jobs")
 def _(tmp: Path, world: World) -> Call:
     return Call(["demo", "--out", str(tmp / "out"), "--jobs", "0", "--no-progress"], "--jobs")
