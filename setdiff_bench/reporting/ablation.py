@@ -229,17 +229,7 @@ def ordering_geometry(
         spec = get_metric(metric)
         sign = 1.0 if spec.higher_is_better else -1.0
         both, none = float(by.loc["both", metric]), float(by.loc["none", metric])
-        paired = [
-            sign * (model["both"][metric] - model["none"][metric])
-            for model in per_model
-            if "both" in model and "none" in model
-        ]
-        per_seed = (
-            f"; gain per model {', '.join(f'{g:+.4f}' for g in paired)}, "
-            f"better in {sum(g > 0 for g in paired)} of {len(paired)}"
-            if len(paired) > 1
-            else ""
-        )
+        per_seed = _paired_gains(per_model, "both", "none", metric, sign)
         notes.append(
             f"{spec.label}: Both vs None {'better' if sign * (both - none) > 0 else 'not better'} "
             f"({both:.4f} vs {none:.4f}{per_seed}; paper: better)"
@@ -266,23 +256,31 @@ def ordering_setsize(
             new, old = results.get(new_size), results.get(old_size)
             if new and old:
                 gain = sign * (new[metric] - old[metric])
-                paired = [
-                    sign * (model[new_size][metric] - model[old_size][metric])
-                    for model in per_model
-                    if new_size in model and old_size in model
-                ]
-                per_seed = (
-                    f"; gain per model {', '.join(f'{g:+.4f}' for g in paired)}, "
-                    f"better in {sum(g > 0 for g in paired)} of {len(paired)}"
-                    if len(paired) > 1
-                    else ""
-                )
+                per_seed = _paired_gains(per_model, new_size, old_size, metric, sign)
                 notes.append(
                     f"{label}: {new_size[0]}+{new_size[1]} vs {old_size[0]}+{old_size[1]} "
                     f"{'better' if gain > 0 else 'not better'} "
                     f"({new[metric]:.4f} vs {old[metric]:.4f}{per_seed}; paper: {paper})"
                 )
     return notes
+
+
+def _paired_gains(
+    per_model: Sequence[Mapping[Key, Mapping[str, float]]], new: Key, old: Key, metric: str, sign: float
+) -> str:
+    """``"; gain per model +0.1000, -0.0200, better in 1 of 2"``: each model's own ``new`` − ``old`` gain
+    (``sign`` −1 for lower-is-better metrics) and in how many models ``new`` is better; empty for one model."""
+    paired = [
+        sign * (model[new][metric] - model[old][metric])
+        for model in per_model
+        if new in model and old in model
+    ]
+    if len(paired) < 2:
+        return ""
+    return (
+        f"; gain per model {', '.join(f'{g:+.4f}' for g in paired)}, "
+        f"better in {sum(g > 0 for g in paired)} of {len(paired)}"
+    )
 
 
 def paper_board(table: str, title: str) -> Leaderboard:
