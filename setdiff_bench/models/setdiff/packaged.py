@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import json
 import shutil
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -122,6 +122,7 @@ def export_enhancer(
     training_manifest: dict[str, Any],
     destination: Path,
     extra: dict[str, Any] | None = None,
+    guidance_scale: float | None = None,
 ) -> Path:
     """Copy a checkpoint's weights and config into ``destination`` (replaced atomically) with a manifest.
 
@@ -130,20 +131,27 @@ def export_enhancer(
         training_manifest: the training run's manifest (commands, seed, steps, data, validation).
         destination: the new model folder, e.g. ``<package>/weights/tiny_setdiff``.
         extra: more manifest entries (e.g. the export command, evaluation metrics).
+        guidance_scale: when given, the exported config's inference geometry-CFG scale (an inference
+            knob, not part of the architecture: the weights are copied unchanged); ``None`` keeps the
+            checkpoint's.
 
     Raises:
         CheckpointError: the checkpoint lacks a file.
     """
     # lazy: the checkpoint module imports this one
-    from setdiff_bench.models.setdiff.checkpoint import CONFIG_FILE, WEIGHTS_FILE
+    from setdiff_bench.models.setdiff.checkpoint import CONFIG_FILE, WEIGHTS_FILE, read_config
 
     names = [CONFIG_FILE, WEIGHTS_FILE]
     for name in names:
         if not (checkpoint / name).is_file():
             raise CheckpointError(f"checkpoint has no {name}", checkpoint)
+    config = read_config(checkpoint) if guidance_scale is not None else None
     with staged_folder(destination) as staging:
         for name in names:
             shutil.copyfile(checkpoint / name, staging / name)
+        if config is not None:
+            model = replace(config.model, guidance_scale=float(guidance_scale))
+            write_text_atomic(staging / CONFIG_FILE, replace(config, model=model).to_json() + "\n")
         manifest = {**training_manifest, **(extra or {}), "files": file_table(staging, names)}
         write_text_atomic(staging / MANIFEST_FILE, json.dumps(manifest, indent=2, sort_keys=True) + "\n")
     return destination
