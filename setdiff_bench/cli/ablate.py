@@ -1,9 +1,9 @@
 """``setdiff-bench ablate geometry|setsize``: the paper's Tables 5 and 6 on a packet store.
 
     setdiff-bench ablate geometry --packets P --out DIR [--config tiny_setdiff] [--steps N] [--seed S ...]
-                                  [--variants none,cmap,pose,both]
+                                  [--variants none,cmap,pose,both] [--guidance-scale G]
     setdiff-bench ablate setsize --packets P --checkpoint CKPT [--checkpoint CKPT ...] --out DIR
-                                 [--sizes 1+1,2+1,3+1,3+2,3+4,3+6]
+                                 [--sizes 1+1,2+1,3+1,3+2,3+4,3+6] [--guidance-scale G]
 
 ``geometry`` trains four SetDiff variants (no geometry, C-maps only, camera poses only, both) with
 the same config, seed and steps, and runs each on the test packets (``--variants none,both`` keeps the
@@ -11,6 +11,8 @@ paper's main comparison at two trainings per seed instead of four); ``setsize`` 
 SetDiff at several N + M set sizes.  Repeating ``--seed`` (geometry: every variant is trained once
 per seed) or ``--checkpoint`` (set size: one model per training seed) makes each cell the mean over
 the models, with the spread under the table and each model's values in ``*_per_model.parquet``.
+``--guidance-scale`` runs every model at that geometry CFG scale instead of its checkpoint's own (an
+inference setting, so the trained models are reused; its runs go to ``runs/cfg<G>/``).
 Every stage is an ordinary ``setdiff-bench`` command (listed in the output tables) and resumes, so an
 interrupted ablation continues where it stopped.  Tables go to ``<out>/ablation_geometry.{md,tex,parquet}``
 and ``<out>/ablation_setsize.{md,tex,parquet}``; checkpoints and runs to ``--work`` (default ``<out>/work``).
@@ -71,18 +73,27 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         study.add_argument(
             "--work", type=Path, default=None, help="checkpoints and runs (default: <out>/work)"
         )
+        study.add_argument(
+            "--guidance-scale",
+            type=float,
+            metavar="G",
+            help="geometry CFG scale of every run (default: each checkpoint's own)",
+        )
         add_device_argument(study, "where training and inference run")
         add_progress_argument(study)
 
 
 def run(args: argparse.Namespace) -> int:
     # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
+    from setdiff_bench.models.setdiff.config import check_guidance_scale
     from setdiff_bench.pipeline.stages import LEDGER_FILE, Pipeline, StageFailed
     from setdiff_bench.runtime.devices import resolve_device
 
     resolve_device(
         args.device
     )  # checked here; passed on as given (auto: not at all), so the stages resolve it
+    if args.guidance_scale is not None:
+        check_guidance_scale(args.guidance_scale, "--guidance-scale")
     work = (args.work or args.out / "work") / f"ablation_{args.study}"
     pipeline = Pipeline(quiet=args.no_progress, ledger=work / LEDGER_FILE)  # reruns keep the original times
     invocation = _invocation(args)
@@ -109,6 +120,7 @@ def _invocation(args: argparse.Namespace) -> str:
     else:
         parts += [part for checkpoint in args.checkpoint for part in ("--checkpoint", checkpoint)]
         parts += ["--sizes", args.sizes]
+    parts += ["--guidance-scale", f"{args.guidance_scale:g}"] if args.guidance_scale is not None else []
     parts += ["--work", args.work] if args.work else []
     parts += ["--device", args.device] if args.device != "auto" else []
     return "setdiff-bench " + shlex.join(str(p) for p in parts)
@@ -119,13 +131,21 @@ def _run_args(args: argparse.Namespace) -> list[str]:
     return [*extra, "--no-progress"] if args.no_progress else extra
 
 
+def _runs_folder(args: argparse.Namespace, work: Path) -> Path:
+    """Where the run stages write: ``<work>/runs``, or ``<work>/runs/cfg<G>`` with ``--guidance-scale``."""
+    runs = work / "runs"
+    return runs if args.guidance_scale is None else runs / f"cfg{args.guidance_scale:g}"
+
+
 def _run_command(
     args: argparse.Namespace, checkpoint: str | Path, out: Path, *options: str
 ) -> list[str | Path]:
     """The ``run`` verb's arguments for SetDiff (``checkpoint``) on the test split of ``args.packets``, writing
-    to ``out``; ``options`` are passed as ``-o`` method options."""
+    to ``out``; ``options`` are passed as ``-o`` method options, with ``guidance_scale`` when given."""
     command: list[str | Path] = ["run", "--method", "setdiff", "--checkpoint", checkpoint]
     command += ["--packets", args.packets, "--split", "test", "--out", out]
+    if args.guidance_scale is not None:
+        options = (*options, f"guidance_scale={args.guidance_scale:g}")
     for option in options:
         command += ["-o", option]
     return [*command, *_run_args(args)]
@@ -165,7 +185,7 @@ def _geometry(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocati
             if args.no_progress:
                 train.append("--no-progress")
             pipeline.run(f"train {key}", train)
-            runs = work / "runs" / key
+            runs = _runs_folder(args, work) / key
             pipeline.run(f"run {key}", _run_command(args, checkpoints, runs))
             results[variant.key] = ablation.pooled_means(runs / METRICS_FILE)
         per_model.append(results)
@@ -192,7 +212,7 @@ def _setsize(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocatio
         results = {}
         for refs, targets in sizes:
             key = f"{refs}+{targets}" if len(checkpoints) == 1 else f"model{index}/{refs}+{targets}"
-            runs = work / "runs" / key
+            runs = _runs_folder(args, work) / key
             pipeline.run(
                 f"run {key}",
                 _run_command(args, checkpoint, runs, f"max_references={refs}", f"targets_per_set={targets}"),

@@ -21,7 +21,6 @@
 from __future__ import annotations
 
 import argparse
-import math
 from pathlib import Path
 
 VERB = "weights"
@@ -206,6 +205,7 @@ def export(args: argparse.Namespace) -> int:
     """``weights export RUN --name NAME``: the run's newest checkpoint + its training manifest."""
     from setdiff_bench.errors import UsageError
     from setdiff_bench.models.setdiff.checkpoint import resolve_checkpoint, saved_step
+    from setdiff_bench.models.setdiff.config import check_guidance_scale
     from setdiff_bench.models.setdiff.manifest import read_manifest
     from setdiff_bench.models.setdiff.packaged import export_enhancer, packaged_root
 
@@ -213,9 +213,9 @@ def export(args: argparse.Namespace) -> int:
         raise UsageError("export needs one training run folder and --name NAME", "export")
     if not args.name.replace("_", "").replace("-", "").isalnum():
         raise UsageError(f"--name must be letters, digits, '_' or '-', got {args.name!r}", "--name")
-    scale = args.guidance_scale
-    if scale is not None and not (math.isfinite(scale) and scale > 0):
-        raise UsageError(f"--guidance-scale must be a finite number > 0, got {scale}", "--guidance-scale")
+    scale = (
+        None if args.guidance_scale is None else check_guidance_scale(args.guidance_scale, "--guidance-scale")
+    )
     run = Path(args.names[0])
     checkpoint = resolve_checkpoint(run)
     manifest = read_manifest(run)

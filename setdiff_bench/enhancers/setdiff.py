@@ -16,6 +16,7 @@ import torch
 from setdiff_bench.errors import UsageError
 from setdiff_bench.models.setdiff import inference  # module attribute: looked up per call (tests replace it)
 from setdiff_bench.models.setdiff.checkpoint import load_model, resolve_checkpoint
+from setdiff_bench.models.setdiff.config import check_guidance_scale
 from setdiff_bench.runtime.devices import resolve_device
 from setdiff_bench.types import Packet
 
@@ -113,6 +114,8 @@ def load_enhancer(
                 f"{name} must be an integer >= {0 if name == 'max_references' else 1}, got {value!r}",
                 f"-o {name}",
             )
+    if guidance_scale is not None:
+        guidance_scale = check_guidance_scale(guidance_scale, "-o guidance_scale")
     if dtype not in DTYPES:
         raise UsageError(f"dtype must be one of {', '.join(DTYPES)}, got {dtype!r}", "--dtype")
     folder = resolve_checkpoint(checkpoint)

@@ -11,8 +11,10 @@ from setdiff_bench.errors import UsageError
 from setdiff_bench.models.setdiff.config import (
     SD_TURBO_SCHEDULE,
     alphas_cumprod,
+    check_guidance_scale,
     config_from_dict,
     load_config,
+    model_config_from_dict,
     packaged_configs,
 )
 
@@ -75,3 +77,12 @@ def test_overrides_and_errors(tmp_path: Path) -> None:
     broken.write_text("[model\n")
     with pytest.raises(UsageError, match="cannot read config TOML"):
         load_config(broken)
+
+
+def test_guidance_scale_must_be_a_finite_positive_number() -> None:
+    assert check_guidance_scale(1, "x") == 1.0 and check_guidance_scale("1.5", "x") == 1.5
+    for bad in (0, -1.0, float("nan"), float("inf"), True, "two", None):
+        with pytest.raises(UsageError, match="guidance_scale must be a finite number > 0"):
+            check_guidance_scale(bad, "x")
+    with pytest.raises(UsageError, match="guidance_scale"):
+        model_config_from_dict({**load_config("tiny_setdiff").model.to_dict(), "guidance_scale": 0.0})

@@ -275,6 +275,7 @@ class ModelConfig:
                 where,
             )
         object.__setattr__(self, "geometry_inputs", inputs)
+        check_guidance_scale(self.guidance_scale, where)
         if not 0.0 <= self.geometry_dropout < 1.0:
             raise UsageError(f"geometry_dropout must be in [0, 1), got {self.geometry_dropout}", where)
         if self.max_references is not None and self.max_references < 0:
@@ -458,6 +459,17 @@ class Config:
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), indent=2, sort_keys=True)
+
+
+def check_guidance_scale(value: Any, where: str) -> float:
+    """``value`` as a geometry CFG scale (a finite number > 0; 1 = conditional only), else UsageError."""
+    try:
+        scale = float(value)
+    except (TypeError, ValueError):
+        scale = math.nan
+    if isinstance(value, bool) or not (math.isfinite(scale) and scale > 0):
+        raise UsageError(f"guidance_scale must be a finite number > 0, got {value!r}", where)
+    return scale
 
 
 def packaged_configs() -> dict[str, Path]:
