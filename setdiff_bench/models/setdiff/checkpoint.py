@@ -96,25 +96,31 @@ def save_checkpoint(
         config: the full config (model + train), saved as JSON.
         optimizer, step: saved too when given (for resuming training).
     """
-    from safetensors.torch import save_file
-
     folder = Path(folder)
     model_config = getattr(model, "config", None)
     if isinstance(model_config, ModelConfig):  # the model's resolved choices (e.g. learn_text_embedding)
         config = dataclasses.replace(config, model=model_config)
     with staged_folder(folder) as tmp:
         state = {name: tensor.detach().cpu().contiguous() for name, tensor in model.state_dict().items()}
-        save_file(
-            state, str(tmp / WEIGHTS_FILE), metadata={"format": "setdiff-bench", "config": config.to_json()}
-        )
-        sort_metadata(tmp / WEIGHTS_FILE)  # same run, same bytes
-        os.chmod(tmp / WEIGHTS_FILE, new_file_mode())  # safetensors creates it 0600 whatever the umask
+        write_weights(tmp / WEIGHTS_FILE, state, config)
         (tmp / CONFIG_FILE).write_text(config.to_json() + "\n", encoding="utf-8")
         if optimizer is not None:
             torch.save(optimizer.state_dict(), tmp / OPTIMIZER_FILE)
         if step is not None:
             (tmp / TRAINER_FILE).write_text(json.dumps({"step": int(step)}) + "\n", encoding="utf-8")
     return folder
+
+
+def write_weights(path: Path, state: dict[str, torch.Tensor], config: Config) -> None:
+    """Write a checkpoint's ``model.safetensors`` (the config in its metadata; equal inputs give equal bytes).
+
+    ``path`` should sit in a staged folder: the file is written in place.
+    """
+    from safetensors.torch import save_file
+
+    save_file(state, str(path), metadata={"format": "setdiff-bench", "config": config.to_json()})
+    sort_metadata(path)  # same run, same bytes
+    os.chmod(path, new_file_mode())  # safetensors creates it 0600 whatever the umask
 
 
 def load_weights(model: torch.nn.Module, checkpoint: str | os.PathLike[str]) -> None:

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
@@ -123,6 +124,7 @@ def export_enhancer(
     destination: Path,
     extra: dict[str, Any] | None = None,
     guidance_scale: float | None = None,
+    average: Sequence[Path] = (),
 ) -> Path:
     """Copy a checkpoint's weights and config into ``destination`` (replaced atomically) with a manifest.
 
@@ -134,24 +136,32 @@ def export_enhancer(
         guidance_scale: when given, the exported config's inference geometry-CFG scale (an inference
             knob, not part of the architecture: the weights are copied unchanged); ``None`` keeps the
             checkpoint's.
+        average: when given, checkpoint folders of the same run whose weights' uniform mean is exported
+            instead of ``checkpoint``'s (:mod:`~setdiff_bench.models.setdiff.averaging`); the config is
+            ``checkpoint``'s.
 
     Raises:
         CheckpointError: the checkpoint lacks a file.
     """
     # lazy: the checkpoint module imports this one
-    from setdiff_bench.models.setdiff.checkpoint import CONFIG_FILE, WEIGHTS_FILE, read_config
+    from setdiff_bench.models.setdiff.averaging import average_weights
+    from setdiff_bench.models.setdiff.checkpoint import CONFIG_FILE, WEIGHTS_FILE, read_config, write_weights
 
     names = [CONFIG_FILE, WEIGHTS_FILE]
     for name in names:
         if not (checkpoint / name).is_file():
             raise CheckpointError(f"checkpoint has no {name}", checkpoint)
-    config = read_config(checkpoint) if guidance_scale is not None else None
+    config = read_config(checkpoint)
+    if guidance_scale is not None:
+        config = replace(config, model=replace(config.model, guidance_scale=float(guidance_scale)))
+    averaged = average_weights(average) if average else None
     with staged_folder(destination) as staging:
         for name in names:
             shutil.copyfile(checkpoint / name, staging / name)
-        if config is not None:
-            model = replace(config.model, guidance_scale=float(guidance_scale))
-            write_text_atomic(staging / CONFIG_FILE, replace(config, model=model).to_json() + "\n")
+        if guidance_scale is not None:
+            write_text_atomic(staging / CONFIG_FILE, config.to_json() + "\n")
+        if averaged is not None:
+            write_weights(staging / WEIGHTS_FILE, averaged, config)
         manifest = {**training_manifest, **(extra or {}), "files": file_table(staging, names)}
         write_text_atomic(staging / MANIFEST_FILE, json.dumps(manifest, indent=2, sort_keys=True) + "\n")
     return destination
