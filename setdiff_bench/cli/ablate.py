@@ -1,7 +1,7 @@
 """``setdiff-bench ablate geometry|setsize``: the paper's Tables 5 and 6 on a packet store.
 
     setdiff-bench ablate geometry --packets P --out DIR [--config tiny_setdiff] [--steps N] [--seed S ...]
-                                  [--variants none,cmap,pose,both] [--guidance-scale G]
+                                  [--variants none,cmap,pose,both] [--average K] [--guidance-scale G]
     setdiff-bench ablate setsize --packets P --checkpoint CKPT [--checkpoint CKPT ...] --out DIR
                                  [--sizes 1+1,2+1,3+1,3+2,3+4,3+6] [--guidance-scale G]
 
@@ -12,7 +12,9 @@ SetDiff at several N + M set sizes.  Repeating ``--seed`` (geometry: every varia
 per seed) or ``--checkpoint`` (set size: one model per training seed) makes each cell the mean over
 the models, with the spread under the table and each model's values in ``*_per_model.parquet``.
 ``--guidance-scale`` runs every model at that geometry CFG scale instead of its checkpoint's own (an
-inference setting, so the trained models are reused; its runs go to ``runs/cfg<G>/``).
+inference setting, so the trained models are reused; its runs go to ``runs/cfg<G>/``).  ``geometry
+--average K`` runs, for every trained variant, the uniform mean of its K newest checkpoints (a ``weights
+export --average K`` stage into ``averaged<K>/``; runs in ``runs/avg<K>/``).
 Every stage is an ordinary ``setdiff-bench`` command (listed in the output tables) and resumes, so an
 interrupted ablation continues where it stopped.  Tables go to ``<out>/ablation_geometry.{md,tex,parquet}``
 and ``<out>/ablation_setsize.{md,tex,parquet}``; checkpoints and runs to ``--work`` (default ``<out>/work``).
@@ -52,6 +54,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="training seed (default: the config's); repeat to train every variant once per seed",
     )
     geometry.add_argument(
+        "--average",
+        type=int,
+        metavar="K",
+        help="run each variant as the mean of its K newest checkpoints (weights export --average K)",
+    )
+    geometry.add_argument(
         "--variants",
         default=None,
         help="comma list of the variants to train (default: all four; keys none, cmap, pose, both)",
@@ -85,6 +93,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
+    from setdiff_bench.errors import UsageError
     from setdiff_bench.models.setdiff.config import check_guidance_scale
     from setdiff_bench.pipeline.stages import LEDGER_FILE, Pipeline, StageFailed
     from setdiff_bench.runtime.devices import resolve_device
@@ -94,6 +103,8 @@ def run(args: argparse.Namespace) -> int:
     )  # checked here; passed on as given (auto: not at all), so the stages resolve it
     if args.guidance_scale is not None:
         check_guidance_scale(args.guidance_scale, "--guidance-scale")
+    if getattr(args, "average", None) is not None and args.average < 2:
+        raise UsageError(f"--average must be 2 or more checkpoints, got {args.average}", "--average")
     work = (args.work or args.out / "work") / f"ablation_{args.study}"
     pipeline = Pipeline(quiet=args.no_progress, ledger=work / LEDGER_FILE)  # reruns keep the original times
     invocation = _invocation(args)
@@ -117,6 +128,7 @@ def _invocation(args: argparse.Namespace) -> str:
         parts += ["--steps", args.steps] if args.steps is not None else []
         parts += [part for seed in args.seed or () for part in ("--seed", seed)]
         parts += ["--variants", args.variants] if args.variants is not None else []
+        parts += ["--average", args.average] if args.average is not None else []
     else:
         parts += [part for checkpoint in args.checkpoint for part in ("--checkpoint", checkpoint)]
         parts += ["--sizes", args.sizes]
@@ -132,9 +144,11 @@ def _run_args(args: argparse.Namespace) -> list[str]:
 
 
 def _runs_folder(args: argparse.Namespace, work: Path) -> Path:
-    """Where the run stages write: ``<work>/runs``, or ``<work>/runs/cfg<G>`` with ``--guidance-scale``."""
-    runs = work / "runs"
-    return runs if args.guidance_scale is None else runs / f"cfg{args.guidance_scale:g}"
+    """Where the run stages write: ``<work>/runs``, or a subfolder naming ``--average`` and
+    ``--guidance-scale`` when given (``runs/avg3_cfg1``)."""
+    parts = [f"avg{args.average}"] if getattr(args, "average", None) is not None else []
+    parts += [f"cfg{args.guidance_scale:g}"] if args.guidance_scale is not None else []
+    return work / "runs" / "_".join(parts) if parts else work / "runs"
 
 
 def _run_command(
@@ -185,8 +199,14 @@ def _geometry(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocati
             if args.no_progress:
                 train.append("--no-progress")
             pipeline.run(f"train {key}", train)
+            model = checkpoints
+            if args.average is not None:
+                averaged = work / f"averaged{args.average}"
+                export = ["weights", "export", checkpoints, "--name", key, "--to", averaged]
+                pipeline.run(f"average {key}", [*export, "--average", str(args.average)])
+                model = averaged / key
             runs = _runs_folder(args, work) / key
-            pipeline.run(f"run {key}", _run_command(args, checkpoints, runs))
+            pipeline.run(f"run {key}", _run_command(args, model, runs))
             results[variant.key] = ablation.pooled_means(runs / METRICS_FILE)
         per_model.append(results)
     models = [f"seed {seed}" if seed is not None else f"seed of {args.config}" for seed in seeds]

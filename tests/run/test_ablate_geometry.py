@@ -1,6 +1,7 @@
 """`setdiff-bench ablate geometry --variants none,both`: only the chosen variants are trained (None without
 geometry, Both with C-maps and Plücker rays), each is run on the test split, and the table's cells are the
-pooled means of those runs, with the paper's Both-vs-None comparison under it."""
+pooled means of those runs, with the paper's Both-vs-None comparison under it; with `--average 2
+--guidance-scale 1` the trained variants are averaged and run at that scale."""
 
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ METRICS = ("psnr", "ssim", "lpips")
 def test_two_variants_are_trained_run_and_tabulated(tmp_path: Path) -> None:
     write_store(tmp_path / "packets")
     config = tmp_path / "tiny.toml"
-    config.write_text(CONFIG)
+    config.write_text(CONFIG.replace("checkpoint_every = 2", "checkpoint_every = 1"))
     out = tmp_path / "ablation"
     argv = ["ablate", "geometry", "--packets", str(tmp_path / "packets"), "--out", str(out)]
     argv += ["--config", str(config), "--variants", "both,none", "--device", "cpu", "--no-progress"]
@@ -45,3 +46,17 @@ def test_two_variants_are_trained_run_and_tabulated(tmp_path: Path) -> None:
     assert "- PSNR: Both vs None " in markdown
     assert "--variants both,none" in markdown
     assert "| Both |" in markdown and "| None |" in markdown and "| Coordinate maps |" not in markdown
+
+    # again, each variant as the mean of its two newest checkpoints (steps 1 and 2) at CFG scale 1: the
+    # trainings are done, so only the export and run stages run; the cells are those runs' pooled means
+    assert main([*argv, "--average", "2", "--guidance-scale", "1"]) == 0
+    table = pd.read_parquet(out / "ablation_geometry.parquet").set_index("variant")
+    for variant in ("none", "both"):
+        manifest = json.loads((work / "averaged2" / variant / "manifest.json").read_text())
+        assert manifest["export"]["averaged_steps"] == [1, 2]
+        run = json.loads((work / "runs" / "avg2_cfg1" / variant / "run.json").read_text())
+        assert run["options"]["checkpoint"] == str(work / "averaged2" / variant)
+        metrics = pd.read_parquet(work / "runs" / "avg2_cfg1" / variant / METRICS_FILE)
+        for metric in METRICS:
+            assert abs(table.loc[variant, metric] - float(metrics[metric].mean())) < 1e-9
+    assert "--average 2" in (out / "ablation_geometry.md").read_text()
