@@ -4,7 +4,9 @@
 # DiFix trained on the 11 training scenes, exported with their manifests.  Scenes _02 and _04 (the default
 # demo's test scenes) and _07 (a test scene of the `full` demo preset) are declared test scenes, so no demo
 # preset evaluates on a scene a shipped model saw (a test checks it from the manifests).  The tiny
-# autoencoder both freeze is shipped too; its own command is in its manifest.
+# autoencoder both freeze is shipped too; its own command is in its manifest.  Each shipped model is the
+# mean of its run's two newest checkpoints (steps 2000 and 2250: `weights export --average 2`), which keeps
+# held-out frames safe across training seeds (README results).
 #
 #   bash benchmarks/train_shipped_models.sh [WORK_DIR] [EXPORT_DIR]
 #
@@ -33,5 +35,5 @@ $bench train --config tiny_difix --packets "$work/packets" --out "$work/ckpt/dif
 difix=$!
 wait $setdiff
 wait $difix
-$bench weights export "$work/ckpt/setdiff" --name tiny_setdiff --to "$export_dir"
-$bench weights export "$work/ckpt/difix" --name tiny_difix --to "$export_dir"
+$bench weights export "$work/ckpt/setdiff" --name tiny_setdiff --to "$export_dir" --average 2
+$bench weights export "$work/ckpt/difix" --name tiny_difix --to "$export_dir" --average 2
