@@ -902,6 +902,20 @@ def _(tmp: Path, world: World) -> Call:
     )
 
 
+@case("ablate-bad-guidance-scale")
+def _(tmp: Path, world: World) -> Call:
+    argv = ["ablate", "setsize", "--checkpoint", str(tmp), "--packets", str(world.store)]
+    return Call(
+        [*argv, "--out", str(tmp / "out"), "--guidance-scale", "nan", "--no-progress"], "--guidance-scale"
+    )
+
+
+@case("ablate-average-one-checkpoint")
+def _(tmp: Path, world: World) -> Call:
+    argv = ["ablate", "geometry", "--average", "1", "--packets", str(world.store)]
+    return Call([*argv, "--out", str(tmp / "out"), "--no-progress"], "--average")
+
+
 @case("demo-zero-jobs")
 def _(tmp: Path, world: World) -> Call:
     return Call(["demo", "--out", str(tmp / "out"), "--jobs", "0", "--no-progress"], "--jobs")
