@@ -93,7 +93,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
-    from setdiff_bench.errors import UsageError
+    from setdiff_bench.models.setdiff.averaging import check_average_count
     from setdiff_bench.models.setdiff.config import check_guidance_scale
     from setdiff_bench.pipeline.stages import LEDGER_FILE, Pipeline, StageFailed
     from setdiff_bench.runtime.devices import resolve_device
@@ -103,8 +103,8 @@ def run(args: argparse.Namespace) -> int:
     )  # checked here; passed on as given (auto: not at all), so the stages resolve it
     if args.guidance_scale is not None:
         check_guidance_scale(args.guidance_scale, "--guidance-scale")
-    if getattr(args, "average", None) is not None and args.average < 2:
-        raise UsageError(f"--average must be 2 or more checkpoints, got {args.average}", "--average")
+    if getattr(args, "average", None) is not None:
+        check_average_count(args.average, "--average")
     work = (args.work or args.out / "work") / f"ablation_{args.study}"
     pipeline = Pipeline(quiet=args.no_progress, ledger=work / LEDGER_FILE)  # reruns keep the original times
     invocation = _invocation(args)

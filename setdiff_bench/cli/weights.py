@@ -212,7 +212,7 @@ def run_shipped(args: argparse.Namespace) -> int:
 def export(args: argparse.Namespace) -> int:
     """``weights export RUN --name NAME``: the run's newest checkpoint + its training manifest."""
     from setdiff_bench.errors import UsageError
-    from setdiff_bench.models.setdiff.averaging import run_checkpoints
+    from setdiff_bench.models.setdiff.averaging import check_average_count, run_checkpoints
     from setdiff_bench.models.setdiff.checkpoint import resolve_checkpoint, saved_step
     from setdiff_bench.models.setdiff.config import check_guidance_scale
     from setdiff_bench.models.setdiff.manifest import read_manifest
@@ -225,8 +225,8 @@ def export(args: argparse.Namespace) -> int:
     scale = (
         None if args.guidance_scale is None else check_guidance_scale(args.guidance_scale, "--guidance-scale")
     )
-    if args.average is not None and args.average < 2:
-        raise UsageError(f"--average must be 2 or more checkpoints, got {args.average}", "--average")
+    if args.average is not None:
+        check_average_count(args.average, "--average")
     run = Path(args.names[0])
     checkpoint = resolve_checkpoint(run)
     manifest = read_manifest(run)

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import torch
 
-from setdiff_bench.errors import CheckpointError
+from setdiff_bench.errors import CheckpointError, UsageError
 from setdiff_bench.models.setdiff.checkpoint import (
     CHECKPOINTS_DIR,
     WEIGHTS_FILE,
@@ -27,6 +27,13 @@ from setdiff_bench.models.setdiff.checkpoint import (
     read_config,
     saved_step,
 )
+
+
+def check_average_count(count: int, where: str) -> int:
+    """``count`` checkpoints to average (at least 2: one is no average), else UsageError naming ``where``."""
+    if count < 2:
+        raise UsageError(f"--average must be 2 or more checkpoints, got {count}", where)
+    return count
 
 
 def run_checkpoints(run: Path) -> list[tuple[int, Path]]:

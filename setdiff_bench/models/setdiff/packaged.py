@@ -151,17 +151,19 @@ def export_enhancer(
     for name in names:
         if not (checkpoint / name).is_file():
             raise CheckpointError(f"checkpoint has no {name}", checkpoint)
-    config = read_config(checkpoint)
-    if guidance_scale is not None:
+    config = read_config(checkpoint) if guidance_scale is not None or average else None
+    if config is not None and guidance_scale is not None:
         config = replace(config, model=replace(config.model, guidance_scale=float(guidance_scale)))
     averaged = average_weights(average) if average else None
     with staged_folder(destination) as staging:
-        for name in names:
-            shutil.copyfile(checkpoint / name, staging / name)
-        if guidance_scale is not None:
+        if config is not None and guidance_scale is not None:
             write_text_atomic(staging / CONFIG_FILE, config.to_json() + "\n")
-        if averaged is not None:
+        else:
+            shutil.copyfile(checkpoint / CONFIG_FILE, staging / CONFIG_FILE)
+        if config is not None and averaged is not None:
             write_weights(staging / WEIGHTS_FILE, averaged, config)
+        else:
+            shutil.copyfile(checkpoint / WEIGHTS_FILE, staging / WEIGHTS_FILE)
         manifest = {**training_manifest, **(extra or {}), "files": file_table(staging, names)}
         write_text_atomic(staging / MANIFEST_FILE, json.dumps(manifest, indent=2, sort_keys=True) + "\n")
     return destination
