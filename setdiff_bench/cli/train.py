@@ -58,7 +58,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     add_device_argument(
         parser,
-        "where the enhancer trains (several GPUs: accelerate launch; the tiny autoencoder trains on the CPU)",
+        "where the enhancer or autoencoder trains (several GPUs: accelerate launch, enhancers only)",
         "auto (cuda when available, else cpu), cpu or cuda",
     )
     parser.add_argument(
@@ -88,13 +88,16 @@ def _autoencoder_defaults() -> dict[str, int | float]:
 
 def run_autoencoder(args: argparse.Namespace) -> int:
     from setdiff_bench.models.setdiff.autoencoder import AutoencoderTraining, train_autoencoder
+    from setdiff_bench.runtime.devices import resolve_device
 
     values = {name: getattr(args, name) for name in _autoencoder_defaults() if name not in ("seed", "steps")}
     defaults = AutoencoderTraining()
     settings = AutoencoderTraining(
         **values, steps=args.steps or defaults.steps, seed=defaults.seed if args.seed is None else args.seed
     )
-    manifest = train_autoencoder(args.packets, args.out, settings, progress=not args.no_progress)
+    manifest = train_autoencoder(
+        args.packets, args.out, settings, device=resolve_device(args.device), progress=not args.no_progress
+    )
     test = manifest["reconstruction_test"] or {}
     print(
         f"trained autoencoder ({manifest['train_frames']} frames, {settings.steps} steps, "

@@ -91,6 +91,10 @@ class MethodSpec:
         needs_gpu: whether it is impractical without CUDA.
         options: default keyword options passed to the factory.
         source: ``"builtin"``, or the entry point (``name = value``) a plugin came from.
+        fingerprint: ``"module:attr"`` of a callable ``fingerprint(**options) -> {file name: SHA-256}`` naming
+            the content of the files (weights, config) that decide the method's outputs for these options,
+            without building the method; ``run`` records it in ``run.json`` so that a resume with other
+            weights behind the same option (a retrained or re-exported checkpoint) is refused.
     """
 
     name: str
@@ -100,6 +104,7 @@ class MethodSpec:
     needs_gpu: bool = False
     options: Mapping[str, Any] = field(default_factory=dict)
     source: str = "builtin"
+    fingerprint: str | None = None
 
     def load_factory(self) -> Callable[..., Enhancer]:
         """Import the factory (this is where a method's heavy imports happen)."""
@@ -107,10 +112,24 @@ class MethodSpec:
             self.factory, f"method {self.name!r} factory", error=UsageError, path=self.source
         )
 
+    def model_files(self, options: Mapping[str, Any]) -> dict[str, str]:
+        """``{file name: SHA-256}`` of what decides the outputs for ``options`` (empty without a fingerprint)."""
+        if self.fingerprint is None:
+            return {}
+        function = load_attribute(
+            self.fingerprint, f"method {self.name!r} fingerprint", error=UsageError, path=self.source
+        )
+        return dict(function(**options))
 
-def _builtin(name: str, module: str, description: str, **flags: bool) -> MethodSpec:
+
+def _builtin(name: str, module: str, description: str, needs_weights: bool = False) -> MethodSpec:
     return MethodSpec(
-        name=name, factory=f"setdiff_bench.enhancers.{module}:create", description=description, **flags
+        name=name,
+        factory=f"setdiff_bench.enhancers.{module}:create",
+        description=description,
+        needs_weights=needs_weights,
+        # a method that loads weights names their files' hashes (``setdiff`` and ``difix`` share one loader)
+        fingerprint="setdiff_bench.enhancers.setdiff:fingerprint" if needs_weights else None,
     )
 
 

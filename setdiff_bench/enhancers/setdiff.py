@@ -14,8 +14,9 @@ from typing import Any
 import torch
 
 from setdiff_bench.errors import UsageError
+from setdiff_bench.io.atomic import sha256_file
 from setdiff_bench.models.setdiff import inference  # module attribute: looked up per call (tests replace it)
-from setdiff_bench.models.setdiff.checkpoint import load_model, resolve_checkpoint
+from setdiff_bench.models.setdiff.checkpoint import CONFIG_FILE, WEIGHTS_FILE, load_model, resolve_checkpoint
 from setdiff_bench.models.setdiff.config import check_guidance_scale
 from setdiff_bench.runtime.devices import resolve_device
 from setdiff_bench.types import Packet
@@ -130,6 +131,20 @@ def load_enhancer(
         max_references=max_references,
         targets_per_set=targets_per_set,
     )
+
+
+def fingerprint(checkpoint: str | None = None, **_: Any) -> dict[str, str]:
+    """``{file: SHA-256}`` of the weights and config that ``checkpoint`` resolves to (empty without one: the
+    factory then refuses with its own message).  A training folder resolves to its newest checkpoint, so a
+    run resumed after more training is refused, as its results would mix two models.
+
+    Raises:
+        CheckpointError: the checkpoint is missing or broken (the same line the factory would give).
+    """
+    if not checkpoint:
+        return {}
+    folder = resolve_checkpoint(checkpoint)
+    return {name: sha256_file(folder / name) for name in (WEIGHTS_FILE, CONFIG_FILE)}
 
 
 #: Factory of ``--method setdiff``: :func:`load_enhancer` for the method (``-o max_references=N

@@ -141,9 +141,14 @@ class RunSettings:
     batch_size: int = 8
     warp_cache: str | None = "auto"
 
-    def identity(self, index_sha256: str) -> dict[str, Any]:
-        """The ``run.json`` content: what must not change between a run and its resumption."""
-        return {
+    def identity(self, index_sha256: str, model_files: Mapping[str, str] | None = None) -> dict[str, Any]:
+        """The ``run.json`` content: what must not change between a run and its resumption.
+
+        ``model_files`` (``{file: SHA-256}`` from the method's fingerprint, e.g. a checkpoint's weights and
+        config) is recorded when the method has one, so that the same ``--checkpoint`` naming other weights
+        (retrained, re-exported, a newer shipped model) does not resume into stale results.
+        """
+        identity = {
             "format": RUN_FORMAT,
             "method": self.method,
             "options": _jsonable(dict(self.options)),
@@ -154,6 +159,9 @@ class RunSettings:
             "device": self.device,
             "index_sha256": index_sha256,
         }
+        if model_files:
+            identity["model_files"] = dict(sorted(model_files.items()))
+        return identity
 
 
 @dataclass
@@ -237,7 +245,9 @@ def run_method(
             "--method",
         )
     index_sha256 = sha256_file(Path(store.root) / INDEX_FILE)
-    identity = settings.identity(index_sha256)
+    spec = available_methods().get(settings.method)
+    model_files = spec.model_files(settings.options) if spec is not None else {}
+    identity = settings.identity(index_sha256, model_files)
     _check_folder(out, identity)
     if merge_only:
         return _merge_finished(store, out, settings, specs, selection)
@@ -360,6 +370,13 @@ def _compare_settings(out: Path, identity: dict[str, Any]) -> None:
         raise UsageError(f"unreadable run settings ({error})", run_file) from None
     if existing != identity:
         changed = sorted(k for k in set(existing) | set(identity) if existing.get(k) != identity.get(k))
+        if changed == ["model_files"]:
+            before = "were not recorded (an older run.json)" if "model_files" not in existing else "differ"
+            raise UsageError(
+                f"this folder holds a run made with other model files (their SHA-256 {before}): "
+                "its results would mix two models; choose another --out",
+                out,
+            )
         raise UsageError(
             f"this folder holds a run with other settings ({', '.join(changed)} differ); "
             "resume with the same command or choose another --out",

@@ -209,6 +209,10 @@ def test_train_autoencoder_and_build_a_model_on_it(tmp_path: Path) -> None:
                 "16",
                 "--latent-channels",
                 "6",
+                "--base-channels",
+                "8",
+                "--device",
+                "cpu",
                 "--no-progress",
             ]
         )
@@ -223,16 +227,30 @@ def test_train_autoencoder_and_build_a_model_on_it(tmp_path: Path) -> None:
     assert len(manifest["data_sha256"]) == 64 and math.isfinite(manifest["reconstruction_test"]["psnr"])
     config = read_autoencoder_config(out)
     assert config["latent_channels"] == 6 and config["scaling_factor"] == manifest["scaling_factor"] > 0
+    assert config["block_out_channels"] == [8, 16, 16, 16] and manifest["device"] == "cpu"
+    assert manifest["settings"]["base_channels"] == 8
     model = SetDiffModel(
         model_config_from_dict({"preset": "tiny", "autoencoder": str(out), "vae_decoder": "full"})
     )
     assert model.config.unet["in_channels"] == 6 and model.codec.scaling_factor == config["scaling_factor"]
+    assert list(model.codec.vae.config.block_out_channels) == [8, 16, 16, 16]
     from safetensors.torch import load_file
 
     saved = load_file(str(out / WEIGHTS_FILE))
     state = model.codec.vae.state_dict()
     assert all(torch.equal(state[k], v) for k, v in saved.items())
     assert not any(p.requires_grad for p in model.codec.vae.encoder.parameters())
+
+
+def test_autoencoder_width_not_a_multiple_of_8_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    write_store(tmp_path / "packets")
+    argv = ["train", "autoencoder", "--packets", str(tmp_path / "packets"), "--out", str(tmp_path / "ae")]
+    code = main([*argv, "--base-channels", "12", "--steps", "1", "--no-progress"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "base channels a multiple of 8" in err[0]
+    assert not (tmp_path / "ae").exists()
 
 
 def test_missing_autoencoder_is_one_clear_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -35,7 +35,6 @@ import torch
 
 from setdiff_bench.errors import UsageError, WeightsError
 from setdiff_bench.io.atomic import atomic_path, write_text_atomic
-from setdiff_bench.io.images import read_rgb
 from setdiff_bench.models.setdiff.config import TINY_VAE
 from setdiff_bench.models.setdiff.manifest import MANIFEST_FILE
 from setdiff_bench.models.setdiff.packaged import file_table, packaged_folder, packaged_names
@@ -57,6 +56,8 @@ class AutoencoderTraining:
         learning_rate: AdamW learning rate (cosine-decayed to 5 % over ``steps``).
         kl_weight: weight of the posterior's KL term (keeps the latent bounded; SD used 1e-6).
         latent_channels: latent channels of the VAE (the tiny preset has 4; more keep more detail).
+        base_channels: width of the VAE's first block; its blocks have ``(c, 2c, 2c, 2c)`` channels
+            (the tiny preset's VAE is ``c = 16``; compute per pixel grows about as ``c²``).
         seed: seeds initialisation, crops and flips.
         checkpoint_every: save the training state every this many steps (resume point).
     """
@@ -67,13 +68,20 @@ class AutoencoderTraining:
     learning_rate: float = 2e-3
     kl_weight: float = 1e-6
     latent_channels: int = 8
+    base_channels: int = 16
     seed: int = 0
     checkpoint_every: int = 250
 
 
-def tiny_vae_config(latent_channels: int) -> dict[str, Any]:
-    """The ``tiny`` preset's VAE config with ``latent_channels`` latent channels."""
-    return {**TINY_VAE, "latent_channels": int(latent_channels)}
+def tiny_vae_config(latent_channels: int, base_channels: int = 16) -> dict[str, Any]:
+    """The ``tiny`` preset's VAE config with ``latent_channels`` latent channels and blocks of
+    ``(base_channels, 2·base_channels, 2·base_channels, 2·base_channels)`` channels."""
+    c = int(base_channels)
+    return {
+        **TINY_VAE,
+        "latent_channels": int(latent_channels),
+        "block_out_channels": [c, 2 * c, 2 * c, 2 * c],
+    }
 
 
 def resolve_autoencoder(source: str | Path) -> Path:
@@ -143,6 +151,9 @@ def ground_truth_frames(store: Any, split: str) -> FrameSet:
 
     Frames are deduplicated by their file's SHA-256 (references recur across packets).
     """
+    # lazy: OpenImageIO is needed only to read a store; training from frames in memory runs without it
+    from setdiff_bench.io.images import read_rgb
+
     seen: dict[str, torch.Tensor] = {}
     for packet_id in store.packet_ids(split):
         rows = store.rows(packet_id)
@@ -195,9 +206,11 @@ def reconstruction_metrics(vae: Any, frames: torch.Tensor, batch: int = 8) -> di
     from setdiff_bench.metrics.ssim import ssim
 
     values: dict[str, list[float]] = {"psnr": [], "ssim": []}
+    device = next(vae.parameters()).device
     for start in range(0, len(frames), batch):
         images = frames[start : start + batch].float() / 255.0
-        output, _ = reconstruct(vae, images)
+        output, _ = reconstruct(vae, images.to(device))
+        output = output.float().cpu()
         values["psnr"] += psnr(output, images).tolist()
         values["ssim"] += ssim(output, images).tolist()
     return {k: round(sum(v) / len(v), 4) for k, v in values.items()}
@@ -206,8 +219,9 @@ def reconstruction_metrics(vae: Any, frames: torch.Tensor, batch: int = 8) -> di
 @torch.no_grad()
 def latent_std(vae: Any, frames: torch.Tensor, batch: int = 8) -> float:
     """Standard deviation of the unscaled posterior means over ``frames`` (SD's scale rule)."""
+    device = next(vae.parameters()).device
     means = [
-        vae.encode(frames[s : s + batch].float() / 255.0 * 2.0 - 1.0).latent_dist.mean
+        vae.encode((frames[s : s + batch].float() / 255.0 * 2.0 - 1.0).to(device)).latent_dist.mean.cpu()
         for s in range(0, len(frames), batch)
     ]
     return float(torch.cat(means).std())
@@ -219,6 +233,7 @@ def train_autoencoder(
     out_dir: str | Path,
     settings: AutoencoderTraining,
     *,
+    device: str = "cpu",
     progress: bool = True,
     command: str | None = None,
 ) -> dict[str, Any]:
@@ -230,24 +245,69 @@ def train_autoencoder(
     Raises:
         UsageError: no training frames, frames of mixed sizes, or a resume with other settings.
     """
-    from diffusers import AutoencoderKL
-    from safetensors.torch import save_file
-    from tqdm.auto import tqdm
-
     from setdiff_bench.packets.store import PacketStore  # lazy, like the metrics above
 
-    if settings.crop % 8 or settings.crop < 16 or settings.steps < 1 or settings.batch_size < 1:
-        raise UsageError(
-            "crop must be a multiple of 8 (>= 16); steps and batch size >= 1", "train autoencoder"
-        )
-    out = Path(out_dir)
+    check_settings(settings)
     store = PacketStore(packets)
     train_frames = ground_truth_frames(store, "train")
-    test_ids = store.packet_ids("test")
-    test_frames = ground_truth_frames(store, "test") if test_ids else None
+    test_frames = ground_truth_frames(store, "test") if store.packet_ids("test") else None
+    scenes = {
+        split: sorted(set(store.index[store.index["split"] == split]["scene"])) for split in ("train", "test")
+    }
+    vae, wall_seconds = fit_autoencoder(train_frames, out_dir, settings, device=device, progress=progress)
+    return save_autoencoder(
+        vae,
+        out_dir,
+        settings,
+        train_frames,
+        test_frames,
+        scenes=scenes,
+        wall_seconds=wall_seconds,
+        device=device,
+        command=command or " ".join(["setdiff-bench", *sys.argv[1:]]),
+    )
 
+
+def check_settings(settings: AutoencoderTraining) -> None:
+    """Refuse settings no VAE can be trained with (one line, naming the command)."""
+    if (
+        settings.crop % 8
+        or settings.crop < 16
+        or settings.steps < 1
+        or settings.batch_size < 1
+        or settings.base_channels < 8
+        or settings.base_channels % 8
+    ):
+        raise UsageError(
+            "crop must be a multiple of 8 (>= 16); base channels a multiple of 8 (>= 8); "
+            "steps and batch size >= 1",
+            "train autoencoder",
+        )
+
+
+def fit_autoencoder(
+    train_frames: FrameSet,
+    out_dir: str | Path,
+    settings: AutoencoderTraining,
+    *,
+    device: str = "cpu",
+    progress: bool = True,
+) -> tuple[Any, float]:
+    """The optimisation itself: a fresh (or resumed) VAE trained on ``train_frames`` → ``(vae in eval mode,
+    wall seconds of training over all sessions)``.
+
+    Crops and flips are drawn on the CPU from a generator seeded by ``(seed, step)``, so a resumed run sees
+    the same batches; ``device`` only moves the arithmetic (CUDA results differ from the CPU's in the last
+    bits).  The resume point ``out_dir/training_state.pt`` is written every ``checkpoint_every`` steps.
+    """
+    from diffusers import AutoencoderKL
+    from tqdm.auto import tqdm
+
+    check_settings(settings)
+    out = Path(out_dir)
     torch.manual_seed(settings.seed)
-    vae = AutoencoderKL.from_config(tiny_vae_config(settings.latent_channels))
+    vae = AutoencoderKL.from_config(tiny_vae_config(settings.latent_channels, settings.base_channels))
+    vae.to(device)  # before the optimiser, so a resumed optimiser state lands on the parameters' device
     optimizer = torch.optim.AdamW(vae.parameters(), lr=settings.learning_rate, weight_decay=0.0)
     schedule = torch.optim.lr_scheduler.LambdaLR(optimizer, lambda step: cosine_factor(step, settings.steps))
     start, elapsed = load_state(out / STATE_FILE, settings, vae, optimizer, schedule)
@@ -262,7 +322,7 @@ def train_autoencoder(
     vae.train()
     for step in range(start, settings.steps):
         rng = random.Random(f"{settings.seed}/{step}")
-        images = random_crops(train_frames.images, settings.batch_size, settings.crop, rng)
+        images = random_crops(train_frames.images, settings.batch_size, settings.crop, rng).to(device)
         output, posterior = reconstruct(vae, images)
         l1 = (output - images).abs().mean()
         l2 = (output - images).square().mean()
@@ -288,19 +348,40 @@ def train_autoencoder(
             )
     bar.close()
     vae.eval()
+    return vae, elapsed + time.perf_counter() - began
+
+
+def save_autoencoder(
+    vae: Any,
+    out_dir: str | Path,
+    settings: AutoencoderTraining,
+    train_frames: FrameSet,
+    test_frames: FrameSet | None,
+    *,
+    scenes: dict[str, list[str]],
+    wall_seconds: float,
+    device: str,
+    command: str,
+) -> dict[str, Any]:
+    """Measure a trained VAE (latent scale, reconstruction on both splits) and write :data:`AUTOENCODER_FILES`
+    to ``out_dir`` (the resume point is removed once they are written) → the manifest."""
+    from safetensors.torch import save_file
+
+    out = Path(out_dir)
     config = dict(vae.config)
     config = {k: v for k, v in config.items() if not k.startswith("_")}
     config["scaling_factor"] = round(1.0 / latent_std(vae, train_frames.images), 6)
     manifest = {
-        "command": command or " ".join(["setdiff-bench", *sys.argv[1:]]),
+        "command": command,
         "settings": asdict(settings),
+        "device": torch.device(device).type,
         "train_frames": len(train_frames.images),
         "test_frames": 0 if test_frames is None else len(test_frames.images),
         "frame_size": list(train_frames.images.shape[-2:]),
         "data_sha256": train_frames.data_hash(),
-        "train_scenes": sorted(set(store.index[store.index["split"] == "train"]["scene"])),
-        "test_scenes": sorted(set(store.index[store.index["split"] == "test"]["scene"])),
-        "wall_seconds": round(elapsed + time.perf_counter() - began, 1),
+        "train_scenes": scenes.get("train", []),
+        "test_scenes": scenes.get("test", []),
+        "wall_seconds": round(wall_seconds, 1),
         "reconstruction_train": reconstruction_metrics(vae, train_frames.images),
         "reconstruction_test": None
         if test_frames is None
@@ -309,7 +390,7 @@ def train_autoencoder(
         "scaling_factor": config["scaling_factor"],
     }
     out.mkdir(parents=True, exist_ok=True)
-    state = {k: v.detach().contiguous() for k, v in vae.state_dict().items()}
+    state = {k: v.detach().cpu().contiguous() for k, v in vae.state_dict().items()}
     with atomic_path(out / WEIGHTS_FILE) as temporary:
         save_file(state, str(temporary))
     write_text_atomic(out / CONFIG_FILE, json.dumps(config, indent=2, sort_keys=True) + "\n")
