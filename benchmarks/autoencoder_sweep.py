@@ -30,7 +30,6 @@ import argparse
 import json
 import subprocess
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -112,14 +111,13 @@ def run_variant(args: argparse.Namespace) -> None:
         latent_channels=latent,
         base_channels=base,
         seed=args.seed,
-        checkpoint_every=10**9,
+        steps=args.steps,
+        checkpoint_every=10**9,  # a sweep run is short and not resumed
     )
-    steps = args.steps
-    settings = replace(settings, steps=steps)
     out = args.out / args.variant
     vae, wall = fit_autoencoder(train, out, settings, device=args.device, progress=False)
     command = (
-        f"setdiff-bench train autoencoder --packets PACKETS --out {args.variant} --steps {steps} "
+        f"setdiff-bench train autoencoder --packets PACKETS --out {args.variant} --steps {args.steps} "
         f"--base-channels {base} --latent-channels {latent} --crop {args.crop} "
         f"--batch-size {args.batch_size} --learning-rate {args.learning_rate} --seed {args.seed}"
     )
@@ -181,23 +179,16 @@ def run_sweep(args: argparse.Namespace) -> None:
 def score_autoencoders(packets: Path, folders: list[Path]) -> None:
     """Print each autoencoder's reconstruction of *every* distinct test frame of a store (the sweep scores
     the subset that travelled), as JSON lines."""
-    from diffusers import AutoencoderKL
-
     from setdiff_bench.models.setdiff.autoencoder import (
         ground_truth_frames,
-        load_autoencoder_weights,
-        read_autoencoder_config,
+        load_autoencoder,
         reconstruction_metrics,
     )
     from setdiff_bench.packets.store import PacketStore
 
     frames = ground_truth_frames(PacketStore(packets), "test")
     for folder in folders:
-        config = {k: v for k, v in read_autoencoder_config(folder).items() if k != "scaling_factor"}
-        vae = AutoencoderKL.from_config(config)
-        load_autoencoder_weights(vae, folder)
-        vae.eval()
-        metrics = reconstruction_metrics(vae, frames.images)
+        metrics = reconstruction_metrics(load_autoencoder(folder), frames.images)
         print(
             json.dumps({"autoencoder": str(folder), "test_frames": len(frames.images), **metrics}), flush=True
         )

@@ -122,14 +122,19 @@ class MethodSpec:
         return dict(function(**options))
 
 
-def _builtin(name: str, module: str, description: str, needs_weights: bool = False) -> MethodSpec:
+#: Fingerprint of the methods that load a trained checkpoint (``setdiff`` and ``difix`` share one loader).
+CHECKPOINT_FINGERPRINT = "setdiff_bench.enhancers.setdiff:fingerprint"
+
+
+def _builtin(
+    name: str, module: str, description: str, needs_weights: bool = False, fingerprint: str | None = None
+) -> MethodSpec:
     return MethodSpec(
         name=name,
         factory=f"setdiff_bench.enhancers.{module}:create",
         description=description,
         needs_weights=needs_weights,
-        # a method that loads weights names their files' hashes (``setdiff`` and ``difix`` share one loader)
-        fingerprint="setdiff_bench.enhancers.setdiff:fingerprint" if needs_weights else None,
+        fingerprint=fingerprint,
     )
 
 
@@ -153,12 +158,14 @@ BUILTIN_METHODS: dict[str, MethodSpec] = {
             "setdiff",
             "SetDiff: geometry-grounded set diffusion over all references + targets (--checkpoint CKPT)",
             needs_weights=True,
+            fingerprint=CHECKPOINT_FINGERPRINT,
         ),
         _builtin(
             "difix",
             "difix",
             "DiFix3D-style baseline: nearest-pose reference + one target, RGB only (--checkpoint CKPT)",
             needs_weights=True,
+            fingerprint=CHECKPOINT_FINGERPRINT,
         ),
     )
 }

@@ -16,6 +16,7 @@ from setdiff_bench.models.setdiff.autoencoder import (
     CONFIG_FILE,
     MANIFEST_FILE,
     WEIGHTS_FILE,
+    load_autoencoder,
     read_autoencoder_config,
 )
 from setdiff_bench.models.setdiff.config import model_config_from_dict
@@ -239,6 +240,8 @@ def test_train_autoencoder_and_build_a_model_on_it(tmp_path: Path) -> None:
     saved = load_file(str(out / WEIGHTS_FILE))
     state = model.codec.vae.state_dict()
     assert all(torch.equal(state[k], v) for k, v in saved.items())
+    alone = load_autoencoder(out)  # the folder on its own, as benchmarks/autoencoder_sweep.py scores it
+    assert not alone.training and all(torch.equal(alone.state_dict()[k], v) for k, v in saved.items())
     assert not any(p.requires_grad for p in model.codec.vae.encoder.parameters())
 
 

@@ -133,6 +133,15 @@ def load_autoencoder_weights(vae: torch.nn.Module, source: str | Path) -> None:
         )
 
 
+def load_autoencoder(source: str | Path) -> Any:
+    """A trained autoencoder folder (or packaged name) → its diffusers ``AutoencoderKL``, in eval mode."""
+    from diffusers import AutoencoderKL
+
+    vae = AutoencoderKL.from_config(read_autoencoder_config(source))
+    load_autoencoder_weights(vae, source)
+    return vae.eval()
+
+
 # ---------------------------------------------------------------------- data
 @dataclass
 class FrameSet:
