@@ -29,7 +29,12 @@ from setdiff_bench.models.setdiff.inputs import (
     training_set,
 )
 from setdiff_bench.models.setdiff.model import SetDiffModel
-from setdiff_bench.models.setdiff.set_mixer import BIAS_DISTANCE_CAP, distance_bias, token_grid
+from setdiff_bench.models.setdiff.set_mixer import (
+    BIAS_DISTANCE_CAP,
+    BIAS_PARAMETER,
+    distance_bias,
+    token_grid,
+)
 from tests.models.setdiff_fixtures import make_packet, make_sample, train_argv
 from tests.models.test_store_training import write_store
 
@@ -48,11 +53,13 @@ def residual_model(**overrides: object) -> SetDiffModel:
     return SetDiffModel(config).eval()
 
 
-@pytest.mark.parametrize("bias", ["none", "cmap_distance"])
-def test_untrained_residual_model_returns_the_render(bias: str) -> None:
+@pytest.mark.parametrize(
+    "bias, layers", [("none", "all"), ("cmap_distance", "all"), ("cmap_distance", "lowest")]
+)
+def test_untrained_residual_model_returns_the_render(bias: str, layers: str) -> None:
     """Identity at initialisation: to the last 8-bit level, with geometry CFG on and the set mixer active."""
     packet = make_packet(3, 2, size=(32, 48))
-    output = enhance_packet(residual_model(attention_bias=bias), packet)
+    output = enhance_packet(residual_model(attention_bias=bias, attention_bias_layers=layers), packet)
     renders = packet.targets.images.float()
     assert (output * 255).round().equal((renders * 255).round())
     assert float((output - renders).abs().max()) < 0.5 / 255
@@ -174,6 +181,73 @@ def test_attention_bias_equals_explicit_attention() -> None:
         mixed = (logits.softmax(-1) @ split(v)).transpose(1, 2).reshape(views, tokens, heads * d)
         expected = attn.to_out[1](attn.to_out[0](mixed)) / attn.rescale_output_factor
     torch.testing.assert_close(output, expected, atol=1e-5, rtol=1e-4)
+
+
+#: A three-level variant of the tiny UNet (set mixers at two resolutions below the top), to check that
+#: "lowest" follows the UNet's depth rather than the tiny preset's layout.
+THREE_LEVEL_UNET = {
+    "down_block_types": ["CrossAttnDownBlock2D", "CrossAttnDownBlock2D", "DownBlock2D"],
+    "up_block_types": ["UpBlock2D", "CrossAttnUpBlock2D", "CrossAttnUpBlock2D"],
+    "block_out_channels": [32, 64, 64],
+    "attention_head_dim": [2, 4, 4],
+}
+
+
+@pytest.mark.parametrize("unet", [{}, THREE_LEVEL_UNET], ids=["tiny", "three_levels"])
+def test_lowest_bias_layers_are_those_with_fewest_tokens(unet: dict) -> None:
+    """`attention_bias_layers = "lowest"` puts the bias parameter on exactly the set-mixing layers that see
+    the fewest tokens in a real forward pass (counted by wrapping each processor), and on no other."""
+    model = residual_model(attention_bias="cmap_distance", attention_bias_layers="lowest", unet=unet)
+    modules = dict(model.unet.named_modules())
+    tokens: dict[str, int] = {}
+
+    class Counting:
+        """Records the tokens per view a layer sees, then attends as before (diffusers passes the set
+        kwargs only to processors whose signature names them)."""
+
+        def __init__(self, name: str, inner: object) -> None:
+            self.name, self.inner = name, inner
+
+        def __call__(
+            self,
+            attn,
+            hidden_states,
+            encoder_hidden_states=None,
+            attention_mask=None,
+            temb=None,
+            num_views=None,
+            token_points=None,
+        ):
+            tokens[self.name] = int(hidden_states.shape[1])
+            return self.inner(attn, hidden_states, num_views=num_views, token_points=token_points)
+
+    for name in model.mixed_attention:
+        attn = modules[name.removesuffix(".processor")]
+        attn.processor = Counting(name, attn.processor)
+    enhance_packet(model, make_packet(2, 1, size=(64, 96)))
+    fewest = min(tokens.values())
+    assert len(set(tokens.values())) > 1
+    for name in model.mixed_attention:
+        has_bias = hasattr(modules[name.removesuffix(".processor")], BIAS_PARAMETER)
+        assert has_bias == (tokens[name] == fewest), (name, tokens)
+
+
+def test_layers_without_the_bias_ignore_the_points() -> None:
+    """In a "lowest" model the other set-mixing layers attend exactly as the plain mixer does."""
+    model = residual_model(attention_bias="cmap_distance", attention_bias_layers="lowest")
+    modules = dict(model.unet.named_modules())
+    views, tokens = 2, 16
+    generator = torch.Generator().manual_seed(1)
+    cells = torch.cat([torch.randn(views, 3, 4, 4, generator=generator), torch.ones(views, 1, 4, 4)], dim=1)
+    changed = {}
+    for name in model.mixed_attention:
+        attn = modules[name.removesuffix(".processor")]
+        hidden = torch.randn(views, tokens, attn.to_q.in_features, generator=generator)
+        with torch.no_grad():
+            plain = attn.processor(attn, hidden, num_views=views)
+            with_points = attn.processor(attn, hidden, num_views=views, token_points=cells)
+        changed[name] = not torch.equal(plain, with_points)
+    assert changed == {name: name.startswith("mid_block") for name in model.mixed_attention}
 
 
 def test_surface_points_divide_by_alpha_where_valid() -> None:

@@ -39,6 +39,7 @@ Prediction = Literal["v_prediction", "epsilon"]
 DecoderTraining = Literal["lora", "full", "frozen"]
 OutputMode = Literal["direct", "residual"]
 AttentionBias = Literal["none", "cmap_distance"]
+AttentionBiasLayers = Literal["all", "lowest"]
 
 CONFIG_FORMAT = 1
 DEFAULT_PROMPT = "remove degradation"
@@ -210,6 +211,9 @@ class ModelConfig:
         attention_bias: ``none`` (the paper's set mixer) or ``cmap_distance`` (beyond the paper): each
             set-mixer logit gets ``−s·min(‖p_q − p_k‖², cap)`` from the tokens' C-map surface points
             (learnable s ≥ 0 per layer), steering attention to geometrically corresponding tokens.
+        attention_bias_layers: which set-mixing layers get the bias: ``all``, or ``lowest`` (only those
+            at the UNet's lowest resolution, whose few tokens keep the bias cheap; the others keep
+            torch's fused attention kernel).
     """
 
     method: Method = "setdiff"
@@ -241,6 +245,7 @@ class ModelConfig:
     autoencoder: str | None = None
     output_mode: OutputMode = "direct"
     attention_bias: AttentionBias = "none"
+    attention_bias_layers: AttentionBiasLayers = "all"
 
     def __post_init__(self) -> None:
         where = "[model]"
@@ -249,6 +254,10 @@ class ModelConfig:
         if self.attention_bias not in ("none", "cmap_distance"):
             raise UsageError(
                 f"attention_bias must be 'none' or 'cmap_distance', got {self.attention_bias!r}", where
+            )
+        if self.attention_bias_layers not in ("all", "lowest"):
+            raise UsageError(
+                f"attention_bias_layers must be 'all' or 'lowest', got {self.attention_bias_layers!r}", where
             )
         if self.attention_bias != "none" and not self.use_geometry:
             raise UsageError("attention_bias needs C-maps: set use_geometry = true", where)
@@ -348,6 +357,7 @@ class ModelConfig:
             "text_length",
             "output_mode",
             "attention_bias",
+            "attention_bias_layers",
         )
         return _jsonable({name: getattr(self, name) for name in keep})
 

@@ -18,7 +18,8 @@ With ``output_mode = "residual"`` (models trained from scratch) the UNet's outpu
 zero, ``x̂0 = z − √(1−ᾱ)·û`` and a target's image is ``clamp(render + D(x̂0) − D(z), 0, 1)`` (both
 latents decoded in one call with the same skips): an untrained model returns its input exactly, and
 training learns the correction only.  With ``attention_bias = "cmap_distance"`` the set mixer's
-logits get a C-map distance bias (:func:`.set_mixer.distance_bias`); the points travel with each
+logits get a C-map distance bias (:func:`.set_mixer.distance_bias`), in every set-mixing layer or, with
+``attention_bias_layers = "lowest"``, only in those at the lowest resolution; the points travel with each
 UNet call and are removed, like Ψ's output, for the unconditional CFG branch and dropped sets.
 
 Geometry classifier-free guidance: training removes C-maps and poses together for a whole set with
@@ -39,7 +40,12 @@ from setdiff_bench.models.setdiff.config import ModelConfig
 from setdiff_bench.models.setdiff.geometry_encoder import GeometryEncoder
 from setdiff_bench.models.setdiff.inputs import SetBatch, check_image_size
 from setdiff_bench.models.setdiff.networks import build_networks
-from setdiff_bench.models.setdiff.set_mixer import add_bias_parameters, install_set_mixer, set_kwargs
+from setdiff_bench.models.setdiff.set_mixer import (
+    add_bias_parameters,
+    biased_layers,
+    install_set_mixer,
+    set_kwargs,
+)
 from setdiff_bench.models.setdiff.vae_codec import Encoded, LatentCodec
 
 
@@ -72,7 +78,10 @@ class SetDiffModel(nn.Module):
         self.unet = networks.unet
         self.mixed_attention = install_set_mixer(self.unet)
         if config.attention_bias == "cmap_distance":
-            add_bias_parameters(self.unet, self.mixed_attention)
+            levels = len(self.unet.down_blocks)
+            add_bias_parameters(
+                self.unet, biased_layers(self.mixed_attention, levels, config.attention_bias_layers)
+            )
         if config.output_mode == "residual":
             nn.init.zeros_(self.unet.conv_out.weight)
             nn.init.zeros_(self.unet.conv_out.bias)

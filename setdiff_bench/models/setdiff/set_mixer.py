@@ -87,6 +87,32 @@ def distance_bias(points: torch.Tensor, valid: torch.Tensor, scale: torch.Tensor
     return (-scale * squared)[:, None]
 
 
+def mixer_level(name: str, levels: int) -> int:
+    """The resolution level (0 = the full latent grid, each level halves it) of a set-mixing layer named
+    as in diffusers' ``UNet2DConditionModel`` with ``levels`` down blocks: ``down_blocks.i`` works at
+    level i (it downsamples at its end), ``mid_block`` at the last, ``up_blocks.j`` at ``levels − 1 − j``
+    (it upsamples at its end)."""
+    block, _, rest = name.partition(".")
+    if block == "mid_block":
+        return levels - 1
+    index = int(rest.split(".", 1)[0])
+    if block == "down_blocks":
+        return index
+    if block == "up_blocks":
+        return levels - 1 - index
+    raise ValueError(f"{name}: not a down, mid or up block of a UNet")
+
+
+def biased_layers(names: list[str], levels: int, which: str) -> list[str]:
+    """The set-mixing layers that get the distance bias: ``all`` of ``names``, or the ``lowest``-resolution ones."""
+    if which == "all":
+        return list(names)
+    if which != "lowest":
+        raise ValueError(f"attention bias layers must be 'all' or 'lowest', got {which!r}")
+    deepest = max(mixer_level(name, levels) for name in names)
+    return [name for name in names if mixer_level(name, levels) == deepest]
+
+
 def add_bias_parameters(unet: torch.nn.Module, names: list[str]) -> None:
     """Give each set-mixing ``attn1`` a learnable log-strength of the distance bias (saved with the UNet)."""
     modules = dict(unet.named_modules())
