@@ -55,7 +55,12 @@ from tqdm import tqdm
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import machine
-from benchmarks.reproject_geometry import masked_psnr, with_true_geometry, world_model
+from benchmarks.reproject_geometry import (
+    add_store_arguments,
+    masked_psnr,
+    packet_and_world,
+    with_true_geometry,
+)
 from setdiff_bench.cameras import Camera
 from setdiff_bench.enhancers.reproject import (
     ReprojectConfig,
@@ -63,9 +68,8 @@ from setdiff_bench.enhancers.reproject import (
     project,
 )
 from setdiff_bench.gaussians.model import GaussianModel
-from setdiff_bench.gaussians.render import render
 from setdiff_bench.geometry import pixel_centers
-from setdiff_bench.packets.store import PacketStore, row_camera
+from setdiff_bench.packets.store import PacketStore
 
 #: Relative inverse-depth tolerance of the visibility test (module docstring).
 TOLERANCE = 0.03
@@ -121,12 +125,7 @@ def target_measures(
     """One record per target of the packet and visibility tolerance: ``identity``, ``surface`` (share
     of static pixels with a surface) and, per K in ``sizes``, ``seen_K``, ``visible_truth_K`` and
     ``copy_K`` (module docstring)."""
-    rows = store.rows(packet_id)
-    packet = store.load_packet(packet_id)
-    truth, masks = store.load_ground_truth(packet_id)
-    cameras = [row_camera(row, world=True) for _, row in rows.iterrows()]
-    with torch.no_grad():
-        world = render(world_model(scenes, packet.scene, cache), cameras, with_geometry=True, tile_size=8)
+    packet, truth, masks, cameras, world = packet_and_world(store, packet_id, scenes, cache)
     n, renders = len(packet.references), packet.targets.images.float()
     alphas = world.alpha.float()
     valid = alphas > ReprojectConfig().alpha_threshold  # (V, 1, H, W): pixels with a surface
@@ -199,10 +198,7 @@ def summary(records: list[dict[str, Any]], sizes: list[int]) -> dict[str, float]
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--packets", required=True, type=Path, help="synthetic packet store")
-    parser.add_argument(
-        "--scenes", required=True, type=Path, help="the synthetic scenes the packets came from"
-    )
+    add_store_arguments(parser)
     parser.add_argument(
         "--references", action="append", type=int, required=True, help="K: first K references (repeatable)"
     )

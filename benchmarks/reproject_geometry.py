@@ -65,6 +65,19 @@ def world_model(scenes: Path, scene: str, cache: dict[str, GaussianModel]) -> Ga
     return cache[scene]
 
 
+def packet_and_world(
+    store: PacketStore, packet_id: str, scenes: Path, cache: dict[str, GaussianModel]
+) -> tuple[Packet, torch.Tensor, torch.Tensor, list, Any]:
+    """A packet, its targets' ground truth ``(M, 3, H, W)`` and static masks ``(M, 1, H, W)``, its views'
+    world cameras (references first) and the true world rendered from them with C-maps and depth."""
+    packet = store.load_packet(packet_id)
+    truth, masks = store.load_ground_truth(packet_id)
+    cameras = [row_camera(row, world=True) for _, row in store.rows(packet_id).iterrows()]
+    with torch.no_grad():
+        world = render(world_model(scenes, packet.scene, cache), cameras, with_geometry=True, tile_size=8)
+    return packet, truth, masks, cameras, world
+
+
 def with_true_geometry(packet: Packet, cameras: list, cmaps: torch.Tensor, alphas: torch.Tensor) -> Packet:
     """The packet with every view's camera, C-map and alpha replaced (world frame, references first)."""
     n = len(packet.references)
@@ -90,12 +103,7 @@ def packet_measures(
     enhancer: ReprojectEnhancer,
 ) -> dict[str, Any]:
     """Every measure of the module docstring for one packet."""
-    rows = store.rows(packet_id)
-    packet = store.load_packet(packet_id)
-    truth, masks = store.load_ground_truth(packet_id)
-    cameras = [row_camera(row, world=True) for _, row in rows.iterrows()]
-    with torch.no_grad():
-        world = render(world_model(scenes, packet.scene, cache), cameras, with_geometry=True, tile_size=8)
+    packet, truth, masks, cameras, world = packet_and_world(store, packet_id, scenes, cache)
     cmaps, alphas = world.cmap.float(), world.alpha.float()
     n, renders = len(packet.references), packet.targets.images
     fit_output = enhancer.enhance(packet)
@@ -167,12 +175,18 @@ def group_summary(records: list[dict[str, Any]]) -> dict[str, float]:
     return summary
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def add_store_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--packets`` (a synthetic packet store) and ``--scenes`` (the scenes it was prepared from), as the
+    scripts that rebuild a synthetic world to compare with need them."""
     parser.add_argument("--packets", required=True, type=Path, help="synthetic packet store")
     parser.add_argument(
         "--scenes", required=True, type=Path, help="the synthetic scenes the packets came from"
     )
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    add_store_arguments(parser)
     parser.add_argument("--group", action="append", required=True, help="packet group (repeatable)")
     parser.add_argument("--per-group", type=int, default=2, help="packets per group (first in id order)")
     parser.add_argument("--split", default="test")
