@@ -42,6 +42,11 @@ AB_CONFIGS = {
         ("model", "attention_bias"): "cmap_distance",
         ("model", "attention_bias_layers"): "lowest",
     },
+    "tiny_setdiff_cmap_bias_lowest_lpips2.toml": {
+        ("model", "attention_bias"): "cmap_distance",
+        ("model", "attention_bias_layers"): "lowest",
+        ("train", "lpips_weight"): 2.0,
+    },
     "tiny_setdiff_masked_copy.toml": {("train", "masked_copy_fraction"): 0.4},
 }
 
