@@ -47,7 +47,6 @@ import sys
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
 import torch.nn.functional as F
 from tqdm import tqdm
@@ -75,26 +74,16 @@ from setdiff_bench.packets.store import PacketStore
 TOLERANCE = 0.03
 
 
-def unproject(depth: torch.Tensor, camera: Camera) -> torch.Tensor:
-    """``(1, H, W)`` camera-frame depths → ``(3, H, W)`` world points on the pixels' rays (pixel centres)."""
-    height, width = depth.shape[-2:]
-    xn, yn = camera.pixel_to_normalized(pixel_centers(height, width))
-    rays = torch.from_numpy(np.stack([xn, yn, np.ones_like(xn)], axis=1)).to(depth)  # (HW, 3)
-    R = torch.tensor(camera.R, dtype=depth.dtype)
-    t = torch.tensor(camera.t, dtype=depth.dtype)
-    world = (rays * depth.reshape(-1, 1) - t) @ R  # Rᵀ (z d − t) for row vectors
-    return world.T.reshape(3, height, width)
-
-
-def seen_colours(
+def reference_samples(
     points: torch.Tensor,
     cameras: list[Camera],
     inverse_depths: torch.Tensor,
     images: torch.Tensor,
-    tolerance: float,
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """For ``P`` surface points ``(P, 3)`` and ``N`` references: ``(N, P)`` bool, which reference sees
-    which point (module docstring), and ``(N, 3, P)`` the references' colours there (bilinear).
+    """For ``P`` surface points ``(P, 3)`` and ``N`` references: ``(N, P)`` the relative inverse-depth
+    mismatch ``|1/z_ref − 1/z| · z`` where the point projects inside the reference onto four pixels with a
+    surface (``inf`` elsewhere) — a reference sees a point when it is within the tolerance (module
+    docstring) — and ``(N, 3, P)`` the references' colours there (bilinear).
 
     Args:
         inverse_depths: ``(N, 2, H, W)``: each reference's inverse depth × validity, and its validity.
@@ -108,10 +97,15 @@ def seen_colours(
     grid = torch.where(inside[..., None], grid, torch.zeros_like(grid))[:, None]  # (N, 1, P, 2)
     sampled = F.grid_sample(inverse_depths, grid, mode="bilinear", align_corners=False)[:, :, 0]
     colours = F.grid_sample(images, grid, mode="bilinear", align_corners=False)[:, :, 0]
-    all_valid = sampled[:, 1] > 1.0 - 1e-4
     inverse = 1.0 / z.clamp_min(1e-6)
-    seen = inside & all_valid & ((sampled[:, 0] - inverse).abs() <= tolerance * inverse)
-    return seen, colours
+    mismatch = (sampled[:, 0] - inverse).abs() / inverse
+    usable = inside & (sampled[:, 1] > 1.0 - 1e-4)
+    return torch.where(usable, mismatch, torch.full_like(mismatch, float("inf"))), colours
+
+
+def share(mask: torch.Tensor, static: torch.Tensor) -> float:
+    """The share of the static pixels ``(P,)`` bool where ``mask`` ``(P,)`` bool holds."""
+    return float((mask & static).float().sum() / static.float().sum().clamp_min(1))
 
 
 def target_measures(
@@ -128,7 +122,8 @@ def target_measures(
     packet, truth, masks, cameras, world = packet_and_world(store, packet_id, scenes, cache)
     n, renders = len(packet.references), packet.targets.images.float()
     alphas = world.alpha.float()
-    valid = alphas > ReprojectConfig().alpha_threshold  # (V, 1, H, W): pixels with a surface
+    config = ReprojectConfig()
+    valid = alphas > config.alpha_threshold  # (V, 1, H, W): pixels with a surface
     depths = torch.where(valid, world.depth.float() / alphas.clamp_min(1e-6), torch.zeros_like(alphas))
     valid &= depths > 0
     inverse_depths = torch.cat(
@@ -139,33 +134,33 @@ def target_measures(
         dim=1,
     )
     true_packet = with_true_geometry(packet, cameras, world.cmap.float(), world.alpha.float())
-    weights = blend_weights(true_packet, ReprojectConfig()).float()  # (M, N)
+    weights = blend_weights(true_packet, config).float()  # (M, N)
     images = packet.references.images.float()
     records = []
+    pixels = pixel_centers(packet.height, packet.width)
     for m in range(len(packet.targets)):
-        target_points = unproject(depths[n + m], cameras[n + m]).reshape(3, -1).T
+        target_depth = depths[n + m].reshape(-1).double().numpy()
+        target_points = torch.from_numpy(cameras[n + m].unproject(pixels, target_depth)).float()
         target_valid = valid[n + m].reshape(-1)
         static = masks[m].reshape(-1)
         flat_truth, flat_render = truth[m].reshape(3, -1), renders[m].reshape(3, -1)
+        mismatch, colours = reference_samples(target_points, cameras[:n], inverse_depths, images)
+        common = {
+            "packet_id": packet_id,
+            "group": packet.group,
+            "target": m,
+            "identity": masked_psnr(flat_render, flat_truth, static[None]),
+            "surface": share(target_valid, static),
+        }
         for tolerance in tolerances:
-            seen_by, colours = seen_colours(target_points, cameras[:n], inverse_depths, images, tolerance)
-            seen_by &= target_valid[None]
-            record: dict[str, Any] = {
-                "packet_id": packet_id,
-                "group": packet.group,
-                "target": m,
-                "tolerance": tolerance,
-                "identity": masked_psnr(flat_render, flat_truth, static[None]),
-                "surface": float((target_valid & static).float().sum() / static.float().sum().clamp_min(1)),
-            }
+            seen_by = (mismatch <= tolerance) & target_valid[None]
+            record: dict[str, Any] = {**common, "tolerance": tolerance}
             for size in sizes:
                 k = min(size, n)
                 w = weights[m, :k, None] * seen_by[:k]  # (k, P)
                 seen = w.sum(dim=0) > 0
                 copied = (colours[:k] * w[:, None]).sum(dim=0) / w.sum(dim=0).clamp_min(1e-12)
-                record[f"seen_{size}"] = float(
-                    (seen & static).float().sum() / static.float().sum().clamp_min(1)
-                )
+                record[f"seen_{size}"] = share(seen, static)
                 record[f"visible_truth_{size}"] = masked_psnr(
                     torch.where(seen[None], flat_truth, flat_render), flat_truth, static[None]
                 )
