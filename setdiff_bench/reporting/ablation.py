@@ -56,10 +56,14 @@ class GeometryVariant:
     overrides: Mapping[str, object]
 
 
+# The C-map attention bias (``attention_bias = "cmap_distance"``, beyond the paper) is C-map geometry too:
+# the rows without C-maps switch it off, the rows with C-maps keep the config's setting.
 GEOMETRY_VARIANTS: tuple[GeometryVariant, ...] = (
-    GeometryVariant("none", "None", {"use_geometry": False}),
+    GeometryVariant("none", "None", {"use_geometry": False, "attention_bias": "none"}),
     GeometryVariant("cmap", "Coordinate maps", {"use_geometry": True, "geometry_inputs": ["cmap"]}),
-    GeometryVariant("pose", "Camera poses", {"use_geometry": True, "geometry_inputs": ["plucker"]}),
+    GeometryVariant(
+        "pose", "Camera poses", {"use_geometry": True, "geometry_inputs": ["plucker"], "attention_bias": "none"}
+    ),
     GeometryVariant("both", "Both", {"use_geometry": True, "geometry_inputs": ["cmap", "plucker"]}),
 )
 

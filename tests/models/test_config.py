@@ -47,6 +47,7 @@ AB_CONFIGS = {
         ("model", "attention_bias_layers"): "lowest",
         ("train", "lpips_weight"): 2.0,
     },
+    "tiny_setdiff_lpips2.toml": {("train", "lpips_weight"): 2.0},
     "tiny_setdiff_masked_copy.toml": {("train", "masked_copy_fraction"): 0.4},
 }
 

@@ -60,3 +60,20 @@ def test_two_variants_are_trained_run_and_tabulated(tmp_path: Path) -> None:
         for metric in METRICS:
             assert abs(table.loc[variant, metric] - float(metrics[metric].mean())) < 1e-9
     assert "--average 2" in (out / "ablation_geometry.md").read_text()
+
+
+def test_variants_of_a_biased_config_bias_attention_only_where_they_see_c_maps() -> None:
+    """The C-map attention bias is C-map geometry: None and Camera poses must train without it (else the
+    'no geometry' row would still attend by C-map distance, and a biased config could not make a None row:
+    the bias needs ``use_geometry``); the rows with C-maps keep the config's bias."""
+    from setdiff_bench.models.setdiff.config import config_from_dict, config_toml_data
+    from setdiff_bench.reporting.ablation import GEOMETRY_VARIANTS
+
+    biased = config_toml_data(
+        Path(__file__).parents[2] / "benchmarks" / "configs" / "tiny_setdiff_cmap_bias_lowest.toml"
+    )
+    expected = {"none": "none", "cmap": "cmap_distance", "pose": "none", "both": "cmap_distance"}
+    for variant in GEOMETRY_VARIANTS:
+        model = config_from_dict({**biased, "model": {**biased["model"], **variant.overrides}}).model
+        assert model.attention_bias == expected[variant.key], variant.key
+        assert model.attention_bias_layers == "lowest"
