@@ -62,7 +62,9 @@ GEOMETRY_VARIANTS: tuple[GeometryVariant, ...] = (
     GeometryVariant("none", "None", {"use_geometry": False, "attention_bias": "none"}),
     GeometryVariant("cmap", "Coordinate maps", {"use_geometry": True, "geometry_inputs": ["cmap"]}),
     GeometryVariant(
-        "pose", "Camera poses", {"use_geometry": True, "geometry_inputs": ["plucker"], "attention_bias": "none"}
+        "pose",
+        "Camera poses",
+        {"use_geometry": True, "geometry_inputs": ["plucker"], "attention_bias": "none"},
     ),
     GeometryVariant("both", "Both", {"use_geometry": True, "geometry_inputs": ["cmap", "plucker"]}),
 )
