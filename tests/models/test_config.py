@@ -35,29 +35,39 @@ def test_packaged_configs_load() -> None:
     assert difix.model.prediction == "epsilon" and not difix.model.use_geometry and not difix.model.uses_cfg
 
 
-#: The A/B configs in benchmarks/configs/ and the keys each changes from tiny_setdiff.
-AB_CONFIGS = {
-    "tiny_setdiff_cmap_bias.toml": {("model", "attention_bias"): "cmap_distance"},
-    "tiny_setdiff_cmap_bias_lowest.toml": {
-        ("model", "attention_bias"): "cmap_distance",
-        ("model", "attention_bias_layers"): "lowest",
-    },
-    "tiny_setdiff_cmap_bias_lowest_lpips2.toml": {
-        ("model", "attention_bias"): "cmap_distance",
-        ("model", "attention_bias_layers"): "lowest",
-        ("train", "lpips_weight"): 2.0,
-    },
-    "tiny_setdiff_lpips2.toml": {("train", "lpips_weight"): 2.0},
-    "tiny_setdiff_masked_copy.toml": {("train", "masked_copy_fraction"): 0.4},
+#: The A/B configs in benchmarks/configs/: the packaged config each arm copies, and the keys it changes.
+AB_CONFIGS: dict[str, tuple[str, dict[tuple[str, str], object]]] = {
+    "tiny_difix_lpips2.toml": ("tiny_difix", {("train", "lpips_weight"): 2.0}),
+    "tiny_setdiff_cmap_bias.toml": ("tiny_setdiff", {("model", "attention_bias"): "cmap_distance"}),
+    "tiny_setdiff_cmap_bias_lowest.toml": (
+        "tiny_setdiff",
+        {("model", "attention_bias"): "cmap_distance", ("model", "attention_bias_layers"): "lowest"},
+    ),
+    "tiny_setdiff_cmap_bias_lowest_lpips2.toml": (
+        "tiny_setdiff",
+        {
+            ("model", "attention_bias"): "cmap_distance",
+            ("model", "attention_bias_layers"): "lowest",
+            ("train", "lpips_weight"): 2.0,
+        },
+    ),
+    "tiny_setdiff_lpips2.toml": ("tiny_setdiff", {("train", "lpips_weight"): 2.0}),
+    "tiny_setdiff_masked_copy.toml": ("tiny_setdiff", {("train", "masked_copy_fraction"): 0.4}),
 }
 
 
+def test_every_ab_config_is_checked() -> None:
+    folder = Path(__file__).parents[2] / "benchmarks" / "configs"
+    assert sorted(p.name for p in folder.glob("*.toml")) == sorted(AB_CONFIGS)
+
+
 @pytest.mark.parametrize("file_name", sorted(AB_CONFIGS))
-def test_ab_configs_differ_from_tiny_setdiff_only_in_their_keys(file_name: str) -> None:
-    """An A/B arm is only an A/B while its copy of tiny_setdiff.toml stays in step with the original."""
+def test_ab_configs_differ_from_their_packaged_config_only_in_their_keys(file_name: str) -> None:
+    """An A/B arm is only an A/B while its copy of a packaged config stays in step with the original."""
+    base_name, changes = AB_CONFIGS[file_name]
     arm = load_config(Path(__file__).parents[2] / "benchmarks" / "configs" / file_name).to_dict()
-    base = load_config("tiny_setdiff").to_dict()
-    for (table, key), value in AB_CONFIGS[file_name].items():
+    base = load_config(base_name).to_dict()
+    for (table, key), value in changes.items():
         assert arm[table][key] == value != base[table][key]
         arm[table][key] = base[table][key]
     assert arm == base
