@@ -7,7 +7,8 @@ luma, images in [0, 1]) for the ground truth, the render and each run's saved ou
 *restored share* ``(run − render) / (ground truth − render)`` — 0 keeps the render's sharpness, 1
 reaches the ground truth's, above 1 over-sharpens.
 
-Written by hand because no library scores a run folder this way; the Laplacian itself is OpenCV's.
+Written by hand because no library scores a run folder this way; the Laplacian itself is OpenCV's, and
+the images are read by the toolkit's own reader (``setdiff_bench.io.images.read_rgb``).
 
     python benchmarks/output_sharpness.py --packets runs/more/packets \\
         --run shipped=<run folder> --run biased=<run folder> [--out benchmarks/results/....json]
@@ -33,6 +34,9 @@ from tqdm import tqdm
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import machine
+from setdiff_bench.errors import SetDiffBenchError, UsageError
+from setdiff_bench.io.atomic import write_text_atomic
+from setdiff_bench.io.images import read_rgb
 from setdiff_bench.packets.store import PacketStore
 
 
@@ -40,15 +44,6 @@ def laplacian_energy(image: np.ndarray) -> float:
     """``mean |∇² luma|`` of an ``(H, W, 3)`` float32 RGB image in [0, 1] (OpenCV 3×3 Laplacian)."""
     gray = cv2.cvtColor(np.ascontiguousarray(image, dtype=np.float32), cv2.COLOR_RGB2GRAY)
     return float(np.abs(cv2.Laplacian(gray, cv2.CV_32F)).mean())
-
-
-def read_output(run: Path, relative: str) -> np.ndarray:
-    """A run's saved output image as ``(H, W, 3)`` float32 RGB in [0, 1]."""
-    path = run / relative
-    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if image is None:
-        raise FileNotFoundError(f"{path}: not a readable image")
-    return cv2.cvtColor(image, cv2.COLOR_BGR2RGB).astype(np.float32) / 255.0
 
 
 def measure(store: PacketStore, runs: dict[str, Path]) -> list[dict[str, Any]]:
@@ -71,10 +66,8 @@ def measure(store: PacketStore, runs: dict[str, Path]) -> list[dict[str, Any]]:
             }
             for name, table in indexed.items():
                 if (packet_id, view) not in table.index:
-                    raise KeyError(f"{runs[name]}: no output for {packet_id} view {view}")
-                record[name] = laplacian_energy(
-                    read_output(runs[name], table.loc[(packet_id, view), "image"])
-                )
+                    raise UsageError(f"no output for {packet_id} view {view}", runs[name])
+                record[name] = laplacian_energy(read_rgb(runs[name] / table.loc[(packet_id, view), "image"]))
             records.append(record)
     return records
 
@@ -101,7 +94,11 @@ def main() -> int:
         if not sep or not name or not folder:
             parser.error(f"--run expects NAME=RUN_FOLDER, got {spec!r}")
         runs[name] = Path(folder)
-    records = measure(PacketStore(args.packets), runs)
+    try:
+        records = measure(PacketStore(args.packets), runs)
+    except (SetDiffBenchError, OSError) as error:  # a missing run folder, image or packet: one line, exit 2
+        print(f"output_sharpness: error: {error}", file=sys.stderr)
+        return 2
     names = list(runs)
     groups = sorted({r["group"] for r in records})
     result = {
@@ -114,7 +111,7 @@ def main() -> int:
     }
     print(json.dumps({"all": result["all"], "groups": result["groups"]}, indent=2))
     if args.out:
-        args.out.write_text(json.dumps(result, indent=2) + "\n")
+        write_text_atomic(args.out, json.dumps(result, indent=2) + "\n")
     return 0
 
 

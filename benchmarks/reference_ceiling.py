@@ -68,6 +68,7 @@ from setdiff_bench.enhancers.reproject import (
 )
 from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.geometry import pixel_centers
+from setdiff_bench.io.atomic import write_text_atomic
 from setdiff_bench.packets.store import PacketStore
 
 #: Relative inverse-depth tolerance of the visibility test (module docstring).
@@ -232,7 +233,7 @@ def main() -> int:
     }
     print(json.dumps(by_tolerance, indent=2))
     if args.out:
-        args.out.write_text(json.dumps(result, indent=2) + "\n")
+        write_text_atomic(args.out, json.dumps(result, indent=2) + "\n")
     return 0
 
 

@@ -36,7 +36,9 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import machine
+from setdiff_bench.cameras import Camera
 from setdiff_bench.enhancers.reproject import ReprojectEnhancer, cmap_points, snap_to_rays
+from setdiff_bench.gaussians.backends.common import RenderOutput
 from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.gaussians.render import render
 from setdiff_bench.metrics.psnr import psnr
@@ -67,7 +69,7 @@ def world_model(scenes: Path, scene: str, cache: dict[str, GaussianModel]) -> Ga
 
 def packet_and_world(
     store: PacketStore, packet_id: str, scenes: Path, cache: dict[str, GaussianModel]
-) -> tuple[Packet, torch.Tensor, torch.Tensor, list, Any]:
+) -> tuple[Packet, torch.Tensor, torch.Tensor, list[Camera], RenderOutput]:
     """A packet, its targets' ground truth ``(M, 3, H, W)`` and static masks ``(M, 1, H, W)``, its views'
     world cameras (references first) and the true world rendered from them with C-maps and depth."""
     packet = store.load_packet(packet_id)

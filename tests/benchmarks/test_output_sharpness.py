@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import math
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from benchmarks.output_sharpness import laplacian_energy, summary
+from benchmarks.output_sharpness import laplacian_energy, main, summary
+from tests.models.test_store_training import write_store
 
 
 def grey(values: np.ndarray) -> np.ndarray:
@@ -41,3 +44,18 @@ def test_restored_share_is_the_fraction_of_the_gap_closed() -> None:
     assert result["b_restored"] == pytest.approx(1.5)
     assert result["targets"] == 2
     assert math.isclose(result["ground_truth"], 0.04)
+
+
+def test_a_missing_store_or_run_folder_is_one_line_and_exit_2(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "sharpness.json"
+    for packets, name in ((tmp_path / "no_store", "no_store"), (tmp_path / "packets", "nowhere")):
+        if name == "nowhere":
+            write_store(packets)
+        argv = ["output_sharpness.py", "--packets", str(packets), "--run", f"a={tmp_path / 'nowhere'}"]
+        monkeypatch.setattr(sys, "argv", [*argv, "--out", str(out)])
+        assert main() == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and name in err, err
+        assert not out.exists()
