@@ -14,10 +14,10 @@
 # WORK_DIR/weights) the exported model folders — pass setdiff_bench/models/setdiff/weights to replace the shipped
 # ones.  Every step resumes when the script is run again.  On 2 CPU cores: about 15 minutes of scenes and
 # packets (the 14 fits, two at a time: about 7 min), then the two trainings side by side, one torch thread
-# each: the shipped models took 46 min (SetDiff, 2250 steps; the packaged tiny_setdiff with the C-map
-# attention bias in its lowest-resolution layer and LPIPS x2, trained under the name of its identical copy
-# benchmarks/configs/tiny_setdiff_cmap_bias_lowest_lpips2.toml) and 47 min (DiFix), sharing the machine with
-# other jobs part of the time.  The same machine and thread count give byte-identical weights; see README
+# each: the shipped models took 43 min (SetDiff, 2250 steps; the packaged tiny_setdiff, with the C-map
+# attention bias in its lowest-resolution layer and LPIPS x2) and 16 min (DiFix), side by side, on the
+# 31.25 dB tiny_autoencoder (made on a GPU: its manifest; the two enhancers' manifests name these commands).
+# The same machine and thread count give byte-identical weights; see README
 # "Reproducibility" for what differs elsewhere (a rebuilt store's fits can differ in the last bits).
 set -euo pipefail
 work=${1:-runs/shipped}
