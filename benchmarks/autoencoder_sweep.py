@@ -9,7 +9,7 @@ script trains several variants with the toolkit's own loop (:func:`fit_autoencod
 reports each variant's reconstruction of the training and test frames, so the choice of architecture and
 step count is measured rather than guessed.
 
-Two stages, so the sweep can run where the packet store (and OpenImageIO) is not (it needs torch, numpy,
+Separate verbs, so the sweep can run where the packet store (and OpenImageIO) is not (it needs torch, numpy,
 opencv and diffusers there: carry diffusers as a wheel to a machine that lacks it)::
 
     # 1. the frames: every distinct ground-truth frame of the store's train and test splits

@@ -46,16 +46,18 @@ def test_restored_share_is_the_fraction_of_the_gap_closed() -> None:
     assert math.isclose(result["ground_truth"], 0.04)
 
 
+@pytest.mark.parametrize("missing", ["no_store", "nowhere"])
 def test_a_missing_store_or_run_folder_is_one_line_and_exit_2(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+    missing: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
+    """``no_store``: the packet store is missing; ``nowhere``: the store exists, the run folder does not."""
+    packets = tmp_path / "packets"
+    if missing == "nowhere":
+        write_store(packets)
     out = tmp_path / "sharpness.json"
-    for packets, name in ((tmp_path / "no_store", "no_store"), (tmp_path / "packets", "nowhere")):
-        if name == "nowhere":
-            write_store(packets)
-        argv = ["output_sharpness.py", "--packets", str(packets), "--run", f"a={tmp_path / 'nowhere'}"]
-        monkeypatch.setattr(sys, "argv", [*argv, "--out", str(out)])
-        assert main() == 2
-        err = capsys.readouterr().err.strip()
-        assert len(err.splitlines()) == 1 and name in err, err
-        assert not out.exists()
+    argv = ["output_sharpness.py", "--packets", str(packets), "--run", f"a={tmp_path / 'nowhere'}"]
+    monkeypatch.setattr(sys, "argv", [*argv, "--out", str(out)])
+    assert main() == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(packets if missing == "no_store" else "nowhere") in err, err
+    assert not out.exists()

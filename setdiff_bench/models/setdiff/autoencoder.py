@@ -50,8 +50,8 @@ class AutoencoderTraining:
     """Hyper-parameters of :func:`train_autoencoder` (all recorded in the manifest).
 
     The defaults are the recipe of the shipped ``tiny_autoencoder`` (31.25 dB on the 288 test frames of the
-    shipped models' store): about 3 min on one H200, about 5 h on 2 CPU cores; ``--steps 1200 --crop 64``
-    gives a 24 dB one in about 4 min on one CPU thread.
+    shipped models' store): about 3 min on one H200, about 5 h on 2 CPU cores; ``--steps 1200 --crop 64
+    --batch-size 8 --latent-channels 8`` gives a 24 dB one in about 4 min on one CPU thread.
 
     Attributes:
         steps: optimiser steps.
