@@ -35,6 +35,11 @@ from setdiff_bench.types import Packet, ViewSet
 #: Most cameras one tick may carry (a rig of this many views is one set).
 MAX_CAMERAS_PER_TICK = 16
 
+#: References per tick when neither the session nor the enhancer caps them (a model config's
+#: ``max_references = null`` means "every reference of the packet"; a session's recorded drive may
+#: hold hundreds, so a tick takes the paper's inference packet: 8 references beside up to 8 targets).
+DEFAULT_REFERENCES_PER_TICK = 8
+
 
 class StreamInputError(UsageError):
     """A tick or a session's references are malformed (wrong size, NaN / non-rigid pose, too many cameras)."""
@@ -171,7 +176,8 @@ class StreamSession:
         enhancer: a loaded SetDiff/DiFix enhancer (:func:`setdiff_bench.enhancers.setdiff.load_enhancer`).
         references: the recorded clean views of the scene (world frame).
         ply: the scene's 3DGS PLY, used to render C-maps wherever they are not given.
-        max_references: references per tick (default: the enhancer's ``max_references`` option).
+        max_references: references per tick (default: the enhancer's ``max_references`` option, or
+            :data:`DEFAULT_REFERENCES_PER_TICK` where that is ``None``).
         max_cameras: most frames one tick may carry.
         cache_reference_latents: encode each reference once per session (:class:`ReferenceLatentCache`).
             Off by default: encoding a smaller batch changes float32 convolution rounding in the last
@@ -214,12 +220,11 @@ class StreamSession:
             alphas=alphas,
             cameras=tuple(references.cameras),
         )
-        options = getattr(enhancer, "options", {})
-        self.max_references = int(
-            max_references
-            if max_references is not None
-            else options.get("max_references", len(self.references))
-        )
+        if max_references is None:
+            max_references = getattr(enhancer, "options", {}).get("max_references")
+        if max_references is None:
+            max_references = min(DEFAULT_REFERENCES_PER_TICK, len(self.references))
+        self.max_references = int(max_references)
         self.max_cameras = max_cameras
         self.latent_cache = ReferenceLatentCache() if cache_reference_latents else None
         self.ticks = 0
