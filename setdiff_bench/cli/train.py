@@ -111,7 +111,7 @@ def run_autoencoder(args: argparse.Namespace) -> int:
 def run(args: argparse.Namespace) -> int:
     from setdiff_bench.errors import UsageError
     from setdiff_bench.models.setdiff.config import load_config, with_overrides
-    from setdiff_bench.models.setdiff.train import train
+    from setdiff_bench.models.setdiff.train import last_validation, train
     from setdiff_bench.packets.store import PacketStore
     from setdiff_bench.runtime.interrupts import Interrupted, stop_at_safe_point
     from setdiff_bench.types import TrainingSample
@@ -155,9 +155,16 @@ def run(args: argparse.Namespace) -> int:
             )
     except Interrupted:
         _record_session(
-            args, config, store, start_step, _latest_step(args.out), time.perf_counter() - began, None
+            args,
+            config,
+            store,
+            start_step,
+            _latest_step(args.out),
+            time.perf_counter() - began,
+            last_validation(args.out),
         )
         raise
+    # a session that scored nothing (a no-op rerun of a finished run) keeps the newest recorded scores
     _record_session(
         args,
         config,
@@ -165,7 +172,7 @@ def run(args: argparse.Namespace) -> int:
         start_step,
         result.step,
         time.perf_counter() - began,
-        result.validation[-1] if result.validation else None,
+        result.validation[-1] if result.validation else last_validation(args.out),
     )
     losses = ", ".join(f"{k} {v:.4f}" for k, v in result.losses.items())
     print(

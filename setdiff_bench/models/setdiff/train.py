@@ -489,6 +489,26 @@ def _gather_list(accelerator: Any, items: list[Any]) -> list[Any]:
     return list(gather_object(items))
 
 
+def last_validation(out: Path) -> dict[str, float] | None:
+    """The newest record of ``out``'s ``validation.jsonl`` (``None`` when no validation ran).
+
+    The manifest's ``"validation"`` comes from here when a session scored nothing itself (a no-op rerun of
+    a finished run, an interruption between two validations), so it keeps the scores the file holds.
+    """
+    path = out / VALIDATION_FILE
+    if not path.is_file():
+        return None
+    last = None
+    for line in path.read_text(encoding="utf-8").splitlines():
+        try:
+            record = json.loads(line)
+        except json.JSONDecodeError:
+            continue  # a line torn by a kill
+        if isinstance(record, dict):
+            last = record
+    return last
+
+
 def _truncate_jsonl(path: Path, last_step: int) -> None:
     """Keep the records of ``path`` up to ``last_step`` (and drop a line torn by a kill), atomically."""
     if not path.is_file():
