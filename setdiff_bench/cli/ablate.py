@@ -105,6 +105,7 @@ def run(args: argparse.Namespace) -> int:
         check_guidance_scale(args.guidance_scale, "--guidance-scale")
     if getattr(args, "average", None) is not None:
         check_average_count(args.average, "--average")
+    _check_inputs(args)  # every refusal before the first file is written
     work = (args.work or args.out / "work") / f"ablation_{args.study}"
     pipeline = Pipeline(quiet=args.no_progress, ledger=work / LEDGER_FILE)  # reruns keep the original times
     invocation = _invocation(args)
@@ -118,6 +119,53 @@ def run(args: argparse.Namespace) -> int:
     for path in paths.values():
         print(f"wrote {path}")
     return 0
+
+
+def _check_inputs(args: argparse.Namespace) -> None:
+    """Refuse, before anything is written, what a stage would refuse later: a packet store without the
+    splits the study reads, a config or checkpoint that is not SetDiff, unknown variants, and set sizes
+    the store's test packets cannot fill (``--sizes 20+1`` on packets of 8 references).
+
+    Raises:
+        UsageError, PacketError, CheckpointError: the first problem found, naming its file or option.
+    """
+    from setdiff_bench.errors import UsageError
+    from setdiff_bench.packets.store import PacketStore
+    from setdiff_bench.reporting import ablation
+
+    store = PacketStore(args.packets)
+    splits = sorted({str(split) for split in store.index["split"]})
+    needed = ("train", "test") if args.study == "geometry" else ("test",)
+    for split in needed:
+        if not store.packet_ids(split):
+            raise UsageError(
+                f"the {args.study} ablation needs {split} packets; this store has none "
+                f"(its splits: {', '.join(splits) or 'none'})",
+                args.packets,
+            )
+    if args.study == "geometry":
+        from setdiff_bench.models.setdiff.config import config_toml_data
+
+        if config_toml_data(args.config)["model"].get("method", "setdiff") != "setdiff":
+            raise UsageError('the geometry ablation needs a SetDiff config (method = "setdiff")', args.config)
+        ablation.parse_variants(args.variants)
+        return
+    from setdiff_bench.models.setdiff.checkpoint import read_config
+
+    for checkpoint in args.checkpoint:
+        method = read_config(checkpoint).model.method
+        if method != "setdiff":
+            raise UsageError(f"the set-size ablation runs SetDiff; this is a {method} checkpoint", checkpoint)
+    rows = store.index[store.index["split"] == "test"]
+    counts = rows.groupby(["packet_id", "role"]).size().unstack(fill_value=0)
+    fewest_refs = int(counts["ref"].min()) if "ref" in counts else 0
+    for refs, targets in ablation.parse_sizes(args.sizes):  # fewer targets: a smaller last set
+        if refs > fewest_refs:
+            raise UsageError(
+                f"set size {refs}+{targets} needs {refs} references per packet; the store's test packets "
+                f"have as few as {fewest_refs}",
+                "--sizes",
+            )
 
 
 def _invocation(args: argparse.Namespace) -> str:
