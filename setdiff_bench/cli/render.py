@@ -3,19 +3,33 @@
 Writes, per view, ``<out>/<view>/rgb.png`` (8-bit), ``cmap.exr`` (float32 X, Y, Z: Eq. 1 world
 coordinates), ``depth.exr`` (float32 accumulated z) and ``alpha.png`` (8-bit accumulated opacity).
 Each file is written atomically; an interrupted run resumes by skipping complete views.
+``<out>/render.json`` records what the views are made from (the PLY's and COLMAP files' SHA-256,
+``--downscale``, ``--backend``, ``--cmap-bound``); a rerun into the same folder resumes only when they
+match, and is refused in one line otherwise (render into another ``--out``, or delete the old one).
+
+Examples::
+
+    setdiff-bench render --ply S/fits/lane0.ply --colmap S/sparse/0 --out renders
+    setdiff-bench render --ply S/fits/lane0.ply --colmap S/sparse/0 --out renders_half --downscale 2 \\
+        --images lane1_front_000.png --device cpu
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
+from typing import Any
 
 from setdiff_bench.cli import add_device_argument, add_progress_argument
 
 VERB = "render"
 HELP = "render a 3DGS PLY at COLMAP cameras: RGB, C-map, depth and alpha per view"
+DESCRIPTION = __doc__.split("\n\n", 1)[1] if __doc__ else HELP
 OUTPUT_FILES = ("rgb.png", "cmap.exr", "depth.exr", "alpha.png")
+RECORD_FILE = "render.json"
+RECORD_FORMAT = "setdiff-render/1"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -27,7 +41,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--images", nargs="+", metavar="NAME", help="only these COLMAP image names (default: all)"
     )
-    parser.add_argument("--backend", choices=("torch", "gsplat"), default="torch")
+    parser.add_argument(
+        "--backend",
+        choices=("torch", "gsplat"),
+        default="torch",
+        help="torch: the built-in rasterizer, any device (default); gsplat: the CUDA rasterizer of the "
+        "gsplat package (needs a GPU and pip install setdiff-bench[gpu])",
+    )
     add_device_argument(parser, "the torch backend's device (gsplat renders on cuda)")
     parser.add_argument(
         "--downscale",
@@ -58,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
     from setdiff_bench.errors import UsageError
     from setdiff_bench.gaussians.ply import read_ply
     from setdiff_bench.gaussians.render import render
+    from setdiff_bench.io.atomic import write_text_atomic
     from setdiff_bench.io.images import to_numpy_hwc, write_exr, write_png
     from setdiff_bench.loaders.colmap import read_colmap_model
     from setdiff_bench.runtime.devices import resolve_device
@@ -71,6 +92,9 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"images not in the COLMAP model: {', '.join(missing[:10])}", args.colmap)
     if args.downscale < 1:
         raise UsageError(f"--downscale must be ≥ 1, got {args.downscale}", "--downscale")
+    record = render_record(args, model.images_file)
+    done = [n for n in names if all((args.out / view_folder_name(n) / f).is_file() for f in OUTPUT_FILES)]
+    check_resume(args.out, record, done)  # before anything is read further or written
     cameras = {}
     for name in names:
         camera = pinhole_camera(model.cameras[name])
@@ -89,7 +113,9 @@ def run(args: argparse.Namespace) -> int:
         )
     gaussians = read_ply(args.ply).to(device)
     args.out.mkdir(parents=True, exist_ok=True)
-    todo = [n for n in names if not all((args.out / view_folder_name(n) / f).is_file() for f in OUTPUT_FILES)]
+    if not (args.out / RECORD_FILE).is_file():
+        write_text_atomic(args.out / RECORD_FILE, json.dumps(record, indent=1, sort_keys=True) + "\n")
+    todo = [n for n in names if n not in done]
     for name in tqdm(todo, desc="render", unit="view", disable=True if args.no_progress else None):
         folder = args.out / view_folder_name(name)
         with torch.no_grad():
@@ -100,3 +126,66 @@ def run(args: argparse.Namespace) -> int:
         write_png(folder / "rgb.png", to_numpy_hwc(out.rgb[0]))  # last: its presence marks a complete view
     print(f"rendered {len(todo)} view(s), {len(names) - len(todo)} already complete, into {args.out}")
     return 0
+
+
+def render_record(args: argparse.Namespace, images_file: Path) -> dict[str, Any]:
+    """What a render folder's views are made from: the inputs' SHA-256 and the settings that change pixels.
+
+    Args:
+        args: the parsed ``render`` arguments (``ply``, ``downscale``, ``backend``, ``cmap_bound``).
+        images_file: the COLMAP ``images.bin`` / ``images.txt`` read (its ``cameras`` file beside it counts too).
+    """
+    from setdiff_bench.io.atomic import sha256_file
+
+    cameras_file = images_file.with_name("cameras" + images_file.suffix)
+    return {
+        "format": RECORD_FORMAT,
+        "ply_sha256": sha256_file(args.ply),
+        "colmap_sha256": {f.name: sha256_file(f) for f in (cameras_file, images_file)},
+        "downscale": args.downscale,
+        "backend": args.backend,
+        "cmap_bound": args.cmap_bound,
+    }
+
+
+def check_resume(out: Path, record: dict[str, Any], done: list[str]) -> None:
+    """Refuse to resume into ``out`` unless its ``render.json`` matches ``record``.
+
+    A folder without ``render.json`` is accepted only while it holds none of the views asked for.
+
+    Raises:
+        UsageError: ``render.json`` names other inputs or settings, is unreadable, or is missing beside
+            finished views.
+    """
+    from setdiff_bench.errors import UsageError
+
+    path = out / RECORD_FILE
+    advice = "render into another --out, or delete the old renders first"
+    if not path.is_file():
+        if done:
+            raise UsageError(
+                f"holds {len(done)} rendered view(s) but no {RECORD_FILE} saying what they were made from; "
+                + advice,
+                out,
+            )
+        return
+    try:
+        earlier = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise UsageError(f"unreadable render record ({error}); {advice}", path) from error
+    if not isinstance(earlier, dict) or earlier.get("format") != RECORD_FORMAT:
+        raise UsageError(f"not a {RECORD_FORMAT} record; {advice}", path)
+    differences = []
+    if earlier.get("ply_sha256") != record["ply_sha256"]:
+        differences.append("another --ply (SHA-256 differs)")
+    if earlier.get("colmap_sha256") != record["colmap_sha256"]:
+        differences.append("another --colmap model (SHA-256 differs)")
+    for setting in ("downscale", "backend", "cmap_bound"):
+        if earlier.get(setting) != record[setting]:
+            flag = "--" + setting.replace("_", "-")
+            was, now = (
+                "not given" if value is None else value for value in (earlier.get(setting), record[setting])
+            )
+            differences.append(f"{flag} {was} (now {now})")
+    if differences:
+        raise UsageError(f"these renders were made with {'; '.join(differences)}; {advice}", path)
