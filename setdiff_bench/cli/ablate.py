@@ -133,6 +133,10 @@ def _check_inputs(args: argparse.Namespace) -> None:
     from setdiff_bench.packets.store import PacketStore
     from setdiff_bench.reporting import ablation
 
+    if args.study == "geometry":  # the arguments first, then the files they name
+        ablation.parse_variants(args.variants)
+    else:
+        sizes = ablation.parse_sizes(args.sizes)
     store = PacketStore(args.packets)
     splits = sorted({str(split) for split in store.index["split"]})
     needed = ("train", "test") if args.study == "geometry" else ("test",)
@@ -148,7 +152,6 @@ def _check_inputs(args: argparse.Namespace) -> None:
 
         if config_toml_data(args.config)["model"].get("method", "setdiff") != "setdiff":
             raise UsageError('the geometry ablation needs a SetDiff config (method = "setdiff")', args.config)
-        ablation.parse_variants(args.variants)
         return
     from setdiff_bench.models.setdiff.checkpoint import read_config
 
@@ -159,7 +162,7 @@ def _check_inputs(args: argparse.Namespace) -> None:
     rows = store.index[store.index["split"] == "test"]
     counts = rows.groupby(["packet_id", "role"]).size().unstack(fill_value=0)
     fewest_refs = int(counts["ref"].min()) if "ref" in counts else 0
-    for refs, targets in ablation.parse_sizes(args.sizes):  # fewer targets: a smaller last set
+    for refs, targets in sizes:  # fewer targets: a smaller last set
         if refs > fewest_refs:
             raise UsageError(
                 f"set size {refs}+{targets} needs {refs} references per packet; the store's test packets "
