@@ -8,6 +8,12 @@ the world frame (the inverse of ``prepare``'s normalisation).  Enhanced images a
 
     setdiff-bench serve --checkpoint CKPT --port 50051 &
     python examples/drive_packets.py --packets STORE --out OUT [--address 127.0.0.1:50051] [--split test]
+
+Against a server with TLS and a token, give the client side of the same options (the token from a file or
+``$SETDIFF_SERVE_TOKEN``, never on the command line)::
+
+    python examples/drive_packets.py --packets STORE --out OUT --address gpu-host:50051 \
+        --tls-ca ca.pem --token-file token [--client-cert client.pem --client-key client.key]
 """
 
 from __future__ import annotations
@@ -18,19 +24,21 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from setdiff_bench.errors import SetDiffBenchError
 from setdiff_bench.evaluation.stream import Views
 from setdiff_bench.io.images import write_png
 from setdiff_bench.packets.index import INDEX_FILE
 from setdiff_bench.packets.store import PacketStore, row_camera
-from setdiff_bench.serve.client import EnhancerClient
+from setdiff_bench.serve.client import add_client_arguments, client_from_arguments
 from setdiff_bench.types import ViewSet
 
 
 def world_views(view_set: ViewSet, rows: list, anchor_world, scale: float, source: str) -> Views:
     """A packet's views back in the world frame: ``c = Rᵀ (c' / scale − alpha · t)`` (``R, t`` of the anchor)."""
     cameras = [row_camera(row, source, world=True) for row in rows]
-    rotation = torch.as_tensor(anchor_world.R, dtype=torch.float64)
-    translation = torch.as_tensor(anchor_world.t, dtype=torch.float64).view(1, 3, 1, 1)
+    # np.array copies: a camera's arrays are read-only, and torch warns on wrapping a non-writable array
+    rotation = torch.from_numpy(np.array(anchor_world.R, dtype=np.float64))
+    translation = torch.from_numpy(np.array(anchor_world.t, dtype=np.float64)).view(1, 3, 1, 1)
     local = view_set.cmaps.to(torch.float64) / scale - view_set.alphas.to(torch.float64) * translation
     cmaps = torch.einsum("ji,vjhw->vihw", rotation, local).float()
     images = torch.round(view_set.images * 255).to(torch.uint8)
@@ -43,12 +51,16 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--packets", type=Path, required=True)
     parser.add_argument("--out", type=Path, required=True)
-    parser.add_argument("--address", default="127.0.0.1:50051")
     parser.add_argument("--split", default="test")
+    add_client_arguments(parser)
     args = parser.parse_args()
     store = PacketStore(args.packets)
     source = str(args.packets / INDEX_FILE)
-    with EnhancerClient(args.address) as client:
+    try:
+        client = client_from_arguments(args)
+    except SetDiffBenchError as error:
+        parser.exit(2, f"{parser.prog}: error: {error.one_line()}\n")
+    with client:
         client.wait_ready()
         for packet_id in store.packet_ids(args.split):
             packet = store.load_packet(packet_id)

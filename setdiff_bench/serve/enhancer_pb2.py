@@ -24,7 +24,7 @@ _sym_db = _symbol_database.Default()
 
 
 
-DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\"setdiff_bench/serve/enhancer.proto\x12\x16setdiff_bench.serve.v1\"\x07\n\x05\x45mpty\"3\n\x05\x41rray\x12\x0c\n\x04\x64\x61ta\x18\x01 \x01(\x0c\x12\r\n\x05shape\x18\x02 \x03(\x03\x12\r\n\x05\x64type\x18\x03 \x01(\t\"T\n\x06\x43\x61mera\x12\x12\n\nintrinsics\x18\x01 \x03(\x01\x12\x17\n\x0fworld_to_camera\x18\x02 \x03(\x01\x12\r\n\x05width\x18\x03 \x01(\x05\x12\x0e\n\x06height\x18\x04 \x01(\x05\"\xcb\x01\n\x04View\x12\x0c\n\x04name\x18\x01 \x01(\t\x12*\n\x03rgb\x18\x02 \x01(\x0b\x32\x1d.setdiff_bench.serve.v1.Array\x12.\n\x06\x63\x61mera\x18\x03 \x01(\x0b\x32\x1e.setdiff_bench.serve.v1.Camera\x12+\n\x04\x63map\x18\x04 \x01(\x0b\x32\x1d.setdiff_bench.serve.v1.Array\x12,\n\x05\x61lpha\x18\x05 \x01(\x0b\x32\x1d.setdiff_bench.serve.v1.Array\"q\n\x13StartSessionRequest\x12\x30\n\nreferences\x18\x01 \x03(\x0b\x32\x1c.setdiff_bench.serve.v1.View\x12\x16\n\x0emax_references\x18\x02 \x01(\x05\x12\x10\n\x08ply_path\x18\x03 \x01(\t\"!\n\tSessionId\x12\x14\n\x0csession_uuid\x18\x01 \x01(\t\"T\n\x0e\x45nhanceRequest\x12\x14\n\x0csession_uuid\x18\x01 \x01(\t\x12,\n\x06\x66rames\x18\x02 \x03(\x0b\x32\x1c.setdiff_bench.serve.v1.View\">\n\rEnhanceReturn\x12-\n\x06images\x18\x01 \x03(\x0b\x32\x1d.setdiff_bench.serve.v1.Array\"C\n\tVersionId\x12\x12\n\nversion_id\x18\x01 \x01(\t\x12\x12\n\ncheckpoint\x18\x02 \x01(\t\x12\x0e\n\x06method\x18\x03 \x01(\t2\xe9\x02\n\x08\x45nhancer\x12_\n\rstart_session\x12+.setdiff_bench.serve.v1.StartSessionRequest\x1a!.setdiff_bench.serve.v1.SessionId\x12X\n\x07\x65nhance\x12&.setdiff_bench.serve.v1.EnhanceRequest\x1a%.setdiff_bench.serve.v1.EnhanceReturn\x12Q\n\rclose_session\x12!.setdiff_bench.serve.v1.SessionId\x1a\x1d.setdiff_bench.serve.v1.Empty\x12O\n\x0bget_version\x12\x1d.setdiff_bench.serve.v1.Empty\x1a!.setdiff_bench.serve.v1.VersionIdb\x06proto3')
+DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\"setdiff_bench/serve/enhancer.proto\x12\x16setdiff_bench.serve.v1\"\x07\n\x05\x45mpty\"3\n\x05\x41rray\x12\x0c\n\x04\x64\x61ta\x18\x01 \x01(\x0c\x12\r\n\x05shape\x18\x02 \x03(\x03\x12\r\n\x05\x64type\x18\x03 \x01(\t\"T\n\x06\x43\x61mera\x12\x12\n\nintrinsics\x18\x01 \x03(\x01\x12\x17\n\x0fworld_to_camera\x18\x02 \x03(\x01\x12\r\n\x05width\x18\x03 \x01(\x05\x12\x0e\n\x06height\x18\x04 \x01(\x05\"\xcb\x01\n\x04View\x12\x0c\n\x04name\x18\x01 \x01(\t\x12*\n\x03rgb\x18\x02 \x01(\x0b\x32\x1d.setdiff_bench.serve.v1.Array\x12.\n\x06\x63\x61mera\x18\x03 \x01(\x0b\x32\x1e.setdiff_bench.serve.v1.Camera\x12+\n\x04\x63map\x18\x04 \x01(\x0b\x32\x1d.setdiff_bench.serve.v1.Array\x12,\n\x05\x61lpha\x18\x05 \x01(\x0b\x32\x1d.setdiff_bench.serve.v1.Array\"\x89\x01\n\x13StartSessionRequest\x12\x30\n\nreferences\x18\x01 \x03(\x0b\x32\x1c.setdiff_bench.serve.v1.View\x12\x16\n\x0emax_references\x18\x02 \x01(\x05\x12\x10\n\x08ply_path\x18\x03 \x01(\t\x12\x16\n\x0eidle_timeout_s\x18\x04 \x01(\x01\"9\n\tSessionId\x12\x14\n\x0csession_uuid\x18\x01 \x01(\t\x12\x16\n\x0eidle_timeout_s\x18\x02 \x01(\x01\"T\n\x0e\x45nhanceRequest\x12\x14\n\x0csession_uuid\x18\x01 \x01(\t\x12,\n\x06\x66rames\x18\x02 \x03(\x0b\x32\x1c.setdiff_bench.serve.v1.View\">\n\rEnhanceReturn\x12-\n\x06images\x18\x01 \x03(\x0b\x32\x1d.setdiff_bench.serve.v1.Array\"C\n\tVersionId\x12\x12\n\nversion_id\x18\x01 \x01(\t\x12\x12\n\ncheckpoint\x18\x02 \x01(\t\x12\x0e\n\x06method\x18\x03 \x01(\t2\xe9\x02\n\x08\x45nhancer\x12_\n\rstart_session\x12+.setdiff_bench.serve.v1.StartSessionRequest\x1a!.setdiff_bench.serve.v1.SessionId\x12X\n\x07\x65nhance\x12&.setdiff_bench.serve.v1.EnhanceRequest\x1a%.setdiff_bench.serve.v1.EnhanceReturn\x12Q\n\rclose_session\x12!.setdiff_bench.serve.v1.SessionId\x1a\x1d.setdiff_bench.serve.v1.Empty\x12O\n\x0bget_version\x12\x1d.setdiff_bench.serve.v1.Empty\x1a!.setdiff_bench.serve.v1.VersionIdb\x06proto3')
 
 _globals = globals()
 _builder.BuildMessageAndEnumDescriptors(DESCRIPTOR, _globals)
@@ -39,16 +39,16 @@ if not _descriptor._USE_C_DESCRIPTORS:
   _globals['_CAMERA']._serialized_end=208
   _globals['_VIEW']._serialized_start=211
   _globals['_VIEW']._serialized_end=414
-  _globals['_STARTSESSIONREQUEST']._serialized_start=416
-  _globals['_STARTSESSIONREQUEST']._serialized_end=529
-  _globals['_SESSIONID']._serialized_start=531
-  _globals['_SESSIONID']._serialized_end=564
-  _globals['_ENHANCEREQUEST']._serialized_start=566
-  _globals['_ENHANCEREQUEST']._serialized_end=650
-  _globals['_ENHANCERETURN']._serialized_start=652
-  _globals['_ENHANCERETURN']._serialized_end=714
-  _globals['_VERSIONID']._serialized_start=716
-  _globals['_VERSIONID']._serialized_end=783
-  _globals['_ENHANCER']._serialized_start=786
-  _globals['_ENHANCER']._serialized_end=1147
+  _globals['_STARTSESSIONREQUEST']._serialized_start=417
+  _globals['_STARTSESSIONREQUEST']._serialized_end=554
+  _globals['_SESSIONID']._serialized_start=556
+  _globals['_SESSIONID']._serialized_end=613
+  _globals['_ENHANCEREQUEST']._serialized_start=615
+  _globals['_ENHANCEREQUEST']._serialized_end=699
+  _globals['_ENHANCERETURN']._serialized_start=701
+  _globals['_ENHANCERETURN']._serialized_end=763
+  _globals['_VERSIONID']._serialized_start=765
+  _globals['_VERSIONID']._serialized_end=832
+  _globals['_ENHANCER']._serialized_start=835
+  _globals['_ENHANCER']._serialized_end=1196
 # @@protoc_insertion_point(module_scope)

@@ -1,6 +1,7 @@
 """Messages of ``enhancer.proto`` ↔ tensors and cameras, validating everything a client sends.
 
-Every problem raises :class:`~setdiff_bench.evaluation.stream.StreamInputError` with a one-line message; the
+Every problem raises :class:`~setdiff_bench.evaluation.stream.StreamInputError` whose path names the field
+(``frames[0] 'front' rgb``) and whose problem says what is wrong, so its one line names the field once; the
 server answers it with ``INVALID_ARGUMENT``.
 """
 
@@ -36,23 +37,21 @@ def to_array(values: np.ndarray) -> pb.Array:
 def from_array(message: pb.Array, what: str, channels: int) -> np.ndarray:
     """Message → ``(H, W, channels)`` array, checking dtype, shape and byte count."""
     if message.dtype not in WIRE_DTYPES:
-        raise StreamInputError(
-            f"{what}: dtype must be one of {', '.join(WIRE_DTYPES)}, got {message.dtype!r}", what
-        )
+        raise StreamInputError(f"dtype must be one of {', '.join(WIRE_DTYPES)}, got {message.dtype!r}", what)
     shape = tuple(int(s) for s in message.shape)
     if len(shape) != 3 or shape[2] != channels or not all(0 < s <= MAX_SIDE for s in shape[:2]):
         raise StreamInputError(
-            f"{what}: shape must be (H, W, {channels}) with 0 < H, W <= {MAX_SIDE}, got {shape}", what
+            f"shape must be (H, W, {channels}) with 0 < H, W <= {MAX_SIDE}, got {shape}", what
         )
     dtype = WIRE_DTYPES[message.dtype]
     expected = int(np.prod(shape)) * dtype.itemsize
     if len(message.data) != expected:
         raise StreamInputError(
-            f"{what}: {len(message.data)} bytes for shape {shape} {message.dtype} (expected {expected})", what
+            f"{len(message.data)} bytes for shape {shape} {message.dtype} (expected {expected})", what
         )
     array = np.frombuffer(message.data, dtype=dtype).reshape(shape)
     if array.dtype.kind == "f" and not np.isfinite(array).all():
-        raise StreamInputError(f"{what}: contains NaN or infinite values", what)
+        raise StreamInputError("contains NaN or infinite values", what)
     return array
 
 
@@ -68,7 +67,7 @@ def to_camera_message(camera: Camera) -> pb.Camera:
 def from_camera_message(message: pb.Camera, what: str) -> Camera:
     if len(message.intrinsics) != 9 or len(message.world_to_camera) != 16:
         raise StreamInputError(
-            f"{what}: camera needs 9 intrinsics and 16 world_to_camera values, got "
+            f"camera needs 9 intrinsics and 16 world_to_camera values, got "
             f"{len(message.intrinsics)} and {len(message.world_to_camera)}",
             what,
         )
@@ -81,7 +80,7 @@ def from_camera_message(message: pb.Camera, what: str) -> Camera:
             source=what,
         )
     except SetDiffBenchError as error:
-        raise StreamInputError(f"{what}: {error.problem}", what) from None
+        raise StreamInputError(error.problem, what) from None
 
 
 def to_view(
@@ -103,11 +102,11 @@ def to_view(
 def from_views(messages: Sequence[pb.View], role: str) -> Views:
     """View messages → :class:`~setdiff_bench.evaluation.stream.Views` (C-maps all given or all absent)."""
     if not messages:
-        raise StreamInputError(f"{role}: no views", role)
+        raise StreamInputError("no views", role)
     images, cameras, cmaps, alphas = [], [], [], []
     with_cmaps = {m.HasField("cmap") for m in messages}
     if len(with_cmaps) != 1:
-        raise StreamInputError(f"{role}: give C-maps for every view or for none", role)
+        raise StreamInputError("give C-maps for every view or for none", role)
     for i, message in enumerate(messages):
         what = f"{role}[{i}] {message.name!r}"
         images.append(torch.from_numpy(from_array(message.rgb, f"{what} rgb", 3).copy()).permute(2, 0, 1))
@@ -125,7 +124,7 @@ def from_views(messages: Sequence[pb.View], role: str) -> Views:
     shapes = {(tuple(t.shape), t.dtype) for t in images}
     if len(shapes) != 1:
         raise StreamInputError(
-            f"{role}: every rgb must have the same shape and dtype, got {sorted(map(str, shapes))}", role
+            f"every rgb must have the same shape and dtype, got {sorted(map(str, shapes))}", role
         )
     try:
         return Views(
@@ -136,7 +135,7 @@ def from_views(messages: Sequence[pb.View], role: str) -> Views:
             names=[m.name or f"view{i}" for i, m in enumerate(messages)],
         )
     except RuntimeError as error:  # C-map sizes differing between views
-        raise StreamInputError(f"{role}: {str(error).splitlines()[0]}", role) from None
+        raise StreamInputError(str(error).splitlines()[0], role) from None
 
 
 def images_to_arrays(images: torch.Tensor) -> list[pb.Array]:

@@ -137,18 +137,19 @@ def write_tick_store(
     write_packet(root, header, contents[: len(refs)], contents[len(refs) :])
 
 
-def run_batch(store: Path, out: Path, checkpoint: Path) -> None:
-    """Index a store of :func:`write_tick_store` packets and ``run --method setdiff`` on it (PSNR only, no warp)."""
+def run_batch(store: Path, out: Path, checkpoint: Path | str, method: str = "setdiff") -> None:
+    """Index a store of :func:`write_tick_store` packets and ``run --method METHOD`` on it (PSNR only, no warp);
+    ``checkpoint`` is a folder or a shipped model's name."""
     merge_index(store)
     run_method(
         store,
         out,
-        RunSettings("setdiff", options={"checkpoint": str(checkpoint)}, metrics=("psnr",), warp="off"),
+        RunSettings(method, options={"checkpoint": str(checkpoint)}, metrics=("psnr",), warp="off"),
         progress=False,
     )
 
 
-def serve_argv(checkpoint: Path, *options: str, device: str = "cpu") -> list[str]:
+def serve_argv(checkpoint: Path | str, *options: str, device: str = "cpu") -> list[str]:
     """The words of ``setdiff-bench serve --checkpoint C --port 0 --device D`` (a free port) and ``options``."""
     return ["serve", "--checkpoint", str(checkpoint), "--port", "0", "--device", device, *options]
 

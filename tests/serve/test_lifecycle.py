@@ -1,0 +1,257 @@
+"""Sessions with a real server on a free 127.0.0.1 port: an unexpected error answers INTERNAL in one line,
+abandoned sessions expire and free their slot and memory, 20 clients killed mid-drive do not lock out the
+21st, the per-session memory bound, and FIFO turns on the model."""
+
+from __future__ import annotations
+
+import gc
+import logging
+import signal
+import threading
+import time
+import weakref
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import grpc
+import numpy as np
+import pytest
+
+from setdiff_bench.enhancers.setdiff import load_enhancer
+from setdiff_bench.evaluation.stream import StreamSession
+from setdiff_bench.serve import enhancer_pb2 as pb
+from setdiff_bench.serve.client import EnhancerClient, view_messages
+from setdiff_bench.serve.server import FairLock, RunningServer, start_server
+from setdiff_bench.serve.settings import ServeSettings
+from tests.serve.serve_fixtures import start_driver
+from tests.stream.stream_fixtures import HEIGHT, WIDTH, recorded_references, tick_frames
+
+
+@pytest.fixture(scope="module")
+def enhancer() -> Any:
+    return load_enhancer("setdiff", "tiny_setdiff", device="cpu")
+
+
+@contextmanager
+def serving(enhancer: Any, **settings: Any) -> Iterator[tuple[RunningServer, EnhancerClient]]:
+    running = start_server(enhancer, ServeSettings(port=0, **settings))
+    try:
+        with EnhancerClient(f"127.0.0.1:{running.port}", timeout=60) as client:
+            client.wait_ready()
+            yield running, client
+    finally:
+        running.stop(grace=5)
+
+
+def refused(call: Any) -> tuple[grpc.StatusCode, str]:
+    with pytest.raises(grpc.RpcError) as caught:
+        call()
+    return caught.value.code(), caught.value.details()
+
+
+class Broken:
+    """The shipped enhancer, except that enhancing raises a Python error (a bug inside the server)."""
+
+    def __init__(self, inner: Any) -> None:
+        self.inner = inner
+        self.name = inner.name
+        self.checkpoint = inner.checkpoint
+        self.options = inner.options
+        self.fail = True
+
+    def enhance(self, packet: Any) -> Any:
+        if self.fail:
+            raise ZeroDivisionError("secret internals\nTraceback (most recent call last)")
+        return self.inner.enhance(packet)
+
+
+def test_unexpected_error_answers_internal_in_one_line(
+    enhancer: Any, caplog: pytest.LogCaptureFixture
+) -> None:
+    broken = Broken(enhancer)
+    with serving(broken) as (running, client), caplog.at_level(logging.ERROR, "setdiff_bench.serve"):
+        session = client.start_session(recorded_references())
+        code, details = refused(lambda: client.enhance(session, tick_frames(0)))
+        assert code == grpc.StatusCode.INTERNAL
+        assert details.startswith("internal server error in enhance (incident ")
+        assert "\n" not in details and "secret" not in details and "ZeroDivision" not in details
+        incident = details.split("incident ")[1].split(";")[0]
+        assert any(incident in r.getMessage() and r.exc_info for r in caplog.records)  # traceback: server log
+        assert running.service.internal_errors == 1
+        broken.fail = False
+        assert client.enhance(session, tick_frames(0)).shape == (3, HEIGHT, WIDTH, 3)  # still serving
+        client.close_session(session)
+
+
+def test_abandoned_session_expires_and_its_slot_is_reused(enhancer: Any) -> None:
+    with serving(enhancer, max_sessions=2, session_idle_timeout=1.5) as (running, client):
+        kept = client.start_session(recorded_references())
+        abandoned = client.start_session(recorded_references(seed=2))
+        held = weakref.ref(running.service.sessions[abandoned].stream)
+        assert (
+            refused(lambda: client.start_session(recorded_references()))[0]
+            == grpc.StatusCode.RESOURCE_EXHAUSTED
+        )
+        client.enhance(abandoned, tick_frames(0))
+        deadline = time.monotonic() + 3.5  # the kept session calls every 0.3 s (a slow simulator): never idle
+        while time.monotonic() < deadline:
+            client.enhance(kept, tick_frames(1))
+            time.sleep(0.3)
+        assert set(running.service.sessions) == {kept}
+        gc.collect()
+        assert held() is None  # its references are freed
+        code, details = refused(lambda: client.enhance(abandoned, tick_frames(0)))
+        assert code == grpc.StatusCode.NOT_FOUND and "expired after 1.5 s without a call" in details
+        assert refused(lambda: client.close_session(abandoned))[0] == grpc.StatusCode.NOT_FOUND
+        reused = client.start_session(recorded_references())  # the slot is free again
+        assert client.enhance(reused, tick_frames(0)).shape == (3, HEIGHT, WIDTH, 3)
+        client.close_session(reused)
+        client.close_session(kept)
+
+
+def test_client_chosen_lease(enhancer: Any) -> None:
+    with serving(enhancer, session_idle_timeout=60) as (running, client):
+        reply = client.stub.start_session(
+            pb.StartSessionRequest(references=view_messages(recorded_references()), idle_timeout_s=0.3)
+        )
+        assert reply.idle_timeout_s == pytest.approx(0.3)
+        time.sleep(0.3 + 0.5)  # the reaper looks every min(1 s, timeout / 4)
+        code, details = refused(lambda: client.enhance(reply.session_uuid, tick_frames(0)))
+        assert code == grpc.StatusCode.NOT_FOUND and "expired" in details
+        for bad in (120.0, -1.0, float("nan")):
+            code, details = refused(
+                lambda bad=bad: client.start_session(recorded_references(), idle_timeout_s=bad)
+            )
+            assert code == grpc.StatusCode.INVALID_ARGUMENT and "idle_timeout_s" in details, details
+        assert client.stub.start_session(
+            pb.StartSessionRequest(references=view_messages(recorded_references()))
+        ).idle_timeout_s == pytest.approx(60)
+        assert not running.service.sessions or len(running.service.sessions) == 1
+
+
+def test_twenty_clients_killed_mid_drive_do_not_lock_out_the_21st(enhancer: Any, tmp_path: Path) -> None:
+    """20 simulator processes (16 slots) open sessions, drive, and are SIGKILLed mid-drive; the 21st gets in."""
+    timeout = 1.0
+    with serving(enhancer, max_sessions=16, session_idle_timeout=timeout, max_queue=64) as (running, client):
+        start_file, tick_file = tmp_path / "start.bin", tmp_path / "tick.bin"
+        start_file.write_bytes(
+            pb.StartSessionRequest(references=view_messages(recorded_references())).SerializeToString()
+        )
+        tick_file.write_bytes(client.enhance_request("", tick_frames(0)).SerializeToString())
+        address = f"127.0.0.1:{running.port}"
+        drivers = [start_driver(address, start_file, tick_file) for _ in range(20)]
+        try:
+            killed = 0
+            for driver in drivers:  # each is killed after its first enhanced tick
+                line = driver.stdout.readline()
+                assert line.startswith("tick "), (line, driver.stderr.read() if driver.poll() else "")
+                driver.send_signal(signal.SIGKILL)
+                driver.wait()
+                killed += 1
+            assert killed == 20
+        finally:
+            for driver in drivers:
+                if driver.poll() is None:
+                    driver.kill()
+                    driver.wait()
+        start = time.monotonic()
+        while True:  # a 21st simulator, retrying as the drivers do
+            try:
+                session = client.start_session(recorded_references())
+                break
+            except grpc.RpcError as error:
+                assert error.code() == grpc.StatusCode.RESOURCE_EXHAUSTED
+                assert time.monotonic() - start < timeout + 3, "locked out"
+                time.sleep(0.1)
+        assert client.enhance(session, tick_frames(3)).shape == (3, HEIGHT, WIDTH, 3)
+        deadline = time.monotonic() + timeout + 1.2  # the last killed sessions expire; the 21st stays in use
+        while time.monotonic() < deadline:
+            client.enhance(session, tick_frames(4))
+            time.sleep(0.2)
+        assert list(running.service.sessions) == [session]  # every killed client's session is gone
+        assert len(running.service.expired) == 20
+        client.close_session(session)
+
+
+def test_session_over_the_memory_bound_is_refused_at_start(enhancer: Any) -> None:
+    per_reference = 28 * HEIGHT * WIDTH  # float32 RGB + C-map + alpha per pixel
+    bound_mib = 4.5 * per_reference / 2**20  # room for 4 references, not 5
+    with serving(enhancer, max_session_mib=bound_mib) as (running, client):
+        six = recorded_references()
+        code, details = refused(lambda: client.start_session(six))
+        assert code == grpc.StatusCode.RESOURCE_EXHAUSTED and "at most" in details and "MiB" in details
+        assert not running.service.sessions
+        four = recorded_references()
+        four.images, four.cmaps, four.alphas = four.images[:4], four.cmaps[:4], four.alphas[:4]
+        four.cameras, four.names = four.cameras[:4], four.names[:4]
+        session = client.start_session(four)
+        held = running.service.sessions[session]
+        references = held.stream.references
+        actual = sum(
+            t.element_size() * t.nelement() for t in (references.images, references.cmaps, references.alphas)
+        )
+        assert held.held_bytes == actual == 4 * per_reference  # the bound counts what the session holds
+        assert client.enhance(session, tick_frames(0)).shape == (3, HEIGHT, WIDTH, 3)
+        client.close_session(session)
+
+
+def test_fair_lock_serves_in_arrival_order() -> None:
+    lock = FairLock()
+    order: list[str] = []
+
+    def take(name: str) -> None:
+        with lock.hold(name):
+            order.append(name)
+
+    threads = [threading.Thread(target=take, args=(name,)) for name in "abcdef"]
+    with lock.hold("first"):
+        for queued, thread in enumerate(threads, start=1):
+            thread.start()
+            while len(lock._queue) < queued:  # wait until it queues behind the holder: arrival order known
+                time.sleep(0.001)
+    for thread in threads:
+        thread.join(timeout=10)
+    assert order == list("abcdef")
+    assert list(lock.grants) == ["first", *"abcdef"]
+
+
+def test_concurrent_sessions_take_turns_on_the_model(enhancer: Any) -> None:
+    """Four sessions calling at once: the model's grants interleave (no session served twice in a row while
+    all four still have ticks to go), and each gets what it would alone."""
+    ticks = 6
+    with serving(enhancer, workers=8) as (running, client):
+        recordings = [recorded_references(seed=s) for s in range(1, 5)]
+        sessions = [client.start_session(refs) for refs in recordings]
+        requests = [[client.enhance_request(s, tick_frames(t)) for t in range(ticks)] for s in sessions]
+        barrier = threading.Barrier(4)
+        got: dict[int, list[np.ndarray]] = {}
+
+        def drive(index: int) -> None:
+            barrier.wait()
+            got[index] = [client.enhance(sessions[index], request) for request in requests[index]]
+
+        threads = [threading.Thread(target=drive, args=(i,)) for i in range(4)]
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join(timeout=120)
+        grants = list(running.service.model_lock.grants)
+        assert sorted(grants) == sorted(s for s in sessions for _ in range(ticks))
+        counts = {s: 0 for s in sessions}
+        worst_lead = 0
+        for owner in grants:
+            counts[owner] += 1
+            if min(counts.values()) < ticks:
+                worst_lead = max(worst_lead, counts[owner] - min(counts.values()))
+        assert worst_lead <= 2, grants  # FIFO over sessions: nobody gets ahead by more than its queued call
+        for index, refs in enumerate(recordings):
+            alone = StreamSession(enhancer, refs)
+            for t in range(ticks):
+                want = np.rint(alone.enhance(tick_frames(t)).permute(0, 2, 3, 1).numpy() * 255).astype(
+                    np.uint8
+                )
+                assert np.array_equal(got[index][t], want), (index, t)
+        for session in sessions:
+            client.close_session(session)
