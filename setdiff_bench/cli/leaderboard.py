@@ -5,9 +5,14 @@ Examples::
     setdiff-bench leaderboard --dataset synthetic --runs results/runs --plots
     setdiff-bench leaderboard --dataset euvs --with-reported --format latex,md
     setdiff-bench leaderboard --dataset synthetic --grids 6 --packets packets/synthetic
+    setdiff-bench leaderboard --dataset synthetic --runs results/runs --against difix
 
 See :mod:`setdiff_bench.reporting.leaderboard` for the aggregation rules (means of per-image values; a method
-missing rows in a block is refused) and how reported paper rows are marked.
+missing rows in a block is refused) and how reported paper rows are marked.  ``--against METHOD`` writes
+``<dataset>.vs_<METHOD>.*`` beside the plain table: each cell also gets the paired difference to METHOD over
+the same targets, starred when its bootstrap interval (resampled by scene, :mod:`setdiff_bench.reporting.paired`)
+excludes 0, and the Markdown lists every interval and the scenes each method wins.  Every argument is checked
+before anything is written.
 """
 
 from __future__ import annotations
@@ -16,6 +21,8 @@ import argparse
 import shlex
 import sys
 from pathlib import Path
+
+from setdiff_bench.reporting.bootstrap import BootstrapSettings
 
 VERB = "leaderboard"
 HELP = "tabulate finished runs per method and group: Parquet, LaTeX (booktabs), Markdown; plots and grids"
@@ -58,6 +65,45 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--packets", type=Path, default=None, help="packet store the runs were made on (for --grids)"
     )
+    add_bootstrap_arguments(parser)
+    parser.add_argument(
+        "--against",
+        default=None,
+        metavar="METHOD",
+        help="add each cell's paired difference to METHOD (a method in the table), starred when its "
+        "interval excludes 0; writes <dataset>.vs_<METHOD>.* beside the plain table",
+    )
+
+
+def add_bootstrap_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--resamples`` and ``--bootstrap-seed``, with :class:`BootstrapSettings`' defaults (also used by
+    ``compare``)."""
+    defaults = BootstrapSettings()
+    parser.add_argument(
+        "--resamples",
+        type=int,
+        default=defaults.resamples,
+        help=f"bootstrap resamples of the paired intervals (default {defaults.resamples})",
+    )
+    parser.add_argument(
+        "--bootstrap-seed",
+        type=int,
+        default=defaults.seed,
+        help=f"seed of the bootstrap resamples (default {defaults.seed})",
+    )
+
+
+def bootstrap_settings(args: argparse.Namespace) -> BootstrapSettings:
+    """The settings the options ask for.
+
+    Raises:
+        UsageError: ``--resamples`` below 1.
+    """
+    from setdiff_bench.errors import UsageError
+
+    if args.resamples < 1:
+        raise UsageError(f"needs at least 1 resample, got {args.resamples}", "--resamples")
+    return BootstrapSettings(resamples=args.resamples, seed=args.bootstrap_seed)
 
 
 def _command(args: argparse.Namespace) -> str:
@@ -83,6 +129,9 @@ def _command(args: argparse.Namespace) -> str:
             parts += [flag, value]
     if args.with_reported:
         parts.append("--with-reported")
+    if args.against:
+        parts += ["--against", args.against, "--resamples", str(args.resamples)]
+        parts += ["--bootstrap-seed", str(args.bootstrap_seed)]
     return " ".join(shlex.quote(part) for part in parts)
 
 
@@ -90,6 +139,7 @@ def run(args: argparse.Namespace) -> int:
     # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     from setdiff_bench.errors import UsageError
     from setdiff_bench.reporting.leaderboard import (
+        FORMATS,
         build_leaderboard,
         load_runs,
         profile_rows,
@@ -97,7 +147,18 @@ def run(args: argparse.Namespace) -> int:
         write_leaderboard,
     )
 
+    if args.grids and args.packets is None:  # every argument is checked before anything is written
+        raise UsageError("--grids needs --packets (the store the runs were made on)", "--grids")
+    if args.grids < 0:
+        raise UsageError(f"needs K >= 0 targets, got {args.grids}", "--grids")
+    settings = bootstrap_settings(args)
     formats = [f.strip() for f in args.format.split(",") if f.strip()]
+    unknown = [f for f in formats if f not in FORMATS]
+    if unknown or not formats:
+        raise UsageError(
+            f"unknown format(s) {', '.join(unknown) or '(none given)'}; choose from {', '.join(FORMATS)}",
+            "--format",
+        )
     split = None if args.split == "all" else args.split
     methods = [m.strip() for m in args.methods.split(",")] if args.methods else None
     metrics = [m.strip() for m in args.metrics.split(",")] if args.metrics else None
@@ -118,20 +179,21 @@ def run(args: argparse.Namespace) -> int:
         metrics=metrics,
         methods=methods,
         profile=args.profile,
+        against=args.against,
+        bootstrap=settings,
     )
-    command = _command(args)
-    for fmt, path in write_leaderboard(board, args.out, formats, command).items():
-        print(f"{fmt}: {path}")
-    if args.plots and len(images):
-        from setdiff_bench.reporting.plots import write_plots
-
-        for path in write_plots(args.dataset, images, args.out, split=split):
-            print(f"plot: {path}")
-    if args.grids:
-        if args.packets is None:
-            raise UsageError("--grids needs --packets (the store the runs were made on)", "--grids")
+    if args.with_reported and not any(row.source == "measured" for row in board.rows):
+        found = sorted(set(images["dataset"])) if len(images) else []
+        print(
+            f"note: no measured {args.dataset} runs under {args.runs}"
+            + (f" (runs found for: {', '.join(found)})" if found else "")
+            + "; the table holds the paper's rows only",
+            file=sys.stderr,
+        )
+    grid = None
+    if args.grids:  # open the store and choose the frames before writing anything
         from setdiff_bench.packets.store import PacketStore
-        from setdiff_bench.reporting.grids import pick_frames, qualitative_grid
+        from setdiff_bench.reporting.grids import pick_frames
 
         store = PacketStore(args.packets)
         chosen = images[(images["dataset"] == args.dataset) & ((images["split"] == split) if split else True)]
@@ -140,11 +202,18 @@ def run(args: argparse.Namespace) -> int:
         }
         order = methods or sorted(folders)
         frames = pick_frames(store.index[store.index["dataset"] == args.dataset], args.grids, split=split)
-        path = qualitative_grid(
-            store,
-            {m: folders[m] for m in order if m in folders},
-            frames,
-            args.out / f"{args.dataset}_grid.png",
-        )
+        grid = (store, {m: folders[m] for m in order if m in folders}, frames)
+    command = _command(args)
+    for fmt, path in write_leaderboard(board, args.out, formats, command).items():
+        print(f"{fmt}: {path}")
+    if args.plots and len(images):
+        from setdiff_bench.reporting.plots import write_plots
+
+        for path in write_plots(args.dataset, images, args.out, split=split):
+            print(f"plot: {path}")
+    if grid is not None:
+        from setdiff_bench.reporting.grids import qualitative_grid
+
+        path = qualitative_grid(*grid, args.out / f"{args.dataset}_grid.png")
         print(f"grid: {path}")
     return 0

@@ -10,8 +10,11 @@
 Each cell is the mean of per-target values over the whole test split (all groups pooled), like
 the paper's tables.  Several trained models (training seeds: ``ablate geometry --seed 0 --seed 1``,
 ``ablate setsize --checkpoint A --checkpoint B``) make each cell the mean over models; the spread
-(max − min over models) and, for set sizes, each model's own paired gain are printed under the table,
-and every model's values go to ``<stem>_per_model.parquet`` (one row per model, row and metric).  The Markdown and LaTeX (booktabs) tables are written by the leaderboard's writers
+(max − min and standard deviation over models) is printed under the table, every comparison gives each
+model's own paired gain, whether the mean gain is beyond both rows' seed spreads, and — computed by the tool,
+not by hand — its paired interval over the test targets (the per-target differences averaged over models,
+bootstrap resampled by scene, :mod:`setdiff_bench.reporting.paired`) with the scenes it wins; every model's
+values go to ``<stem>_per_model.parquet`` (one row per model, row and metric).  The Markdown and LaTeX (booktabs) tables are written by the leaderboard's writers
 (:func:`setdiff_bench.reporting.leaderboard.pooled_table`), so cells, bold and headers follow the metric specs
 exactly as in the leaderboards; the Markdown adds the paper's numbers (DL3DV) below for orientation —
 never mixed into our rows — and the exact commands that produced them.  The set-size table has one row
@@ -21,6 +24,7 @@ shape.
 
 from __future__ import annotations
 
+import statistics
 from collections.abc import Hashable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,6 +37,7 @@ import pyarrow.parquet as pq
 from setdiff_bench.errors import SetDiffBenchError, UsageError
 from setdiff_bench.io.atomic import atomic_path, write_text_atomic
 from setdiff_bench.metrics.registry import get_metric
+from setdiff_bench.reporting.bootstrap import BootstrapSettings
 from setdiff_bench.reporting.leaderboard import (
     Leaderboard,
     load_reported,
@@ -40,6 +45,13 @@ from setdiff_bench.reporting.leaderboard import (
     pooled_table,
     render_latex,
     render_markdown,
+)
+from setdiff_bench.reporting.paired import (
+    TARGET_COLUMNS,
+    PairedDifference,
+    few_scenes_note,
+    pair_targets,
+    paired_differences,
 )
 
 METRICS = ("psnr", "ssim", "lpips")
@@ -109,15 +121,26 @@ def size_label(size: tuple[int, int]) -> str:
     return f"{size[0]} + {size[1]}"
 
 
-def pooled_means(metrics_file: Path, split: str = "test") -> dict[str, float]:
-    """Mean of each metric over the targets of ``split`` in one run's ``metrics.parquet``."""
+class RunMeans(dict[str, float]):
+    """One run's pooled means (metric → mean, plus ``targets``) that also carries the per-target rows they
+    average (:attr:`rows`: :data:`~setdiff_bench.reporting.paired.TARGET_COLUMNS` and the metrics), so that
+    two rows of an ablation can be compared target by target."""
+
+    def __init__(self, means: Mapping[str, float], rows: pd.DataFrame | None = None) -> None:
+        super().__init__(means)
+        self.rows = rows
+
+
+def pooled_means(metrics_file: Path, split: str = "test") -> RunMeans:
+    """Mean of each metric over the targets of ``split`` in one run's ``metrics.parquet`` (with the rows)."""
     if not metrics_file.is_file():
         raise SetDiffBenchError("run has no metrics.parquet (did the run finish?)", metrics_file.parent)
     frame = pd.read_parquet(metrics_file)
     frame = frame[frame["split"] == split]
     if not len(frame):
         raise SetDiffBenchError(f"no {split} targets in the run", metrics_file)
-    return {m: float(frame[m].mean()) for m in METRICS} | {"targets": float(len(frame))}
+    means = {m: float(frame[m].mean()) for m in METRICS} | {"targets": float(len(frame))}
+    return RunMeans(means, frame[[*TARGET_COLUMNS, *METRICS]].reset_index(drop=True))
 
 
 def mean_over_models(per_model: Sequence[Mapping[Key, Mapping[str, float]]]) -> dict[Key, dict[str, float]]:
@@ -133,7 +156,8 @@ def mean_over_models(per_model: Sequence[Mapping[Key, Mapping[str, float]]]) -> 
 def spread_notes(
     per_model: Sequence[Mapping[Key, Mapping[str, float]]], label: Mapping[Key, str], models: Sequence[str]
 ) -> list[str]:
-    """One line per metric: the spread (max − min over models) of each row's value; none for one model."""
+    """One line per metric: the seed spread of each row's value, max − min and (in parentheses) the
+    standard deviation over models (n − 1); none for one model."""
     if len(per_model) < 2:
         return []
     notes = [f"Each cell is the mean over {len(per_model)} trained models ({', '.join(models)})."]
@@ -142,9 +166,48 @@ def spread_notes(
         cells = []
         for key, text in label.items():
             values = [model[key][metric] for model in per_model if key in model]
-            cells.append(f"{text} {max(values) - min(values):.{spec.decimals + 1}f}")
-        notes.append(f"{spec.label} spread (max − min over models): {', '.join(cells)}.")
+            sd = statistics.stdev(values) if len(values) > 1 else 0.0
+            cells.append(
+                f"{text} {max(values) - min(values):.{spec.decimals + 1}f} ({sd:.{spec.decimals + 1}f})"
+            )
+        notes.append(f"{spec.label} spread over models, max − min (sd): {', '.join(cells)}.")
     return notes
+
+
+def seed_spread(per_model: Sequence[Mapping[Key, Mapping[str, float]]], key: Key, metric: str) -> float:
+    """Max − min over models of row ``key``'s value (0 with one model)."""
+    values = [model[key][metric] for model in per_model if key in model]
+    return max(values) - min(values) if values else 0.0
+
+
+def paired_over_targets(
+    per_model: Sequence[Mapping[Key, Mapping[str, float]]],
+    new: Key,
+    old: Key,
+    settings: BootstrapSettings | None = None,
+) -> dict[str, PairedDifference] | None:
+    """``new`` against ``old`` target by target: each target's difference averaged over the models, its mean
+    and bootstrap interval (resampled by scene) and the scenes won, per metric.
+
+    Only targets that every model scored in both rows count.  ``None`` when a model's rows do not carry their
+    per-target values (:class:`RunMeans`), or no target is shared.
+    """
+    paired = []
+    for model in per_model:
+        if new not in model or old not in model:
+            continue
+        rows_new, rows_old = getattr(model[new], "rows", None), getattr(model[old], "rows", None)
+        if rows_new is None or rows_old is None:
+            return None
+        paired.append(pair_targets(rows_new, rows_old, METRICS))
+    if not paired:
+        return None
+    grouped = pd.concat(paired, ignore_index=True).groupby(list(TARGET_COLUMNS), sort=True)
+    every_model = grouped.size() == len(paired)
+    pairs = grouped.mean(numeric_only=True)[every_model].reset_index()
+    if not len(pairs):
+        return None
+    return paired_differences(pairs, METRICS, settings)
 
 
 def per_model_frame(
@@ -213,12 +276,16 @@ def setsize_frame(results: Mapping[tuple[int, int], Mapping[str, float]]) -> pd.
 
 
 def ordering_geometry(
-    frame: pd.DataFrame, per_model: Sequence[Mapping[str, Mapping[str, float]]] = ()
+    frame: pd.DataFrame,
+    per_model: Sequence[Mapping[str, Mapping[str, float]]] = (),
+    settings: BootstrapSettings | None = None,
 ) -> list[str]:
     """Plain-language comparison with the paper's Table 5 ordering (None worst, Both best).  With both
     rows present, each metric also compares Both with None; with two or more ``per_model`` results
     (``variant key`` → metric → value, one mapping per training seed) that line gives every model's own
-    paired gain and in how many models Both is better."""
+    paired gain, in how many models Both is better and whether the mean gain is beyond the seed spreads;
+    when the results carry their per-target rows (:class:`RunMeans`) it also gives the paired interval over
+    targets (:func:`paired_over_targets`, drawn as ``settings`` says)."""
     notes = []
     by = frame.set_index("variant")
     for metric in METRICS:
@@ -231,29 +298,38 @@ def ordering_geometry(
         )
     if not {"both", "none"} <= set(by.index):
         return notes
+    over_targets = paired_over_targets(per_model, "both", "none", settings)
     for metric in METRICS:
         spec = get_metric(metric)
         sign = 1.0 if spec.higher_is_better else -1.0
         both, none = float(by.loc["both", metric]), float(by.loc["none", metric])
         per_seed = _paired_gains(per_model, "both", "none", metric, sign)
+        per_seed += _target_gain(over_targets, metric)
         notes.append(
             f"{spec.label}: Both vs None {'better' if sign * (both - none) > 0 else 'not better'} "
             f"({both:.4f} vs {none:.4f}{per_seed}; paper: better)"
         )
-    return notes
+    return notes + _interval_notes([over_targets], len(per_model), settings)
 
 
 def ordering_setsize(
     results: Mapping[tuple[int, int], Mapping[str, float]],
     per_model: Sequence[Mapping[tuple[int, int], Mapping[str, float]]] = (),
+    settings: BootstrapSettings | None = None,
 ) -> list[str]:
     """Whether more references / more targets help, as in the paper's Table 6.  ``results`` holds the means;
-    with two or more ``per_model`` results each comparison also gives every model's own (paired) gain and
-    in how many models the larger set is better."""
+    with two or more ``per_model`` results each comparison also gives every model's own (paired) gain, in
+    how many models the larger set is better and whether the mean gain is beyond the seed spreads; results
+    that carry their per-target rows (:class:`RunMeans`) add the paired interval over targets."""
     comparisons = (  # (larger set, smaller set, what the paper found)
         ((3, 1), (1, 1), "better"),
         ((3, 6), (3, 1), "better for PSNR/SSIM, LPIPS within 0.001"),
     )
+    over_targets = {
+        (new, old): paired_over_targets(per_model, new, old, settings)
+        for new, old, _ in comparisons
+        if new in results and old in results
+    }
     notes = []
     for metric in METRICS:
         label = get_metric(metric).label
@@ -263,12 +339,13 @@ def ordering_setsize(
             if new and old:
                 gain = sign * (new[metric] - old[metric])
                 per_seed = _paired_gains(per_model, new_size, old_size, metric, sign)
+                per_seed += _target_gain(over_targets[(new_size, old_size)], metric)
                 notes.append(
                     f"{label}: {new_size[0]}+{new_size[1]} vs {old_size[0]}+{old_size[1]} "
                     f"{'better' if gain > 0 else 'not better'} "
                     f"({new[metric]:.4f} vs {old[metric]:.4f}{per_seed}; paper: {paper})"
                 )
-    return notes
+    return notes + _interval_notes(list(over_targets.values()), len(per_model), settings)
 
 
 def _paired_gains(
@@ -283,10 +360,45 @@ def _paired_gains(
     ]
     if len(paired) < 2:
         return ""
+    mean_gain = sum(paired) / len(paired)
+    spreads = [seed_spread(per_model, new, metric), seed_spread(per_model, old, metric)]
+    beyond = (
+        f"mean gain beyond both seed spreads ({spreads[0]:.4f}, {spreads[1]:.4f})"
+        if abs(mean_gain) > max(spreads)
+        else f"mean gain within the seed spread ({max(spreads):.4f})"
+    )
     return (
         f"; gain per model {', '.join(f'{g:+.4f}' for g in paired)}, "
-        f"better in {sum(g > 0 for g in paired)} of {len(paired)}"
+        f"better in {sum(g > 0 for g in paired)} of {len(paired)}, {beyond}"
     )
+
+
+def _target_gain(over_targets: Mapping[str, PairedDifference] | None, metric: str) -> str:
+    """``"; over 252 targets +0.3450 [+0.2900, +0.4000] (holds), better in 3 of 3 scenes"``: the paired gain
+    over targets (positive = better, whatever the metric's direction) and its interval; empty without one."""
+    if over_targets is None:
+        return ""
+    d = over_targets[metric]
+    sign = 1.0 if get_metric(metric).higher_is_better else -1.0
+    low, high = sorted((sign * d.low, sign * d.high))
+    interval = f"[{low:+.4f}, {high:+.4f}]" if d.has_interval else "[n/a]"
+    return (
+        f"; paired gain over {d.targets} targets {sign * d.difference:+.4f} {interval} "
+        f"({'holds' if d.holds else 'interval includes 0'}), better in {d.wins} of {d.scenes} scenes"
+    )
+
+
+def _interval_notes(
+    found: Sequence[Mapping[str, PairedDifference] | None], models: int, settings: BootstrapSettings | None
+) -> list[str]:
+    """How the paired gains over targets were computed, and the few-scenes caveat; none without any."""
+    present = [d for d in found if d is not None]
+    if not present:
+        return []
+    averaged = f"each target's gain averaged over the {models} models, " if models > 1 else ""
+    notes = [f"Paired gains over targets: {averaged}{(settings or BootstrapSettings()).describe()}."]
+    caveat = few_scenes_note(min(d.scenes for found_ in present for d in found_.values()))
+    return notes + ([caveat] if caveat else [])
 
 
 def paper_board(table: str, title: str) -> Leaderboard:

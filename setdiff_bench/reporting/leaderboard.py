@@ -48,6 +48,14 @@ from setdiff_bench.loaders import DATASETS
 from setdiff_bench.loaders.common import natural_key
 from setdiff_bench.metrics.registry import METRICS, get_metric
 from setdiff_bench.protocols import POOLED, Block, Layout, list_protocols, load_protocol
+from setdiff_bench.reporting.bootstrap import BootstrapSettings
+from setdiff_bench.reporting.paired import (
+    TARGET_COLUMNS,
+    PairedDifference,
+    few_scenes_note,
+    pair_targets,
+    paired_differences,
+)
 
 FORMATS = ("parquet", "latex", "md")
 ALL = POOLED  # block key of the pooled block (every group)
@@ -163,6 +171,8 @@ class Row:
     values: dict[tuple[str, str], float] = field(default_factory=dict)  # (block key, metric) → value
     decimals: dict[tuple[str, str], int] = field(default_factory=dict)
     counts: dict[tuple[str, str], int] = field(default_factory=dict)  # images or sequences averaged
+    #: (block key, metric) → paired difference to the table's ``against`` method (empty without one)
+    differences: dict[tuple[str, str], PairedDifference] = field(default_factory=dict)
 
 
 @dataclass
@@ -178,6 +188,8 @@ class Leaderboard:
         notes: footnotes (aggregation, marks).
         profile: the evaluation profile tabulated.
         row_header: header of the label column.
+        against: the method every measured row is compared with (paired differences), or ``None``.
+        bootstrap: how the intervals of those differences were drawn.
     """
 
     dataset: str
@@ -188,11 +200,15 @@ class Leaderboard:
     notes: list[str]
     profile: str = DEFAULT_PROFILE
     row_header: str = "Method"
+    against: str | None = None
+    bootstrap: BootstrapSettings | None = None
 
     @property
     def stem(self) -> str:
-        """Output file stem: ``<dataset>``, or ``<dataset>.<profile>`` for a profile other than ``paper``."""
-        return self.dataset if self.profile == DEFAULT_PROFILE else f"{self.dataset}.{self.profile}"
+        """Output file stem: ``<dataset>``, or ``<dataset>.<profile>`` for a profile other than ``paper``;
+        ``.vs_<method>`` appended for a table with paired differences, so it never replaces the plain one."""
+        stem = self.dataset if self.profile == DEFAULT_PROFILE else f"{self.dataset}.{self.profile}"
+        return stem if self.against is None else f"{stem}.vs_{self.against}"
 
     def cells(self) -> list[tuple[str, str]]:
         return [(block.key, metric) for block, metrics in self.columns for metric in metrics]
@@ -221,6 +237,8 @@ def build_leaderboard(
     methods: Sequence[str] | None = None,
     layout: Layout | None = None,
     profile: str = DEFAULT_PROFILE,
+    against: str | None = None,
+    bootstrap: BootstrapSettings | None = None,
 ) -> Leaderboard:
     """Aggregate runs (and optional reported rows) of ``dataset`` into a :class:`Leaderboard`.
 
@@ -236,9 +254,13 @@ def build_leaderboard(
         profile: the evaluation profile tabulated (:mod:`setdiff_bench.evaluation.profiles`): rows of plain runs are
             ``paper``; ``setdiff-bench evaluate`` tables carry their profile.  The caption names it, and the
             profile's averaging is used (``scene_mean``: the mean of per-scene means).
+        against: a measured method shown in the table: every other measured cell gets its paired difference
+            to it (:mod:`setdiff_bench.reporting.paired`; image metrics only, warp error is per sequence).
+        bootstrap: how those intervals are drawn (default :class:`BootstrapSettings`).
 
     Raises:
         LeaderboardError: no rows, a metric column missing, duplicate rows, or a method missing rows.
+        UsageError: ``against`` is not a measured method of the table.
     """
     layout = layout or dataset_layout(dataset)
     metric_names = tuple(metrics or layout.metrics)
@@ -334,14 +356,44 @@ def build_leaderboard(
             )
         )
     _check_complete(frame, blocks)
+    if against is not None:
+        if against not in order:
+            raise UsageError(
+                f"no {dataset} runs of method {against!r} in the table"
+                + _present("methods in the table", list(order)),
+                "--against",
+            )
+        for row in rows:
+            if row.source == "measured" and row.method != against:
+                row.differences = _paired_cells(
+                    frame,
+                    row.method,
+                    against,
+                    blocks,
+                    metric_names,
+                    bootstrap or BootstrapSettings(),
+                    spec.aggregation,
+                )
     filled = {key for row in rows for key, _ in row.values}
     columns = [(block, metrics) for block, metrics in columns if block.key in filled]
     if not columns:
         raise LeaderboardError(
             f"no {dataset} results fall in the table's blocks ({', '.join(b.label for b in blocks)})"
         )
+    title = f"{layout.title or dataset}; {spec.caption()}"
+    settings = bootstrap or BootstrapSettings()
+    if against is not None:
+        title += f"; paired differences to {against}: {settings.describe()}"
     board = Leaderboard(
-        dataset, columns, rows, {}, f"{layout.title or dataset}; {spec.caption()}", [], profile
+        dataset,
+        columns,
+        rows,
+        {},
+        title,
+        [],
+        profile,
+        against=against,
+        bootstrap=settings if against else None,
     )
     board.best = _best(board)
     board.notes = _notes(board, frame, seq)
@@ -367,7 +419,7 @@ def profile_rows(frame: pd.DataFrame, profile: str) -> pd.DataFrame:
 def _check_duplicates(frame: pd.DataFrame) -> None:
     if not len(frame):
         return
-    keys = ["method", "protocol", "group", "scene", "frame"]
+    keys = ["method", *TARGET_COLUMNS]
     duplicated = frame[frame.duplicated(keys, keep=False)]
     if len(duplicated):
         first = duplicated.iloc[0]
@@ -385,7 +437,7 @@ def _block_rows(frame: pd.DataFrame, block: Block) -> pd.DataFrame:
 
 def _check_complete(frame: pd.DataFrame, blocks: Sequence[Block]) -> None:
     """Refuse a mean over a subset: every method present in a block must have every target of it."""
-    keys = ["protocol", "group", "scene", "frame"]
+    keys = list(TARGET_COLUMNS)
     if not len(frame):
         return
     for block in blocks:
@@ -437,6 +489,28 @@ def _measured_row(
     return row
 
 
+def _paired_cells(
+    frame: pd.DataFrame,
+    method: str,
+    against: str,
+    blocks: Sequence[Block],
+    metric_names: Sequence[str],
+    settings: BootstrapSettings,
+    aggregation: str,
+) -> dict[tuple[str, str], PairedDifference]:
+    """(block key, metric) → paired difference of ``method`` to ``against`` over the block's targets."""
+    cells: dict[tuple[str, str], PairedDifference] = {}
+    for block in blocks:
+        rows = _block_rows(frame, block)
+        mine, theirs = rows[rows["method"] == method], rows[rows["method"] == against]
+        if not len(mine) or not len(theirs):
+            continue
+        pairs = pair_targets(mine, theirs, metric_names)
+        found = paired_differences(pairs, metric_names, settings, scene_mean=aggregation == "scene_mean")
+        cells.update({(block.key, metric): difference for metric, difference in found.items()})
+    return cells
+
+
 def _reported_rows(reported: pd.DataFrame, blocks: Sequence[Block], tables: Sequence[str]) -> list[Row]:
     """Paper rows keyed by (section, method id), tables in layout order then CSV order.
 
@@ -459,7 +533,13 @@ def _reported_rows(reported: pd.DataFrame, blocks: Sequence[Block], tables: Sequ
         rows[key].values[cell] = float(record.value)
         rows[key].decimals[cell] = int(record.decimals)
     ordered = sorted(rows.values(), key=lambda r: SECTIONS.index(r.section) if r.section in SECTIONS else 99)
-    return ordered
+    # a paper table may repeat a row in two sections (EUVS Table 1: "3DGS" is the first reconstruction row
+    # and the base of the enhancer section, with the same numbers): one row in ours
+    unique: list[Row] = []
+    for row in ordered:
+        if not any(r.label == row.label and r.values == row.values for r in unique):
+            unique.append(row)
+    return unique
 
 
 def pooled_table(
@@ -540,6 +620,16 @@ def _notes(board: Leaderboard, frame: pd.DataFrame, seq: pd.DataFrame | None) ->
         notes.append(
             "Rows marked (paper) / † are the numbers reported in the SetDiff paper, not measured here."
         )
+    if board.against is not None:
+        notes.append(
+            f"(±x): paired difference to {board.against} (row − {board.against}) over the same targets; "
+            "a star marks one whose interval excludes 0. Scenes won: scenes whose mean difference favours the row "
+            "in the metric's direction. Warp error is per sequence and has no paired difference."
+        )
+        scenes = [d.scenes for row in board.rows for d in row.differences.values()]
+        caveat = few_scenes_note(min(scenes)) if scenes else None
+        if caveat:
+            notes.append(caveat)
     return notes
 
 
@@ -569,9 +659,11 @@ def to_frame(board: Leaderboard) -> pd.DataFrame:
                         "decimals": row.decimals.get(cell, metric_decimals(metric)),
                         "count": row.counts.get(cell),
                         "best": index in board.best.get(cell, set()),
+                        **_difference_fields(row.differences.get(cell)),
                     }
                 )
-    return pd.DataFrame.from_records(
+    paired = list(_difference_fields(None)) if board.against is not None else []
+    frame = pd.DataFrame.from_records(
         records,
         columns=[
             "dataset",
@@ -587,8 +679,40 @@ def to_frame(board: Leaderboard) -> pd.DataFrame:
             "decimals",
             "count",
             "best",
+            *paired,
         ],
     )
+    for column in ("wins", "losses", "ties", "scenes", "resamples", "bootstrap_seed"):
+        if column in frame.columns:
+            frame[column] = frame[column].astype("Int64")
+    return frame
+
+
+def _difference_fields(difference: PairedDifference | None) -> dict[str, object]:
+    """The Parquet columns of a cell's paired difference (``None``: no difference there)."""
+    if difference is None:
+        nan = float("nan")
+        return dict.fromkeys(("difference", "low", "high"), nan) | {
+            "holds": False,
+            "wins": None,
+            "losses": None,
+            "ties": None,
+            "scenes": None,
+            "resamples": None,
+            "bootstrap_seed": None,
+        }
+    return {
+        "difference": difference.difference,
+        "low": difference.low,
+        "high": difference.high,
+        "holds": difference.holds,
+        "wins": difference.wins,
+        "losses": difference.losses,
+        "ties": difference.ties,
+        "scenes": difference.scenes,
+        "resamples": difference.settings.resamples,
+        "bootstrap_seed": difference.settings.seed,
+    }
 
 
 LATEX_SPECIALS = {
@@ -610,7 +734,7 @@ def latex_escape(text: str) -> str:
     return "".join(LATEX_SPECIALS.get(char, char) for char in text)
 
 
-def _arrow(metric: str, latex: bool) -> str:
+def metric_arrow(metric: str, latex: bool) -> str:
     """The metric's direction arrow (``MetricSpec.arrow``), in LaTeX math where asked."""
     spec = get_metric(metric)
     if latex:
@@ -636,7 +760,7 @@ def render_latex(board: Leaderboard, command: str | None = None) -> str:
         lines.append(" ".join(rules))
     header = [rf"\textbf{{{latex_escape(board.row_header)}}}"]
     header += [
-        rf"\textbf{{{latex_escape(metric_header(m))}}}{_arrow(m, True)}"
+        rf"\textbf{{{latex_escape(metric_header(m))}}}{metric_arrow(m, True)}"
         for _, metrics in board.columns
         for m in metrics
     ]
@@ -654,15 +778,45 @@ def render_latex(board: Leaderboard, command: str | None = None) -> str:
             if text is None:
                 cells.append("--")
             elif index in board.best.get(cell, set()):
-                cells.append(rf"\textbf{{{text}}}")
+                cells.append(rf"\textbf{{{text}}}" + _difference_suffix(board, row, cell, r"$^\ast$"))
             else:
-                cells.append(text)
+                cells.append(text + _difference_suffix(board, row, cell, r"$^\ast$"))
         lines.append(" & ".join(cells) + r" \\")
     lines += [r"\bottomrule", r"\end{tabular}"]
+    lines += [f"% {latex_escape(line)}" for line in _interval_lines(board)]
     return "\n".join(lines) + "\n"
 
 
-def _md_escape(text: str) -> str:
+def _difference_suffix(board: Leaderboard, row: Row, cell: tuple[str, str], mark: str) -> str:
+    """`` (+1.81*)``: the cell's paired difference at the cell's decimals, marked when its interval excludes
+    0; empty where the row has none (the ``against`` row, reported rows, warp error, tables without one)."""
+    difference = row.differences.get(cell)
+    if difference is None or math.isnan(difference.difference):
+        return ""
+    decimals = row.decimals.get(cell, metric_decimals(cell[1]))
+    return f" ({difference.difference:+.{decimals}f}{mark if difference.holds else ''})"
+
+
+def _interval_lines(board: Leaderboard) -> list[str]:
+    """One line per measured row and block: each metric's difference, interval and scenes won."""
+    if board.against is None:
+        return []
+    labels = {block.key: block.label for block, _ in board.columns}
+    lines = []
+    for row in board.rows:
+        for block, metrics in board.columns:
+            parts = [
+                f"{metric_header(m)} {d.format()} won {d.wins} of {d.scenes}"
+                for m in metrics
+                if (d := row.differences.get((block.key, m))) is not None
+            ]
+            if parts:
+                lines.append(f"{row.label} vs {board.against}, {labels[block.key]}: {'; '.join(parts)}")
+    return lines
+
+
+def md_escape(text: str) -> str:
+    """Text safe inside a Markdown table cell (``|`` escaped)."""
     return text.replace("|", r"\|")
 
 
@@ -670,30 +824,69 @@ def render_markdown(board: Leaderboard, command: str | None = None) -> str:
     """A GitHub Markdown table: one column per (block, metric), best in bold, paper rows suffixed."""
     multi = len(board.columns) > 1 or board.columns[0][0].key != ALL
     header = [board.row_header] + [
-        (f"{block.label} " if multi else "") + metric_header(m) + _arrow(m, False)
+        (f"{block.label} " if multi else "") + metric_header(m) + metric_arrow(m, False)
         for block, metrics in board.columns
         for m in metrics
     ]
     lines = [
-        f"**{_md_escape(board.title)}**",
+        f"**{md_escape(board.title)}**",
         "",
-        "| " + " | ".join(_md_escape(h) for h in header) + " |",
+        "| " + " | ".join(md_escape(h) for h in header) + " |",
         "|" + "---|" + "---:|" * (len(header) - 1),
     ]
     for index, row in enumerate(board.rows):
         label = row.label + (" (paper)" if row.source == "reported" else "")
-        cells = [_md_escape(label)]
+        cells = [md_escape(label)]
         for cell in board.cells():
             text = board.display(row, cell)
             cells.append(
-                "–" if text is None else f"**{text}**" if index in board.best.get(cell, set()) else text
+                "–"
+                if text is None
+                else (f"**{text}**" if index in board.best.get(cell, set()) else text)
+                + _difference_suffix(board, row, cell, r"\*")
             )
         lines.append("| " + " | ".join(cells) + " |")
     lines.append("")
-    lines += [_md_escape(note) for note in board.notes]
+    lines += [md_escape(note) for note in board.notes]
+    lines += _interval_markdown(board)
     if command:
         lines.append(f"Generated by `{command}`.")
     return "\n".join(lines) + "\n"
+
+
+def _interval_markdown(board: Leaderboard) -> list[str]:
+    """The paired differences of a table with ``against`` as a Markdown table: one row per measured method
+    and block, one column per metric holding ``difference [low, high]`` and the scenes it wins."""
+    if board.against is None:
+        return []
+    metrics = list(dict.fromkeys(m for _, ms in board.columns for m in ms))
+    records = []
+    for row in board.rows:
+        for block, _ in board.columns:
+            found = {m: row.differences.get((block.key, m)) for m in metrics}
+            if any(d is not None for d in found.values()):
+                cells = [
+                    "–"
+                    if d is None
+                    else d.format() + (r" \*" if d.holds else "") + f", won {d.wins} of {d.scenes}"
+                    for d in found.values()
+                ]
+                records.append([md_escape(row.label), md_escape(block.label), *cells])
+    if not records:
+        return []
+    confidence = (board.bootstrap or BootstrapSettings()).confidence
+    header = [board.row_header, "Block", *(metric_header(m) + metric_arrow(m, False) for m in metrics)]
+    lines = [
+        "",
+        f"**Paired differences to {md_escape(board.against)}: row − {md_escape(board.against)} "
+        f"[{confidence * 100:g} % interval], scenes won of scenes**",
+        "",
+        "| " + " | ".join(header) + " |",
+        "|---|---|" + "---:|" * len(metrics),
+    ]
+    lines += ["| " + " | ".join(record) + " |" for record in records]
+    lines.append("")
+    return lines
 
 
 def write_leaderboard(

@@ -146,7 +146,8 @@ def test_several_models_give_means_spread_and_paired_gains() -> None:
     labels = {(1, 1): "1 + 1", (3, 1): "3 + 1"}
     notes = ablation.spread_notes([seed0, seed1], labels, ["seed 0", "seed 1"])
     assert notes[0] == "Each cell is the mean over 2 trained models (seed 0, seed 1)."
-    assert notes[1] == "PSNR spread (max − min over models): 1 + 1 1.000, 3 + 1 0.400."
+    # sd (n − 1) by hand: |21 − 20| / sqrt(2) = 0.707, |20.9 − 20.5| / sqrt(2) = 0.283
+    assert notes[1] == "PSNR spread over models, max − min (sd): 1 + 1 1.000 (0.707), 3 + 1 0.400 (0.283)."
     assert ablation.spread_notes([seed0], labels, ["seed 0"]) == []
     frame = ablation.per_model_frame([seed0, seed1], labels, ["seed 0", "seed 1"])
     assert len(frame) == 12 and list(frame.columns) == ["model", "row", "metric", "value"]
@@ -167,8 +168,8 @@ def test_geometry_ordering_compares_both_with_none_per_model() -> None:
     ordering = ablation.ordering_geometry(frame, [seed0, seed1])
     # means by hand: PSNR none 20.5, both 20.55; gains +0.3 (seed 0) and -0.2 (seed 1)
     assert ordering[3] == (
-        "PSNR: Both vs None better (20.5500 vs 20.5000; gain per model +0.3000, -0.2000, better in 1 of 2;"
-        " paper: better)"
+        "PSNR: Both vs None better (20.5500 vs 20.5000; gain per model +0.3000, -0.2000, better in 1 of 2,"
+        " mean gain within the seed spread (1.0000); paper: better)"
     )
     # SSIM: -0.01 and +0.01, mean tie 0.72 vs 0.72 -> not better; LPIPS lower is better: +0.02, +0.01
     assert ordering[4].startswith("SSIM: Both vs None not better (0.7200 vs 0.7200;")
