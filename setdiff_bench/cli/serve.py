@@ -99,6 +99,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="file holding the bearer token every RPC but health must carry (re-read when it changes); "
         "default $SETDIFF_SERVE_TOKEN if set. Never give the token itself as an argument",
     )
+    # a token given as an argument shows in `ps` to every user: refused without echoing it (and without
+    # argparse taking `--token X` as an abbreviation of --token-file)
+    parser.add_argument("--token", dest="token_argument", default=None, help=argparse.SUPPRESS)
     parser.add_argument(
         "--insecure",
         action="store_true",
@@ -118,6 +121,12 @@ def settings_from_arguments(args: argparse.Namespace) -> ServeSettings:
     from setdiff_bench.errors import UsageError
     from setdiff_bench.serve.security import ServerTls, check_bind, token_source
 
+    if getattr(args, "token_argument", None) is not None:
+        raise UsageError(
+            "never give the token on the command line (every user sees it in `ps`); "
+            "put it in a file for --token-file or in $SETDIFF_SERVE_TOKEN",
+            "--token",
+        )
     for name in LIMITS:
         if getattr(args, name) < 1:
             raise UsageError(f"must be >= 1, got {getattr(args, name)}", f"--{name.replace('_', '-')}")
