@@ -28,7 +28,7 @@ DESCRIPTION = (
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from setdiff_bench.pipeline.demo import DEFAULT_OUT, DEMO_PRESETS
+    from setdiff_bench.pipeline.presets import DEFAULT_OUT, DEMO_PRESETS
 
     parser.add_argument(
         "--preset",

@@ -10,6 +10,7 @@ argparse's usage block).  Set ``SETDIFF_DEBUG=1`` to see tracebacks.
 from __future__ import annotations
 
 import argparse
+import ast
 import importlib
 import os
 import pkgutil
@@ -18,6 +19,7 @@ import shlex
 import sys
 import textwrap
 from collections.abc import Sequence
+from pathlib import Path
 from types import ModuleType
 from typing import NoReturn
 
@@ -27,16 +29,48 @@ from setdiff_bench.errors import SetDiffBenchError
 from setdiff_bench.runtime.threads import verb_threads
 
 
+def verb_module_names() -> list[str]:
+    """The names of the modules in ``setdiff_bench.cli`` that may define a verb (none is imported)."""
+    return sorted(
+        info.name
+        for info in pkgutil.iter_modules(cli_package.__path__)
+        if not info.name.startswith("_") and info.name != "main"
+    )
+
+
 def verb_modules() -> list[ModuleType]:
     """Every module in ``setdiff_bench.cli`` that defines a verb, sorted by verb name."""
-    modules = []
-    for info in pkgutil.iter_modules(cli_package.__path__):
-        if info.name.startswith("_") or info.name == "main":
+    modules = [importlib.import_module(f"setdiff_bench.cli.{name}") for name in verb_module_names()]
+    return sorted((m for m in modules if hasattr(m, "VERB") and hasattr(m, "run")), key=lambda m: m.VERB)
+
+
+def verb_summaries() -> dict[str, str]:
+    """``{VERB: HELP}`` of every verb module, read from its source without importing it (a verb module may
+    import a heavy dependency at module level; listing the verbs must not).
+
+    A module whose ``VERB`` and ``HELP`` are not plain string literals is imported instead.
+    """
+    summaries = {}
+    for name in verb_module_names():
+        path = Path(cli_package.__path__[0]) / f"{name}.py"
+        constants: dict[str, str] = {}
+        try:
+            tree = ast.parse(path.read_text(encoding="utf-8"))
+        except (OSError, SyntaxError, UnicodeDecodeError):
+            tree = ast.Module(body=[], type_ignores=[])
+        for node in tree.body:
+            if isinstance(node, ast.Assign) and isinstance(node.value, ast.Constant):
+                for target in node.targets:
+                    if isinstance(target, ast.Name) and isinstance(node.value.value, str):
+                        constants[target.id] = node.value.value
+        has_run = any(isinstance(node, ast.FunctionDef) and node.name == "run" for node in tree.body)
+        if "VERB" in constants and "HELP" in constants and has_run:
+            summaries[constants["VERB"]] = constants["HELP"]
             continue
-        module = importlib.import_module(f"setdiff_bench.cli.{info.name}")
+        module = importlib.import_module(f"setdiff_bench.cli.{name}")
         if hasattr(module, "VERB") and hasattr(module, "run"):
-            modules.append(module)
-    return sorted(modules, key=lambda m: m.VERB)
+            summaries[module.VERB] = module.HELP
+    return dict(sorted(summaries.items()))
 
 
 class OneLineArgumentParser(argparse.ArgumentParser):
@@ -71,18 +105,38 @@ class ParagraphHelpFormatter(argparse.HelpFormatter):
         return "\n\n".join(blocks)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
+    """The ``setdiff-bench`` parser.
+
+    Args:
+        argv: the words about to be parsed, or ``None`` for the full parser.  Given, only the verb they
+            name is imported and gets its options (the others are listed from their sources), so that
+            ``setdiff-bench --help`` and ``setdiff-bench <verb> --help`` load no more than they show.
+    """
     parser = OneLineArgumentParser(
         prog="setdiff-bench",
         description="Benchmark and enhance 3D Gaussian Splatting renders far from the recorded trajectory.",
     )
     parser.add_argument("--version", action="version", version=f"setdiff-bench {__version__}")
     sub = parser.add_subparsers(dest="verb", metavar="VERB", required=True)
-    for module in verb_modules():
+    if argv is None:
+        modules = {module.VERB: module for module in verb_modules()}
+        summaries = {verb: module.HELP for verb, module in modules.items()}
+    else:
+        summaries = verb_summaries()
+        chosen = next((word for word in argv if not word.startswith("-")), None)
+        modules = (
+            {chosen: importlib.import_module(f"setdiff_bench.cli.{chosen}")} if chosen in summaries else {}
+        )
+    for verb, summary in summaries.items():
+        if verb not in modules:  # listed for the top-level help and for "invalid choice"; never parsed
+            sub.add_parser(verb, help=summary)
+            continue
+        module = modules[verb]
         verb_parser = sub.add_parser(
-            module.VERB,
-            help=module.HELP,
-            description=getattr(module, "DESCRIPTION", module.HELP),
+            verb,
+            help=summary,
+            description=getattr(module, "DESCRIPTION", summary),
             formatter_class=ParagraphHelpFormatter,
         )
         module.add_arguments(verb_parser)
@@ -92,10 +146,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Parse ``argv`` and run the verb; returns the process exit code."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    words = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(words)
+    args = parser.parse_args(words)
     #: the command as typed, for the records a verb writes (training manifests)
-    args.command_line = "setdiff-bench " + shlex.join(sys.argv[1:] if argv is None else list(argv))
+    args.command_line = "setdiff-bench " + shlex.join(words)
     try:
         with verb_threads():  # one fixed thread count: same command, same machine, same bytes
             return int(args._run(args) or 0)

@@ -81,7 +81,7 @@ def _autoencoder_defaults() -> dict[str, int | float]:
     # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     from dataclasses import asdict
 
-    from setdiff_bench.models.setdiff.autoencoder import AutoencoderTraining
+    from setdiff_bench.models.setdiff.autoencoder_settings import AutoencoderTraining
 
     return asdict(AutoencoderTraining())
 

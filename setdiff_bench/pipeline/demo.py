@@ -49,6 +49,12 @@ from setdiff_bench.evaluation.paths import METRICS_FILE
 from setdiff_bench.io.atomic import sha256_file, write_text_atomic
 from setdiff_bench.metrics.registry import get_metric
 from setdiff_bench.models.setdiff.packaged import packaged_models
+from setdiff_bench.pipeline.presets import (  # noqa: F401 (DEFAULT_OUT, DEMO_PRESETS: re-exported)
+    DEFAULT_OUT,
+    DEMO_PRESETS,
+    DemoPreset,
+    get_demo_preset,
+)
 from setdiff_bench.pipeline.stages import LEDGER_FILE, Pipeline, relative
 from setdiff_bench.protocols import load_protocol
 from setdiff_bench.runtime.devices import resolve_device
@@ -59,79 +65,9 @@ METHODS = ("identity", "reproject", "difix", "setdiff")
 VERDICT_METRICS = ("psnr", "ssim", "lpips")  # the +2-lane verdict's metrics, in table order
 #: The learned methods and the shipped models the demo evaluates unless ``--train``.
 SHIPPED_MODELS = {"setdiff": "tiny_setdiff", "difix": "tiny_difix"}
-#: Where the demo writes unless told otherwise: a scratch folder, git-ignored, never the published results.
-DEFAULT_OUT = "runs/demo"
 #: The demo's summary in ``<out>``; written last, so a folder with it holds one complete run.
 SUMMARY_FILE = "demo.json"
 REPORT_FILE = "README.md"
-
-
-@dataclass(frozen=True)
-class DemoPreset:
-    """What one demo preset runs.
-
-    Attributes:
-        name, description: the preset key and one line for ``--help``.
-        synth_preset: the ``setdiff-bench synth`` preset (scene count, size, fit schedule).
-        scenes: number of scenes (``None``: the synth preset's).
-        setdiff_config, difix_config: training configs (TOML paths or packaged names).
-        setdiff_steps, difix_steps: optimiser steps.
-        grid_frames: targets shown in the qualitative grid.
-    """
-
-    name: str
-    description: str
-    synth_preset: str
-    scenes: int | None
-    setdiff_config: str
-    difix_config: str
-    setdiff_steps: int
-    difix_steps: int
-    grid_frames: int
-
-
-DEMO_PRESETS: dict[str, DemoPreset] = {
-    "tiny": DemoPreset(
-        "tiny",
-        "smoke test: tiny 80x48 scenes (with --train: 3 scenes, a few steps)",
-        "tiny",
-        3,
-        "tiny_setdiff",
-        "tiny_difix",
-        20,
-        20,
-        2,
-    ),
-    "default": DemoPreset(
-        "default",
-        "the 2 test scenes at 256x144 with the shipped models (about 5 minutes "
-        "on 2 CPU cores); with --train all 6 scenes and short CPU training",
-        "default",
-        None,
-        "tiny_setdiff",
-        "tiny_difix",
-        230,
-        200,
-        6,
-    ),
-    "full": DemoPreset(
-        "full",
-        "8 scenes at 512x288; with --train long training, for a GPU",
-        "large",
-        None,
-        "tiny_setdiff",
-        "tiny_difix",
-        20000,
-        20000,
-        8,
-    ),
-}
-
-
-def get_demo_preset(name: str) -> DemoPreset:
-    if name not in DEMO_PRESETS:
-        raise UsageError(f"unknown demo preset {name!r}; choose one of {', '.join(DEMO_PRESETS)}", "--preset")
-    return DEMO_PRESETS[name]
 
 
 @dataclass(frozen=True)
