@@ -156,8 +156,8 @@ def mean_over_models(per_model: Sequence[Mapping[Key, Mapping[str, float]]]) -> 
 def spread_notes(
     per_model: Sequence[Mapping[Key, Mapping[str, float]]], label: Mapping[Key, str], models: Sequence[str]
 ) -> list[str]:
-    """One line per metric: the seed spread of each row's value, max − min and (in parentheses) the
-    standard deviation over models (n − 1); none for one model."""
+    """One line per metric: the seed spread of each row's value, max − min and (``sd``) the standard
+    deviation over models (n − 1); none for one model."""
     if len(per_model) < 2:
         return []
     notes = [f"Each cell is the mean over {len(per_model)} trained models ({', '.join(models)})."]
@@ -167,10 +167,9 @@ def spread_notes(
         for key, text in label.items():
             values = [model[key][metric] for model in per_model if key in model]
             sd = statistics.stdev(values) if len(values) > 1 else 0.0
-            cells.append(
-                f"{text} {max(values) - min(values):.{spec.decimals + 1}f} ({sd:.{spec.decimals + 1}f})"
-            )
-        notes.append(f"{spec.label} spread over models, max − min (sd): {', '.join(cells)}.")
+            digits = spec.decimals + 1
+            cells.append(f"{text} {max(values) - min(values):.{digits}f} (sd {sd:.{digits}f})")
+        notes.append(f"{spec.label} spread (max − min over models): {', '.join(cells)}.")
     return notes
 
 

@@ -147,7 +147,7 @@ def test_several_models_give_means_spread_and_paired_gains() -> None:
     notes = ablation.spread_notes([seed0, seed1], labels, ["seed 0", "seed 1"])
     assert notes[0] == "Each cell is the mean over 2 trained models (seed 0, seed 1)."
     # sd (n − 1) by hand: |21 − 20| / sqrt(2) = 0.707, |20.9 − 20.5| / sqrt(2) = 0.283
-    assert notes[1] == "PSNR spread over models, max − min (sd): 1 + 1 1.000 (0.707), 3 + 1 0.400 (0.283)."
+    assert notes[1] == "PSNR spread (max − min over models): 1 + 1 1.000 (sd 0.707), 3 + 1 0.400 (sd 0.283)."
     assert ablation.spread_notes([seed0], labels, ["seed 0"]) == []
     frame = ablation.per_model_frame([seed0, seed1], labels, ["seed 0", "seed 1"])
     assert len(frame) == 12 and list(frame.columns) == ["model", "row", "metric", "value"]
