@@ -30,8 +30,8 @@ DESCRIPTION = (
     "requests in flight (at most 256 MiB each).\n\n"
     "examples:\n"
     "  setdiff-bench serve --checkpoint tiny_setdiff --port 50051\n"
-    "  SETDIFF_SERVE_TOKEN=$(cat token) setdiff-bench serve --checkpoint tiny_setdiff --host 0.0.0.0 "
-    "--tls-cert server.pem --tls-key server.key\n"
+    "  setdiff-bench serve --checkpoint tiny_setdiff --host 0.0.0.0 --tls-cert server.pem "
+    "--tls-key server.key --token-file token   # see docs/serve.md\n"
 )
 
 #: The integer settings that must be >= 1: each is an option ``--name`` whose help starts with this text.

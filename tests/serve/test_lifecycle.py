@@ -25,6 +25,7 @@ from setdiff_bench.serve import enhancer_pb2 as pb
 from setdiff_bench.serve.client import EnhancerClient, view_messages
 from setdiff_bench.serve.server import FairLock, RunningServer, start_server
 from setdiff_bench.serve.settings import ServeSettings
+from setdiff_bench.serve.wire import to_array
 from tests.serve.serve_fixtures import start_driver
 from tests.stream.stream_fixtures import HEIGHT, WIDTH, recorded_references, tick_frames
 
@@ -255,3 +256,30 @@ def test_concurrent_sessions_take_turns_on_the_model(enhancer: Any) -> None:
                 assert np.array_equal(got[index][t], want), (index, t)
         for session in sessions:
             client.close_session(session)
+
+
+def test_invalid_argument_names_the_field_once(enhancer: Any) -> None:
+    """Issue 45: the NaN error repeated its prefix ("frames[0] 'x' rgb: frames[0] 'x' rgb: contains NaN")."""
+    with serving(enhancer) as (_, client):
+        session = client.start_session(recorded_references())
+        frames = tick_frames(0)
+        request = client.enhance_request(session, frames)
+        pixels = frames.images[0].permute(1, 2, 0).float().numpy() / 255
+        pixels[0, 0, 0] = np.nan
+        request.frames[0].rgb.CopyFrom(to_array(pixels.astype(np.float32)))
+        code, details = refused(lambda: client.stub.enhance(request, timeout=30))
+        assert code == grpc.StatusCode.INVALID_ARGUMENT
+        assert details == "frames[0] 'front/000000.png' rgb: contains NaN or infinite values"
+        client.close_session(session)
+
+
+def test_load_benchmark_smoke(tmp_path: Path) -> None:
+    """benchmarks/serve.py --load on a small scale: kills, expiry, byte equality and memory are all reported."""
+    from benchmarks.serve import load_test
+
+    result = load_test("tiny_setdiff", "setdiff", [2], ticks=3, idle_timeout=0.5, seed=1)
+    [phase] = result["phases"]
+    assert phase["clients"] == 2 and phase["killed_mid_drive"] == 1 and phase["clients_finished"] == 2
+    assert phase["byte_equal_to_batch_runner"] and result["all_byte_equal"]
+    assert phase["failures"] == [] and phase["ticks_timed"] == 2 * 3
+    assert result["full_sessions"]["predicted_held_mib"] == pytest.approx(2 * 16 * 28 * 144 * 256 / 2**20)
