@@ -356,6 +356,7 @@ def build_leaderboard(
             )
         )
     _check_complete(frame, blocks)
+    settings = bootstrap or BootstrapSettings()
     if against is not None:
         if against not in order:
             raise UsageError(
@@ -371,7 +372,7 @@ def build_leaderboard(
                     against,
                     blocks,
                     metric_names,
-                    bootstrap or BootstrapSettings(),
+                    settings,
                     spec.aggregation,
                 )
     filled = {key for row in rows for key, _ in row.values}
@@ -381,7 +382,6 @@ def build_leaderboard(
             f"no {dataset} results fall in the table's blocks ({', '.join(b.label for b in blocks)})"
         )
     title = f"{layout.title or dataset}; {spec.caption()}"
-    settings = bootstrap or BootstrapSettings()
     if against is not None:
         title += f"; paired differences to {against}: {settings.describe()}"
     board = Leaderboard(
