@@ -18,6 +18,13 @@ export --average K`` stage into ``averaged<K>/``; runs in ``runs/avg<K>/``).
 Every stage is an ordinary ``setdiff-bench`` command (listed in the output tables) and resumes, so an
 interrupted ablation continues where it stopped.  Tables go to ``<out>/ablation_geometry.{md,tex,parquet}``
 and ``<out>/ablation_setsize.{md,tex,parquet}``; checkpoints and runs to ``--work`` (default ``<out>/work``).
+
+The examples use the packets of ``setdiff-bench demo --train``, which have the ``train`` split that
+``geometry`` needs.  Examples::
+
+    setdiff-bench ablate geometry --packets runs/demo/work/packets --out runs/ablation --variants none,both --steps 200
+    setdiff-bench ablate setsize --packets runs/demo/work/packets --checkpoint tiny_setdiff --out runs/ablation \\
+        --sizes 1+1,3+1
 """
 
 from __future__ import annotations
@@ -37,9 +44,29 @@ HELP = "the paper's ablations: geometric grounding (Table 5) and set size (Table
 DESCRIPTION = __doc__.split("\n\n", 1)[1] if __doc__ else HELP
 
 
+def _with_examples(summary: str, prefix: str) -> str:
+    """``summary`` and, under ``Examples:``, the examples of the module docstring that start with ``prefix``
+    (a study's own ``--help`` shows its examples, written once)."""
+    block = (__doc__ or "").split("Examples", 1)[-1].split("::", 1)[-1]
+    examples: list[list[str]] = []
+    for line in block.splitlines():
+        if line.strip().startswith("setdiff-bench "):
+            examples.append([line.rstrip()])
+        elif line.strip() and examples and examples[-1][-1].endswith("\\"):
+            examples[-1].append(line.rstrip())  # a continued line
+    kept = ["\n".join(lines) for lines in examples if lines[0].strip().startswith(prefix)]
+    return summary[0].upper() + summary[1:] + "." + ("\n\nExamples:\n\n" + "\n".join(kept) if kept else "")
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="study", metavar="STUDY", required=True)
-    geometry = sub.add_parser("geometry", help="train and score SetDiff without / with C-maps / poses / both")
+    geometry_help = "train and score SetDiff without / with C-maps / poses / both"
+    geometry = sub.add_parser(
+        "geometry",
+        help=geometry_help,
+        description=_with_examples(geometry_help, "setdiff-bench ablate geometry"),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     geometry.add_argument(
         "--config", default="tiny_setdiff", help="base SetDiff config (TOML or packaged name)"
     )
@@ -64,8 +91,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="comma list of the variants to train (default: all four; keys none, cmap, pose, both)",
     )
+    setsize_help = "score one trained SetDiff at several reference + target set sizes"
     setsize = sub.add_parser(
-        "setsize", help="score one trained SetDiff at several reference + target set sizes"
+        "setsize",
+        help=setsize_help,
+        description=_with_examples(setsize_help, "setdiff-bench ablate setsize"),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     setsize.add_argument(
         "--checkpoint",

@@ -22,8 +22,9 @@ DESCRIPTION = (
     "scenes), and write the leaderboard, plots and grids into a scratch folder (default runs/demo, "
     "git-ignored; `setdiff-bench publish` copies a finished run to results/). --train makes every scene "
     "and trains SetDiff and DiFix first. Every stage resumes.\n\n"
-    "examples:\n  setdiff-bench demo\n  setdiff-bench demo --preset tiny --out runs/smoke\n"
-    "  setdiff-bench demo --train --setdiff-steps 1000 --difix-steps 1000 --ablations"
+    "Examples:\n\n    setdiff-bench demo\n    setdiff-bench demo --preset tiny --out runs/smoke\n"
+    "    setdiff-bench demo --train --setdiff-steps 1000 --difix-steps 1000\n"
+    "    setdiff-bench demo --train --setdiff-steps 1000 --difix-steps 1000 --ablations"
 )
 
 

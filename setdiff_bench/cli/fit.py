@@ -3,6 +3,12 @@
 The scene is read through the dataset loaders (synthetic, EUVS, or any COLMAP scene); its sparse
 points initialise the Gaussians.  ``--checkpoint DIR`` saves the full optimiser state every
 ``--checkpoint-every`` iterations; rerunning the same command resumes from it.
+
+Examples::
+
+    setdiff-bench fit --scene runs/demo/work/scenes/scene_0000_02 --out runs/fit/lane0.ply --preset tiny
+    setdiff-bench fit --scene runs/demo/work/scenes/scene_0000_02 --out runs/fit_long/lane0.ply \\
+        --checkpoint runs/fit_long/state --iterations 2000
 """
 
 from __future__ import annotations
@@ -14,6 +20,7 @@ from setdiff_bench.cli import add_device_argument, add_option_argument, add_prog
 
 VERB = "fit"
 HELP = "fit 3D Gaussian Splatting to a scene's training frames and write the standard PLY"
+DESCRIPTION = __doc__.split("\n\n", 1)[1] if __doc__ else HELP
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -2,10 +2,11 @@
 
 Examples::
 
-    setdiff-bench leaderboard --dataset synthetic --runs results/runs --plots
-    setdiff-bench leaderboard --dataset euvs --with-reported --format latex,md
-    setdiff-bench leaderboard --dataset synthetic --grids 6 --packets packets/synthetic
-    setdiff-bench leaderboard --dataset synthetic --runs results/runs --against difix
+    setdiff-bench leaderboard --dataset synthetic --runs runs/demo/work/runs --out runs/tables --plots
+    setdiff-bench leaderboard --dataset euvs --with-reported --format latex,md --out runs/tables
+    setdiff-bench leaderboard --dataset synthetic --runs runs/demo/work/runs --out runs/tables --grids 6 \\
+        --packets runs/demo/work/packets
+    setdiff-bench leaderboard --dataset synthetic --runs runs/demo/work/runs --out runs/tables --against difix
 
 See :mod:`setdiff_bench.reporting.leaderboard` for the aggregation rules (means of per-image values; a method
 missing rows in a block is refused) and how reported paper rows are marked.  ``--against METHOD`` writes

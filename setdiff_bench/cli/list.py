@@ -27,7 +27,9 @@ from setdiff_bench.errors import UsageError
 VERB = "list"
 HELP = "list datasets, methods, or the scenes of a dataset on disk"
 DESCRIPTION = (
-    "List what the toolkit can see: `list datasets`, `list methods`, `list scenes --dataset D --root R`."
+    "List what the toolkit can see: `list datasets`, `list methods`, `list scenes --dataset D --root R`.\n\n"
+    "Examples:\n\n    setdiff-bench list datasets\n    setdiff-bench list methods\n"
+    "    setdiff-bench list scenes --dataset synthetic --root runs/demo/work/scenes"
 )
 
 
@@ -206,12 +208,26 @@ TARGETS: dict[str, ListTarget] = {
     ),
 }
 
+#: The example each target's ``--help`` shows (also listed in ``list --help``).
+TARGET_EXAMPLES = {
+    "datasets": "setdiff-bench list datasets",
+    "methods": "setdiff-bench list methods",
+    "scenes": "setdiff-bench list scenes --dataset synthetic --root runs/demo/work/scenes",
+}
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """One subcommand per entry of :data:`TARGETS`."""
     sub = parser.add_subparsers(dest="target", metavar="TARGET", required=True)
     for name, target in TARGETS.items():
-        target_parser = sub.add_parser(name, help=target.help, description=target.help)
+        description = target.help[0].upper() + target.help[1:] + "."
+        description += f"\n\nExample:\n\n    {TARGET_EXAMPLES[name]}" if name in TARGET_EXAMPLES else ""
+        target_parser = sub.add_parser(
+            name,
+            help=target.help,
+            description=description,
+            formatter_class=argparse.RawDescriptionHelpFormatter,
+        )
         target.add_arguments(target_parser)
         target_parser.set_defaults(_list_target=target)
 

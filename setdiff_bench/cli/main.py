@@ -86,15 +86,18 @@ class OneLineArgumentParser(argparse.ArgumentParser):
 
 
 class ParagraphHelpFormatter(argparse.HelpFormatter):
-    """Help text from module docstrings: paragraphs are re-wrapped, indented blocks (examples) kept line
-    by line, reStructuredText ``literal`` / ``Examples::`` markup shown plainly."""
+    """Help text from module docstrings: paragraphs are re-wrapped, indented blocks (examples, also under a
+    one-line heading such as ``examples:``) kept line by line, reStructuredText ``literal`` /
+    ``Examples::`` markup shown plainly."""
 
     def _fill_text(self, text: str, width: int, indent: str) -> str:
         text = re.sub(r":\w+:`", "`", textwrap.dedent(text).replace("``", "`").replace("::\n", ":\n"))
         blocks = []
         for paragraph in re.split(r"\n\s*\n", text.strip("\n")):
             lines = paragraph.splitlines()
-            if all(line.startswith((" ", "\t")) or not line.strip() for line in lines):
+            # an indented block, possibly under a one-line heading ("examples:"), is kept line by line
+            body = lines[1:] if len(lines) > 1 and lines[0].rstrip().endswith(":") else lines
+            if all(line.startswith((" ", "\t")) or not line.strip() for line in body):
                 blocks.append("\n".join(indent + line.rstrip() for line in lines))
             else:
                 blocks.append(

