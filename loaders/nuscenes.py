@@ -58,7 +58,7 @@ Record = Mapping[str, Any]
 def locate(root: str | os.PathLike[str], version: str | None = None) -> tuple[Path, Path]:
     """``(dataroot, table folder)`` for ``root`` and an optional ``version`` name."""
     base = dataset_root(root)
-    if (base / "scene.json").is_file():
+    if _is_table_folder(base):
         if version is not None and base.name != version:
             raise DatasetError(f"root is the table folder {base.name!r}, not {version!r}", base)
         return base.parent, base
@@ -67,16 +67,24 @@ def locate(root: str | os.PathLike[str], version: str | None = None) -> tuple[Pa
         if not tables.is_dir():
             raise DatasetError(f"nuScenes version folder {version!r} not found", tables)
         return base, tables
-    present = sorted(p.name for p in base.iterdir() if p.is_dir() and (p / "scene.json").is_file())
+    present = sorted(p.name for p in base.iterdir() if p.is_dir() and _is_table_folder(p))
     if not present:
         raise DatasetError(
-            f"no nuScenes table folder found (expected {' or '.join(VERSIONS)} with scene.json)", base
+            f"not a nuScenes folder: no table folder here ({' or '.join(VERSIONS)} with scene.json)",
+            base,
         )
     if len(present) > 1:
         raise DatasetError(
             f"several nuScenes versions ({', '.join(present)}); choose one with version=<name>", base
         )
     return base, base / present[0]
+
+
+def _is_table_folder(folder: Path) -> bool:
+    """Whether ``folder`` looks like a nuScenes table folder: a ``scene.json`` and a version name
+    (``v1.0-mini``) or a ``sample.json`` (a synthetic or EUVS scene folder has a ``scene.json`` too)."""
+    named = folder.name in VERSIONS or folder.name.startswith("v1.")
+    return (folder / "scene.json").is_file() and (named or (folder / "sample.json").is_file())
 
 
 def load_table(tables: Path, name: str) -> list[dict[str, Any]]:

@@ -2,6 +2,7 @@
 
 Examples::
 
+    setdiff-bench evaluate runs/demo/work/runs/setdiff --profile paper --packets runs/demo/work/packets
     setdiff-bench evaluate results/runs/euvs-setdiff --profile euvs_official --packets packets/euvs \\
         --data /data/EUVS --dinov2 /weights/dinov2-base --euvs-compat-report
     setdiff-bench evaluate results/runs/dl3dv-setdiff --profile dl3dv_3dgs_enhancer --packets packets/dl3dv \\
@@ -23,7 +24,8 @@ VERB = "evaluate"
 HELP = "score a finished run under an evaluation profile (the official EUVS / 3DGS-Enhancer scoring)"
 DESCRIPTION = (
     "Rescore a finished run's enhanced images under an evaluation profile: scoring size and filters, "
-    "crop, metrics, per-scene or pooled averaging (profiles: paper, euvs_official, dl3dv_3dgs_enhancer)."
+    "crop, metrics, per-scene or pooled averaging (profiles: paper, euvs_official, dl3dv_3dgs_enhancer).\n\n"
+    + (__doc__.split("\n\n", 1)[1] if __doc__ else "")
 )
 
 
@@ -57,7 +59,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
-    from setdiff_bench.errors import UsageError
+    from setdiff_bench.errors import SetDiffBenchError, UsageError
     from setdiff_bench.evaluation.paths import EUVS_COMPAT_FILE
     from setdiff_bench.evaluation.profile_scoring import score_run
     from setdiff_bench.evaluation.profiles import get_profile
@@ -76,16 +78,22 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(
             "--euvs-compat-report applies to EUVS profiles (euvs_official)", "--euvs-compat-report"
         )
-    out = score_run(
-        args.run,
-        profile,
-        packets=args.packets,
-        data=args.data,
-        dinov2=dinov2,
-        device=device,
-        progress=False if args.no_progress else None,
-    )
-    print(f"{profile.caption()}")
+    try:
+        out = score_run(
+            args.run,
+            profile,
+            packets=args.packets,
+            data=args.data,
+            dinov2=dinov2,
+            device=device,
+            progress=False if args.no_progress else None,
+        )
+    except SetDiffBenchError as error:
+        other = _other_store(args.run, args.packets)
+        if other is None:
+            raise
+        raise UsageError(other, "--packets") from error
+    print(profile.caption(_scored_size(out, args.packets)))
     print(f"tables: {out}")
     if profile.dinov2 and dinov2 is None:
         print(
@@ -95,3 +103,43 @@ def run(args: argparse.Namespace) -> int:
     if args.euvs_compat_report:
         sys.stdout.write((out / EUVS_COMPAT_FILE).read_text())
     return 0
+
+
+def _scored_size(tables: Path, packets: Path) -> tuple[int, int] | None:
+    """``(height, width)`` of the targets a profile scored (from the store's index), or ``None`` when they
+    differ or cannot be read, so that the caption states the real size (not the paper's 576x1024)."""
+    import pandas as pd
+
+    from setdiff_bench.errors import SetDiffBenchError
+    from setdiff_bench.packets.store import PacketStore
+
+    try:
+        scored = set(pd.read_parquet(tables / "metrics.parquet", columns=["packet_id"])["packet_id"])
+        index = PacketStore(packets).index
+    except (OSError, ValueError, KeyError, SetDiffBenchError):
+        return None
+    rows = index[(index["role"] == "target") & index["packet_id"].isin(scored)]
+    sizes = {(int(h), int(w)) for h, w in zip(rows["height"], rows["width"])}
+    return sizes.pop() if len(sizes) == 1 else None
+
+
+def _other_store(run: Path, packets: Path) -> str | None:
+    """Why ``packets`` is not the store ``run`` was made from (its ``index.parquet`` differs from the one
+    ``run.json`` records), or ``None`` when it is, or when either cannot be read."""
+    import json
+
+    from setdiff_bench.evaluation.paths import RUN_FILE
+    from setdiff_bench.io.atomic import sha256_file
+    from setdiff_bench.packets.index import INDEX_FILE
+
+    try:
+        recorded = json.loads((run / RUN_FILE).read_text(encoding="utf-8"))["index_sha256"]
+        actual = sha256_file(packets / INDEX_FILE)
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    if recorded == actual:
+        return None
+    return (
+        f"{packets} is not the packet store {run} was made from (its {INDEX_FILE} differs from the one "
+        f"{RUN_FILE} records); pass the run's own --packets"
+    )

@@ -11,6 +11,12 @@ Several GPUs: ``accelerate launch -m setdiff_bench.cli.main train ...`` (DDP, on
 ``setdiff-bench train autoencoder --packets DIR --out AE_DIR`` trains the tiny autoencoder that the
 tiny configs freeze as their VAE (see :mod:`setdiff_bench.models.setdiff.autoencoder`) on the
 ground-truth frames of the store's ``train`` split; re-running it resumes.
+
+The examples use the packets of ``setdiff-bench demo --train``, which have a ``train`` split.  Examples::
+
+    setdiff-bench train --config tiny_setdiff --packets runs/demo/work/packets --out runs/ckpt/setdiff --steps 200
+    setdiff-bench train autoencoder --packets runs/demo/work/packets --out runs/ae --steps 1200 --crop 48 \\
+        --batch-size 8 --latent-channels 8
 """
 
 from __future__ import annotations
@@ -18,6 +24,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -88,8 +95,20 @@ def _autoencoder_defaults() -> dict[str, int | float]:
 
 def run_autoencoder(args: argparse.Namespace) -> int:
     from setdiff_bench.models.setdiff.autoencoder import AutoencoderTraining, train_autoencoder
+    from setdiff_bench.packets.store import PacketStore
     from setdiff_bench.runtime.devices import resolve_device
 
+    store = PacketStore(args.packets)
+    _check_split(store, "train", args.packets)
+    rows = store.index[store.index["split"] == "train"]
+    height, width = int(rows["height"].min()), int(rows["width"].min())
+    if args.crop > min(height, width):  # said, not silent: random_crops clips the crop to the frame
+        clipped = f"{min(args.crop, height) // 8 * 8}x{min(args.crop, width) // 8 * 8}"
+        print(
+            f"note: --crop {args.crop} is larger than the {height}x{width} training frames; the crops are "
+            f"{clipped} (height x width, clipped to the frame)",
+            file=sys.stderr,
+        )
     values = {name: getattr(args, name) for name in _autoencoder_defaults() if name not in ("seed", "steps")}
     defaults = AutoencoderTraining()
     settings = AutoencoderTraining(
@@ -130,6 +149,7 @@ def run(args: argparse.Namespace) -> int:
             "output folder already holds a training run (drop --no-resume to continue it)", args.out
         )
     store = PacketStore(args.packets)
+    _check_split(store, "train", args.packets)
     tc = config.train
     dataset = store.training_dataset(
         split="train", min_views=tc.min_views, max_views=tc.max_views, seed=tc.seed
@@ -174,6 +194,8 @@ def run(args: argparse.Namespace) -> int:
         time.perf_counter() - began,
         result.validation[-1] if result.validation else last_validation(args.out),
     )
+    if int(os.environ.get("RANK", "0")) != 0:
+        return 0  # several processes (accelerate launch): the main one prints the summary
     losses = ", ".join(f"{k} {v:.4f}" for k, v in result.losses.items())
     print(
         f"trained {config.model.method} to step {result.step}: {result.checkpoint}"
@@ -183,6 +205,26 @@ def run(args: argparse.Namespace) -> int:
         last = result.validation[-1]
         print("validation: " + ", ".join(f"{k} {v:.4f}" for k, v in last.items() if k != "step"))
     return 0
+
+
+def _check_split(store: object, split: str, packets: Path) -> None:
+    """Refuse a store without ``split`` packets, naming the splits it has (a test-only store, say).
+
+    Raises:
+        UsageError: no packet of ``split`` in ``store``.
+    """
+    from setdiff_bench.errors import UsageError
+
+    if store.packet_ids(split):  # type: ignore[attr-defined]
+        return
+    index = getattr(store, "index", None)
+    splits = sorted({str(s) for s in index["split"]}) if index is not None and len(index) else []
+    raise UsageError(
+        f"training reads the store's {split} split, and this store has no {split} packets "
+        f"(its splits: {', '.join(splits) or 'none'}); prepare one with training scenes "
+        "(setdiff-bench demo --train makes one)",
+        packets,
+    )
 
 
 def _on_cpu(device: str) -> bool:

