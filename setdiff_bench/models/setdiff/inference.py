@@ -36,6 +36,11 @@ def target_chunks(num_targets: int, targets_per_set: int | None) -> list[list[in
     return [list(range(start, min(start + size, num_targets))) for start in range(0, num_targets, size)]
 
 
+def stacked(tensors: list[torch.Tensor]) -> torch.Tensor:
+    """``torch.stack`` on a new first axis, without a copy for a single tensor (one set per call)."""
+    return tensors[0].unsqueeze(0) if len(tensors) == 1 else torch.stack(tensors)
+
+
 def set_packets(
     packet: Packet, max_references: int | None, targets_per_set: int | None, *, renormalise: bool
 ) -> list[tuple[Packet, list[int]]]:
@@ -110,13 +115,14 @@ def enhance_packet(
                 for subset, _ in part
             ]
             num_refs = tensors[0][2]
-            geometry = None if tensors[0][1] is None else torch.stack([g for _, g, _ in tensors])
+            geometry = None if tensors[0][1] is None else stacked([g for _, g, _ in tensors])
             points = (
-                torch.stack([surface_points(subset) for subset, _ in part])
+                stacked([surface_points(subset) for subset, _ in part])
                 if config.attention_bias != "none"
                 else None
             )
-            batch = SetBatch(torch.stack([images for images, _, _ in tensors]), geometry, num_refs, points)
+            batch = SetBatch(stacked([images for images, _, _ in tensors]), geometry, num_refs, points)
+            del tensors, geometry, points  # the batch holds them now (at 576×1024: GBs for a large set)
             enhanced = model.enhance(
                 batch.to(parameter.device, parameter.dtype), guidance_scale=guidance_scale
             )

@@ -48,6 +48,23 @@ from setdiff_bench.models.setdiff.set_mixer import (
 )
 from setdiff_bench.models.setdiff.vae_codec import Encoded, LatentCodec
 
+#: Pixels (views × H × W) that the VAE encoder, Ψ and the decoder take per call at inference.  They work
+#: view by view at full resolution, so a 16-view 576×1024 set in one call would hold gigabytes of
+#: activations; in chunks of this many pixels their peak memory is bounded whatever the set size (the
+#: UNet still sees the whole set at once).  2 Mi pixels = three 576×1024 views; every set of the
+#: 256×144 driving demo fits one chunk.
+INFERENCE_CHUNK_PIXELS = 1 << 21
+
+
+def views_per_chunk(height: int, width: int) -> int:
+    """Views per encoder / Ψ / decoder call at inference for ``height × width`` images (at least one)."""
+    return max(1, INFERENCE_CHUNK_PIXELS // max(1, height * width))
+
+
+def view_chunks(count: int, size: int) -> list[slice]:
+    """``range(count)`` as consecutive slices of at most ``size``."""
+    return [slice(start, min(start + size, count)) for start in range(0, count, size)]
+
 
 @dataclass
 class SetPrediction:
@@ -190,6 +207,7 @@ class SetDiffModel(nn.Module):
         guidance_scale: float = 1.0,
         geometry_keep: torch.Tensor | None = None,
         points: torch.Tensor | None = None,
+        view_chunk: int | None = None,
     ) -> torch.Tensor:
         """x̂0 for every view, ``(B·V, C, h, w)``.
 
@@ -201,10 +219,12 @@ class SetDiffModel(nn.Module):
                 multiplication keeps Ψ in the graph so DDP sees all parameters used.
             points: ``(B·V, 4, H, W)`` pixel surface points for the attention bias (or ``None``);
                 dropped with the geometry.
+            view_chunk: run Ψ on this many views per call (``None`` = all at once).
         """
         if geometry is None or self.geometry_encoder is None:
             return self.to_x0(latents, self.unet_output(latents, num_views))
-        g = self.geometry_latents(geometry.to(latents.dtype))
+        chunks = view_chunks(geometry.shape[0], view_chunk or geometry.shape[0])
+        g = torch.cat([self.geometry_latents(geometry[chunk].to(latents.dtype)) for chunk in chunks])
         cells = self.latent_points(points)
         if geometry_keep is not None:
             keep = geometry_keep.to(g.dtype).repeat_interleave(num_views)
@@ -271,11 +291,43 @@ class SetDiffModel(nn.Module):
         sets, views, n = batch.num_sets, batch.num_views, batch.num_references
         images, geometry, points = _merged_views(batch)
         targets = (torch.arange(sets)[:, None] * views + torch.arange(n, views)[None, :]).reshape(-1)
-        encoded = self.encode(images, targets.to(images.device))
-        x0 = self.predict_x0(encoded.latents, geometry, views, guidance_scale=scale, points=points)
+        chunk = views_per_chunk(int(images.shape[-2]), int(images.shape[-1]))
+        encoded = self._encode_in_chunks(images, targets.to(images.device), chunk)
+        x0 = self.predict_x0(
+            encoded.latents, geometry, views, guidance_scale=scale, points=points, view_chunk=chunk
+        )
         chosen = targets.to(x0.device)
-        decoded = self.output_images(x0[chosen], encoded.latents[chosen], images[chosen], encoded.skips)
+        target_skips = encoded.skips
+        decoded = torch.cat(
+            [
+                self.output_images(
+                    x0[chosen[part]],
+                    encoded.latents[chosen[part]],
+                    images[chosen[part]],
+                    None if target_skips is None else tuple(skip[part] for skip in target_skips),
+                )
+                for part in view_chunks(len(chosen), max(1, chunk // 2))  # residual decodes twice
+            ]
+        )
         return decoded.reshape(sets, views - n, *decoded.shape[1:]).float()
+
+    def _encode_in_chunks(self, images: torch.Tensor, keep_skips: torch.Tensor, chunk: int) -> Encoded:
+        """:meth:`encode` of ``(V, 3, H, W)`` images ``chunk`` views per call; the skips of
+        ``keep_skips`` (ascending indices into V) come back in that order."""
+        if chunk >= images.shape[0]:
+            return self.encode(images, keep_skips)
+        parts = []
+        for views in view_chunks(images.shape[0], chunk):
+            local = keep_skips[(keep_skips >= views.start) & (keep_skips < views.stop)] - views.start
+            parts.append(self.encode(images[views], local))
+        latents = torch.cat([part.latents for part in parts])
+        if parts[0].skips is None:
+            return Encoded(latents=latents, skips=None)
+        levels = len(parts[0].skips)
+        skips = tuple(
+            torch.cat([part.skips[level] for part in parts if part.skips]) for level in range(levels)
+        )
+        return Encoded(latents=latents, skips=skips)
 
     def trainable_parameters(self) -> list[nn.Parameter]:
         """UNet (fully), Ψ, the decoder per ``vae_decoder`` (LoRA/full), skip convs, a learned text embedding."""

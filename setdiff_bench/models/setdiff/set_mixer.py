@@ -36,6 +36,10 @@ BIAS_PARAMETER = "set_bias_log_scale"
 BIAS_INITIAL_SCALE = 2.0
 #: Squared distances are capped here (packet units²): beyond it a token is simply "elsewhere".
 BIAS_DISTANCE_CAP = 4.0
+#: Most elements (sets × queries × keys) of one block of the distance bias: 16 Mi float32 = 64 MiB (each set
+#: of the 256×144 driving demo is one block, as before blocking existed).  The bias is built and applied
+#: block by block over queries (:func:`biased_attention`), never as T × T.
+BIAS_BLOCK_ELEMENTS = 1 << 24
 
 
 def set_kwargs(num_views: int, points: torch.Tensor | None = None) -> dict[str, Any]:
@@ -74,17 +78,63 @@ def pool_token_points(points: torch.Tensor, tokens: int) -> tuple[torch.Tensor, 
     return xyz.flatten(2).transpose(1, 2), (coverage > 0.5).flatten(1)
 
 
-def distance_bias(points: torch.Tensor, valid: torch.Tensor, scale: torch.Tensor) -> torch.Tensor:
-    """Additive attention logits ``(B, 1, T, T)`` = ``−scale · min(‖p_q − p_k‖², cap)``; pairs where either
+def distance_bias(
+    points: torch.Tensor, valid: torch.Tensor, scale: torch.Tensor, rows: slice | None = None
+) -> torch.Tensor:
+    """Additive attention logits ``(B, 1, Q, T)`` = ``−scale · min(‖p_q − p_k‖², cap)``; pairs where either
     token has no surface point get the cap (a query without a point thus gets a constant row: no effect).
 
     Args:
         points: ``(B, T, 3)`` token surface points (packet units); valid: ``(B, T)`` bool.
+        rows: the queries to compute the logits of (``None`` = all T, so Q = T); the keys are always all T.
     """
-    squared = torch.cdist(points, points).square().clamp(max=BIAS_DISTANCE_CAP)
-    both = valid[:, :, None] & valid[:, None, :]
+    rows = slice(None) if rows is None else rows
+    squared = torch.cdist(points[:, rows], points).square().clamp(max=BIAS_DISTANCE_CAP)
+    both = valid[:, rows, None] & valid[:, None, :]
     squared = torch.where(both, squared, torch.full_like(squared, BIAS_DISTANCE_CAP))
     return (-scale * squared)[:, None]
+
+
+def bias_block_rows(sets: int, tokens: int) -> int:
+    """Queries per block of :func:`biased_attention`: as many as keep one block's bias within
+    :data:`BIAS_BLOCK_ELEMENTS` (at least one)."""
+    return max(1, BIAS_BLOCK_ELEMENTS // max(1, sets * tokens))
+
+
+def biased_attention(
+    query: torch.Tensor,
+    key: torch.Tensor,
+    value: torch.Tensor,
+    points: torch.Tensor,
+    valid: torch.Tensor,
+    scale: torch.Tensor,
+) -> torch.Tensor:
+    """``softmax(QKᵀ/√d + distance_bias)·V``, computed blockwise over queries so that no ``T × T`` tensor is
+    ever held: each block of queries gets its rows of :func:`distance_bias` as the additive mask of a
+    fused SDPA kernel (which never materialises the attention matrix), so peak memory grows linearly
+    with T.  Each query's softmax runs over all keys, so the result equals the unblocked one.
+
+    Args:
+        query, key, value: ``(B, heads, T, d)``.
+        points: ``(B, T, 3)`` token surface points; valid: ``(B, T)`` bool; scale: the bias strength.
+
+    Returns:
+        ``(B, heads, T, d)``.
+    """
+    sets, _, total, _ = query.shape
+    block = bias_block_rows(sets, total)
+    if block >= total:
+        bias = distance_bias(points, valid, scale).to(query.dtype)
+        return F.scaled_dot_product_attention(query, key, value, attn_mask=bias)
+    # Written into one preallocated output: collecting per-block outputs between the large bias blocks
+    # fragments the CPU heap (glibc kept 2 GB for a 16-view 576×1024 set).  Autograd tracks the
+    # in-place writes, so training through this path works as the unblocked one.
+    output = query.new_empty(*query.shape[:3], value.shape[-1])
+    for start in range(0, total, block):
+        rows = slice(start, min(start + block, total))
+        bias = distance_bias(points, valid, scale, rows).to(query.dtype)
+        output[:, :, rows] = F.scaled_dot_product_attention(query[:, :, rows], key, value, attn_mask=bias)
+    return output
 
 
 def mixer_level(name: str, levels: int) -> int:
@@ -165,16 +215,20 @@ class SetSelfAttnProcessor:
         ) -> torch.Tensor:  # (B·V, L, h·d) → (B, h, V·L, d); a view in "(b v)" order
             return x.reshape(sets, num_views * tokens, heads, head_dim).transpose(1, 2)
 
-        bias = None
+        query, key, value = to_heads(query), to_heads(key), to_heads(value)
         log_scale = getattr(attn, BIAS_PARAMETER, None)
         if token_points is not None and log_scale is not None:
             points, valid = pool_token_points(token_points, tokens)
-            bias = distance_bias(
-                points.reshape(sets, num_views * tokens, 3), valid.reshape(sets, -1), log_scale.exp()
-            ).to(query.dtype)
-        mixed = F.scaled_dot_product_attention(
-            to_heads(query), to_heads(key), to_heads(value), attn_mask=bias
-        )
+            mixed = biased_attention(
+                query,
+                key,
+                value,
+                points.reshape(sets, num_views * tokens, 3),
+                valid.reshape(sets, -1),
+                log_scale.exp(),
+            )
+        else:
+            mixed = F.scaled_dot_product_attention(query, key, value)
         mixed = mixed.transpose(1, 2).reshape(batch_views, tokens, heads * head_dim).to(query.dtype)
         mixed = attn.to_out[0](mixed)
         mixed = attn.to_out[1](mixed)
