@@ -99,6 +99,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="file holding the bearer token every RPC but health must carry (re-read when it changes); "
         "default $SETDIFF_SERVE_TOKEN if set. Never give the token itself as an argument",
     )
+    parser.add_argument(
+        "--ply-root",
+        type=Path,
+        default=None,
+        help="folder of scene PLYs a session may name (ply_path, relative to it) to render C-maps the client "
+        "does not send; default: none (sessions must send C-maps)",
+    )
     # a token given as an argument shows in `ps` to every user: refused without echoing it (and without
     # argparse taking `--token X` as an abbreviation of --token-file)
     parser.add_argument("--token", dest="token_argument", default=None, help=argparse.SUPPRESS)
@@ -136,6 +143,8 @@ def settings_from_arguments(args: argparse.Namespace) -> ServeSettings:
         value = getattr(args, name)
         if not math.isfinite(value) or value < 0 or (value == 0 and name != "grace"):
             raise UsageError(f"must be a finite number > 0, got {value}", f"--{name.replace('_', '-')}")
+    if args.ply_root is not None and not args.ply_root.is_dir():
+        raise UsageError("not a folder", args.ply_root)
     tls = ServerTls.from_files(args.tls_cert, args.tls_key, args.tls_client_ca)
     token = token_source(args.token_file)
     check_bind(args.host, tls, token, args.insecure)
@@ -153,6 +162,7 @@ def settings_from_arguments(args: argparse.Namespace) -> ServeSettings:
         tls=tls,
         token=token,
         insecure=args.insecure,
+        ply_root=args.ply_root,
     )
 
 

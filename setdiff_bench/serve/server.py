@@ -107,25 +107,30 @@ class FairLock:
 
     Each session holds its own lock while it waits here, so a session has at most one call waiting:
     FIFO over calls is round-robin over the sessions calling at once -- none waits for more than one
-    call of each other session.  ``grants`` records the last owners served (for measurements).
+    call of each other session.  ``grants`` records the last owners served and ``arrivals`` the order in
+    which each of them had asked (0, 1, 2, ...: increasing when FIFO holds), for tests and measurements.
     """
 
     def __init__(self, history: int = 4096) -> None:
         self._condition = threading.Condition()
-        self._queue: collections.deque[object] = collections.deque()
+        self._queue: collections.deque[int] = collections.deque()
         self._held = False
+        self._asked = 0
         self.grants: collections.deque[str] = collections.deque(maxlen=history)
+        self.arrivals: collections.deque[int] = collections.deque(maxlen=history)
 
     @contextmanager
     def hold(self, owner: str) -> Iterator[None]:
-        ticket = object()
         with self._condition:
+            ticket = self._asked
+            self._asked += 1
             self._queue.append(ticket)
-            while self._held or self._queue[0] is not ticket:
+            while self._held or self._queue[0] != ticket:
                 self._condition.wait()
             self._queue.popleft()
             self._held = True
             self.grants.append(owner)
+            self.arrivals.append(ticket)
         try:
             yield
         finally:
@@ -140,7 +145,7 @@ class _Session:
     idle_timeout: float
     held_bytes: int
     lock: threading.Lock = field(default_factory=threading.Lock)
-    last_used: float = field(default_factory=time.monotonic)
+    last_used: float = 0.0  # the service clock's time at the end of the last call
     busy: int = 0
 
 
@@ -177,9 +182,12 @@ def _session_bytes(request: pb.StartSessionRequest) -> int:
 class EnhancerService(pb_grpc.EnhancerServicer):
     """The RPC handlers; ``enhancer`` is a loaded SetDiff/DiFix enhancer."""
 
-    def __init__(self, enhancer: Any, settings: ServeSettings) -> None:
+    def __init__(
+        self, enhancer: Any, settings: ServeSettings, clock: Callable[[], float] = time.monotonic
+    ) -> None:
         self.enhancer = enhancer
         self.settings = settings
+        self.clock = clock  # seconds, monotonic (idle expiry)
         self.sessions: dict[str, _Session] = {}
         self.expired: collections.OrderedDict[str, float] = collections.OrderedDict()
         self.internal_errors = 0
@@ -189,7 +197,7 @@ class EnhancerService(pb_grpc.EnhancerServicer):
     # ------------------------------------------------------------------ sessions
     def expire_idle(self, now: float | None = None) -> int:
         """Drop sessions idle past their timeout (none with a call in flight); returns how many."""
-        now = time.monotonic() if now is None else now
+        now = self.clock() if now is None else now
         with self._sessions_lock:
             stale = [
                 key
@@ -221,9 +229,7 @@ class EnhancerService(pb_grpc.EnhancerServicer):
         with self._sessions_lock:
             session = self.sessions.get(session_uuid)
             idle = session is not None and session.busy == 0
-            if (
-                idle and time.monotonic() - session.last_used > session.idle_timeout
-            ):  # before the reaper looked
+            if idle and self.clock() - session.last_used > session.idle_timeout:  # the reaper is late
                 self.expired[session_uuid] = self.sessions.pop(session_uuid).idle_timeout
                 session = None
             if session is None:
@@ -234,7 +240,7 @@ class EnhancerService(pb_grpc.EnhancerServicer):
         finally:
             with self._sessions_lock:
                 session.busy -= 1
-                session.last_used = time.monotonic()
+                session.last_used = self.clock()
 
     # ------------------------------------------------------------------ RPCs
     @_rpc
@@ -249,11 +255,8 @@ class EnhancerService(pb_grpc.EnhancerServicer):
                 "",
             )
         held = _session_bytes(request)
-        ply = None
-        if request.ply_path:
-            ply = Path(request.ply_path)
-            if not ply.is_file():
-                raise StreamInputError("PLY not found on the server", ply)
+        ply = self._ply(request.ply_path) if request.ply_path else None
+        if ply is not None:
             held += ply.stat().st_size
         if held > settings.max_session_bytes:
             raise _Refusal(
@@ -274,13 +277,40 @@ class EnhancerService(pb_grpc.EnhancerServicer):
             max_cameras=settings.max_cameras,
             cache_reference_latents=settings.cache_reference_latents,
         )
-        session = _Session(stream, idle_timeout=lease or settings.session_idle_timeout, held_bytes=held)
+        session = _Session(
+            stream,
+            idle_timeout=lease or settings.session_idle_timeout,
+            held_bytes=held,
+            last_used=self.clock(),
+        )
         with self._sessions_lock:
             if len(self.sessions) >= settings.max_sessions:
                 raise self._full()
             session_uuid = str(uuid.uuid4())
             self.sessions[session_uuid] = session
         return pb.SessionId(session_uuid=session_uuid, idle_timeout_s=session.idle_timeout)
+
+    def _ply(self, name: str) -> Path:
+        """``name`` as a ``.ply`` file under ``settings.ply_root`` (no absolute paths, no way out of it)."""
+        root = self.settings.ply_root
+        if root is None:
+            raise StreamInputError(
+                "this server reads no PLY files (it was started without --ply-root)", "ply_path"
+            )
+        relative = Path(name)
+        resolved_root = root.resolve()
+        candidate = (resolved_root / relative).resolve()
+        if (
+            relative.is_absolute()
+            or not candidate.is_relative_to(resolved_root)
+            or candidate.suffix != ".ply"
+        ):
+            raise StreamInputError(
+                f"{name!r} must be a .ply file relative to the server's --ply-root", "ply_path"
+            )
+        if not candidate.is_file():
+            raise StreamInputError(f"{name!r}: no such PLY under the server's --ply-root", "ply_path")
+        return candidate
 
     def _full(self) -> _Refusal:
         return _Refusal(
@@ -403,8 +433,12 @@ def _reap(service: EnhancerService, stop: threading.Event) -> None:
             LOG.exception("session reaper")
 
 
-def start_server(enhancer: Any, settings: ServeSettings | None = None) -> RunningServer:
+def start_server(
+    enhancer: Any, settings: ServeSettings | None = None, *, clock: Callable[[], float] = time.monotonic
+) -> RunningServer:
     """Bind and start the service (plus ``grpc.health.v1``) on ``settings.host:settings.port``.
+
+    ``clock`` (seconds, monotonic) times idle expiry; tests pass one they move.
 
     Raises:
         UsageError: a non-loopback host without TLS and a token (and not ``insecure``).
@@ -422,7 +456,7 @@ def start_server(enhancer: Any, settings: ServeSettings | None = None) -> Runnin
             ("grpc.so_reuseport", 0),
         ],
     )
-    service = EnhancerService(enhancer, settings)
+    service = EnhancerService(enhancer, settings, clock)
     pb_grpc.add_EnhancerServicer_to_server(service, server)
     health_servicer = health.HealthServicer()
     health_pb2_grpc.add_HealthServicer_to_server(health_servicer, server)

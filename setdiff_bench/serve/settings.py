@@ -1,13 +1,16 @@
-"""How ``setdiff-bench serve`` runs (no grpc import, so the CLI can list the verb without grpcio)."""
+"""How ``setdiff-bench serve`` runs (no grpc or torch import, so ``serve --help`` answers at once)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
-from setdiff_bench.evaluation.stream import MAX_CAMERAS_PER_TICK
 from setdiff_bench.serve.security import ServerTls, TokenSource
 
 DEFAULT_HOST = "127.0.0.1"
+#: Most frames one tick may carry by default: ``setdiff_bench.evaluation.stream.MAX_CAMERAS_PER_TICK``
+#: (not imported: that module loads torch; ``tests/serve/test_lifecycle.py`` checks they agree).
+MAX_CAMERAS_PER_TICK = 16
 
 #: Bytes one reference of ``H × W`` pixels holds in a session, per pixel: float32 RGB (3), world C-map
 #: (3) and alpha (1) -- the :class:`~setdiff_bench.evaluation.stream.StreamSession`'s ``ViewSet``.
@@ -42,6 +45,8 @@ class ServeSettings:
         tls: server certificate, key and optional client CA (mutual TLS); ``None``: plaintext.
         token: the bearer token every RPC but health must carry; ``None``: none asked.
         insecure: allow a non-loopback ``host`` without TLS and a token.
+        ply_root: folder whose ``.ply`` files a session's ``ply_path`` may name (relative to it); ``None``:
+            ``ply_path`` is refused (a client never names arbitrary files of the server's disk).
     """
 
     host: str = DEFAULT_HOST
@@ -57,6 +62,7 @@ class ServeSettings:
     tls: ServerTls | None = None
     token: TokenSource | None = None
     insecure: bool = False
+    ply_root: Path | None = None
 
     @property
     def max_session_bytes(self) -> int:

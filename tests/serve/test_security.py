@@ -248,3 +248,51 @@ def test_port_in_use_prints_one_line(enhancer: Any) -> None:
     assert result.stderr.splitlines() == [
         f"setdiff-bench serve: error: 127.0.0.1:{running.port}: cannot bind (address in use or not available)"
     ]
+
+
+def test_ply_path_is_confined_to_the_ply_root(enhancer: Any, tmp_path: Path) -> None:
+    """A session may name a PLY (its C-maps are then rendered) only relative to --ply-root."""
+    import torch
+
+    from setdiff_bench.evaluation.stream import Views
+    from setdiff_bench.gaussians.model import GaussianModel
+    from setdiff_bench.gaussians.ply import write_ply
+
+    generator = torch.Generator().manual_seed(0)
+    count = 300
+    means = torch.rand(count, 3, generator=generator) * torch.tensor([12.0, 8.0, 3.0]) + torch.tensor(
+        [14.0, 2.0, -0.5]
+    )
+    model = GaussianModel(
+        means=means,
+        quats=torch.tensor([[1.0, 0.0, 0.0, 0.0]]).repeat(count, 1),
+        log_scales=torch.full((count, 3), -1.0),
+        opacity_logits=torch.full((count,), 2.0),
+        sh=torch.rand(count, 1, 3, generator=generator),
+    )
+    (tmp_path / "plys" / "drive").mkdir(parents=True)
+    write_ply(tmp_path / "plys" / "drive" / "lane0.ply", model)
+    (tmp_path / "plys" / "drive" / "notes.txt").write_text("not a PLY")
+    write_ply(tmp_path / "outside.ply", model)
+    references, frames = recorded_references(), tick_frames(0)
+    bare_references = Views(references.images, references.cameras, names=references.names)
+    with (
+        serving(enhancer, ply_root=tmp_path / "plys") as running,
+        EnhancerClient(f"127.0.0.1:{running.port}") as client,
+    ):
+        session = client.start_session(bare_references, ply_path="drive/lane0.ply")
+        images = client.enhance(session, Views(frames.images, frames.cameras))  # C-maps rendered
+        assert images.shape == (3, HEIGHT, WIDTH, 3)
+        client.close_session(session)
+        for bad in (
+            "../outside.ply",
+            str(tmp_path / "outside.ply"),
+            "drive/notes.txt",
+            "drive/missing.ply",
+        ):
+            code, details = refused(lambda bad=bad: client.start_session(bare_references, ply_path=bad))
+            assert code == grpc.StatusCode.INVALID_ARGUMENT and "--ply-root" in details, (bad, details)
+            assert str(tmp_path) not in details.replace(bad, "")  # the server's folders are not revealed
+    with serving(enhancer) as running, EnhancerClient(f"127.0.0.1:{running.port}") as client:
+        code, details = refused(lambda: client.start_session(bare_references, ply_path="drive/lane0.ply"))
+        assert code == grpc.StatusCode.INVALID_ARGUMENT and "without --ply-root" in details
