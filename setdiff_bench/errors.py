@@ -65,6 +65,10 @@ class CheckpointError(SetDiffBenchError):
     """A checkpoint is missing, unsafe, or belongs to another configuration."""
 
 
+class MemoryNeedError(SetDiffBenchError):
+    """The work asked for needs more memory than the device has available (checked before it starts)."""
+
+
 def key_mismatch(expected: Iterable[str], found: Iterable[str], examples: int = 3) -> str | None:
     """``None`` when the two name sets agree, else ``"N missing (e.g. [...]), M unexpected (e.g. [...])"``.
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import contextlib
 import importlib
 import os
 import pkgutil
@@ -18,7 +19,8 @@ import re
 import shlex
 import sys
 import textwrap
-from collections.abc import Sequence
+import warnings
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from types import ModuleType
 from typing import NoReturn
@@ -147,6 +149,23 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+@contextlib.contextmanager
+def one_line_warnings(verb: str) -> Iterator[None]:
+    """Show the toolkit's own warnings (classes defined in ``setdiff_bench``) as one line
+    ``setdiff-bench <verb>: warning: <message>`` on stderr, as errors are shown; others as Python shows them."""
+    with warnings.catch_warnings():
+        python_show = warnings.showwarning
+
+        def show(message: Warning | str, category: type[Warning], *args: object, **kwargs: object) -> None:
+            if category.__module__.startswith("setdiff_bench"):
+                print(f"setdiff-bench {verb}: warning: {' '.join(str(message).split())}", file=sys.stderr)
+            else:
+                python_show(message, category, *args, **kwargs)  # type: ignore[arg-type]
+
+        warnings.showwarning = show
+        yield
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Parse ``argv`` and run the verb; returns the process exit code."""
     words = sys.argv[1:] if argv is None else list(argv)
@@ -155,7 +174,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     #: the command as typed, for the records a verb writes (training manifests)
     args.command_line = "setdiff-bench " + shlex.join(words)
     try:
-        with verb_threads():  # one fixed thread count: same command, same machine, same bytes
+        with verb_threads(), one_line_warnings(args.verb):  # one fixed thread count: same bytes
             return int(args._run(args) or 0)
     except SetDiffBenchError as error:
         if os.environ.get("SETDIFF_DEBUG"):

@@ -79,6 +79,33 @@ class ChecksTargets(Protocol):
     def check_targets(self, targets: Sequence[TargetRef]) -> None: ...
 
 
+@runtime_checkable
+class EstimatesMemory(Protocol):
+    """An enhancer that can say, before it runs, how much memory a packet of a given shape takes.
+
+    Attributes:
+        device: the torch device it computes on (``cpu``, ``cuda:0``).
+    """
+
+    device: str
+
+    def memory_bytes(self, references: int, targets: int, height: int, width: int) -> int:
+        """Estimated peak bytes above the loaded enhancer to enhance N references + M targets of H × W."""
+        ...
+
+
+@runtime_checkable
+class KnowsTrainingData(Protocol):
+    """An enhancer whose training data is recorded, so that it can tell when it meets other data."""
+
+    def out_of_distribution(
+        self, datasets: Sequence[str], resolutions: Sequence[tuple[int, int]], what: str
+    ) -> str | None:
+        """One warning line when ``datasets`` / ``(height, width)`` ``resolutions`` differ from its training
+        data (``what`` names them: ``this store``), else ``None``."""
+        ...
+
+
 @dataclass(frozen=True)
 class MethodSpec:
     """A registered method.

@@ -8,6 +8,7 @@ All references and targets of a packet are enhanced jointly in one set (see
 from __future__ import annotations
 
 import functools
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +19,9 @@ from setdiff_bench.io.atomic import sha256_file
 from setdiff_bench.models.setdiff import inference  # module attribute: looked up per call (tests replace it)
 from setdiff_bench.models.setdiff.checkpoint import CONFIG_FILE, WEIGHTS_FILE, load_model, resolve_checkpoint
 from setdiff_bench.models.setdiff.config import check_guidance_scale
+from setdiff_bench.models.setdiff.domain import DataDomain, checkpoint_domain, domain_mismatch
+from setdiff_bench.models.setdiff.manifest import MANIFEST_FILE
+from setdiff_bench.models.setdiff.memory import inference_bytes
 from setdiff_bench.runtime.devices import resolve_device
 from setdiff_bench.types import Packet
 
@@ -64,6 +68,43 @@ class ModelEnhancer:
             "max_references": config.model.max_references if max_references is None else max_references,
             "targets_per_set": config.model.targets_per_set if targets_per_set is None else targets_per_set,
         }
+
+    @property
+    def device(self) -> str:
+        """The device the model computes on."""
+        return self.options["device"]
+
+    @property
+    def model_name(self) -> str:
+        """``tiny_setdiff`` for a shipped model, ``RUN/step_002250`` for a training checkpoint."""
+        if (self.checkpoint / MANIFEST_FILE).is_file():
+            return self.checkpoint.name
+        return f"{self.checkpoint.parent.name}/{self.checkpoint.name}"
+
+    def memory_bytes(self, references: int, targets: int, height: int, width: int) -> int:
+        """Estimated peak bytes above the loaded model to enhance one packet
+        (:func:`setdiff_bench.models.setdiff.memory.inference_bytes` with this enhancer's options)."""
+        return inference_bytes(
+            self.config.model,
+            references=references,
+            targets=targets,
+            height=height,
+            width=width,
+            max_references=self.max_references,
+            targets_per_set=self.targets_per_set,
+            sets_per_call=self.sets_per_call,
+            guidance_scale=self.guidance_scale,
+            dtype_bytes=next(self.model.parameters()).element_size(),
+        )
+
+    def out_of_distribution(
+        self, datasets: Sequence[str], resolutions: Sequence[tuple[int, int]], what: str
+    ) -> str | None:
+        """The warning when the data differs from what the checkpoint's manifest records it was trained on
+        (:func:`setdiff_bench.models.setdiff.domain.domain_mismatch`); ``None`` without such a record."""
+        return domain_mismatch(
+            self.model_name, checkpoint_domain(self.checkpoint), DataDomain.of(datasets, resolutions), what
+        )
 
     def enhance(self, packet: Packet) -> torch.Tensor:
         """``(M, 3, H, W)`` float32 images in [0, 1], packet order (H, W divisible by 8)."""

@@ -77,6 +77,7 @@ from setdiff_bench.evaluation.paths import (
     image_relative,
     safe_component,
 )
+from setdiff_bench.evaluation.preflight import check_packets_fit, warn_out_of_distribution
 from setdiff_bench.evaluation.scoring import (
     default_warp_cache,
     quantize,
@@ -277,6 +278,8 @@ def run_method(
         if isinstance(enhancer, ChecksTargets):
             todo_set = set(todo)
             enhancer.check_targets([_target_ref(row) for row in targets if row["packet_id"] in todo_set])
+        check_packets_fit(enhancer, store.index, todo, Path(store.root))
+        warn_out_of_distribution(enhancer, store.index, todo)
         built = enhancer
         claimed = False
 

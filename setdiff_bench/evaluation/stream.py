@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import warnings
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
@@ -27,13 +28,22 @@ import numpy as np
 import torch
 
 from setdiff_bench.cameras import Camera
+from setdiff_bench.enhancers.base import EstimatesMemory, KnowsTrainingData
 from setdiff_bench.errors import UsageError
 from setdiff_bench.geometry import max_pairwise_distance, normalize_packet, select_references
 from setdiff_bench.io.images import uint8_to_float
+from setdiff_bench.models.setdiff.domain import OutOfDistributionWarning
+from setdiff_bench.runtime.memory import check_memory
 from setdiff_bench.types import Packet, ViewSet
 
 #: Most cameras one tick may carry (a rig of this many views is one set).
 MAX_CAMERAS_PER_TICK = 16
+
+#: What a simulator can change when a tick does not fit in memory.
+TICK_MEMORY_ADVICE = (
+    "send fewer cameras per tick, start the session with fewer references (max_references), "
+    "render smaller frames, or serve on another device"
+)
 
 #: References per tick when neither the session nor the enhancer caps them (a model config's
 #: ``max_references = null`` means "every reference of the packet"; a session's recorded drive may
@@ -228,6 +238,13 @@ class StreamSession:
         self.max_cameras = max_cameras
         self.latent_cache = ReferenceLatentCache() if cache_reference_latents else None
         self.ticks = 0
+        #: the one warning line when the references are unlike the enhancer's training data (else None)
+        self.out_of_distribution = None
+        if isinstance(enhancer, KnowsTrainingData):
+            height, width = self.size
+            self.out_of_distribution = enhancer.out_of_distribution([], [(height, width)], "this session")
+            if self.out_of_distribution is not None:
+                warnings.warn(self.out_of_distribution, OutOfDistributionWarning, stacklevel=2)
 
     def _geometry(self, views: Views) -> tuple[torch.Tensor, torch.Tensor]:
         count = len(views.cameras)
@@ -291,7 +308,21 @@ class StreamSession:
         return self.enhance_packet(self.packet(frames))
 
     def enhance_packet(self, packet: Packet) -> torch.Tensor:
-        """Enhance a packet built by :meth:`packet` (the model call alone, so servers can lock just it)."""
+        """Enhance a packet built by :meth:`packet` (the model call alone, so servers can lock just it).
+
+        Raises:
+            MemoryNeedError: the enhancer estimates that this tick needs more memory than its device has
+                available (nothing is enhanced; a tick with fewer cameras may fit).
+        """
+        if isinstance(self.enhancer, EstimatesMemory):
+            needed = self.enhancer.memory_bytes(
+                len(packet.references), len(packet.targets), packet.height, packet.width
+            )
+            what = (
+                f"enhancing a tick of {len(packet.references)} references + {len(packet.targets)} frames of "
+                f"{packet.width}x{packet.height} with {self.enhancer.name}"
+            )
+            check_memory(needed, self.enhancer.device, what, TICK_MEMORY_ADVICE, None)
         model = getattr(self.enhancer, "model", None)
         with torch.no_grad():
             if self.latent_cache is not None and hasattr(model, "encode"):

@@ -164,6 +164,9 @@ def test_list_and_verify_cli(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["weights", "list"]) == 0
     listed = capsys.readouterr().out
     assert all(name in listed for name in SHIPPED)
+    rows = {line.split()[0]: line for line in listed.splitlines()[1:]}
+    for name in ("tiny_setdiff", "tiny_difix"):  # the training data, for the out-of-distribution warning
+        assert "  synthetic at 256×144 / " in rows[name]
     assert main(["weights", "verify"]) == 0
     assert f"{len(SHIPPED)} shipped model(s) intact" in capsys.readouterr().out
     assert main(["weights", "verify", "no_such_model"]) == 2

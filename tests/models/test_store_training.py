@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -90,6 +91,8 @@ def test_train_on_a_packet_store_and_enhance(tmp_path: Path) -> None:
         store.load_packet("test-0")
     )
     assert enhanced.shape == (3, 3, 32, 32) and float(enhanced.min()) >= 0.0 and float(enhanced.max()) <= 1.0
+    data = json.loads((out / "manifest.json").read_text())["data"]
+    assert (data["datasets"], data["resolutions"]) == ([UNIT_LABELS["dataset"]], [[32, 32]])
 
 
 def test_training_sets_from_the_store_keep_the_packet_invariant(tmp_path: Path) -> None:

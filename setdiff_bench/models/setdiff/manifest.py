@@ -40,8 +40,10 @@ def training_data_record(store: Any, split: str) -> dict[str, Any]:
     """What a training run reads from a :class:`~setdiff_bench.packets.store.PacketStore`'s ``split``.
 
     Returns:
-        ``{"split", "packets", "views", "scenes", "synthetic_seeds", "data_sha256"}``; ``synthetic_seeds``
-        lists ``[seed, index]`` per synthetic scene (empty for other datasets).
+        ``{"split", "packets", "views", "scenes", "synthetic_seeds", "datasets", "resolutions",
+        "data_sha256"}``; ``synthetic_seeds`` lists ``[seed, index]`` per synthetic scene (empty for other
+        datasets); ``datasets`` the dataset names and ``resolutions`` the ``[height, width]`` image sizes
+        (what :mod:`~setdiff_bench.models.setdiff.domain` compares a model's inputs with).
     """
     rows = store.index[store.index["split"] == split]
     hashes = sorted(
@@ -56,6 +58,8 @@ def training_data_record(store: Any, split: str) -> dict[str, Any]:
         "views": len(rows),
         "scenes": scenes,
         "synthetic_seeds": seeds,
+        "datasets": sorted({str(d) for d in rows["dataset"]}),
+        "resolutions": sorted({(int(h), int(w)) for h, w in zip(rows["height"], rows["width"], strict=True)}),
         "data_sha256": digest,
     }
 
