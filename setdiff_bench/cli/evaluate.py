@@ -94,6 +94,9 @@ def run(args: argparse.Namespace) -> int:
             raise
         raise UsageError(other, "--packets") from error
     print(profile.caption(_scored_size(out, args.packets)))
+    unlisted = _unlisted_by_protocol(out, profile.name)
+    if unlisted:
+        print(f"note: {unlisted}", file=sys.stderr)
     print(f"tables: {out}")
     if profile.dinov2 and dinov2 is None:
         print(
@@ -143,3 +146,24 @@ def _other_store(run: Path, packets: Path) -> str | None:
         f"{packets} is not the packet store {run} was made from (its {INDEX_FILE} differs from the one "
         f"{RUN_FILE} records); pass the run's own --packets"
     )
+
+
+def _unlisted_by_protocol(tables: Path, profile: str) -> str | None:
+    """Why ``profile`` is not one the run's protocol lists (its ``[evaluation] profiles``), or ``None`` when
+    it is listed or the protocol cannot be read; said on stderr, since scoring any run under any profile is
+    allowed (docs/evaluation_profiles.md compares profiles on one synthetic run)."""
+    import pandas as pd
+
+    from setdiff_bench.errors import SetDiffBenchError
+    from setdiff_bench.protocols import load_protocol
+
+    try:
+        names = sorted(set(pd.read_parquet(tables / "metrics.parquet", columns=["protocol"])["protocol"]))
+        listed = {name: tuple(load_protocol(name).evaluation) for name in names}
+    except (OSError, ValueError, KeyError, SetDiffBenchError):
+        return None
+    outside = [name for name, profiles in listed.items() if profile not in profiles]
+    if not outside:
+        return None
+    name = outside[0]
+    return f"the {name} protocol lists the profiles {', '.join(listed[name])}, not {profile} (scored anyway)"

@@ -3,7 +3,7 @@
 Examples::
 
     setdiff-bench leaderboard --dataset synthetic --runs runs/demo/work/runs --out runs/tables --plots
-    setdiff-bench leaderboard --dataset euvs --with-reported --format latex,md --out runs/tables
+    setdiff-bench leaderboard --dataset euvs --with-reported --format latex,md --runs runs/demo/work/runs --out runs/tables
     setdiff-bench leaderboard --dataset synthetic --runs runs/demo/work/runs --out runs/tables --grids 6 \\
         --packets runs/demo/work/packets
     setdiff-bench leaderboard --dataset synthetic --runs runs/demo/work/runs --out runs/tables --against difix

@@ -226,3 +226,18 @@ def test_lpips_check_with_one_net_file(
         "lpips_vgg_v0.1.safetensors, or ask for alex only (weights lpips --check --net alex)\n"
     )
     assert main(["weights", "lpips", "--check", "--net", "alex"]) == 0
+
+
+def test_profile_the_protocol_does_not_list(tmp_path: Path) -> None:
+    """Scoring a synthetic run under euvs_official is allowed (the profiles doc does it) but said."""
+    import pandas as pd
+
+    from setdiff_bench.cli.evaluate import _unlisted_by_protocol
+
+    pd.DataFrame({"protocol": ["synthetic", "synthetic"], "psnr": [1.0, 2.0]}).to_parquet(
+        tmp_path / "metrics.parquet"
+    )
+    assert _unlisted_by_protocol(tmp_path, "euvs_official") == (
+        "the synthetic protocol lists the profiles paper, not euvs_official (scored anyway)"
+    )
+    assert _unlisted_by_protocol(tmp_path, "paper") is None
