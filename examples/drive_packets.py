@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import grpc
 import numpy as np
 import torch
 
@@ -29,7 +30,7 @@ from setdiff_bench.evaluation.stream import Views
 from setdiff_bench.io.images import write_png
 from setdiff_bench.packets.index import INDEX_FILE
 from setdiff_bench.packets.store import PacketStore, row_camera
-from setdiff_bench.serve.client import add_client_arguments, client_from_arguments
+from setdiff_bench.serve.client import EnhancerClient, add_client_arguments, client_from_arguments
 from setdiff_bench.types import ViewSet
 
 
@@ -61,19 +62,27 @@ def main() -> None:
     except SetDiffBenchError as error:
         parser.exit(2, f"{parser.prog}: error: {error.one_line()}\n")
     with client:
-        client.wait_ready()
-        for packet_id in store.packet_ids(args.split):
-            packet = store.load_packet(packet_id)
-            rows = store.rows(packet_id)
-            refs = [row for _, row in rows[rows["role"] == "ref"].iterrows()]
-            tgts = [row for _, row in rows[rows["role"] == "target"].iterrows()]
-            anchor = row_camera(tgts[0], source, world=True)
-            session = client.start_session(world_views(packet.references, refs, anchor, packet.scale, source))
-            images = client.enhance(session, world_views(packet.targets, tgts, anchor, packet.scale, source))
-            client.close_session(session)
-            for name, image in zip(packet.targets.names, images):
-                write_png(args.out / packet_id / Path(name).with_suffix(".png"), np.asarray(image))
-            print(f"{packet_id}: {len(images)} frames")
+        try:
+            drive(client, store, source, args)
+        except grpc.RpcError as error:  # refused (a bad token, a full server, ...): say so in one line
+            parser.exit(1, f"{parser.prog}: error: {error.code().name}: {error.details()}\n")
+
+
+def drive(client: EnhancerClient, store: PacketStore, source: str, args: argparse.Namespace) -> None:
+    """Replay every packet of ``args.split`` as one session and one tick; write the enhanced frames."""
+    client.wait_ready()
+    for packet_id in store.packet_ids(args.split):
+        packet = store.load_packet(packet_id)
+        rows = store.rows(packet_id)
+        refs = [row for _, row in rows[rows["role"] == "ref"].iterrows()]
+        tgts = [row for _, row in rows[rows["role"] == "target"].iterrows()]
+        anchor = row_camera(tgts[0], source, world=True)
+        session = client.start_session(world_views(packet.references, refs, anchor, packet.scale, source))
+        images = client.enhance(session, world_views(packet.targets, tgts, anchor, packet.scale, source))
+        client.close_session(session)
+        for name, image in zip(packet.targets.names, images):
+            write_png(args.out / packet_id / Path(name).with_suffix(".png"), np.asarray(image))
+        print(f"{packet_id}: {len(images)} frames")
 
 
 if __name__ == "__main__":

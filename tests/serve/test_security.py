@@ -296,3 +296,64 @@ def test_ply_path_is_confined_to_the_ply_root(enhancer: Any, tmp_path: Path) -> 
     with serving(enhancer) as running, EnhancerClient(f"127.0.0.1:{running.port}") as client:
         code, details = refused(lambda: client.start_session(bare_references, ply_path="drive/lane0.ply"))
         assert code == grpc.StatusCode.INVALID_ARGUMENT and "without --ply-root" in details
+
+
+def test_example_client_takes_the_same_options(
+    enhancer: Any, certificates: Certificates, tmp_path: Path
+) -> None:
+    """examples/drive_packets.py against a mutual-TLS server with a token: the client side of the options."""
+    from setdiff_bench.evaluation.stream import StreamSession
+    from setdiff_bench.packets.index import merge_index
+    from tests.serve.serve_fixtures import ROOT
+    from tests.stream.stream_fixtures import write_tick_store
+
+    references, frames = recorded_references(), tick_frames(0)
+    chosen = StreamSession(enhancer, references).select(frames.cameras)
+    write_tick_store(tmp_path / "store", references, frames, chosen, 0)
+    merge_index(tmp_path / "store")
+    (tmp_path / "token").write_text(TOKEN)
+    tls = ServerTls.from_files(certificates.server_cert, certificates.server_key, certificates.ca)
+
+    def example(*options: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            [
+                sys.executable,
+                str(ROOT / "examples" / "drive_packets.py"),
+                "--packets",
+                str(tmp_path / "store"),
+                "--out",
+                str(tmp_path / "out"),
+                "--address",
+                address,
+                *options,
+            ],
+            capture_output=True,
+            text=True,
+            env=environment(),
+            timeout=300,
+        )
+
+    mutual = [
+        "--tls-ca",
+        str(certificates.ca),
+        "--client-cert",
+        str(certificates.client_cert),
+        "--client-key",
+        str(certificates.client_key),
+    ]
+    with serving(enhancer, tls=tls, token=TokenSource(file=tmp_path / "token")) as running:
+        address = f"127.0.0.1:{running.port}"
+        done = example(*mutual, "--token-file", str(tmp_path / "token"))
+        assert done.returncode == 0, done.stderr
+        assert len(list((tmp_path / "out").rglob("*.png"))) == 3
+        tokenless = example(*mutual)
+        assert tokenless.returncode == 1
+        assert tokenless.stderr.splitlines() == [
+            "drive_packets.py: error: UNAUTHENTICATED: missing bearer token (metadata 'authorization: Bearer <token>')"
+        ]
+        missing = example(*mutual, "--token-file", str(tmp_path / "nope"))
+        assert (
+            missing.returncode == 2
+            and len(missing.stderr.splitlines()) == 1
+            and "nope: not found" in missing.stderr
+        )
