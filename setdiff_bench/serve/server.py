@@ -58,6 +58,8 @@ MAX_MESSAGE_BYTES = 256 * 1024 * 1024
 UNAUTHENTICATED_PREFIX = "/grpc.health.v1.Health/"
 #: How many expired session ids are remembered (to answer "expired" rather than "unknown").
 EXPIRED_MEMORY = 4096
+#: Longest session id or PLY name a request may carry (characters; ours are 36-character UUIDs).
+MAX_ID_CHARS = 64
 
 LOG = logging.getLogger("setdiff_bench.serve")
 
@@ -216,6 +218,15 @@ class EnhancerService(pb_grpc.EnhancerServicer):
             release_freed_memory()
         return len(stale)
 
+    @staticmethod
+    def _check_id(session_uuid: str) -> None:
+        """Refuse what cannot be a session id (ids are echoed in answers: keep them short and printable)."""
+        if not 0 < len(session_uuid) <= MAX_ID_CHARS or not session_uuid.isprintable():
+            raise StreamInputError(
+                f"not a session id ({len(session_uuid)} characters; ids are at most {MAX_ID_CHARS} printable)",
+                "session_uuid",
+            )
+
     def _missing(self, session_uuid: str) -> _Refusal:
         timeout = self.expired.get(session_uuid)
         if timeout is not None:
@@ -228,6 +239,7 @@ class EnhancerService(pb_grpc.EnhancerServicer):
     @contextmanager
     def _using(self, session_uuid: str) -> Iterator[_Session]:
         """The session, marked busy (it cannot expire) for the duration of the call."""
+        self._check_id(session_uuid)
         with self._sessions_lock:
             session = self.sessions.get(session_uuid)
             idle = session is not None and session.busy == 0
@@ -299,6 +311,10 @@ class EnhancerService(pb_grpc.EnhancerServicer):
             raise StreamInputError(
                 "this server reads no PLY files (it was started without --ply-root)", "ply_path"
             )
+        if len(name) > 4 * MAX_ID_CHARS or not name.isprintable():
+            raise StreamInputError(
+                f"a PLY name of {len(name)} characters, or with control characters", "ply_path"
+            )
         relative = Path(name)
         resolved_root = root.resolve()
         candidate = (resolved_root / relative).resolve()
@@ -337,6 +353,7 @@ class EnhancerService(pb_grpc.EnhancerServicer):
 
     @_rpc
     def close_session(self, request: pb.SessionId, context: grpc.ServicerContext) -> pb.Empty:
+        self._check_id(request.session_uuid)
         with self._sessions_lock:
             removed = self.sessions.pop(request.session_uuid, None)
             if removed is None:

@@ -307,3 +307,17 @@ def test_serve_settings_agree_with_the_stream_api_and_load_no_torch() -> None:
     probe = "import sys, setdiff_bench.cli.serve; print('torch' in sys.modules, 'grpc' in sys.modules)"
     loaded = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
     assert loaded.stdout.split() == ["False", "False"]  # serve --help stays fast
+
+
+def test_session_ids_that_cannot_be_ours_are_refused_without_echo(enhancer: Any) -> None:
+    with serving(enhancer) as (_, client):
+        request = client.enhance_request("x" * 10_000, tick_frames(0))
+        for call in (
+            lambda: client.stub.enhance(request, timeout=30),
+            lambda: client.close_session("bad\nid"),
+            lambda: client.close_session(""),
+        ):
+            code, details = refused(call)
+            assert code == grpc.StatusCode.INVALID_ARGUMENT and "not a session id" in details
+            assert len(details) < 200 and "\n" not in details
+        assert refused(lambda: client.close_session("0" * 36))[0] == grpc.StatusCode.NOT_FOUND
