@@ -29,6 +29,11 @@ from tests.stream.stream_fixtures import (
     write_tick_store,
 )
 
+#: The tests' 48×32 frames are smaller than the shipped models' 256×144: the domain warning is expected.
+pytestmark = pytest.mark.filterwarnings(
+    "ignore::setdiff_bench.models.setdiff.domain.OutOfDistributionWarning"
+)
+
 TICKS = 4
 
 
