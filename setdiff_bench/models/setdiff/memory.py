@@ -34,6 +34,9 @@ _LIVE = 4
 _PACKET_CHANNELS = 7
 _TARGET_CHANNELS = 3.25
 FLOAT32 = 4
+#: Allocations that do not grow with the packet (kernel workspaces, allocator slack): 0.14–0.16 GB above
+#: the loaded model for a 2 + 2 packet at 256×144 (``benchmarks/memory.py``).
+_OVERHEAD = 128 << 20
 
 
 def set_input_channels(config: ModelConfig) -> int:
@@ -101,11 +104,15 @@ def inference_bytes(
     )
     batch = FLOAT32 * pixels * sets * views * set_input_channels(config)
     skips = dtype_bytes * pixels * sets * set_targets * skip_channels(config)
-    bias_block = 3 * FLOAT32 * BIAS_BLOCK_ELEMENTS if config.attention_bias != "none" else 0
+    lowest_tokens = (
+        views * pixels / (config.latent_factor * 2 ** (len(config.unet["block_out_channels"]) - 1)) ** 2
+    )
+    bias_elements = min(BIAS_BLOCK_ELEMENTS, branches * sets * lowest_tokens**2)
+    bias_block = 3 * FLOAT32 * bias_elements if config.attention_bias != "none" else 0
     working = max(
         batch,  # the stacked copy while the batch is built
         _LIVE * dtype_bytes * pixels * chunk * widths[0],
         _LIVE * dtype_bytes * latent_pixels * branches * sets * views * unet_width + bias_block,
         _LIVE * dtype_bytes * pixels * decode_chunk * max(widths[:2]),
     )
-    return int(held + batch + skips + working)
+    return int(_OVERHEAD + held + batch + skips + working)
