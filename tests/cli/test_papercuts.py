@@ -16,9 +16,10 @@ from setdiff_bench.cli.synth import SceneProgress
 from setdiff_bench.evaluation.profiles import get_profile
 from setdiff_bench.models.setdiff.train import TrainResult
 from setdiff_bench.runtime.threads import torch_threads
+from tests.cli.conftest import IndexedFakeStore
 from tests.cli.test_help_examples import extract_examples, help_texts
 from tests.models.setdiff_fixtures import train_argv
-from tests.models.test_cli_train import CONFIG, FakeStore, fake_store  # noqa: F401 (fixture)
+from tests.models.test_cli_train import CONFIG
 from tests.run.store_fixtures import StoreSpec, build_store
 
 #: Verbs whose options belong to other owners this issue does not edit (their gaps are reported).
@@ -150,7 +151,7 @@ def test_autoencoder_crop_larger_than_frames_is_said(tmp_path: Path, monkeypatch
 
 def test_ddp_summary_printed_once(
     tmp_path: Path,
-    fake_store: type[FakeStore],  # noqa: F811
+    train_store: type[IndexedFakeStore],
     monkeypatch: pytest.MonkeyPatch,
     capsys: pytest.CaptureFixture[str],
 ) -> None:

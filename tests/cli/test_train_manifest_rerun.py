@@ -10,13 +10,14 @@ import pytest
 from setdiff_bench.cli.main import main
 from setdiff_bench.models.setdiff.manifest import MANIFEST_FILE
 from setdiff_bench.models.setdiff.train import VALIDATION_FILE
+from tests.cli.conftest import IndexedFakeStore
 from tests.models.setdiff_fixtures import train_argv
-from tests.models.test_cli_train import CONFIG, FakeStore, fake_store  # noqa: F401 (fixture)
+from tests.models.test_cli_train import CONFIG
 
 
 def test_noop_rerun_keeps_validation(
     tmp_path: Path,
-    fake_store: type[FakeStore],  # noqa: F811
+    train_store: type[IndexedFakeStore],
     capsys: pytest.CaptureFixture[str],
 ) -> None:
     config = tmp_path / "tiny.toml"
