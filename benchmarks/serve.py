@@ -40,6 +40,8 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -302,9 +304,9 @@ class Slot:
 
 
 def load_phase(
-    address: str, folder: Path, clients: int, ticks: int, rng: random.Random
+    address: str, folder: Path, clients: int, ticks: int, rng: random.Random, kill: bool = True
 ) -> tuple[list[Slot], float]:
-    victims = set(rng.sample(range(clients), max(1, clients // 4)))
+    victims = set(rng.sample(range(clients), max(1, clients // 4))) if kill else set()
     slots = [
         Slot(i, address, folder, ticks, rng.randrange(1, ticks - 1) if i in victims else None)
         for i in range(clients)
@@ -353,6 +355,86 @@ def full_sessions(address: str, pid: int, sessions: int, idle_timeout: float) ->
     }
 
 
+class ArrivalLock:
+    """Python's ``threading.Lock`` (no order promised) with :class:`~setdiff_bench.serve.server.FairLock`'s
+    records (``grants``, ``arrivals``): the comparison the FIFO lock is measured against.  A call's arrival
+    number is taken just before it asks for the lock, so two calls arriving within a few microseconds may
+    count as an overtake that no lock could have avoided; FIFO's records are exact (taken under its lock)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._counter = threading.Lock()
+        self._asked = 0
+        self.grants: list[str] = []
+        self.arrivals: list[int] = []
+
+    @contextmanager
+    def hold(self, owner: str) -> Iterator[None]:
+        with self._counter:
+            ticket = self._asked
+            self._asked += 1
+        with self._lock:
+            self.grants.append(owner)
+            self.arrivals.append(ticket)
+            yield
+
+
+def overtakes(arrivals: list[int]) -> list[int]:
+    """For each grant, how many calls that asked later were served before it (0 everywhere under FIFO)."""
+    return [sum(1 for earlier in arrivals[:i] if earlier > mine) for i, mine in enumerate(arrivals)]
+
+
+def compare_locks(
+    checkpoint: str, method: str, folder: Path, clients: int, ticks: int, expected: dict[int, np.ndarray]
+) -> dict[str, Any]:
+    """The same N clients (no kills) against an in-process server with the FIFO model lock, then with a plain
+    ``threading.Lock``: per-client latency spread and how often a later tick overtook an earlier one."""
+    from setdiff_bench.serve.server import start_server
+    from setdiff_bench.serve.settings import ServeSettings
+
+    enhancer = load_enhancer(method, checkpoint, device="cpu")
+    results = {}
+    for name in ("fifo", "threading_lock"):
+        running = start_server(
+            enhancer, ServeSettings(port=0, workers=8, max_queue=4 * clients, max_sessions=clients)
+        )
+        if name == "threading_lock":
+            running.service.model_lock = ArrivalLock()
+        try:
+            phase_folder = folder / f"locks_{name}"
+            phase_folder.mkdir()
+            for recording in range(RECORDINGS):
+                (phase_folder / f"rec{recording}").symlink_to(folder / f"rec{recording}")
+            slots, seconds = load_phase(
+                f"127.0.0.1:{running.port}", phase_folder, clients, ticks, random.Random(0), kill=False
+            )
+        finally:
+            running.stop(grace=5)
+        means, latencies, equal = [], [], True
+        for slot in slots:
+            if slot.result is None:
+                raise RuntimeError(f"client {slot.index} failed: {slot.error}")
+            data = np.load(slot.result)
+            means.append(float(data["latencies"].mean()))
+            latencies.extend(data["latencies"].tolist())
+            equal = equal and bool(np.array_equal(data["images"], expected[slot.recording]))
+        passed = overtakes(list(running.service.model_lock.arrivals))
+        stats = percentiles(latencies, len(RIG))
+        results[name] = {
+            "latency_p50_ms": stats["p50_ms"],
+            "latency_p99_ms": stats["p99_ms"],
+            "throughput_frames_per_s": len(latencies) * len(RIG) / seconds,
+            "fairness_jain_of_client_mean_latency": jain(means),
+            "client_mean_latency_max_over_min": max(means) / min(means),
+            "grants_overtaken": sum(1 for n in passed if n),
+            "max_overtaken_by": max(passed),
+            "grants": len(passed),
+            "byte_equal_to_batch_runner": equal,
+        }
+        print(name, json.dumps(results[name]), flush=True)
+    return {"clients": clients, "ticks_per_client": ticks, "server": "in the benchmark's process", **results}
+
+
 def jain(values: list[float]) -> float:
     """Jain's fairness index: 1 when all equal, 1/n when one takes everything."""
     array = np.asarray(values, dtype=np.float64)
@@ -360,7 +442,13 @@ def jain(values: list[float]) -> float:
 
 
 def load_test(
-    checkpoint: str, method: str, clients: list[int], ticks: int, idle_timeout: float, seed: int
+    checkpoint: str,
+    method: str,
+    clients: list[int],
+    ticks: int,
+    idle_timeout: float,
+    seed: int,
+    with_lock_comparison: bool = True,
 ) -> dict[str, Any]:
     rng = random.Random(seed)
     with tempfile.TemporaryDirectory() as temporary:
@@ -460,7 +548,13 @@ def load_test(
             full["rss_after_minus_idle_mib"] = full["rss_after_expiry_mib"] - idle_rss
         finally:
             stop_served(process)
+        locks = (
+            compare_locks(checkpoint, method, folder, max(clients), ticks, expected)
+            if with_lock_comparison
+            else None
+        )
     return {
+        "lock_comparison": locks,
         "phases": phases,
         "rss_cold_mib": cold_rss,
         "rss_idle_mib": idle_rss,

@@ -28,10 +28,11 @@ DESCRIPTION = (
     f"({_DEFAULTS.max_sessions} x {_DEFAULTS.max_session_mib:g} MiB = "
     f"{_DEFAULTS.worst_case_mib() / 1024:g} GiB at the defaults), plus the model and up to --max-queue "
     "requests in flight (at most 256 MiB each).\n\n"
-    "examples:\n"
-    "  setdiff-bench serve --checkpoint tiny_setdiff --port 50051\n"
-    "  setdiff-bench serve --checkpoint tiny_setdiff --host 0.0.0.0 --tls-cert server.pem "
-    "--tls-key server.key --token-file token   # see docs/serve.md\n"
+    "Deployment (certificate, token, host): docs/serve.md.\n\n"
+    "Examples:\n\n"
+    "    setdiff-bench serve --checkpoint tiny_setdiff --port 50051\n"
+    "    setdiff-bench serve --checkpoint tiny_setdiff --host 0.0.0.0 --port 50051 "
+    "--tls-cert server.pem --tls-key server.key --token-file token"
 )
 
 #: The integer settings that must be >= 1: each is an option ``--name`` whose help starts with this text.
