@@ -94,10 +94,20 @@ def _autoencoder_defaults() -> dict[str, int | float]:
 
 
 def run_autoencoder(args: argparse.Namespace) -> int:
-    from setdiff_bench.models.setdiff.autoencoder import AutoencoderTraining, train_autoencoder
+    from setdiff_bench.models.setdiff.autoencoder import (
+        AutoencoderTraining,
+        check_settings,
+        train_autoencoder,
+    )
     from setdiff_bench.packets.store import PacketStore
     from setdiff_bench.runtime.devices import resolve_device
 
+    values = {name: getattr(args, name) for name in _autoencoder_defaults() if name not in ("seed", "steps")}
+    defaults = AutoencoderTraining()
+    settings = AutoencoderTraining(
+        **values, steps=args.steps or defaults.steps, seed=defaults.seed if args.seed is None else args.seed
+    )
+    check_settings(settings)  # every refusal before the note below
     store = PacketStore(args.packets)
     _check_split(store, "train", args.packets)
     rows = store.index[store.index["split"] == "train"]
@@ -109,11 +119,6 @@ def run_autoencoder(args: argparse.Namespace) -> int:
             f"{clipped} (height x width, clipped to the frame)",
             file=sys.stderr,
         )
-    values = {name: getattr(args, name) for name in _autoencoder_defaults() if name not in ("seed", "steps")}
-    defaults = AutoencoderTraining()
-    settings = AutoencoderTraining(
-        **values, steps=args.steps or defaults.steps, seed=defaults.seed if args.seed is None else args.seed
-    )
     manifest = train_autoencoder(
         args.packets, args.out, settings, device=resolve_device(args.device), progress=not args.no_progress
     )
