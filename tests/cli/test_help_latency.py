@@ -29,7 +29,13 @@ heavy = [name for name in {heavy!r} if name in sys.modules]
 print("HEAVY", ",".join(heavy))
 """
 
-HELPS = [[], *([verb] for verb in verb_summaries()), ["list", "scenes"], ["ablate", "geometry"], ["weights", "lpips"]]
+HELPS = [
+    [],
+    *([verb] for verb in verb_summaries()),
+    ["list", "scenes"],
+    ["ablate", "geometry"],
+    ["weights", "lpips"],
+]
 
 
 @pytest.mark.parametrize("words", HELPS, ids=lambda words: " ".join(words) or "(top)")
