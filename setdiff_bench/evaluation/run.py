@@ -45,7 +45,6 @@ import contextlib
 import hashlib
 import json
 import os
-import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -64,7 +63,9 @@ from setdiff_bench.enhancers.base import (
     available_methods,
     create_enhancer,
 )
-from setdiff_bench.errors import PacketError, SetDiffBenchError, UsageError
+from setdiff_bench.errors import PacketError, UsageError
+from setdiff_bench.evaluation.packet_scoring import EnhancerOutputError as EnhancerOutputError  # re-exported
+from setdiff_bench.evaluation.packet_scoring import score_packet
 from setdiff_bench.evaluation.paths import (
     ENHANCER_FILE,
     FRAGMENTS_DIR,
@@ -80,9 +81,7 @@ from setdiff_bench.evaluation.paths import (
 from setdiff_bench.evaluation.preflight import check_packets_fit, warn_out_of_distribution
 from setdiff_bench.evaluation.scoring import (
     default_warp_cache,
-    quantize,
     resolve_metrics,
-    score_images,
     sequence_warp_error,
     to_uint8_hwc,
 )
@@ -99,7 +98,6 @@ from setdiff_bench.packets.index import INDEX_FILE
 from setdiff_bench.packets.shards import Shard
 from setdiff_bench.packets.store import PacketStore, timestamp_or_none
 from setdiff_bench.runtime.provenance import device_description, git_revision, package_versions
-from setdiff_bench.types import Packet
 
 RUN_FORMAT = "setdiff-run/1"
 #: Protocols whose targets are time-ordered camera sequences: warp error with ``warp="auto"``.
@@ -108,10 +106,6 @@ SEQUENCE_PROTOCOLS = frozenset({"nuscenes"})
 TIMING_COLUMNS = ("ms_per_frame",)
 
 WarpMode = Literal["auto", "on", "off"]
-
-
-class EnhancerOutputError(SetDiffBenchError):
-    """An enhancer returned something other than ``(M, 3, H, W)`` finite images."""
 
 
 @dataclass(frozen=True)
@@ -232,7 +226,7 @@ def run_method(
     out = Path(out)
     if settings.batch_size < 1:
         raise UsageError(f"batch size must be >= 1, got {settings.batch_size}", "--batch-size")
-    specs = resolve_metrics(settings.metrics)
+    specs = resolve_metrics(settings.metrics, option="RunSettings.metrics")  # the CLI checks --metrics
     selection = store.packet_ids(settings.split)
     if not selection:
         splits = sorted(set(store.index["split"]))
@@ -426,23 +420,15 @@ def _run_packet(
     """Enhance and score one packet, then write its images and (last) its fragment.
 
     Everything that can fail on bad input (reading, enhancing, checking, scoring) happens before the
-    first write; ``claim()`` is called right before it.
+    first write, in :func:`~setdiff_bench.evaluation.packet_scoring.score_packet` (the one implementation
+    of the shape check, the 8-bit rounding and the scoring); ``claim()`` is called right before it.
     """
-    packet = store.load_packet(packet_id)
-    gt, masks = store.load_ground_truth(packet_id)
     rows = store.rows(packet_id)
     targets = rows[rows["role"] == "target"].sort_values("view").to_dict("records")
-    device = torch.device(settings.device)
-    if device.type == "cuda":
-        torch.cuda.synchronize(device)
-    start = time.perf_counter()
-    output = enhancer.enhance(packet)
-    if isinstance(output, torch.Tensor) and output.is_cuda:
-        torch.cuda.synchronize(output.device)
-    elapsed_ms = (time.perf_counter() - start) * 1000.0
-    output = _checked(output, packet, enhancer.name)
-    enhanced = quantize(output)
-    scores = score_images(specs, enhanced.to(device), gt.to(device), masks.to(device), settings.batch_size)
+    result = score_packet(
+        enhancer, store, packet_id, metrics=specs, device=settings.device, batch_size=settings.batch_size
+    )
+    enhanced, scores, elapsed_ms = result.enhanced, result.scores, result.elapsed_ms
     claim()
     records = []
     for position, row in enumerate(targets):
@@ -465,24 +451,6 @@ def _run_packet(
             record[spec.name] = float(scores[spec.name][position])
         record["ms_per_frame"] = per_frame
     _write_rows(fragment_path(out, packet_id), records, [spec.name for spec in specs])
-
-
-def _checked(output: Any, packet: Packet, name: str) -> torch.Tensor:
-    where = f"method {name}, packet {packet.packet_id}"
-    expected = (len(packet.targets), 3, packet.height, packet.width)
-    if not isinstance(output, torch.Tensor):
-        raise EnhancerOutputError(
-            f"enhance() returned {type(output).__name__}, expected a tensor {expected}", where
-        )
-    if tuple(output.shape) != expected:
-        raise EnhancerOutputError(
-            f"enhance() returned shape {tuple(output.shape)}, expected {expected}", where
-        )
-    if not output.is_floating_point():
-        raise EnhancerOutputError(f"enhance() returned dtype {output.dtype}, expected float in [0, 1]", where)
-    if not torch.isfinite(output).all():
-        raise EnhancerOutputError("enhance() returned NaN or infinite values", where)
-    return output.detach().float().cpu()
 
 
 # ---------------------------------------------------------------------- tables

@@ -43,8 +43,11 @@ def to_uint8_hwc(image: torch.Tensor) -> np.ndarray:
     )
 
 
-def resolve_metrics(names: str | Sequence[str]) -> tuple[MetricSpec, ...]:
+def resolve_metrics(names: str | Sequence[str], *, option: str = "--metrics") -> tuple[MetricSpec, ...]:
     """Image-metric specs from a preset name (``standard``), or a comma list / sequence of metric names.
+
+    ``option`` is what the caller calls the choice, named in errors: the CLI's ``--metrics`` flag by
+    default, ``metrics`` for a Python parameter.
 
     Raises:
         UsageError: an unknown name, a sequence metric (warp error is chosen with ``warp=``) or a profile
@@ -54,26 +57,25 @@ def resolve_metrics(names: str | Sequence[str]) -> tuple[MetricSpec, ...]:
         names = (
             list(PRESETS[names]) if names in PRESETS else [n.strip() for n in names.split(",") if n.strip()]
         )
+    warp = "--warp" if option.startswith("--") else "RunSettings.warp"
     specs = []
     for name in names:
         if name not in METRICS:
             raise UsageError(
                 f"unknown metric {name!r}; presets: {', '.join(PRESETS)}; metrics: {', '.join(METRICS)}",
-                "--metrics",
+                option,
             )
         spec = METRICS[name]
         if spec.scope == "sequence":
-            raise UsageError(
-                f"{name} is a sequence metric; it is enabled with --warp, not --metrics", "--metrics"
-            )
+            raise UsageError(f"{name} is a sequence metric; it is enabled with {warp}, not {option}", option)
         if spec.scope != "image":
             raise UsageError(
-                f"{name} is a {spec.scope} metric; `setdiff-bench evaluate` computes it, not --metrics",
-                "--metrics",
+                f"{name} is a {spec.scope} metric; `setdiff-bench evaluate` computes it, not {option}",
+                option,
             )
         specs.append(spec)
     if not specs:
-        raise UsageError("no metrics selected", "--metrics")
+        raise UsageError("no metrics selected", option)
     return tuple(specs)
 
 

@@ -1,0 +1,165 @@
+"""Enhance and score one packet: the rules every run applies, in one place.
+
+:func:`score_packet` is what ``setdiff-bench run`` does for each packet (``evaluation/run.py`` calls it),
+and what a notebook calls to try a method on one packet::
+
+    import setdiff_bench as sb
+
+    store = sb.PacketStore("runs/demo/work/packets")
+    enhancer = sb.create_enhancer("setdiff", checkpoint="tiny_setdiff")
+    print(sb.score_packet(enhancer, store, store.packet_ids("test")[0]).means())
+
+The rules, in order:
+
+1. the enhancer sees the packet without ground truth or masks (:meth:`PacketStore.load_packet`);
+2. its output must be a finite float tensor ``(M, 3, H, W)`` — one image per target at the packet's
+   size (:func:`check_output`, else :class:`EnhancerOutputError`);
+3. it is rounded to the 8-bit grid, exactly as ``run`` writes it to PNG (:func:`~setdiff_bench.evaluation.
+   scoring.quantize`), so a score never depends on precision a saved image does not have;
+4. every image metric is computed against the ground truth with the dynamic-object masks applied.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import torch
+
+from setdiff_bench.errors import SetDiffBenchError
+from setdiff_bench.evaluation.scoring import quantize, resolve_metrics, score_images
+from setdiff_bench.metrics.registry import MetricSpec
+from setdiff_bench.types import Packet
+
+if TYPE_CHECKING:
+    from setdiff_bench.enhancers.base import Enhancer
+    from setdiff_bench.packets.store import PacketStore
+
+
+class EnhancerOutputError(SetDiffBenchError):
+    """An enhancer returned something other than ``(M, 3, H, W)`` finite images."""
+
+
+@dataclass(frozen=True)
+class PacketScore:
+    """One packet, enhanced and scored.
+
+    Attributes:
+        packet_id: the packet's id in its store.
+        enhanced: ``(M, 3, H, W)`` float32 on the CPU, on the 8-bit grid (what ``run`` writes as PNG).
+        scores: metric name → ``(M,)`` float64, one value per target in stored order.
+        elapsed_ms: the enhancer's wall time for the packet (``enhance()`` only; no I/O, no scoring).
+    """
+
+    packet_id: str
+    enhanced: torch.Tensor
+    scores: dict[str, np.ndarray]
+    elapsed_ms: float
+
+    @property
+    def ms_per_frame(self) -> float:
+        """``elapsed_ms`` divided by the number of targets (the ``ms_per_frame`` column of ``run``)."""
+        return self.elapsed_ms / max(1, int(self.enhanced.shape[0]))
+
+    def means(self) -> dict[str, float]:
+        """Metric name → mean over the packet's targets."""
+        return {name: float(np.mean(values)) for name, values in self.scores.items()}
+
+
+def check_output(output: Any, packet: Packet, name: str) -> torch.Tensor:
+    """``output`` as a detached float32 CPU tensor, after checking it is ``(M, 3, H, W)`` finite floats.
+
+    Args:
+        output: what ``enhancer.enhance(packet)`` returned.
+        packet: the packet it was given (its targets and size decide the expected shape).
+        name: the method's name, for the message.
+
+    Raises:
+        EnhancerOutputError: not a tensor, another shape, not floating point, or NaN / infinite values.
+    """
+    where = f"method {name}, packet {packet.packet_id}"
+    expected = (len(packet.targets), 3, packet.height, packet.width)
+    if not isinstance(output, torch.Tensor):
+        raise EnhancerOutputError(
+            f"enhance() returned {type(output).__name__}, expected a tensor {expected}", where
+        )
+    if tuple(output.shape) != expected:
+        raise EnhancerOutputError(
+            f"enhance() returned shape {tuple(output.shape)}, expected {expected}", where
+        )
+    if not output.is_floating_point():
+        raise EnhancerOutputError(f"enhance() returned dtype {output.dtype}, expected float in [0, 1]", where)
+    if not torch.isfinite(output).all():
+        raise EnhancerOutputError("enhance() returned NaN or infinite values", where)
+    return output.detach().float().cpu()
+
+
+def score_packet(
+    enhancer: Enhancer,
+    store: PacketStore | str | os.PathLike[str],
+    packet_id: str,
+    *,
+    metrics: str | Sequence[str] | Sequence[MetricSpec] = "standard",
+    device: str | torch.device | None = None,
+    batch_size: int = 8,
+) -> PacketScore:
+    """Enhance one packet of a store and score it against its ground truth.
+
+    Args:
+        enhancer: a built method (:func:`setdiff_bench.create_enhancer`, or any object with ``name`` and
+            ``enhance(packet) -> (M, 3, H, W)``).
+        store: a :class:`~setdiff_bench.packets.store.PacketStore` or its folder.
+        packet_id: one of ``store.packet_ids()``.
+        metrics: a preset (``"standard"``: PSNR, SSIM, LPIPS-alex), a comma list or sequence of metric
+            names, or metric specs.
+        device: where the metrics run (default: the enhancer's own ``device`` if it has one, else the CPU).
+        batch_size: images per metric call (bounds LPIPS memory; does not change the values).
+
+    Returns:
+        The 8-bit enhanced images, per-target scores and the enhancer's time.
+
+    Raises:
+        SetDiffBenchError: an unknown packet or metric (named as the ``packet_id`` / ``metrics``
+            parameter), an unreadable packet file, or an output of the wrong shape
+            (:class:`EnhancerOutputError`).
+    """
+    from setdiff_bench.errors import UsageError
+    from setdiff_bench.packets.store import PacketStore
+
+    if batch_size < 1:
+        raise UsageError(f"batch_size must be >= 1, got {batch_size}", "batch_size")
+    if isinstance(store, (str, os.PathLike)):
+        store = PacketStore(store)
+    try:
+        store.rows(packet_id)
+    except SetDiffBenchError:
+        raise UsageError(
+            f"no packet {packet_id!r} in the store at {store.root} (store.packet_ids() lists them)",
+            "packet_id",
+        ) from None
+    specs = _specs(metrics)
+    target_device = torch.device(device if device is not None else getattr(enhancer, "device", None) or "cpu")
+    packet = store.load_packet(packet_id)
+    gt, masks = store.load_ground_truth(packet_id)
+    if target_device.type == "cuda":
+        torch.cuda.synchronize(target_device)
+    start = time.perf_counter()
+    output = enhancer.enhance(packet)
+    if isinstance(output, torch.Tensor) and output.is_cuda:
+        torch.cuda.synchronize(output.device)
+    elapsed_ms = (time.perf_counter() - start) * 1000.0
+    enhanced = quantize(check_output(output, packet, enhancer.name))
+    scores = score_images(
+        specs, enhanced.to(target_device), gt.to(target_device), masks.to(target_device), batch_size
+    )
+    return PacketScore(packet_id, enhanced, scores, elapsed_ms)
+
+
+def _specs(metrics: str | Sequence[str] | Sequence[MetricSpec]) -> tuple[MetricSpec, ...]:
+    if not isinstance(metrics, str) and metrics and all(isinstance(m, MetricSpec) for m in metrics):
+        return tuple(metrics)  # type: ignore[arg-type]
+    return resolve_metrics(metrics, option="metrics")  # type: ignore[arg-type]
