@@ -3,8 +3,8 @@ checkpoints (the idea of stochastic weight averaging, applied to the checkpoints
 
 Why: two training seeds of the same tiny SetDiff recipe differ most on frames that need no repair (held-out
 renders), where a checkpoint's step-to-step noise shows as damage; averaging the run's last checkpoints
-(same trajectory, constant learning rate) smooths that noise without another training run (measured in the
-README's results section and ``benchmarks/results/weight_averaging.json``).
+(same trajectory, constant learning rate) smooths that noise without another training run (measured in
+``docs/model_recipe.md`` and ``benchmarks/results/weight_averaging.json``).
 
 Written here, not with ``torch.optim.swa_utils.AveragedModel``: that class averages a live model during
 training, whereas this reads the finished run's ``model.safetensors`` files from disk.  Floating-point
