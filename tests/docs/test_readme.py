@@ -81,3 +81,11 @@ def test_the_cheap_commands_run(command: str) -> None:
     result = subprocess.run(argv, capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip()
+
+
+def test_every_table_has_a_header_row() -> None:
+    lines = prose(README.read_text(encoding="utf-8")).splitlines()
+    for number, line in enumerate(lines):
+        if line.startswith("|") and (number == 0 or not lines[number - 1].startswith("|")):
+            assert not re.fullmatch(r"\|[-:| ]+\|", line), f"table without a header before line {number + 1}"
+            assert re.fullmatch(r"\|[-:| ]+\|", lines[number + 1]), f"no separator under line {number + 1}"
