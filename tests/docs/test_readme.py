@@ -89,3 +89,11 @@ def test_every_table_has_a_header_row() -> None:
         if line.startswith("|") and (number == 0 or not lines[number - 1].startswith("|")):
             assert not re.fullmatch(r"\|[-:| ]+\|", line), f"table without a header before line {number + 1}"
             assert re.fullmatch(r"\|[-:| ]+\|", lines[number + 1]), f"no separator under line {number + 1}"
+
+
+def test_docs_link_only_files_in_the_repository() -> None:
+    for page in sorted((ROOT / "docs").glob("*.md")):
+        text = prose(page.read_text(encoding="utf-8"))
+        targets = [t.split("#")[0] for t in re.findall(r"\]\(([^)\s]+)\)", text) if "://" not in t]
+        missing = [t for t in targets if t and not (page.parent / t).exists()]
+        assert not missing, f"{page.relative_to(ROOT)} links to missing files: {missing}"
