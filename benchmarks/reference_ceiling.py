@@ -25,6 +25,9 @@ measures, per target and for the first ``K`` references (the packet's Eq. 2 orde
 * ``error_share_K``: the share of the render's squared error (static pixels) that lies on the pixels
   the first K references see, ``1 − 10^(−(visible_truth_K − identity)/10)`` per target.
 
+Every measure is also given for ``all`` the packet's references (``seen_all``, ``visible_truth_all``,
+``error_share_all``): the share of the render's error that the references see at all.
+
 ``visible_truth_K − visible_truth_1`` is what the extra references can add: on the pixels that
 references 2…K see and reference 1 does not, at most the render's whole error.  An enhancer that also
 improves unseen pixels from the render alone (as every trained model here does) leaves less error on the
@@ -36,6 +39,14 @@ Usage (the store the shipped models were trained from; its test split holds the 
     python benchmarks/reference_ceiling.py --packets runs/more/packets --scenes runs/more/scenes \\
         --references 1 --references 2 --references 3 --references 8 \\
         --tolerance 0.01 --tolerance 0.03 --tolerance 0.1 --out benchmarks/results/reference_ceiling.json
+
+The sparse-view scenes (``synth --preset sparse``, DL3DV layout, protocol
+``benchmarks/configs/sparse_dl3dv.toml``; groups ``n3`` / ``n6`` / ``n9``) work the same way: the world is
+rebuilt from each scene's ``scene.json`` whichever kind it is (:func:`setdiff_bench.synthetic.sparse.static_world`)::
+
+    python benchmarks/reference_ceiling.py --packets runs/sparse/packets --scenes runs/sparse/scenes \
+        --references 1 --references 2 --references 3 --references 6 \
+        --tolerance 0.01 --tolerance 0.03 --tolerance 0.1 --out benchmarks/results/sparse_reference_ceiling.json
 """
 
 from __future__ import annotations
@@ -57,7 +68,6 @@ from benchmarks.common import machine
 from benchmarks.reproject_geometry import (
     add_store_arguments,
     masked_psnr,
-    packet_and_world,
     with_true_geometry,
 )
 from setdiff_bench.cameras import Camera
@@ -66,13 +76,33 @@ from setdiff_bench.enhancers.reproject import (
     blend_weights,
     project,
 )
+from setdiff_bench.gaussians.backends.common import RenderOutput
 from setdiff_bench.gaussians.model import GaussianModel
+from setdiff_bench.gaussians.render import render
 from setdiff_bench.geometry import pixel_centers
 from setdiff_bench.io.atomic import write_text_atomic
-from setdiff_bench.packets.store import PacketStore
+from setdiff_bench.packets.store import PacketStore, row_camera
+from setdiff_bench.synthetic.sparse import static_world
+from setdiff_bench.types import Packet
 
 #: Relative inverse-depth tolerance of the visibility test (module docstring).
 TOLERANCE = 0.03
+
+
+def packet_and_world(
+    store: PacketStore, packet_id: str, scenes: Path, cache: dict[str, GaussianModel]
+) -> tuple[Packet, torch.Tensor, torch.Tensor, list[Camera], RenderOutput]:
+    """A packet, its targets' ground truth ``(M, 3, H, W)`` and static masks ``(M, 1, H, W)``, its views'
+    world cameras (references first) and the true world (rebuilt from ``scenes/<scene>/scene.json``, a
+    street or a sparse-view walk) rendered from them with C-maps and depth."""
+    packet = store.load_packet(packet_id)
+    truth, masks = store.load_ground_truth(packet_id)
+    cameras = [row_camera(row, world=True) for _, row in store.rows(packet_id).iterrows()]
+    if packet.scene not in cache:
+        cache[packet.scene] = static_world(scenes / packet.scene)
+    with torch.no_grad():
+        world = render(cache[packet.scene], cameras, with_geometry=True, tile_size=8)
+    return packet, truth, masks, cameras, world
 
 
 def reference_samples(
@@ -80,15 +110,22 @@ def reference_samples(
     cameras: list[Camera],
     inverse_depths: torch.Tensor,
     images: torch.Tensor,
+    window: int = 1,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """For ``P`` surface points ``(P, 3)`` and ``N`` references: ``(N, P)`` the relative inverse-depth
     mismatch ``|1/z_ref − 1/z| · z`` where the point projects inside the reference onto four pixels with a
     surface (``inf`` elsewhere) — a reference sees a point when it is within the tolerance (module
     docstring) — and ``(N, 3, P)`` the references' colours there (bilinear).
 
+    With ``window`` = ``w`` > 1 (odd), the mismatch is the smallest of the bilinear one and those of the
+    ``w × w`` reference pixels nearest the projection (each pixel's own inverse depth, where it has a
+    surface): a point counts as seen when the reference shows a surface at its depth within ``(w − 1) / 2``
+    pixels of where it projects (module docstring, "window").
+
     Args:
         inverse_depths: ``(N, 2, H, W)``: each reference's inverse depth × validity, and its validity.
         images: ``(N, 3, H, W)`` the references' ground-truth images in [0, 1].
+        window: odd neighbourhood size (1 = the bilinear test alone).
     """
     height, width = images.shape[-2:]
     uv, z = project(tuple(cameras), points)  # (N, P, 2), (N, P)
@@ -101,7 +138,24 @@ def reference_samples(
     inverse = 1.0 / z.clamp_min(1e-6)
     mismatch = (sampled[:, 0] - inverse).abs() / inverse
     usable = inside & (sampled[:, 1] > 1.0 - 1e-4)
-    return torch.where(usable, mismatch, torch.full_like(mismatch, float("inf"))), colours
+    mismatch = torch.where(usable, mismatch, torch.full_like(mismatch, float("inf")))
+    half = (window - 1) // 2
+    if half > 0:
+        col = torch.floor(uv[..., 0]).long()  # the pixel the projection falls in (pixel centres at +0.5)
+        row = torch.floor(uv[..., 1]).long()
+        flat = inverse_depths.flatten(2)  # (N, 2, H·W)
+        for dy in range(-half, half + 1):
+            for dx in range(-half, half + 1):
+                c, r = col + dx, row + dy
+                ok = inside & (c >= 0) & (c < width) & (r >= 0) & (r < height)
+                index = torch.where(ok, r * width + c, torch.zeros_like(c))  # (N, P)
+                values = torch.gather(flat, 2, index[:, None].expand(-1, 2, -1))  # (N, 2, P)
+                ok &= values[:, 1] > 0.5
+                near = torch.where(
+                    ok, (values[:, 0] - inverse).abs() / inverse, torch.full_like(mismatch, float("inf"))
+                )
+                mismatch = torch.minimum(mismatch, near)
+    return mismatch, colours
 
 
 def share(mask: torch.Tensor, static: torch.Tensor) -> float:
@@ -116,10 +170,11 @@ def target_measures(
     cache: dict[str, GaussianModel],
     sizes: list[int],
     tolerances: list[float],
+    window: int = 1,
 ) -> list[dict[str, Any]]:
     """One record per target of the packet and visibility tolerance: ``identity``, ``surface`` (share
-    of static pixels with a surface) and, per K in ``sizes``, ``seen_K``, ``visible_truth_K`` and
-    ``copy_K`` (module docstring)."""
+    of static pixels with a surface) and, per K in ``sizes`` and for ``all`` the packet's references,
+    ``seen_K``, ``visible_truth_K`` and ``copy_K`` (module docstring)."""
     packet, truth, masks, cameras, world = packet_and_world(store, packet_id, scenes, cache)
     n, renders = len(packet.references), packet.targets.images.float()
     alphas = world.alpha.float()
@@ -145,19 +200,20 @@ def target_measures(
         target_valid = valid[n + m].reshape(-1)
         static = masks[m].reshape(-1)
         flat_truth, flat_render = truth[m].reshape(3, -1), renders[m].reshape(3, -1)
-        mismatch, colours = reference_samples(target_points, cameras[:n], inverse_depths, images)
+        mismatch, colours = reference_samples(target_points, cameras[:n], inverse_depths, images, window)
         common = {
             "packet_id": packet_id,
             "group": packet.group,
             "target": m,
             "identity": masked_psnr(flat_render, flat_truth, static[None]),
             "surface": share(target_valid, static),
+            "references": n,
         }
         for tolerance in tolerances:
             seen_by = (mismatch <= tolerance) & target_valid[None]
             record: dict[str, Any] = {**common, "tolerance": tolerance}
-            for size in sizes:
-                k = min(size, n)
+            for size in [*sizes, "all"]:
+                k = n if size == "all" else min(int(size), n)
                 w = weights[m, :k, None] * seen_by[:k]  # (k, P)
                 seen = w.sum(dim=0) > 0
                 copied = (colours[:k] * w[:, None]).sum(dim=0) / w.sum(dim=0).clamp_min(1e-12)
@@ -173,14 +229,19 @@ def target_measures(
 
 
 def summary(records: list[dict[str, Any]], sizes: list[int]) -> dict[str, float]:
-    """Means over targets of every measure, and the gains of each K over K = ``sizes[0]``."""
+    """Means over targets of every measure (per K in ``sizes`` and for ``all`` references), and the gains of
+    each K over K = ``sizes[0]``."""
     keys = [
         "identity",
         "surface",
-        *(f"{name}_{k}" for k in sizes for name in ("seen", "visible_truth", "copy")),
+        *(f"{name}_{k}" for k in [*sizes, "all"] for name in ("seen", "visible_truth", "copy")),
     ]
     result = {key: statistics.fmean(r[key] for r in records) for key in keys}
-    for k in sizes:  # the share of the render's squared error on the pixels the first K references see
+    result["references"] = statistics.fmean(r["references"] for r in records)
+    for k in [
+        *sizes,
+        "all",
+    ]:  # the share of the render's squared error on the pixels the first K references see
         result[f"error_share_{k}"] = statistics.fmean(
             1.0 - 10.0 ** (-(r[f"visible_truth_{k}"] - r["identity"]) / 10.0) for r in records
         )
@@ -205,17 +266,26 @@ def main() -> int:
         type=float,
         help=f"relative inverse-depth tolerance of the visibility test (repeatable; default {TOLERANCE})",
     )
+    parser.add_argument(
+        "--window",
+        type=int,
+        default=1,
+        help="odd w: a point is also seen where one of the w x w reference pixels nearest its projection "
+        "has a surface at its depth (default 1: the bilinear test alone)",
+    )
     parser.add_argument("--out", type=Path, help="JSON output (default: print only)")
     args = parser.parse_args()
     sizes = sorted(set(args.references))
     tolerances = sorted(set(args.tolerance or [TOLERANCE]))
     if sizes[0] < 1:
         parser.error("--references must be >= 1")
+    if args.window < 1 or args.window % 2 == 0:
+        parser.error("--window must be an odd number >= 1")
     torch.set_num_threads(1)
     store, cache = PacketStore(args.packets), {}
     records: list[dict[str, Any]] = []
     for packet_id in tqdm(store.packet_ids(args.split), desc="packets", unit="packet"):
-        records.extend(target_measures(store, packet_id, args.scenes, cache, sizes, tolerances))
+        records.extend(target_measures(store, packet_id, args.scenes, cache, sizes, tolerances, args.window))
     groups = sorted({r["group"] for r in records})
     by_tolerance = {}
     for tolerance in tolerances:
@@ -228,6 +298,7 @@ def main() -> int:
         "benchmark": "reference_ceiling",
         "command": " ".join(["python", *sys.argv]),
         "machine": machine(),
+        "window": args.window,
         "tolerances": by_tolerance,
         "targets": records,
     }

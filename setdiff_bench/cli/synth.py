@@ -34,8 +34,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--preset",
         default="default",
-        choices=("tiny", "default", "large"),
-        help="tiny: seconds, for tests; default: ~10 min on 2 CPU cores; large: for a GPU",
+        choices=("tiny", "default", "large", "sparse_tiny", "sparse", "sparse_large"),
+        help="tiny: seconds, for tests; default: ~10 min on 2 CPU cores; large: for a GPU; sparse*: "
+        "handheld walks in DL3DV's layout with n3/n6/n9 fits (docs/synthetic_format.md)",
     )
     parser.add_argument("--seed", type=int, default=0, help="base seed; scene i uses (seed, i)")
     parser.add_argument("--scenes", type=int, default=None, help="number of scenes (default: the preset's)")
@@ -159,6 +160,20 @@ def make_scene(
     from setdiff_bench.synthetic.generate import generate_scene
     from setdiff_bench.synthetic.presets import get_preset
 
+    if preset_name.startswith("sparse"):  # the sparse-view scene kind: DL3DV layout, fits n3/n6/n9
+        from setdiff_bench.synthetic.sparse import make_sparse_scene
+
+        return make_sparse_scene(
+            out,
+            preset_name,
+            seed,
+            index,
+            fit=fit,
+            device=device,
+            overwrite=overwrite,
+            report=report,
+            threads=threads,
+        )
     if threads is not None:
         torch.set_num_threads(threads)
     preset = get_preset(preset_name)
@@ -232,8 +247,9 @@ def run(args: argparse.Namespace) -> int:
     from setdiff_bench.runtime.devices import resolve_device
     from setdiff_bench.runtime.threads import compute_threads
     from setdiff_bench.synthetic.presets import get_preset
+    from setdiff_bench.synthetic.sparse import SPARSE_PRESETS
 
-    preset = get_preset(args.preset)
+    preset = SPARSE_PRESETS.get(args.preset) or get_preset(args.preset)
     count = preset.num_scenes if args.scenes is None else args.scenes
     if count < 1:
         raise UsageError(f"--scenes must be ≥ 1, got {count}", "--scenes")
@@ -247,8 +263,9 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--jobs must be ≥ 1, got {jobs}", "--jobs")
     start = time.perf_counter()
     options = {"fit": not args.no_fit, "device": device, "overwrite": args.overwrite}
-    # the scenes' names, as synthetic.generate.scene_name writes them (not imported: it loads torch)
-    names = {index: f"scene_{args.seed:04d}_{index:02d}" for index in indices}
+    # the scenes' names, as synthetic.generate.scene_name (sparse.sparse_scene_name) writes them
+    prefix = "sparse" if args.preset.startswith("sparse") else "scene"
+    names = {index: f"{prefix}_{args.seed:04d}_{index:02d}" for index in indices}
     bars = not args.no_progress and sys.stderr.isatty()  # no bars in a log: lines instead
     progress = SceneProgress(names, bars=bars)
     try:

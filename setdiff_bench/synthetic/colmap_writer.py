@@ -37,6 +37,8 @@ def write_colmap_model(
     images: Sequence[ColmapImage],
     points_xyz: np.ndarray,
     points_rgb: np.ndarray,
+    *,
+    camera_model: str = "PINHOLE",
 ) -> None:
     """Write the model into ``sparse_dir`` (created; the three files are moved in only when complete).
 
@@ -46,7 +48,11 @@ def write_colmap_model(
     Args:
         images: posed images; all images of one sensor must share intrinsics and size.
         points_xyz: ``(P, 3)`` world coordinates (metres).  points_rgb: ``(P, 3)`` uint8.
+        camera_model: ``"PINHOLE"`` (EUVS) or ``"OPENCV"`` (DL3DV's model, written with zero distortion
+            ``k1 = k2 = p1 = p2 = 0``).
     """
+    if camera_model not in ("PINHOLE", "OPENCV"):
+        raise ValueError(f"camera_model must be PINHOLE or OPENCV, got {camera_model!r}")
     import pycolmap
 
     reconstruction = pycolmap.Reconstruction()
@@ -58,10 +64,11 @@ def write_colmap_model(
             reconstruction.add_camera_with_trivial_rig(
                 pycolmap.Camera(
                     camera_id=camera_ids[image.sensor],
-                    model="PINHOLE",
+                    model=camera_model,
                     width=cam.width,
                     height=cam.height,
-                    params=[cam.fx, cam.fy, cam.cx, cam.cy],
+                    params=[cam.fx, cam.fy, cam.cx, cam.cy]
+                    + ([0.0, 0.0, 0.0, 0.0] if camera_model == "OPENCV" else []),
                 )
             )
     for image_id, image in enumerate(images, start=1):
