@@ -30,25 +30,18 @@ import torch
 from setdiff_bench.cameras import Camera
 from setdiff_bench.enhancers.base import EstimatesMemory, KnowsTrainingData
 from setdiff_bench.errors import UsageError
+from setdiff_bench.evaluation.tick_limits import DEFAULT_REFERENCES_PER_TICK, MAX_CAMERAS_PER_TICK
 from setdiff_bench.geometry import max_pairwise_distance, normalize_packet, select_references
 from setdiff_bench.io.images import uint8_to_float
 from setdiff_bench.models.setdiff.domain import OutOfDistributionWarning
 from setdiff_bench.runtime.memory import check_memory
 from setdiff_bench.types import Packet, ViewSet
 
-#: Most cameras one tick may carry (a rig of this many views is one set).
-MAX_CAMERAS_PER_TICK = 16
-
 #: What a simulator can change when a tick does not fit in memory.
 TICK_MEMORY_ADVICE = (
     "send fewer cameras per tick, start the session with fewer references (max_references), "
     "render smaller frames, or serve on another device"
 )
-
-#: References per tick when neither the session nor the enhancer caps them (a model config's
-#: ``max_references = null`` means "every reference of the packet"; a session's recorded drive may
-#: hold hundreds, so a tick takes the paper's inference packet: 8 references beside up to 8 targets).
-DEFAULT_REFERENCES_PER_TICK = 8
 
 
 class StreamInputError(UsageError):
@@ -83,31 +76,29 @@ def _check_views(views: Views, role: str, size: tuple[int, int] | None) -> tuple
     images = views.images
     if not isinstance(images, torch.Tensor) or images.ndim != 4 or images.shape[1] != 3:
         raise StreamInputError(
-            f"{role} images must be (V, 3, H, W), got {tuple(getattr(images, 'shape', ()))}", role
+            f"images must be (V, 3, H, W), got {tuple(getattr(images, 'shape', ()))}", role
         )
     count, _, height, width = images.shape
     if count != len(views.cameras):
-        raise StreamInputError(f"{role}: {count} images but {len(views.cameras)} cameras", role)
+        raise StreamInputError(f"{count} images but {len(views.cameras)} cameras", role)
     if size is not None and (height, width) != size:
-        raise StreamInputError(
-            f"{role} images are {width}x{height}, the session expects {size[1]}x{size[0]}", role
-        )
+        raise StreamInputError(f"images are {width}x{height}, the session expects {size[1]}x{size[0]}", role)
     if height % 8 or width % 8:
-        raise StreamInputError(f"{role} images are {width}x{height}; both sides must be divisible by 8", role)
+        raise StreamInputError(f"images are {width}x{height}; both sides must be divisible by 8", role)
     if images.is_floating_point() and not torch.isfinite(images).all():
-        raise StreamInputError(f"{role} images contain NaN or infinite values", role)
+        raise StreamInputError("images contain NaN or infinite values", role)
     for i, camera in enumerate(views.cameras):
         if (camera.height, camera.width) != (height, width):
             raise StreamInputError(
-                f"{role} camera {i} is {camera.width}x{camera.height}, image is {width}x{height}", role
+                f"camera {i} is {camera.width}x{camera.height}, image is {width}x{height}", role
             )
     for name, tensor, channels in (("C-maps", views.cmaps, 3), ("alphas", views.alphas, 1)):
         if tensor is not None and tuple(tensor.shape) != (count, channels, height, width):
             raise StreamInputError(
-                f"{role} {name} must be {(count, channels, height, width)}, got {tuple(tensor.shape)}", role
+                f"{name} must be {(count, channels, height, width)}, got {tuple(tensor.shape)}", role
             )
         if tensor is not None and not torch.isfinite(tensor).all():
-            raise StreamInputError(f"{role} {name} contain NaN or infinite values", role)
+            raise StreamInputError(f"{name} contain NaN or infinite values", role)
     return int(height), int(width)
 
 

@@ -42,7 +42,7 @@ import grpc
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 
 from setdiff_bench import __version__
-from setdiff_bench.errors import SetDiffBenchError
+from setdiff_bench.errors import MemoryNeedError, SetDiffBenchError
 from setdiff_bench.evaluation.stream import StreamInputError, StreamSession
 from setdiff_bench.serve import enhancer_pb2 as pb
 from setdiff_bench.serve import enhancer_pb2_grpc as pb_grpc
@@ -79,7 +79,8 @@ class _Refusal(Exception):
 def _rpc(
     method: Callable[[EnhancerService, Request, grpc.ServicerContext], Reply],
 ) -> Callable[[EnhancerService, Request, grpc.ServicerContext], Reply]:
-    """Answer :class:`_Refusal` with its code, a :class:`SetDiffBenchError` with ``INVALID_ARGUMENT``,
+    """Answer :class:`_Refusal` with its code, a tick too large for the memory with ``RESOURCE_EXHAUSTED``,
+    any other :class:`SetDiffBenchError` with ``INVALID_ARGUMENT``,
     and anything else with ``INTERNAL`` plus an incident number (the traceback goes to the log only)."""
 
     @functools.wraps(method)
@@ -88,6 +89,8 @@ def _rpc(
             return method(self, request, context)
         except _Refusal as refusal:
             context.abort(refusal.code, refusal.message)
+        except MemoryNeedError as error:  # the tick does not fit in the device's memory now
+            context.abort(grpc.StatusCode.RESOURCE_EXHAUSTED, " ".join(error.one_line().split()))
         except SetDiffBenchError as error:
             context.abort(grpc.StatusCode.INVALID_ARGUMENT, " ".join(error.one_line().split()))
         except Exception:

@@ -5,12 +5,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from setdiff_bench.evaluation.tick_limits import MAX_CAMERAS_PER_TICK
 from setdiff_bench.serve.security import ServerTls, TokenSource
 
 DEFAULT_HOST = "127.0.0.1"
-#: Most frames one tick may carry by default: ``setdiff_bench.evaluation.stream.MAX_CAMERAS_PER_TICK``
-#: (not imported: that module loads torch; ``tests/serve/test_lifecycle.py`` checks they agree).
-MAX_CAMERAS_PER_TICK = 16
 
 #: Bytes one reference of ``H × W`` pixels holds in a session, per pixel: float32 RGB (3), world C-map
 #: (3) and alpha (1) -- the :class:`~setdiff_bench.evaluation.stream.StreamSession`'s ``ViewSet``.

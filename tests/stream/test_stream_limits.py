@@ -45,3 +45,27 @@ def test_tick_too_large_for_the_memory_is_refused(monkeypatch: pytest.MonkeyPatc
     assert session.ticks == 0
     monkeypatch.delenv(MEMORY_LIMIT_ENV)
     assert session.enhance(frames).shape == (2, 3, HEIGHT, WIDTH)
+
+
+def test_served_tick_too_large_is_resource_exhausted_and_the_domain_warned() -> None:
+    """A real ``serve`` process under a 64 KiB memory cap: the session starts, a tick is refused with
+    ``RESOURCE_EXHAUSTED`` and the one-line reason, and the server's log names the domain mismatch once."""
+    import grpc
+
+    from setdiff_bench.serve.client import EnhancerClient
+    from tests.serve.serve_fixtures import environment, served
+    from tests.stream.stream_fixtures import serve_argv, tick_frames
+
+    with served(serve_argv("tiny_setdiff"), env=environment(SETDIFF_MEMORY_LIMIT="64K")) as (process, port):
+        with EnhancerClient(f"127.0.0.1:{port}", timeout=60) as client:
+            client.wait_ready()
+            session = client.start_session(recorded_references())
+            with pytest.raises(grpc.RpcError) as refused:
+                client.enhance(session, tick_frames(0))
+            assert refused.value.code() == grpc.StatusCode.RESOURCE_EXHAUSTED
+            assert "needs about" in refused.value.details() and "64 KB available" in refused.value.details()
+            client.close_session(session)
+        process.terminate()
+        _, log = process.communicate(timeout=30)
+    warned = [line for line in log.splitlines() if "was trained on synthetic at 256×144" in line]
+    assert len(warned) == 1 and "this session is images of 48×32" in warned[0], log
