@@ -48,6 +48,9 @@ class FakeStore:
                 "packet_id": ["train-0", "train-0", "test-0"],
                 "split": ["train", "train", "test"],
                 "scene": ["scene_0003_01", "scene_0003_01", "scene_0003_02"],
+                "dataset": ["synthetic"] * 3,
+                "height": [32, 32, 32],
+                "width": [32, 32, 32],
                 **{f"{c}_sha256": ["a" * 64, "b" * 64, "c" * 64] for c in ("image", "cmap", "gt")},
                 "mask_sha256": ["", "d" * 64, ""],
             }
@@ -102,6 +105,7 @@ def test_train_verb(tmp_path: Path, fake_store: type[FakeStore], capsys: pytest.
     # the data hash: SHA-256 over the sorted distinct file hashes of the train rows, written out by hand
     expected = hashlib.sha256("\n".join(["a" * 64, "b" * 64, "d" * 64]).encode()).hexdigest()
     assert manifest["data"]["data_sha256"] == expected
+    assert manifest["data"]["datasets"] == ["synthetic"] and manifest["data"]["resolutions"] == [[32, 32]]
     assert manifest["validation"]["psnr"] > 0
 
 
