@@ -4,7 +4,7 @@
   kind, size, training steps, training scenes and data hash (:mod:`setdiff_bench.models.setdiff.packaged`).
 * ``weights verify [NAME ...]``: recompute every shipped file's SHA-256 against its manifest (exit 2 on a
   difference, one line per file).
-* ``weights export RUN --name NAME [--to DIR] [--guidance-scale S]``: make a shipped model of a finished
+* ``weights export RUN --name NAME [--to DIR | --force] [--guidance-scale S]``: make a shipped model of a finished
   training run (its newest checkpoint and its ``manifest.json``); ``--to`` defaults to the package's
   weights folder; ``--guidance-scale`` sets the exported model's default geometry-CFG scale (an inference
   setting; the weights are unchanged, the manifest's ``export`` entry records it); ``--average K`` exports
@@ -67,6 +67,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="DIR",
         type=Path,
         help="export: the folder the model folder goes into (default: the package's weights folder)",
+    )
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="export: replace a shipped model of the same name in the package's weights folder",
     )
     action = parser.add_mutually_exclusive_group()
     action.add_argument(
@@ -235,6 +240,12 @@ def export(args: argparse.Namespace) -> int:
     )
     if args.average is not None:
         check_average_count(args.average, "--average")
+    if args.to is None and (packaged_root() / args.name).exists() and not args.force:
+        raise UsageError(
+            f"{args.name!r} is a shipped model: exporting would replace it in the package; give --to DIR "
+            "to export elsewhere, or --force to replace it",
+            "--name",
+        )
     run = Path(args.names[0])
     checkpoint = resolve_checkpoint(run)
     manifest = read_manifest(run)

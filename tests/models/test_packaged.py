@@ -256,3 +256,22 @@ def test_export_refuses_an_impossible_average(
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and problem in err
     assert not (tmp_path / "shipped").exists()
+
+
+def test_export_refuses_to_replace_a_shipped_model_without_to_or_force(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The `weights --help` example names `--name tiny_setdiff`: without `--to` it would write into the
+    package and replace the shipped model; it is refused in one line and the shipped files stay as they are."""
+    run = _training_run(tmp_path / "run", steps=2, finished=2)
+    shipped = packaged_root() / "tiny_setdiff"
+    before = {path.name: path.read_bytes() for path in shipped.iterdir()}
+    assert main(["weights", "export", str(run), "--name", "tiny_setdiff"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (
+        "setdiff-bench weights: error: --name: 'tiny_setdiff' is a shipped model: exporting would replace it "
+        "in the package; give --to DIR to export elsewhere, or --force to replace it"
+    )
+    assert {path.name: path.read_bytes() for path in shipped.iterdir()} == before
+    assert main(["weights", "export", str(run), "--name", "tiny_setdiff", "--to", str(tmp_path / "out")]) == 0
+    assert (tmp_path / "out" / "tiny_setdiff" / "manifest.json").is_file()
