@@ -53,12 +53,15 @@ class PacketScore:
         enhanced: ``(M, 3, H, W)`` float32 on the CPU, on the 8-bit grid (what ``run`` writes as PNG).
         scores: metric name → ``(M,)`` float64, one value per target in stored order.
         elapsed_ms: the enhancer's wall time for the packet (``enhance()`` only; no I/O, no scoring).
+        peak_memory_mb: on CUDA the most memory torch allocated during ``enhance()``; on the CPU the
+            process's peak resident memory so far (MiB; the process peak includes the loaded model).
     """
 
     packet_id: str
     enhanced: torch.Tensor
     scores: dict[str, np.ndarray]
     elapsed_ms: float
+    peak_memory_mb: float = float("nan")
 
     @property
     def ms_per_frame(self) -> float:
@@ -147,16 +150,28 @@ def score_packet(
     gt, masks = store.load_ground_truth(packet_id)
     if target_device.type == "cuda":
         torch.cuda.synchronize(target_device)
+        torch.cuda.reset_peak_memory_stats(target_device)
     start = time.perf_counter()
     output = enhancer.enhance(packet)
     if isinstance(output, torch.Tensor) and output.is_cuda:
         torch.cuda.synchronize(output.device)
     elapsed_ms = (time.perf_counter() - start) * 1000.0
+    peak_memory_mb = peak_memory_bytes(target_device) / (1 << 20)
     enhanced = quantize(check_output(output, packet, enhancer.name))
     scores = score_images(
         specs, enhanced.to(target_device), gt.to(target_device), masks.to(target_device), batch_size
     )
-    return PacketScore(packet_id, enhanced, scores, elapsed_ms)
+    return PacketScore(packet_id, enhanced, scores, elapsed_ms, peak_memory_mb)
+
+
+def peak_memory_bytes(device: torch.device) -> int:
+    """CUDA: the most memory torch allocated on ``device`` since its peak was last reset; CPU: this
+    process's peak resident set size (``ru_maxrss``, KiB on Linux)."""
+    if device.type == "cuda":
+        return int(torch.cuda.max_memory_allocated(device))
+    import resource
+
+    return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024
 
 
 def _specs(metrics: str | Sequence[str] | Sequence[MetricSpec]) -> tuple[MetricSpec, ...]:

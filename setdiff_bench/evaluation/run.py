@@ -13,7 +13,9 @@ Output folder (``--out``)::
 ``metrics.parquet`` has one row per target: ``dataset, protocol, group, split, scene, frame, sensor,
 timestamp_us, packet_id, view, method``, one float column per image metric (``psnr, ssim, lpips`` with
 the default ``standard`` preset, masks applied), ``ms_per_frame`` (the enhancer's wall time for the
-packet divided by its targets; excludes I/O and scoring), and the enhanced image's path and SHA-256.
+packet divided by its targets; excludes I/O and scoring), ``peak_memory_mb`` (CUDA: most memory allocated
+while enhancing the packet; CPU: the process's peak resident memory), and the enhanced image's path and
+SHA-256.
 Rows are sorted by packet id and target position, so the file depends only on the results.
 
 Resume and shards.  A packet is done when its fragment exists (fragments are written last, atomically),
@@ -28,8 +30,8 @@ written by atomic rename and depend only on the settings and the fragments).  A 
 fragment present merges them; on a network filesystem, whose directory listings may lag behind other
 machines, end with ``run --merge`` (the same command plus ``--merge``), which merges or refuses, in one
 line, while a fragment is missing.  One run and any sharding give the same ``metrics.parquet`` up to the
-timing column.  Everything written is deterministic except timing — ``ms_per_frame`` and the
-manifest's ``timing`` block — so an interrupted-and-resumed run matches an uninterrupted one byte for
+timing columns.  Everything written is deterministic except timing and memory — ``ms_per_frame``,
+``peak_memory_mb`` and the manifest's ``timing`` block — so an interrupted-and-resumed run matches an uninterrupted one byte for
 byte in ``images/`` and in every other column (compare with :func:`comparable_metrics`).
 
 Warp error (``warp``: ``auto`` = on for the protocols in :data:`SEQUENCE_PROTOCOLS`) is computed at
@@ -103,7 +105,7 @@ RUN_FORMAT = "setdiff-run/1"
 #: Protocols whose targets are time-ordered camera sequences: warp error with ``warp="auto"``.
 SEQUENCE_PROTOCOLS = frozenset({"nuscenes"})
 #: Columns that are measurements of time, not results: excluded from byte-identity comparisons.
-TIMING_COLUMNS = ("ms_per_frame",)
+TIMING_COLUMNS = ("ms_per_frame", "peak_memory_mb")
 
 WarpMode = Literal["auto", "on", "off"]
 
@@ -450,6 +452,7 @@ def _run_packet(
         for spec in specs:
             record[spec.name] = float(scores[spec.name][position])
         record["ms_per_frame"] = per_frame
+        record["peak_memory_mb"] = result.peak_memory_mb
     _write_rows(fragment_path(out, packet_id), records, [spec.name for spec in specs])
 
 
@@ -471,6 +474,7 @@ def row_schema(metric_names: Sequence[str]) -> pa.Schema:
             ("method", pa.string()),
             *[(name, pa.float64()) for name in metric_names],
             ("ms_per_frame", pa.float64()),
+            ("peak_memory_mb", pa.float64()),
             ("image", pa.string()),
             ("image_sha256", pa.string()),
         ]
@@ -652,6 +656,11 @@ def _manifest(
     timing = frame.drop_duplicates("packet_id")[["packet_id", "ms_per_frame"]]
     per_frame = frame["ms_per_frame"].to_numpy(dtype=np.float64)
     per_packet_ms = (frame.groupby("packet_id")["ms_per_frame"].sum()).to_numpy(dtype=np.float64)
+    peak = (
+        frame["peak_memory_mb"].to_numpy(dtype=np.float64)
+        if "peak_memory_mb" in frame.columns
+        else np.array([], dtype=np.float64)
+    )
     return {
         "format": RUN_FORMAT,
         "method": {
@@ -702,6 +711,9 @@ def _manifest(
             "ms_per_frame_mean": float(per_frame.mean()) if len(per_frame) else None,
             "ms_per_frame_median": float(np.median(per_frame)) if len(per_frame) else None,
             "ms_per_frame_max": float(per_frame.max()) if len(per_frame) else None,
+            "peak_memory_mb": float(np.nanmax(peak)) if len(peak) and not np.isnan(peak).all() else None,
+            "peak_memory": "CUDA: most memory torch allocated in one packet's enhance(); CPU: the peak "
+            "resident memory of the process that enhanced (model included)",
             "note": "enhancer wall time only (no I/O, no scoring); the first packet of each call includes "
             "one-off warm-up (the median is robust to it); timing differs between runs",
         },

@@ -20,6 +20,7 @@ from setdiff_bench.evaluation.paths import (
     METRICS_FILE,
     RUN_FILE,
 )
+from setdiff_bench.evaluation.run import TIMING_COLUMNS
 from setdiff_bench.io.images import read_image_raw
 from setdiff_bench.pipeline.demo import METHODS, SUMMARY_FILE
 from setdiff_bench.pipeline.stages import LEDGER_FILE
@@ -88,8 +89,8 @@ def test_same_command_gives_byte_identical_results(demo_out: Path, second_demo_o
             continue
         if relative.name == METRICS_FILE or FRAGMENTS_DIR in relative.parts:
             a, b = (
-                pd.read_parquet(first).drop(columns="ms_per_frame"),
-                pd.read_parquet(second).drop(columns="ms_per_frame"),
+                pd.read_parquet(first).drop(columns=list(TIMING_COLUMNS)),
+                pd.read_parquet(second).drop(columns=list(TIMING_COLUMNS)),
             )
             pd.testing.assert_frame_equal(a, b, check_exact=True)
         else:

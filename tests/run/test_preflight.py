@@ -85,3 +85,16 @@ def test_packet_shapes_counts_views_per_packet(other_store: Path) -> None:
 )
 def test_parse_bytes(text: str, expected: int) -> None:
     assert parse_bytes(text) == expected
+
+
+def test_run_records_peak_memory(other_store: Path, tmp_path: Path) -> None:
+    """Every target row and the manifest carry the peak memory (CPU: the process's peak resident set, which
+    holds at least the loaded model and the packet)."""
+    import json
+
+    out = tmp_path / "run"
+    assert main(run_argv("difix", other_store, out, "--checkpoint", "tiny_difix")) == 0
+    rows = pd.read_parquet(out / "metrics.parquet")
+    assert (rows["peak_memory_mb"] > 100).all()
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["timing"]["peak_memory_mb"] == rows["peak_memory_mb"].max()

@@ -48,6 +48,7 @@ COLUMNS = [
     "ssim",
     "lpips",
     "ms_per_frame",
+    "peak_memory_mb",
     "image",
     "image_sha256",
 ]
