@@ -178,7 +178,6 @@ def run(args: argparse.Namespace) -> int:
         args.method, args.checkpoint, device=resolve_device(args.device), dtype=args.dtype
     )
     running = start_server(enhancer, settings)
-    print(pid_line(running, args.host), flush=True)
-    serve_until_signalled(running, args.grace)
+    serve_until_signalled(running, args.grace, ready=lambda: print(pid_line(running, args.host), flush=True))
     print("stopped", flush=True)
     return 0

@@ -508,11 +508,20 @@ def start_server(
     return running
 
 
-def serve_until_signalled(running: RunningServer, grace: float) -> None:
-    """Block until SIGTERM or SIGINT, then shut down gracefully (in-flight RPCs finish)."""
+def serve_until_signalled(
+    running: RunningServer, grace: float, ready: Callable[[], None] | None = None
+) -> None:
+    """Block until SIGTERM or SIGINT, then shut down gracefully (in-flight RPCs finish).
+
+    Args:
+        ready: called once the signal handlers are installed (``serve`` prints its "serving on" line
+            there, so a SIGTERM sent as soon as a client reads it is a graceful stop, not a kill).
+    """
     stop = threading.Event()
     for signum in (signal.SIGTERM, signal.SIGINT):
         signal.signal(signum, lambda *_: stop.set())
+    if ready is not None:
+        ready()
     stop.wait()
     running.stop(grace)
 

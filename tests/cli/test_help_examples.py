@@ -32,7 +32,6 @@ import shutil
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -162,10 +161,7 @@ def run_example(example: str, world: Path) -> None:
         )
         assert process.stdout is not None
         first = process.stdout.readline()
-        # serve prints its "serving on" line before it installs its SIGTERM handler (reported to the
-        # service's owner): a SIGTERM sent at once would kill it (-15) instead of stopping it gracefully
-        time.sleep(3)
-        process.send_signal(signal.SIGTERM)
+        process.send_signal(signal.SIGTERM)  # at once: serve prints its line after its handler is in
         out, err = process.communicate(timeout=120)
         assert first.startswith("serving on") and process.returncode == 0, (command, first, out, err)
         return

@@ -326,3 +326,15 @@ def test_session_ids_that_cannot_be_ours_are_refused_without_echo(enhancer: Any)
             assert code == grpc.StatusCode.INVALID_ARGUMENT and "not a session id" in details
             assert len(details) < 200 and "\n" not in details
         assert refused(lambda: client.close_session("0" * 36))[0] == grpc.StatusCode.NOT_FOUND
+
+
+def test_sigterm_right_after_the_serving_line_stops_gracefully() -> None:
+    """The "serving on" line is printed only once the SIGTERM handler is installed: a supervisor that
+    signals as soon as it reads the line gets a graceful stop (exit 0, "stopped"), not a kill (-15)."""
+    from tests.serve.serve_fixtures import served
+    from tests.stream.stream_fixtures import serve_argv
+
+    with served(serve_argv("tiny_difix", "--method", "difix")) as (process, _):
+        process.send_signal(signal.SIGTERM)
+        out, _ = process.communicate(timeout=60)
+    assert process.returncode == 0 and out.strip().endswith("stopped")
