@@ -7,6 +7,7 @@ Examples::
     setdiff-bench leaderboard --dataset synthetic --runs runs/demo/work/runs --out runs/tables --grids 6 \\
         --packets runs/demo/work/packets
     setdiff-bench leaderboard --dataset synthetic --runs runs/demo/work/runs --out runs/tables --against difix
+    setdiff-bench leaderboard --dataset synthetic --runs runs/demo/work/runs --out runs/tables_cost --cost
 
 See :mod:`setdiff_bench.reporting.leaderboard` for the aggregation rules (means of per-image values; a method
 missing rows in a block is refused) and how reported paper rows are marked.  ``--against METHOD`` writes
@@ -74,6 +75,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="add each cell's paired difference to METHOD (a method in the table), starred when its "
         "interval excludes 0; writes <dataset>.vs_<METHOD>.* beside the plain table",
     )
+    parser.add_argument(
+        "--cost",
+        action="store_true",
+        help="add a Cost block: each method's ms per frame (median) and peak memory, as `run` recorded them",
+    )
 
 
 def add_bootstrap_arguments(parser: argparse.ArgumentParser) -> None:
@@ -130,6 +136,8 @@ def _command(args: argparse.Namespace) -> str:
             parts += [flag, value]
     if args.with_reported:
         parts.append("--with-reported")
+    if args.cost:
+        parts.append("--cost")
     if args.against:
         parts += ["--against", args.against, "--resamples", str(args.resamples)]
         parts += ["--bootstrap-seed", str(args.bootstrap_seed)]
@@ -182,6 +190,7 @@ def run(args: argparse.Namespace) -> int:
         profile=args.profile,
         against=args.against,
         bootstrap=settings,
+        cost=args.cost,
     )
     if args.with_reported and not any(row.source == "measured" for row in board.rows):
         found = sorted(set(images["dataset"])) if len(images) else []

@@ -62,6 +62,21 @@ def read_image_raw(path: PathLike, dtype: str = "float") -> np.ndarray:
     return np.ascontiguousarray(pixels)
 
 
+def image_size(path: PathLike) -> tuple[int, int] | None:
+    """``(height, width)`` from an image file's header (nothing decoded), or ``None`` when unreadable."""
+    import OpenImageIO as oiio
+
+    image = oiio.ImageInput.open(str(path))
+    if image is None:
+        oiio.geterror()  # clear the library's pending error
+        return None
+    try:
+        spec = image.spec()
+        return int(spec.height), int(spec.width)
+    finally:
+        image.close()
+
+
 def read_rgb(path: PathLike, expected_size: tuple[int, int] | None = None) -> np.ndarray:
     """Read an RGB image as float32 ``(H, W, 3)`` in [0, 1].
 

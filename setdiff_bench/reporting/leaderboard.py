@@ -44,6 +44,7 @@ from setdiff_bench.errors import SetDiffBenchError, UsageError
 from setdiff_bench.evaluation.paths import METRICS_FILE, RUN_FILE, SEQUENCES_FILE
 from setdiff_bench.evaluation.profiles import DEFAULT_PROFILE, PROFILE_COLUMN, get_profile
 from setdiff_bench.io.atomic import atomic_path, write_text_atomic
+from setdiff_bench.io.images import image_size
 from setdiff_bench.loaders import DATASETS
 from setdiff_bench.loaders.common import natural_key
 from setdiff_bench.metrics.registry import METRICS, get_metric
@@ -81,19 +82,45 @@ def dataset_layout(dataset: str) -> Layout:
     return layout if layout is not None else Layout(None)
 
 
+#: Block key of the cost columns (``cost=True``): what enhancing took, beside what it scored.
+COST = "cost"
+
+
+@dataclass(frozen=True)
+class CostColumn:
+    """A column of the cost block, read from every run's per-target timing columns (lower is better).
+
+    Attributes:
+        label: column header; decimals: digits printed; aggregate: how a method's targets reduce to one
+            value (``median``: robust to the first packet's warm-up; ``max``: the peak).
+    """
+
+    label: str
+    decimals: int
+    aggregate: str
+
+
+#: The cost block: ms per target frame (median over the method's targets, warm) and peak memory (CUDA max
+#: allocated or peak resident memory, the largest over its packets), as ``run`` records them.
+COST_COLUMNS: dict[str, CostColumn] = {
+    "ms_per_frame": CostColumn("ms/frame", 0, "median"),
+    "peak_memory_mb": CostColumn("peak MiB", 0, "max"),
+}
+
+
 def metric_header(name: str) -> str:
     """The column header of metric ``name`` (``MetricSpec.label``: ``psnr_euvs`` → ``PSNR``)."""
-    return get_metric(name).label
+    return COST_COLUMNS[name].label if name in COST_COLUMNS else get_metric(name).label
 
 
 def metric_decimals(name: str) -> int:
     """Digits after the point that tables print for metric ``name`` (``MetricSpec.decimals``)."""
-    return get_metric(name).decimals
+    return COST_COLUMNS[name].decimals if name in COST_COLUMNS else get_metric(name).decimals
 
 
 def higher_is_better(name: str) -> bool:
-    """Ranking direction of metric ``name`` (``MetricSpec.higher_is_better``)."""
-    return get_metric(name).higher_is_better
+    """Ranking direction of metric ``name`` (``MetricSpec.higher_is_better``; costs: lower is better)."""
+    return False if name in COST_COLUMNS else get_metric(name).higher_is_better
 
 
 # ---------------------------------------------------------------------- inputs
@@ -239,6 +266,7 @@ def build_leaderboard(
     profile: str = DEFAULT_PROFILE,
     against: str | None = None,
     bootstrap: BootstrapSettings | None = None,
+    cost: bool = False,
 ) -> Leaderboard:
     """Aggregate runs (and optional reported rows) of ``dataset`` into a :class:`Leaderboard`.
 
@@ -257,6 +285,7 @@ def build_leaderboard(
         against: a measured method shown in the table: every other measured cell gets its paired difference
             to it (:mod:`setdiff_bench.reporting.paired`; image metrics only, warp error is per sequence).
         bootstrap: how those intervals are drawn (default :class:`BootstrapSettings`).
+        cost: add a "Cost" block of :data:`COST_COLUMNS` (ms per frame, peak memory) per measured method.
 
     Raises:
         LeaderboardError: no rows, a metric column missing, duplicate rows, or a method missing rows.
@@ -356,6 +385,20 @@ def build_leaderboard(
             )
         )
     _check_complete(frame, blocks)
+    if cost:
+        recorded = tuple(name for name in COST_COLUMNS if name in frame.columns)
+        for row in rows:
+            if row.source == "measured":
+                own = frame[frame["method"] == row.method]
+                for name in recorded:
+                    values = own[name].to_numpy(dtype=np.float64)
+                    values = values[~np.isnan(values)]
+                    if len(values):
+                        reduce = np.median if COST_COLUMNS[name].aggregate == "median" else np.max
+                        row.values[(COST, name)] = float(reduce(values))
+                        row.decimals[(COST, name)] = COST_COLUMNS[name].decimals
+                        row.counts[(COST, name)] = len(values)
+        columns.append((Block(COST, "Cost"), recorded))
     settings = bootstrap or BootstrapSettings()
     if against is not None:
         if against not in order:
@@ -381,7 +424,7 @@ def build_leaderboard(
         raise LeaderboardError(
             f"no {dataset} results fall in the table's blocks ({', '.join(b.label for b in blocks)})"
         )
-    title = f"{layout.title or dataset}; {spec.caption()}"
+    title = f"{layout.title or dataset}; {spec.caption(scored_size(frame))}"
     if against is not None:
         title += f"; paired differences to {against}: {settings.describe()}"
     board = Leaderboard(
@@ -403,6 +446,18 @@ def build_leaderboard(
             "Cells are means over scenes of each scene's mean over its targets",
         )
     return board
+
+
+def scored_size(frame: pd.DataFrame) -> tuple[int, int] | None:
+    """``(height, width)`` of the images the rows were scored on, read from each run's first output image,
+    when every run shares one (the caption states it); ``None`` otherwise or without run folders."""
+    if not len(frame) or "run" not in frame.columns or "image" not in frame.columns:
+        return None
+    sizes = {
+        image_size(Path(run) / str(first))
+        for run, first in frame.drop_duplicates("run")[["run", "image"]].itertuples(index=False)
+    }
+    return sizes.pop() if len(sizes) == 1 else None
 
 
 def profile_rows(frame: pd.DataFrame, profile: str) -> pd.DataFrame:
@@ -620,6 +675,13 @@ def _notes(board: Leaderboard, frame: pd.DataFrame, seq: pd.DataFrame | None) ->
         notes.append(
             "Rows marked (paper) / † are the numbers reported in the SetDiff paper, not measured here."
         )
+    if any(block.key == COST for block, _ in board.columns):
+        notes.append(
+            "Cost: the enhancer's wall time per target frame (median over the method's targets; no I/O or "
+            "scoring) and its peak memory (CUDA: most allocated while enhancing a packet; CPU: the peak "
+            "resident memory of the process, model included), as `run` recorded them on its machine: "
+            "compare methods run on the same machine."
+        )
     if board.against is not None:
         notes.append(
             f"(±x): paired difference to {board.against} (row − {board.against}) over the same targets; "
@@ -736,6 +798,8 @@ def latex_escape(text: str) -> str:
 
 def metric_arrow(metric: str, latex: bool) -> str:
     """The metric's direction arrow (``MetricSpec.arrow``), in LaTeX math where asked."""
+    if metric in COST_COLUMNS:
+        return r"$\downarrow$" if latex else "↓"
     spec = get_metric(metric)
     if latex:
         return r"$\uparrow$" if spec.higher_is_better else r"$\downarrow$"
