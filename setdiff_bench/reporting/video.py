@@ -159,7 +159,7 @@ def side_by_side(
         [[render, output, truth]],
         ["3DGS render", method, "ground truth"],
         [caption],
-        label_width=0 if not caption else 120,
+        label_width=0 if not caption else 48,
     )
 
 
