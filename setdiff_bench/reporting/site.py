@@ -353,7 +353,7 @@ def target_records(
             for _, row in rows.iterrows()
             if str(row["run"]) in by_run
         }
-        name = f"{first['dataset']}__{first['scene']}__{first['group']}__{packet_id}__{int(view)}"
+        name = f"{packet_id}__{int(view)}"  # packet ids are unique in a store (they name the protocol)
         records.append(
             TargetRecord(
                 TargetKey(str(packet_id), int(view)),
@@ -483,8 +483,10 @@ def target_page(
     previous: TargetRecord | None,
     following: TargetRecord | None,
     command: str | None,
+    videos: Sequence[VideoRecord] = (),
 ) -> str:
-    """The page of one target: pictures, sliders, error maps and metrics (images under ``../images``)."""
+    """The page of one target: pictures, sliders, error maps, metrics (images under ``../images``) and the
+    ``videos`` of its camera sequence (under ``../videos``)."""
     folder = f"../images/{record.slug}"
     shown = [m for m in methods if m != baseline]
     render_label = f"3DGS render (= {baseline})" if baseline in record.values else "3DGS render"
@@ -544,6 +546,13 @@ def target_page(
         f'<h2>Metrics</h2><table><thead><tr><th class="l">Method</th>{head}{gains}</tr></thead>'
         f"<tbody>{''.join(rows)}</tbody></table>"
     )
+    if videos:
+        position = videos[0].sequence.targets.index(record.key) + 1
+        body += (
+            f"<h2>Its sequence: {_e(videos[0].sequence.title)}</h2><p class='note'>This target is frame "
+            f"{position} of {len(videos[0].sequence.targets)}; render | method | ground truth.</p>"
+            + video_players(videos, "../videos/")
+        )
     title = f"{record.scene} / {record.group} / {record.frame}"
     return page(title, body, root="../", script=SLIDER_SCRIPT, command=command)
 
@@ -563,6 +572,17 @@ def write_target_images(
         write_png(folder / f"{slug(method)}.err.png", error_map(output, truth), atomic=False)
 
 
+def video_players(videos: Sequence[VideoRecord], folder: str) -> str:
+    """One player per video (files under the relative ``folder``), side by side."""
+    players = "".join(
+        f'<figure><video src="{folder}{_e(v.path.name)}" controls loop muted playsinline '
+        f'preload="metadata" title="{_e(v.method)}"></video><figcaption>render | {_e(v.method)} | '
+        f"ground truth — {v.frames} frames</figcaption></figure>"
+        for v in videos
+    )
+    return f'<div class="videos">{players}</div>'
+
+
 def videos_page(records: Sequence[VideoRecord], note: str, command: str | None) -> str:
     """``videos.html``: one row per sequence, one player per method."""
     by_sequence: dict[str, list[VideoRecord]] = {}
@@ -570,13 +590,7 @@ def videos_page(records: Sequence[VideoRecord], note: str, command: str | None) 
         by_sequence.setdefault(record.sequence.title, []).append(record)
     sections = []
     for title, videos in by_sequence.items():
-        players = "".join(
-            f'<figure><video src="videos/{_e(v.path.name)}" controls loop muted playsinline '
-            f'preload="metadata" title="{_e(v.method)}"></video><figcaption>render | {_e(v.method)} | '
-            f"ground truth — {v.frames} frames</figcaption></figure>"
-            for v in videos
-        )
-        sections.append(f'<h2>{_e(title)}</h2><div class="videos">{players}</div>')
+        sections.append(f"<h2>{_e(title)}</h2>" + video_players(videos, "videos/"))
     body = f'<p class="note">{_e(note)}</p>' + ("".join(sections) or "<p>No videos in this report.</p>")
     return page("Videos", body, command=command)
 
@@ -647,6 +661,10 @@ def build_site(
         if video_only:
             return summary
         (staging / "targets").mkdir()
+        by_target: dict[TargetKey, list[VideoRecord]] = {}
+        for video in video_records:
+            for key in video.sequence.targets:
+                by_target.setdefault(key, []).append(video)
         if pictures is not None:
             for i, record in enumerate(records):
                 write_target_images(
@@ -660,6 +678,7 @@ def build_site(
                     previous=records[i - 1] if i else None,
                     following=records[i + 1] if i + 1 < len(records) else None,
                     command=settings.command,
+                    videos=by_target.get(record.key, []),
                 )
                 (staging / "targets" / f"{record.slug}.html").write_text(page_text, encoding="utf-8")
             summary.pages += len(records)
