@@ -2,8 +2,8 @@
 
 Pages (every stylesheet and script inline, every link relative)::
 
-    index.html                 leaderboards (one per dataset and evaluation profile, blocks = groups), cost
-                               (ms per frame, peak memory), the dataset's plots, and every target in a
+    index.html                 leaderboards (one per dataset and evaluation profile, blocks = groups, and the
+                               cost block: ms per frame, peak memory), the dataset's plots, and every target in a
                                table sortable by each method's gain or loss against the render
     videos.html                render | method | ground truth per camera sequence (WebM, VP9)
     targets/<target>.html      render | each method | ground truth, a before/after slider per method,
@@ -279,35 +279,6 @@ def leaderboard_html(board: Leaderboard) -> str:
     return (
         f'<table class="board"><caption>{_e(board.title)}</caption><thead>{header}</thead>'
         f"<tbody>{''.join(rows)}</tbody></table>{notes}"
-    )
-
-
-def cost_html(images: pd.DataFrame, labels: Mapping[str, Path]) -> str:
-    """Median ms per frame and peak memory per method (the runs' timing columns), or ``""`` without them."""
-    if "ms_per_frame" not in images.columns:
-        return ""
-    memory = "peak_memory_mb" in images.columns
-    rows = []
-    for label, folder in labels.items():
-        mine = images[images["run"] == str(folder)]
-        if mine.empty:
-            continue
-        ms = mine["ms_per_frame"].median()
-        peak = mine["peak_memory_mb"].max() if memory else float("nan")
-        rows.append(
-            f'<tr><td class="l">{_e(label)}</td><td>{_number(ms, 1)}</td>'
-            + (f"<td>{_number(peak, 0)}</td>" if memory else "")
-            + "</tr>"
-        )
-    header = '<th class="l">Method</th><th>ms / frame (median)</th>' + (
-        "<th>peak memory (MB)</th>" if memory else ""
-    )
-    return (
-        '<h2 id="cost">Cost</h2><table><thead><tr>'
-        + header
-        + f'</tr></thead><tbody>{"".join(rows)}</tbody></table><p class="note">Enhancer wall time per '
-        "target (no I/O, no scoring) on the machine each run used; peak memory is CUDA's most allocated or, "
-        "on the CPU, the process's peak resident memory.</p>"
     )
 
 
@@ -687,7 +658,7 @@ def build_site(
         for dataset in sorted(set(plain["dataset"])):
             plots += write_plots(dataset, plain, staging / "plots", split=settings.split)
         index = _index_body(
-            boards, images, labels, plots, records, methods, metrics, baseline, pictures is not None, staging
+            boards, labels, plots, records, methods, metrics, baseline, pictures is not None, staging
         )
         if baseline is None:
             summary.notes.append(
@@ -720,13 +691,14 @@ def _boards(images: pd.DataFrame, sequences: pd.DataFrame, settings: SiteSetting
                 rows = rows[rows["split"] == settings.split]
             if rows.empty:
                 continue
-            boards.append(build_leaderboard(dataset, rows, sequences, split=settings.split, profile=profile))
+            boards.append(
+                build_leaderboard(dataset, rows, sequences, split=settings.split, profile=profile, cost=True)
+            )
     return boards
 
 
 def _index_body(
     boards: Sequence[Leaderboard],
-    images: pd.DataFrame,
     labels: Mapping[str, Path],
     plots: Sequence[Path],
     records: Sequence[TargetRecord],
@@ -738,7 +710,6 @@ def _index_body(
 ) -> str:
     parts = ['<h2 id="leaderboards">Leaderboards</h2>']
     parts += [leaderboard_html(board) for board in boards]
-    parts.append(cost_html(images, labels))
     if plots:
         parts.append('<h2 id="plots">Plots</h2><div class="strip">')
         parts += [
