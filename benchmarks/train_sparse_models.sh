@@ -16,6 +16,13 @@
 # WORK_DIR/weights) the exported model folders.  Every step resumes when the script is run again (synth
 # keeps finished scenes and fits, prepare complete packets, train resumes from its newest checkpoint).
 # STAGE=data stops after the packets; STAGE=train skips the data steps (they must be complete).
+#
+# Measured on the shared 2-core machine (load average 7-11 from other jobs), 2026-11-27: synth 4-7 min per
+# scene and process (render 45-50 s, fits n3 / n6 / n9 100-280 s each), 36 min for the 10 scenes; prepare
+# 280-340 s per two scenes with one worker (102 packets per training scene pair).  The first run prepared
+# the store scene by scene as the scenes finished (`prepare ... --scene sparse_0000_02 --scene
+# sparse_0000_03`, then 04-05, 06-07, 08-09, test scenes 00-01 with --split test), which writes the same
+# packets as the one `prepare --split all` below, and started training with STAGE=train.
 set -euo pipefail
 work=${1:-runs/sparse}
 export_dir=${2:-$work/weights}
