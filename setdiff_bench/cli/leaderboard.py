@@ -173,7 +173,8 @@ def run(args: argparse.Namespace) -> int:
     metrics = [m.strip() for m in args.metrics.split(",")] if args.metrics else None
     images, sequences = load_runs(args.runs)
     if len(images):
-        images = profile_rows(images, args.profile)  # plots and grids see the tabulated profile's rows only
+        # plots and grids see the tabulated profile's rows only
+        images = profile_rows(images, args.profile, None if args.with_reported else args.dataset)
     reported = None
     if args.with_reported:
         reported = reported_for(args.dataset)

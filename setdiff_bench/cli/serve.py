@@ -47,7 +47,12 @@ LIMITS: dict[str, str] = {
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     defaults = _DEFAULTS
     parser.add_argument("--checkpoint", required=True, help="checkpoint folder (or training output folder)")
-    parser.add_argument("--method", default="setdiff", choices=("setdiff", "difix"))
+    parser.add_argument(
+        "--method",
+        default="setdiff",
+        choices=("setdiff", "difix"),
+        help="what the checkpoint was trained as (default %(default)s; `weights list` shows the shipped ones)",
+    )
     parser.add_argument("--host", default=defaults.host, help="interface to bind (default %(default)s)")
     parser.add_argument(
         "--port", type=int, default=defaults.port, help="TCP port; 0 = a free one (default %(default)s)"

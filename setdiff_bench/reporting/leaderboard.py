@@ -304,7 +304,7 @@ def build_leaderboard(
         )
     frame = frame[frame["dataset"] == dataset]
     spec = get_profile(profile)
-    frame = profile_rows(frame, profile)
+    frame = profile_rows(frame, profile, dataset if no_reported else None)
     if (
         metrics is None and profile != DEFAULT_PROFILE
     ):  # the profile's metrics (+ the DINOv2 columns when scored)
@@ -460,15 +460,29 @@ def scored_size(frame: pd.DataFrame) -> tuple[int, int] | None:
     return sizes.pop() if len(sizes) == 1 else None
 
 
-def profile_rows(frame: pd.DataFrame, profile: str) -> pd.DataFrame:
+def profile_rows(frame: pd.DataFrame, profile: str, dataset: str | None = None) -> pd.DataFrame:
     """The rows scored under ``profile``: plain run rows are ``paper``; a ``paper`` table written by
-    ``setdiff-bench evaluate`` is used only where no plain run rows exist (they hold the same numbers)."""
+    ``setdiff-bench evaluate`` is used only where no plain run rows exist (they hold the same numbers).
+
+    Raises:
+        LeaderboardError: (only when ``dataset`` is given) ``frame`` holds rows of ``dataset`` but none were
+            scored under ``profile`` — the runs need ``setdiff-bench evaluate`` first.
+    """
     if PROFILE_COLUMN not in frame.columns:
-        return frame if profile == DEFAULT_PROFILE else frame.iloc[0:0]
-    plain = frame[PROFILE_COLUMN].isna()
-    if profile == DEFAULT_PROFILE and plain.any():
-        return frame[plain]
-    return frame[frame[PROFILE_COLUMN].fillna(DEFAULT_PROFILE) == profile]
+        chosen = frame if profile == DEFAULT_PROFILE else frame.iloc[0:0]
+    else:
+        plain = frame[PROFILE_COLUMN].isna()
+        if profile == DEFAULT_PROFILE and plain.any():
+            chosen = frame[plain]
+        else:
+            chosen = frame[frame[PROFILE_COLUMN].fillna(DEFAULT_PROFILE) == profile]
+    mine = frame["dataset"] == dataset if dataset is not None and "dataset" in frame.columns else None
+    if mine is not None and mine.any() and not (chosen["dataset"] == dataset).any():
+        raise LeaderboardError(
+            f"no {dataset} results scored under profile {profile!r}: score the runs with "
+            f"`setdiff-bench evaluate RUN --profile {profile}` first"
+        )
+    return chosen
 
 
 def _check_duplicates(frame: pd.DataFrame) -> None:

@@ -3,6 +3,8 @@ from the timing columns ``run`` records; lower is better; the default table has 
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pandas as pd
 import pytest
 
@@ -47,3 +49,30 @@ def test_default_table_has_no_cost_block_and_old_runs_show_a_dash() -> None:
     old = timed().drop(columns="peak_memory_mb")  # a run made before peak memory was recorded
     board = build_leaderboard("synthetic", old, cost=True)
     assert [metrics for block, metrics in board.columns if block.key == COST] == [("ms_per_frame",)]
+
+
+def test_a_profile_not_scored_yet_says_to_run_evaluate(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`leaderboard --profile euvs_official` on plain runs (issue 45): the line says to run `evaluate` first."""
+    from setdiff_bench.cli.main import main
+    from tests.run.store_fixtures import build_store, run_argv
+
+    store = build_store(tmp_path / "packets")
+    assert main(run_argv("identity", store, tmp_path / "runs" / "identity")) == 0
+    capsys.readouterr()
+    argv = [
+        "leaderboard",
+        "--dataset",
+        "synthetic",
+        "--runs",
+        str(tmp_path / "runs"),
+        "--out",
+        str(tmp_path / "t"),
+    ]
+    assert main([*argv, "--profile", "euvs_official"]) == 2
+    assert capsys.readouterr().err.strip() == (
+        "setdiff-bench leaderboard: error: no synthetic results scored under profile 'euvs_official': score the "
+        "runs with `setdiff-bench evaluate RUN --profile euvs_official` first"
+    )
+    assert not (tmp_path / "t").exists()
