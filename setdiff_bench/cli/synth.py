@@ -27,6 +27,9 @@ VERB = "synth"
 HELP = "generate synthetic multi-lane street scenes (EUVS layout) and fit their 3DGS"
 DESCRIPTION = __doc__.split("\n\n", 1)[1] if __doc__ else HELP
 FIT_NAME = "lane0"
+#: Names of the sparse-view presets and scenes start with this (``synthetic.sparse``: ``sparse_tiny`` ...,
+#: ``sparse_0000_01``); every other preset is a driving one.
+SPARSE_PREFIX = "sparse"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -160,34 +163,41 @@ def make_scene(
     from setdiff_bench.synthetic.generate import generate_scene
     from setdiff_bench.synthetic.presets import get_preset
 
-    if preset_name.startswith("sparse"):  # the sparse-view scene kind: DL3DV layout, fits n3/n6/n9
-        from setdiff_bench.synthetic.sparse import make_sparse_scene
-
-        return make_sparse_scene(
-            out,
-            preset_name,
-            seed,
-            index,
-            fit=fit,
-            device=device,
-            overwrite=overwrite,
-            report=report,
-            threads=threads,
-        )
     if threads is not None:
         torch.set_num_threads(threads)
-    preset = get_preset(preset_name)
+    sparse = preset_name.startswith(SPARSE_PREFIX)  # the sparse-view kind: DL3DV layout, fits n3/n6/n9
     t0 = time.perf_counter()
 
     def rendered(done: int, total: int) -> None:
         if report is not None:
             report("render", index, done, total)
 
-    scene_dir = generate_scene(
-        out, preset, seed, index, overwrite=overwrite, progress=rendered, device=device
-    )
+    if sparse:
+        from setdiff_bench.synthetic.sparse import fit_sparse_scene, generate_sparse_scene, get_sparse_preset
+
+        sparse_preset = get_sparse_preset(preset_name)
+        scene_dir = generate_sparse_scene(
+            out, sparse_preset, seed, index, overwrite=overwrite, progress=rendered, device=device
+        )
+    else:
+        preset = get_preset(preset_name)
+        scene_dir = generate_scene(
+            out, preset, seed, index, overwrite=overwrite, progress=rendered, device=device
+        )
     t1 = time.perf_counter()
     message = f"{scene_dir.name}: generated in {t1 - t0:.1f} s"
+    if fit and sparse:
+        keys = [f"n{k}" for k in sparse_preset.views]
+
+        def fitted_view(key: str, iteration: int, total: int) -> None:
+            if report is not None:
+                report("fit", index, keys.index(key) * total + iteration, len(keys) * total)
+
+        lines = fit_sparse_scene(
+            scene_dir, sparse_preset, device=device, overwrite=overwrite, report=fitted_view
+        )
+        return f"{message}, {', '.join(lines)}"
+
     if fit:
         ply = fit_path(scene_dir)
         if overwrite or not ply.is_file():
@@ -264,7 +274,7 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     options = {"fit": not args.no_fit, "device": device, "overwrite": args.overwrite}
     # the scenes' names, as synthetic.generate.scene_name (sparse.sparse_scene_name) writes them
-    prefix = "sparse" if args.preset.startswith("sparse") else "scene"
+    prefix = SPARSE_PREFIX if args.preset.startswith(SPARSE_PREFIX) else "scene"
     names = {index: f"{prefix}_{args.seed:04d}_{index:02d}" for index in indices}
     bars = not args.no_progress and sys.stderr.isatty()  # no bars in a log: lines instead
     progress = SceneProgress(names, bars=bars)

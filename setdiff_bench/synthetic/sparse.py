@@ -38,7 +38,6 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch
@@ -586,49 +585,6 @@ def fit_sparse_scene(
         shutil.rmtree(checkpoint, ignore_errors=True)
         lines.append(f"{key}: {len(result.model)} Gaussians in {time.perf_counter() - t0:.1f} s")
     return lines
-
-
-def make_sparse_scene(
-    out: Path,
-    preset_name: str,
-    seed: int,
-    index: int,
-    *,
-    fit: bool,
-    device: str,
-    overwrite: bool,
-    report: Any = None,
-    threads: int | None = None,
-) -> str:
-    """``synth`` for a sparse preset: generate (and fit) scene ``index``; returns a one-line summary.
-
-    ``report(kind, index, done, total)`` receives render and fit progress (``cli.synth.ProgressEvents``).
-    """
-    if threads is not None:
-        torch.set_num_threads(threads)
-    preset = get_sparse_preset(preset_name)
-    t0 = time.perf_counter()
-
-    def rendered(done: int, total: int) -> None:
-        if report is not None:
-            report("render", index, done, total)
-
-    scene_dir = generate_sparse_scene(
-        out, preset, seed, index, overwrite=overwrite, progress=rendered, device=device
-    )
-    message = f"{scene_dir.name}: generated in {time.perf_counter() - t0:.1f} s"
-    if fit:
-        views = len(preset.views)
-
-        def fitted(key: str, iteration: int, iterations: int) -> None:
-            if report is not None:
-                done = list(fit_views(preset)).index(key) * iterations + iteration
-                report("fit", index, done, views * iterations)
-
-        message += ", " + ", ".join(
-            fit_sparse_scene(scene_dir, preset, device=device, overwrite=overwrite, report=fitted)
-        )
-    return message
 
 
 def static_world(scene_dir: Path) -> GaussianModel:
