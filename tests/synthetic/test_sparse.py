@@ -192,3 +192,21 @@ def test_reference_ceiling_on_a_tiny_scene(tmp_path, monkeypatch):
     assert result["seen_all"] == pytest.approx(result["seen_3"])
     assert 0.0 <= result["error_share_all"] <= 1.0
     assert result["seen_1"] > 0.0  # the references do see the targets' surfaces
+
+
+def test_synth_verb_makes_a_sparse_scene_with_its_fits(tmp_path, capsys):
+    """`synth --preset sparse_tiny` goes through the same make_scene as the driving presets: one summary line
+    naming the scene and each of the n3 / n6 / n9 fits, whose PLYs exist."""
+    from setdiff_bench.cli.main import main
+
+    assert (
+        main(["synth", "--preset", "sparse_tiny", "--out", str(tmp_path), "--indices", "0", "--no-progress"])
+        == 0
+    )
+    summary = [line for line in capsys.readouterr().out.splitlines() if line.startswith("sparse_0000_00:")]
+    assert len(summary) == 1 and all(f"n{k}: " in summary[0] for k in (3, 6, 9)), summary
+    assert sorted(p.name for p in (tmp_path / "sparse_0000_00" / "fits").glob("*.ply")) == [
+        "n3.ply",
+        "n6.ply",
+        "n9.ply",
+    ]
