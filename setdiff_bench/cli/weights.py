@@ -188,7 +188,7 @@ def run_shipped(args: argparse.Namespace) -> int:
 
     models = packaged_models()
     if args.model == "list":
-        from setdiff_bench.models.setdiff.domain import DataDomain, domain_of_manifest
+        from setdiff_bench.models.setdiff.domain import domain_of_manifest
 
         print(
             f"{'name':<18} {'kind':<12} {'MB':>5} {'steps':>6}  trained on / data SHA-256 / training scenes"
@@ -200,8 +200,6 @@ def run_shipped(args: argparse.Namespace) -> int:
             digest = data.get("data_sha256") or manifest.get("data_sha256") or "?"
             steps = manifest.get("steps") or manifest.get("settings", {}).get("steps", "?")
             domain = domain_of_manifest(manifest)
-            if domain is None and isinstance(manifest.get("frame_size"), list):  # an autoencoder's frames
-                domain = DataDomain.of([], [tuple(manifest["frame_size"])])
             print(
                 f"{model.name:<18} {model.kind:<12} {model.size_bytes() / 1e6:>5.1f} {steps!s:>6}  "
                 f"{domain.describe() if domain else 'unrecorded data'} / {digest[:12]} / {','.join(scenes)}"

@@ -18,6 +18,12 @@ from pathlib import Path
 
 from setdiff_bench.errors import MemoryNeedError, UsageError
 
+#: Float32 channels one loaded view holds per pixel: RGB (3), C-map (3), alpha (1) -- a packet's or a
+#: stream session's ``ViewSet``.  The memory estimate and the service's per-session bound count with it.
+VIEW_CHANNELS = 3 + 3 + 1
+#: Bytes per float32 element.
+FLOAT32_BYTES = 4
+
 #: Environment variable that caps the memory this process may plan to use (bytes or ``2G``, ``512M``...).
 MEMORY_LIMIT_ENV = "SETDIFF_MEMORY_LIMIT"
 _SUFFIXES = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}

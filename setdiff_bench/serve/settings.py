@@ -6,13 +6,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from setdiff_bench.evaluation.tick_limits import MAX_CAMERAS_PER_TICK
+from setdiff_bench.runtime.memory import FLOAT32_BYTES, VIEW_CHANNELS
 from setdiff_bench.serve.security import ServerTls, TokenSource
 
 DEFAULT_HOST = "127.0.0.1"
 
 #: Bytes one reference of ``H × W`` pixels holds in a session, per pixel: float32 RGB (3), world C-map
 #: (3) and alpha (1) -- the :class:`~setdiff_bench.evaluation.stream.StreamSession`'s ``ViewSet``.
-SESSION_BYTES_PER_PIXEL = 4 * (3 + 3 + 1)
+SESSION_BYTES_PER_PIXEL = FLOAT32_BYTES * VIEW_CHANNELS
 
 
 def reference_bytes(height: int, width: int) -> int:

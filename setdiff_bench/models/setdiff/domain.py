@@ -50,8 +50,12 @@ class DataDomain:
 
 
 def domain_of_manifest(manifest: Mapping[str, Any]) -> DataDomain | None:
-    """The training data recorded in an enhancer manifest, or ``None`` where it records none."""
+    """The training data recorded in a manifest, or ``None`` where it records none: an enhancer's
+    ``data.datasets`` / ``data.resolutions``; an autoencoder's ``frame_size`` (its dataset unrecorded)."""
     data = manifest.get("data")
+    frame_size = manifest.get("frame_size")
+    if not isinstance(data, Mapping) and isinstance(frame_size, list) and len(frame_size) == 2:
+        return DataDomain.of([], [(frame_size[0], frame_size[1])])
     if not isinstance(data, Mapping):
         return None
     datasets, resolutions = data.get("datasets"), data.get("resolutions")

@@ -26,14 +26,12 @@ import math
 from setdiff_bench.models.setdiff.config import ModelConfig
 from setdiff_bench.models.setdiff.model import views_per_chunk
 from setdiff_bench.models.setdiff.set_mixer import BIAS_BLOCK_ELEMENTS
+from setdiff_bench.runtime.memory import FLOAT32_BYTES, VIEW_CHANNELS
 
 #: Live tensors per activation in a stage's working set (input, normalised, activated, convolved).
 _LIVE = 4
-#: Packet channels held as float32 per view: RGB 3, C-map 3, alpha 1; per target also ground truth 3
-#: and the mask (1 byte, counted as a quarter channel).
-_PACKET_CHANNELS = 7
+#: Per target, beside its view's channels: ground truth 3 and the mask (1 byte, a quarter channel).
 _TARGET_CHANNELS = 3.25
-FLOAT32 = 4
 #: Allocations that do not grow with the packet (kernel workspaces, allocator slack): 0.14–0.16 GB above
 #: the loaded model for a 2 + 2 packet at 256×144 (``benchmarks/memory.py``).
 _OVERHEAD = 128 << 20
@@ -68,7 +66,7 @@ def inference_bytes(
     targets_per_set: int | None = None,
     sets_per_call: int | None = None,
     guidance_scale: float | None = None,
-    dtype_bytes: int = FLOAT32,
+    dtype_bytes: int = FLOAT32_BYTES,
 ) -> int:
     """Peak bytes above the loaded model to enhance one packet (see the module docstring).
 
@@ -98,17 +96,17 @@ def inference_bytes(
     latent_pixels = pixels / config.latent_factor**2
 
     held = (
-        FLOAT32
+        FLOAT32_BYTES
         * pixels
-        * ((references + targets) * _PACKET_CHANNELS + targets * _TARGET_CHANNELS + sets * set_targets * 3)
+        * ((references + targets) * VIEW_CHANNELS + targets * _TARGET_CHANNELS + sets * set_targets * 3)
     )
-    batch = FLOAT32 * pixels * sets * views * set_input_channels(config)
+    batch = FLOAT32_BYTES * pixels * sets * views * set_input_channels(config)
     skips = dtype_bytes * pixels * sets * set_targets * skip_channels(config)
     lowest_tokens = (
         views * pixels / (config.latent_factor * 2 ** (len(config.unet["block_out_channels"]) - 1)) ** 2
     )
     bias_elements = min(BIAS_BLOCK_ELEMENTS, branches * sets * lowest_tokens**2)
-    bias_block = 3 * FLOAT32 * bias_elements if config.attention_bias != "none" else 0
+    bias_block = 3 * FLOAT32_BYTES * bias_elements if config.attention_bias != "none" else 0
     working = max(
         batch,  # the stacked copy while the batch is built
         _LIVE * dtype_bytes * pixels * chunk * widths[0],
