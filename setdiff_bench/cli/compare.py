@@ -18,7 +18,7 @@ import shlex
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from setdiff_bench.cli.leaderboard import add_bootstrap_arguments, bootstrap_settings
+from setdiff_bench.cli.leaderboard import add_bootstrap_arguments, bootstrap_settings, parse_formats
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -64,13 +64,7 @@ def run(args: argparse.Namespace) -> int:
     from setdiff_bench.reporting.paired import PairingError
 
     settings = bootstrap_settings(args)
-    formats = [f.strip() for f in args.format.split(",") if f.strip()]
-    unknown = [f for f in formats if f not in FORMATS]
-    if unknown or not formats:
-        raise UsageError(
-            f"unknown format(s) {', '.join(unknown) or '(none given)'}; choose from {', '.join(FORMATS)}",
-            "--format",
-        )
+    formats = parse_formats(args.format, FORMATS)
     metrics = [m.strip() for m in args.metrics.split(",") if m.strip()] if args.metrics else None
     if metrics is not None:
         bad = [m for m in metrics if m not in METRICS]

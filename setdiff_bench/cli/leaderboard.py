@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import shlex
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 
 from setdiff_bench.reporting.bootstrap import BootstrapSettings
@@ -100,6 +101,24 @@ def add_bootstrap_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def parse_formats(text: str, known: Sequence[str]) -> list[str]:
+    """``--format``'s comma list, each one of ``known``.
+
+    Raises:
+        UsageError: (naming ``--format``) an unknown format, or none.
+    """
+    from setdiff_bench.errors import UsageError
+
+    formats = [f.strip() for f in text.split(",") if f.strip()]
+    unknown = [f for f in formats if f not in known]
+    if unknown or not formats:
+        raise UsageError(
+            f"unknown format(s) {', '.join(unknown) or '(none given)'}; choose from {', '.join(known)}",
+            "--format",
+        )
+    return formats
+
+
 def bootstrap_settings(args: argparse.Namespace) -> BootstrapSettings:
     """The settings the options ask for.
 
@@ -161,13 +180,7 @@ def run(args: argparse.Namespace) -> int:
     if args.grids < 0:
         raise UsageError(f"needs K >= 0 targets, got {args.grids}", "--grids")
     settings = bootstrap_settings(args)
-    formats = [f.strip() for f in args.format.split(",") if f.strip()]
-    unknown = [f for f in formats if f not in FORMATS]
-    if unknown or not formats:
-        raise UsageError(
-            f"unknown format(s) {', '.join(unknown) or '(none given)'}; choose from {', '.join(FORMATS)}",
-            "--format",
-        )
+    formats = parse_formats(args.format, FORMATS)
     split = None if args.split == "all" else args.split
     methods = [m.strip() for m in args.methods.split(",")] if args.methods else None
     metrics = [m.strip() for m in args.metrics.split(",")] if args.metrics else None
