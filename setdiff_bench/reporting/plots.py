@@ -1,10 +1,10 @@
-"""Metric-vs-distance plots (matplotlib, Agg): nuScenes time buckets (the paper's per-offset figure) and
-lane shift (Para-Lane single/double, synthetic lane +1/+2).
+"""Metric-vs-distance plots (matplotlib, Agg): nuScenes time buckets (the paper's per-offset figure), lane
+shift (Para-Lane single/double, synthetic lane +1/+2) and DL3DV's view count (n3/n6/n9).
 
 Each point is a method's mean of per-image values over the targets of one group, with an error bar
 of ±1 standard error of that mean (``std / sqrt(n)``, ddof 1).  The x position of a group comes from
 its name: ``10-11s`` → the bucket's start offset 10 s (label "10–11 s"); ``single``/``double`` → 1/2
-lanes, ``lane+K`` → K, ``interp`` → 0.  Groups without a position are left out of that plot.
+lanes, ``lane+K`` → K, ``interp`` → 0; ``nK`` → K fit views.  Groups without a position are left out of that plot.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ from setdiff_bench.reporting.leaderboard import higher_is_better, metric_header
 
 _BUCKET = re.compile(r"^(\d+(?:\.\d+)?)-(\d+(?:\.\d+)?)s$")
 _LANE = re.compile(r"^lane\+(\d+)$")
+_VIEWS = re.compile(r"^n(\d+)$")
 LANE_NAMES = {"interp": 0, "single": 1, "double": 2}
 
 
@@ -42,6 +43,14 @@ def lane_shift(group: str) -> tuple[float, str] | None:
     else:
         return None
     return float(lanes), f"{lanes:+d}" if lanes else "0"
+
+
+def view_count(group: str) -> tuple[float, str] | None:
+    """``"n3"`` (the 3DGS fitted on 3 views, DL3DV's groups) → ``(3.0, "3")``; ``None`` for other names."""
+    match = _VIEWS.match(group)
+    if not match:
+        return None
+    return float(match.group(1)), match.group(1)
 
 
 def group_summary(
@@ -164,8 +173,14 @@ def plot_lane_shift(images: pd.DataFrame, out: str | Path, **kwargs: object) -> 
     return plot_metric_by_group(images, out, position=lane_shift, xlabel="lane shift", **kwargs)  # type: ignore[arg-type]
 
 
+def plot_view_count(images: pd.DataFrame, out: str | Path, **kwargs: object) -> Path:
+    """Metric vs the number of views the 3DGS was fitted on (DL3DV's sparse-view groups, paper Table 4)."""
+    return plot_metric_by_group(images, out, position=view_count, xlabel="fit views", **kwargs)  # type: ignore[arg-type]
+
+
 #: Plots :func:`write_plots` makes per dataset: (file suffix, plotting function).
 PLOTS: dict[str, tuple[str, Callable[..., Path]]] = {
+    "dl3dv": ("view_count", plot_view_count),
     "nuscenes": ("time_buckets", plot_time_buckets),
     "paralane": ("lane_shift", plot_lane_shift),
     "synthetic": ("lane_shift", plot_lane_shift),
