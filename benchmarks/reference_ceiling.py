@@ -41,7 +41,7 @@ Usage (the store the shipped models were trained from; its test split holds the 
         --tolerance 0.01 --tolerance 0.03 --tolerance 0.1 --out benchmarks/results/reference_ceiling.json
 
 The sparse-view scenes (``synth --preset sparse``, DL3DV layout, protocol
-``benchmarks/protocols/sparse_dl3dv.toml``; groups ``n3`` / ``n6`` / ``n9``) work the same way: the world is
+``dl3dv_sparse_synthetic``; groups ``n3`` / ``n6`` / ``n9``) work the same way: the world is
 rebuilt from each scene's ``scene.json`` whichever kind it is (:func:`setdiff_bench.synthetic.sparse.static_world`)::
 
     python benchmarks/reference_ceiling.py --packets runs/sparse/packets --scenes runs/sparse/scenes \

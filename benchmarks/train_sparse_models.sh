@@ -4,8 +4,8 @@
 # tiny_difix, both on the frozen tiny_autoencoder, 2250 steps, exported as the mean of the two newest
 # checkpoints, SetDiff at geometry CFG 1.5):
 #   1. `synth --preset sparse`: 10 scenes of seed 0 (indices 0-9) in DL3DV's layout with their n3/n6/n9 fits;
-#   2. `prepare dl3dv --protocol benchmarks/protocols/sparse_dl3dv.toml`: packets of every scene; the protocol's
-#      test-scene list (benchmarks/protocols/sparse_test_scenes.txt: sparse_0000_00, sparse_0000_01) makes
+#   2. `prepare dl3dv --protocol dl3dv_sparse_synthetic`: packets of every scene; the protocol's
+#      test-scene list (protocols/splits/dl3dv_sparse_synthetic_test.txt: sparse_0000_00, sparse_0000_01) makes
 #      the other 8 the training scenes, so no model sees a test scene;
 #   3. `train` of both models side by side, one torch thread each (SETDIFF_THREADS=1);
 #   4. `weights export` as train_shipped_models.sh does.
@@ -30,7 +30,7 @@ stage=${STAGE:-all}
 export SETDIFF_THREADS=${SETDIFF_THREADS:-1}
 bench="python3 -m setdiff_bench"
 steps=2250
-protocol=benchmarks/protocols/sparse_dl3dv.toml
+protocol=dl3dv_sparse_synthetic
 mkdir -p "$work/logs"
 
 if [[ $stage != train ]]; then

@@ -31,7 +31,7 @@ from setdiff_bench.synthetic.sparse import (
 )
 
 REPO = Path(__file__).resolve().parents[2]
-SPARSE_PROTOCOL = REPO / "benchmarks" / "protocols" / "sparse_dl3dv.toml"
+SPARSE_PROTOCOL = "dl3dv_sparse_synthetic"  # the packaged protocol
 
 
 def tiny_preset():
