@@ -14,7 +14,9 @@ missing rows in a block is refused) and how reported paper rows are marked.  ``-
 ``<dataset>.vs_<METHOD>.*`` beside the plain table: each cell also gets the paired difference to METHOD over
 the same targets, starred when its bootstrap interval (resampled by scene, :mod:`setdiff_bench.reporting.paired`)
 excludes 0, and the Markdown lists every interval and the scenes each method wins.  Every argument is checked
-before anything is written.
+before anything is written.  A run still being written under ``--runs`` (``run.json`` but no ``manifest.json``
+yet) is left out with one warning line naming its folder; it is refused when ``--methods`` names its method
+and no finished run has it, or when every run is unfinished.
 """
 
 from __future__ import annotations
@@ -168,10 +170,14 @@ def run(args: argparse.Namespace) -> int:
     from setdiff_bench.errors import UsageError
     from setdiff_bench.reporting.leaderboard import (
         FORMATS,
+        LeaderboardError,
         build_leaderboard,
         load_runs,
         profile_rows,
         reported_for,
+        require_finished,
+        survey_runs,
+        warn_unfinished,
         write_leaderboard,
     )
 
@@ -184,7 +190,15 @@ def run(args: argparse.Namespace) -> int:
     split = None if args.split == "all" else args.split
     methods = [m.strip() for m in args.methods.split(",")] if args.methods else None
     metrics = [m.strip() for m in args.metrics.split(",")] if args.metrics else None
-    images, sequences = load_runs(args.runs)
+    finished, unfinished = survey_runs(args.runs)
+    require_finished(finished, unfinished)
+    images, sequences = load_runs(finished)
+    measured = set(images["method"]) if len(images) else set()
+    # a method asked for by name whose only run is unfinished is refused, not left out
+    for waiting in unfinished:
+        if methods and waiting.method in methods and waiting.method not in measured:
+            raise LeaderboardError(f"--methods names {waiting.method}: {waiting.problem()}", waiting.folder)
+    warn_unfinished(unfinished)  # one line each: left out of the table
     if len(images):
         # plots and grids see the tabulated profile's rows only
         images = profile_rows(images, args.profile, None if args.with_reported else args.dataset)

@@ -29,7 +29,9 @@ Table shapes follow the paper: EUVS Settings 1–3 (Table 1), Para-Lane single/d
 
 from __future__ import annotations
 
+import json
 import math
+import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import resources
@@ -41,10 +43,10 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from setdiff_bench.errors import SetDiffBenchError, UsageError
-from setdiff_bench.evaluation.paths import METRICS_FILE, RUN_FILE, SEQUENCES_FILE
 from setdiff_bench.evaluation.profiles import DEFAULT_PROFILE, PROFILE_COLUMN, get_profile
 from setdiff_bench.io.atomic import atomic_path, write_text_atomic
 from setdiff_bench.io.images import image_size
+from setdiff_bench.io.run_layout import MANIFEST_FILE, METRICS_FILE, RUN_FILE, SEQUENCES_FILE
 from setdiff_bench.loaders import DATASETS
 from setdiff_bench.loaders.common import natural_key
 from setdiff_bench.metrics.registry import METRICS, get_metric
@@ -124,24 +126,94 @@ def higher_is_better(name: str) -> bool:
 
 
 # ---------------------------------------------------------------------- inputs
-def find_runs(runs: str | Path) -> list[Path]:
-    """Every run folder (holding ``metrics.parquet``) under ``runs``, sorted.
+class UnfinishedRunWarning(UserWarning):
+    """A run folder left out of a table because its run has not finished (shown as one line by the CLI)."""
+
+
+@dataclass(frozen=True)
+class UnfinishedRun:
+    """A folder claimed by ``run`` (``run.json``) whose ``manifest.json`` is not written yet: the run is still
+    going, was killed, or its shards are unfinished or not merged (``merge_run`` writes the manifest last)."""
+
+    folder: Path
+    method: str | None  # from run.json; None when it cannot be read
+
+    def problem(self) -> str:
+        """What is wrong and what to do (the folder is named beside it)."""
+        method = f" (method {self.method})" if self.method else ""
+        return (
+            f"run incomplete{method}: no {MANIFEST_FILE} yet (still running, killed, or shards unfinished or "
+            "not merged); finish it, or run the same `setdiff-bench run` command with --merge"
+        )
+
+
+def survey_runs(runs: str | Path) -> tuple[list[Path], list[UnfinishedRun]]:
+    """The finished run folders under ``runs`` and the unfinished ones, each sorted.
+
+    A folder with ``metrics.parquet`` is a finished run unless ``run`` claimed it (``run.json``) and has not
+    written its ``manifest.json`` (the last file a run writes, atomically); a claimed folder without the
+    manifest is unfinished.  Folders of other writers (evaluation profiles, tables made by hand) have no
+    ``run.json`` and count when their ``metrics.parquet`` exists.
 
     Raises:
-        LeaderboardError: a run folder (``run.json``) has no merged ``metrics.parquet`` yet, i.e. some of
-            its shards have not finished: a table without it would silently miss a method.
+        UsageError: ``runs`` is not a folder.
     """
     root = Path(runs)
     if not root.is_dir():
         raise UsageError("runs folder not found", root)
+    unfinished = []
     for claimed in sorted(root.rglob(RUN_FILE)):
-        if not (claimed.parent / METRICS_FILE).is_file():
-            raise LeaderboardError(
-                f"run incomplete: no {METRICS_FILE} yet (shards unfinished or not merged); finish "
-                "them, or run the same `setdiff-bench run` command with --merge",
-                claimed.parent,
-            )
-    return sorted(p.parent for p in root.rglob(METRICS_FILE) if not p.name.startswith("."))
+        folder = claimed.parent
+        if not (folder / MANIFEST_FILE).is_file() or not (folder / METRICS_FILE).is_file():
+            unfinished.append(UnfinishedRun(folder, _claimed_method(claimed)))
+    skipped = {run.folder for run in unfinished}  # with the profile tables inside them
+    finished = sorted(p.parent for p in root.rglob(METRICS_FILE) if skipped.isdisjoint(p.parents))
+    return finished, unfinished
+
+
+def _claimed_method(run_file: Path) -> str | None:
+    """The method ``run.json`` names, or ``None`` when it cannot be read (being written, damaged)."""
+    try:
+        method = json.loads(run_file.read_text(encoding="utf-8")).get("method")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return method if isinstance(method, str) else None
+
+
+def find_runs(runs: str | Path) -> list[Path]:
+    """Every finished run folder (holding ``metrics.parquet``) under ``runs``, sorted.
+
+    Unfinished runs (:func:`survey_runs`) are left out, each with an :class:`UnfinishedRunWarning` naming it.
+
+    Raises:
+        UsageError: ``runs`` is not a folder.
+        LeaderboardError: every run under ``runs`` is unfinished (a table of none would say less).
+    """
+    finished, unfinished = survey_runs(runs)
+    require_finished(finished, unfinished)
+    warn_unfinished(unfinished)
+    return finished
+
+
+def require_finished(finished: Sequence[Path], unfinished: Sequence[UnfinishedRun]) -> None:
+    """Refuse a runs folder whose every run is unfinished, naming the first.
+
+    Raises:
+        LeaderboardError: no finished run and at least one unfinished one.
+    """
+    if unfinished and not finished:
+        first = unfinished[0]
+        raise LeaderboardError(first.problem() + _more(len(unfinished) - 1, "unfinished run"), first.folder)
+
+
+def warn_unfinished(unfinished: Sequence[UnfinishedRun]) -> None:
+    """One :class:`UnfinishedRunWarning` per run left out (the CLI prints each as one line)."""
+    for run in unfinished:
+        warnings.warn(f"{run.folder}: left out, {run.problem()}", UnfinishedRunWarning, stacklevel=3)
+
+
+def _more(count: int, what: str) -> str:
+    return f" (and {count} more {what}{'s' if count > 1 else ''})" if count else ""
 
 
 def load_runs(runs: str | Path | Sequence[Path]) -> tuple[pd.DataFrame, pd.DataFrame]:
