@@ -16,7 +16,8 @@ Each target is enhanced with one reference, RGB only — no geometry, no CFG.  W
     target.
 
 The (reference, target) pairs run as independent sets stacked on the batch axis (``sets_per_call``
-bounds how many per UNet call).
+bounds how many per UNet call).  A packet of any size is reflect-padded once to the network's size
+multiple and the output cropped back (:mod:`setdiff_bench.enhancers.padding`).
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ import numpy as np
 import torch
 
 from setdiff_bench.cameras import Camera
+from setdiff_bench.enhancers.padding import crop, pad_packet
 from setdiff_bench.enhancers.setdiff import ModelEnhancer, load_enhancer
 from setdiff_bench.errors import UsageError
 from setdiff_bench.types import Packet
@@ -79,18 +81,21 @@ class DifixEnhancer(ModelEnhancer):
         self.options = {**self.options, "references": references}
 
     def enhance(self, packet: Packet) -> torch.Tensor:
-        """``(M, 3, H, W)`` float32 in [0, 1], packet order; each target with its rule's one reference."""
+        """``(M, 3, H, W)`` float32 in [0, 1], packet order, any H × W; each target with its rule's one
+        reference."""
         if self.references == "eq2" or len(packet.references) == 0:
             return super().enhance(packet)
-        choice = nearest_pose_assignments(packet.references.cameras, packet.targets.cameras)
-        output = torch.empty((len(packet.targets), 3, packet.height, packet.width), dtype=torch.float32)
+        # pad once here: the parts below are then at the size multiple and go to the model as they are
+        padded, padding = pad_packet(packet, self.size_multiple)
+        choice = nearest_pose_assignments(padded.references.cameras, padded.targets.cameras)
+        output = torch.empty((len(padded.targets), 3, padded.height, padded.width), dtype=torch.float32)
         for reference in sorted(set(choice)):
             ids = [i for i, r in enumerate(choice) if r == reference]
             part = dataclasses.replace(
-                packet, references=packet.references.subset([reference]), targets=packet.targets.subset(ids)
+                padded, references=padded.references.subset([reference]), targets=padded.targets.subset(ids)
             )
             output[ids] = super().enhance(part)
-        return output
+        return crop(output, padding)
 
 
 def create(

@@ -2,7 +2,9 @@
 
 All references and targets of a packet are enhanced jointly in one set (see
 :mod:`setdiff_bench.models.setdiff`), with geometry CFG at the checkpoint's guidance scale unless
-``guidance_scale`` overrides it.  Heavy imports (diffusers, peft) happen when the enhancer is built.
+``guidance_scale`` overrides it.  A packet of any size is enhanced: its views are reflect-padded to
+the network's size multiple (the VAE's ``latent_factor``, 8) and the output cropped back
+(:mod:`setdiff_bench.enhancers.padding`).  Heavy imports (diffusers, peft) happen when the enhancer is built.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from typing import Any
 
 import torch
 
+from setdiff_bench.enhancers.padding import crop, pad_packet, padded_size
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.atomic import sha256_file
 from setdiff_bench.models.setdiff import inference  # module attribute: looked up per call (tests replace it)
@@ -81,9 +84,16 @@ class ModelEnhancer:
             return self.checkpoint.name
         return f"{self.checkpoint.parent.name}/{self.checkpoint.name}"
 
+    @property
+    def size_multiple(self) -> int:
+        """Both image sides the network sees are multiples of this (the VAE's latent factor)."""
+        return int(self.config.model.latent_factor)
+
     def memory_bytes(self, references: int, targets: int, height: int, width: int) -> int:
-        """Estimated peak bytes above the loaded model to enhance one packet
-        (:func:`setdiff_bench.models.setdiff.memory.inference_bytes` with this enhancer's options)."""
+        """Estimated peak bytes above the loaded model to enhance one packet of ``height × width`` pixels
+        (:func:`setdiff_bench.models.setdiff.memory.inference_bytes` with this enhancer's options, at
+        the padded size the network sees)."""
+        height, width = padded_size(height, width, self.size_multiple)
         return inference_bytes(
             self.config.model,
             references=references,
@@ -107,15 +117,22 @@ class ModelEnhancer:
         )
 
     def enhance(self, packet: Packet) -> torch.Tensor:
-        """``(M, 3, H, W)`` float32 images in [0, 1], packet order (H, W divisible by 8)."""
-        return inference.enhance_packet(
+        """``(M, 3, H, W)`` float32 images in [0, 1], packet order, any H × W.
+
+        Views are reflect-padded to :attr:`size_multiple` and the output cropped back
+        (:func:`~setdiff_bench.enhancers.padding.pad_packet`); a packet already at a multiple is passed
+        to the model as it is.
+        """
+        padded, padding = pad_packet(packet, self.size_multiple)
+        output = inference.enhance_packet(
             self.model,
-            packet,
+            padded,
             guidance_scale=self.guidance_scale,
             sets_per_call=self.sets_per_call,
             max_references=self.max_references,
             targets_per_set=self.targets_per_set,
         )
+        return crop(output, padding)
 
 
 def load_enhancer(

@@ -9,6 +9,9 @@ as ``prepare`` does), builds a :class:`~setdiff_bench.types.Packet` and enhances
 as one set with the loaded enhancer — the same code path as ``run --method setdiff``, so a tick whose
 views match a prepared packet gives the same images (to the last 8-bit level).
 
+Any frame size is accepted: the SetDiff / DiFix enhancers reflect-pad a packet to the size multiple their
+network needs and crop the output back (:mod:`setdiff_bench.enhancers.padding`).
+
 Shapes: images ``(V, 3, H, W)`` float32 in [0, 1]; C-maps ``(V, 3, H, W)`` world coordinates
 (alpha-weighted, Eq. 1); alphas ``(V, 1, H, W)``.
 """
@@ -83,8 +86,6 @@ def _check_views(views: Views, role: str, size: tuple[int, int] | None) -> tuple
         raise StreamInputError(f"{count} images but {len(views.cameras)} cameras", role)
     if size is not None and (height, width) != size:
         raise StreamInputError(f"images are {width}x{height}, the session expects {size[1]}x{size[0]}", role)
-    if height % 8 or width % 8:
-        raise StreamInputError(f"images are {width}x{height}; both sides must be divisible by 8", role)
     if images.is_floating_point() and not torch.isfinite(images).all():
         raise StreamInputError("images contain NaN or infinite values", role)
     for i, camera in enumerate(views.cameras):

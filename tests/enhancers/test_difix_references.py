@@ -63,7 +63,9 @@ def test_each_target_is_enhanced_with_its_rule_reference(monkeypatch, rule, expe
 
     monkeypatch.setattr(inference, "enhance_packet", fake_enhance)
     model = torch.nn.Linear(1, 1)
-    config = SimpleNamespace(model=SimpleNamespace(guidance_scale=1.0, max_references=1, targets_per_set=1))
+    config = SimpleNamespace(
+        model=SimpleNamespace(guidance_scale=1.0, max_references=1, targets_per_set=1, latent_factor=8)
+    )
     base = difix.ModelEnhancer("difix", model, config, "ckpt", guidance_scale=None, sets_per_call=None)
     enhancer = difix.DifixEnhancer(base, rule)
     packet = Packet(
