@@ -16,7 +16,10 @@ lie on that chain.  ``sweeps=False`` keeps keyframes only.
 Camera: ``camera-to-world = T(ego_pose) · T(calibrated_sensor)`` with ``T(r) = [R(r.rotation) r.translation; 0 1]``
 and scalar-first quaternions; the camera frame is already OpenCV (x right, y down, z forward);
 ``K = calibrated_sensor.camera_intrinsic``; no distortion (images are rectified).  The world is the
-map frame of the log (metres).  ``timestamp_us`` is the integer ``sample_data.timestamp``.
+map frame of the log (metres).  ``timestamp_us`` is the integer ``sample_data.timestamp``; a float
+timestamp (tables written by other tools: mmdetection3d's Lyft tables store ``1556675185903083.2``) is
+rounded to the nearest microsecond (Python's ``round``, halves to even), with one warning per table
+giving how many were rounded; NaN, infinities and strings are refused.
 
 Frame name: ``sample_data.filename`` (unique).  Frame order: timestamp, then channel in the schema's
 listing order ``CAM_FRONT, CAM_FRONT_LEFT, CAM_FRONT_RIGHT, CAM_BACK, CAM_BACK_LEFT, CAM_BACK_RIGHT``
@@ -28,7 +31,9 @@ dependency here).  ``v1.0-trainval``'s ``sample_data.json`` is large: loading it
 
 from __future__ import annotations
 
+import math
 import os
+import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -134,24 +139,39 @@ FIELD_TYPES: dict[str, dict[str, tuple[type, ...]]] = {
 }
 
 
-def check_field_types(record: dict[str, Any], table: str, path: Path) -> None:
+#: Fields stored in integer microseconds that may be written as fractional floats; rounded on load.
+MICROSECOND_FIELDS: dict[str, tuple[str, ...]] = {"sample_data": ("timestamp",)}
+
+
+def check_field_types(record: dict[str, Any], table: str, path: Path) -> int:
     """Raise ``DatasetError`` when a field the loader reads has another JSON type than the schema's.
 
     An integral float where the schema has an int (``1556675185850000.0``: nuScenes-format tables
     written by other tools, e.g. Lyft tables trimmed by mmdetection3d) is accepted and stored as the int.
+    A finite non-integral float in a microsecond field (:data:`MICROSECOND_FIELDS`,
+    ``1556675185903083.2``) is rounded to the nearest microsecond and stored as the int; NaN and
+    infinities stay refused.
+
+    Returns:
+        how many fields of ``record`` were rounded (the caller warns once per table with the total).
     """
+    rounded = 0
     for field, kinds in FIELD_TYPES.get(table, {}).items():
         if field not in record:
             continue
         value = record[field]
         if int in kinds and isinstance(value, float) and value.is_integer():
             record[field] = value = int(value)
+        elif field in MICROSECOND_FIELDS.get(table, ()) and isinstance(value, float) and math.isfinite(value):
+            record[field] = value = round(value)
+            rounded += 1
         if not isinstance(value, kinds) or (isinstance(value, bool) and bool not in kinds):
             expected = " or ".join("list" if k is list else k.__name__ for k in kinds)
             raise DatasetError(
                 f"{table} {record['token']!r} field {field!r} must be a JSON {expected}, got {value!r:.60}",
                 path,
             )
+    return rounded
 
 
 @dataclass
@@ -165,12 +185,21 @@ class _Table:
     @classmethod
     def load(cls, tables: Path, name: str) -> _Table:
         rows: dict[str, dict[str, Any]] = {}
+        path = tables / f"{name}.json"
+        rounded = 0
         for record in load_table(tables, name):
             if record["token"] in rows:
-                raise DatasetError(f"duplicate token {record['token']!r}", tables / f"{name}.json")
-            check_field_types(record, name, tables / f"{name}.json")
+                raise DatasetError(f"duplicate token {record['token']!r}", path)
+            rounded += check_field_types(record, name, path)
             rows[record["token"]] = record
-        return cls(name, tables / f"{name}.json", rows)
+        if rounded:
+            fields = " / ".join(MICROSECOND_FIELDS[name])
+            warnings.warn(
+                f"{path}: {rounded} {name} {fields} values are fractional microseconds; "
+                "rounded to the nearest microsecond",
+                stacklevel=2,
+            )
+        return cls(name, path, rows)
 
     def get(self, token: Any, referrer: _Table, referrer_token: str, field: str) -> dict[str, Any]:
         """The record ``token`` names; a dangling token is a ``DatasetError`` naming the referring file."""

@@ -87,10 +87,7 @@ def test_integral_float_timestamp_is_accepted(nu):
     [scene] = load_scenes("nuscenes", nu.root, ["scene-0061"])
     [frame] = [f for f in scene.frames if f.metadata["sample_data_token"] == "scene0_CAM_FRONT_LEFT_2"]
     assert frame.timestamp_us == expected and isinstance(frame.timestamp_us, int)
-    record["timestamp"] = expected + 0.5
-    nu.write()
-    with pytest.raises(DatasetError, match="'timestamp' must be a JSON int"):
-        load_scenes("nuscenes", nu.root, ["scene-0061"])
+    # fractional microseconds are rounded since issue 41 (tests/loaders/test_loader_nuscenes_timestamps.py)
 
 
 def test_missing_field_is_named(nu):
