@@ -149,6 +149,17 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+def chosen_parser(parser: argparse.ArgumentParser, args: argparse.Namespace) -> argparse.ArgumentParser:
+    """The innermost parser ``args`` went through: ``setdiff-bench weights list`` → the ``weights list``
+    sub-parser, so that a usage error names the help that lists the right options."""
+    while True:
+        sub = next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)), None)
+        name = getattr(args, sub.dest, None) if sub is not None else None
+        if sub is None or name not in sub.choices:
+            return parser
+        parser = sub.choices[name]
+
+
 @contextlib.contextmanager
 def one_line_warnings(verb: str) -> Iterator[None]:
     """Show the toolkit's own warnings (classes defined in ``setdiff_bench``) as one line
@@ -170,7 +181,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Parse ``argv`` and run the verb; returns the process exit code."""
     words = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(words)
-    args = parser.parse_args(words)
+    args, extras = parser.parse_known_args(words)
+    if extras:  # reported by the (sub-)command they were given to, with its --help
+        chosen_parser(parser, args).error(f"unrecognized arguments: {' '.join(extras)}")
     #: the command as typed, for the records a verb writes (training manifests)
     args.command_line = "setdiff-bench " + shlex.join(words)
     try:

