@@ -50,9 +50,9 @@ import torch
 
 from benchmarks.common import machine, write_result
 from setdiff_bench.enhancers.setdiff import load_enhancer
-from setdiff_bench.evaluation.paths import IMAGES_DIR
 from setdiff_bench.evaluation.stream import StreamSession
 from setdiff_bench.io.images import read_rgb
+from setdiff_bench.io.run_layout import IMAGES_DIR
 from setdiff_bench.serve.client import EnhancerClient, view_messages
 from tests.stream.stream_fixtures import (
     RIG,

@@ -1,4 +1,4 @@
-"""The shared vocabulary of the data path: Camera, Frame, Scene, ViewSet, PacketKey, Packet.
+"""The shared vocabulary of the data path: Camera, Frame, Scene, ViewSet, PacketKey, TargetRef, Packet.
 
 Shapes follow docs/architecture.md: images are float32 ``(V, 3, H, W)`` in [0, 1]; C-maps
 ``(V, 3, H, W)`` in the packet's normalised frame; alphas ``(V, 1, H, W)`` in [0, 1]; masks
@@ -26,6 +26,7 @@ __all__ = [
     "Packet",
     "PacketKey",
     "Scene",
+    "TargetRef",
     "TrainingSample",
     "ViewSet",
 ]
@@ -168,8 +169,8 @@ class PacketKey:
     """Which packet: the one declaration of a packet's identity.
 
     Everything that names a packet extends it — the plan's ``PacketJob``, the store's ``PacketHeader``,
-    an enhancer's ``TargetRef`` — and its fields are the key columns of the packet index and of a run's
-    ``metrics.parquet`` (:data:`setdiff_bench.evaluation.paths.KEY_COLUMNS`).  :class:`Packet` is mutable
+    one target view's :class:`TargetRef` — and its fields are the key columns of the packet index and of a run's
+    ``metrics.parquet`` (:data:`setdiff_bench.io.run_layout.KEY_COLUMNS`).  :class:`Packet` is mutable
     (trainers and tests swap its views), so it carries the same fields and gives its key as :attr:`Packet.key`.
 
     Attributes:
@@ -202,6 +203,14 @@ PACKET_KEY_FIELDS: tuple[str, ...] = tuple(f.name for f in fields(PacketKey))
 def key_fields(keyed: PacketKey | Packet) -> dict[str, str]:
     """``{field: value}`` of the packet key of a :class:`PacketKey` (or anything extending it) or a :class:`Packet`."""
     return {name: getattr(keyed, name) for name in PACKET_KEY_FIELDS}
+
+
+@dataclass(frozen=True)
+class TargetRef(PacketKey):
+    """Where one target view comes from: its packet's key and its frame, enough to find a file produced
+    for it by external code."""
+
+    frame: str
 
 
 @dataclass

@@ -248,7 +248,7 @@ def _run_command(
 
 
 def _geometry(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocation: str) -> dict[str, Path]:
-    from setdiff_bench.evaluation.paths import METRICS_FILE
+    from setdiff_bench.io.run_layout import METRICS_FILE
     from setdiff_bench.models.setdiff.config import config_toml_data, write_config_toml
     from setdiff_bench.reporting import ablation
 
@@ -304,7 +304,7 @@ def _geometry(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocati
 
 
 def _setsize(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocation: str) -> dict[str, Path]:
-    from setdiff_bench.evaluation.paths import METRICS_FILE
+    from setdiff_bench.io.run_layout import METRICS_FILE
     from setdiff_bench.reporting import ablation
 
     sizes = ablation.parse_sizes(args.sizes)

@@ -60,9 +60,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     from setdiff_bench.errors import SetDiffBenchError, UsageError
-    from setdiff_bench.evaluation.paths import EUVS_COMPAT_FILE
     from setdiff_bench.evaluation.profile_scoring import score_run
     from setdiff_bench.evaluation.profiles import get_profile
+    from setdiff_bench.io.run_layout import EUVS_COMPAT_FILE
     from setdiff_bench.runtime.devices import resolve_device
 
     device = resolve_device(args.device)
@@ -131,8 +131,8 @@ def _other_store(run: Path, packets: Path) -> str | None:
     ``run.json`` records), or ``None`` when it is, or when either cannot be read."""
     import json
 
-    from setdiff_bench.evaluation.paths import RUN_FILE
     from setdiff_bench.io.atomic import sha256_file
+    from setdiff_bench.io.run_layout import RUN_FILE
     from setdiff_bench.packets.index import INDEX_FILE
 
     try:

@@ -92,9 +92,9 @@ def run(args: argparse.Namespace) -> int:
     # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     from setdiff_bench.cli.list import parse_option
     from setdiff_bench.errors import UsageError
-    from setdiff_bench.evaluation.paths import MANIFEST_FILE, METRICS_FILE
     from setdiff_bench.evaluation.run import RunSettings, run_method
     from setdiff_bench.evaluation.scoring import resolve_metrics
+    from setdiff_bench.io.run_layout import MANIFEST_FILE, METRICS_FILE
     from setdiff_bench.packets.shards import Shard
     from setdiff_bench.runtime.devices import resolve_device
 

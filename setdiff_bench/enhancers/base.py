@@ -33,7 +33,7 @@ import torch
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.runtime.lazy import load_attribute
-from setdiff_bench.types import Packet, PacketKey
+from setdiff_bench.types import Packet, TargetRef
 
 ENTRY_POINT_GROUP = "setdiff_bench.enhancers"
 #: Command-line spelling of factory options whose flag differs from ``--<option-name>``.
@@ -57,14 +57,6 @@ class Enhancer(Protocol):
     def enhance(self, packet: Packet) -> torch.Tensor:
         """Return ``(M, 3, H, W)`` float32 images in [0, 1], one per target view, in packet order."""
         ...
-
-
-@dataclass(frozen=True)
-class TargetRef(PacketKey):
-    """Where one target view comes from: its packet's key and its frame, enough to find a file produced
-    for it by external code."""
-
-    frame: str
 
 
 @runtime_checkable

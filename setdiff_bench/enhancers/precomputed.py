@@ -9,7 +9,7 @@ specific first, at::
     DIR/<scene>/S.<ext>
     DIR/S.<ext>
 
-(``<protocol>``, ``<group>``, ``<scene>`` as :func:`setdiff_bench.evaluation.paths.safe_component` spells them:
+(``<protocol>``, ``<group>``, ``<scene>`` as :func:`setdiff_bench.io.names.safe_component` spells them:
 the names themselves unless they hold a path separator) with ``<ext>`` one of ``png``, ``jpg``, ``jpeg`` (case-insensitive on the suffix as written: ``.png``,
 ``.PNG``...).  The first level holding a file wins; two files for one frame at the same level (say
 ``S.png`` and ``S.jpg``) are an error.  Use the ``<group>`` levels when one frame is a target of several
@@ -29,11 +29,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from setdiff_bench.enhancers.base import TargetRef
 from setdiff_bench.errors import ImageError, UsageError
-from setdiff_bench.evaluation.paths import IMAGES_DIR, MANIFEST_FILE, frame_relative, safe_component
 from setdiff_bench.io.images import read_rgb
-from setdiff_bench.types import Packet, key_fields
+from setdiff_bench.io.names import frame_relative, safe_component
+from setdiff_bench.io.run_layout import IMAGES_DIR, MANIFEST_FILE
+from setdiff_bench.types import Packet, TargetRef, key_fields
 
 EXTENSIONS = (".png", ".jpg", ".jpeg")
 SHOW_MISSING = 10

@@ -32,15 +32,6 @@ import torch
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.evaluation.euvs_compat import compat_report
-from setdiff_bench.evaluation.paths import (
-    EUVS_COMPAT_FILE,
-    GROUPS_FILE,
-    KEY_COLUMNS,
-    METRICS_FILE,
-    PROFILE_FILE,
-    PROFILES_DIR,
-    SCENES_FILE,
-)
 from setdiff_bench.evaluation.profiles import (
     PROFILE_COLUMN,
     EvaluationProfile,
@@ -52,6 +43,15 @@ from setdiff_bench.evaluation.profiles import (
 )
 from setdiff_bench.io.atomic import atomic_path, write_text_atomic
 from setdiff_bench.io.images import read_mask, read_rgb
+from setdiff_bench.io.run_layout import (
+    EUVS_COMPAT_FILE,
+    GROUPS_FILE,
+    KEY_COLUMNS,
+    METRICS_FILE,
+    PROFILE_FILE,
+    PROFILES_DIR,
+    SCENES_FILE,
+)
 from setdiff_bench.loaders import load_scenes
 from setdiff_bench.metrics.dinov2 import final_score, masked_cosine
 from setdiff_bench.metrics.registry import METRICS

@@ -68,18 +68,6 @@ from setdiff_bench.enhancers.base import (
 from setdiff_bench.errors import PacketError, UsageError
 from setdiff_bench.evaluation.packet_scoring import EnhancerOutputError as EnhancerOutputError  # re-exported
 from setdiff_bench.evaluation.packet_scoring import score_packet
-from setdiff_bench.evaluation.paths import (
-    ENHANCER_FILE,
-    FRAGMENTS_DIR,
-    IMAGES_DIR,
-    KEY_COLUMNS,
-    MANIFEST_FILE,
-    METRICS_FILE,
-    RUN_FILE,
-    SEQUENCES_FILE,
-    image_relative,
-    safe_component,
-)
 from setdiff_bench.evaluation.preflight import check_packets_fit, warn_out_of_distribution
 from setdiff_bench.evaluation.scoring import (
     default_warp_cache,
@@ -95,6 +83,18 @@ from setdiff_bench.io.atomic import (
     write_text_atomic,
 )
 from setdiff_bench.io.images import read_rgb, to_tensor_chw, write_png
+from setdiff_bench.io.names import safe_component
+from setdiff_bench.io.run_layout import (
+    ENHANCER_FILE,
+    FRAGMENTS_DIR,
+    IMAGES_DIR,
+    KEY_COLUMNS,
+    MANIFEST_FILE,
+    METRICS_FILE,
+    RUN_FILE,
+    SEQUENCES_FILE,
+    image_relative,
+)
 from setdiff_bench.metrics.registry import PRESETS, MetricSpec
 from setdiff_bench.packets.index import INDEX_FILE
 from setdiff_bench.packets.shards import Shard

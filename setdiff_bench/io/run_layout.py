@@ -1,19 +1,18 @@
 """A run folder's file names, the key columns of its tables, and where a run puts each enhanced target:
 ``images/<protocol>/<group>/<scene>/<frame stem>.png``.
 
-Declared once here for :mod:`setdiff_bench.evaluation.run` (which writes them) and every reader: the leaderboard,
-grids, the demo, ablations, evaluation profiles and the ``precomputed`` enhancer (which reads a run's
-``images/`` folder, or any folder in the same layout).
+Declared once here, on the I/O floor, for :mod:`setdiff_bench.evaluation.run` (which writes them) and every
+reader: the leaderboard, grids, the demo, ablations, evaluation profiles and the ``precomputed`` enhancer (which
+reads a run's ``images/`` folder, or any folder in the same layout).  Names become path components through
+:mod:`setdiff_bench.io.names`.
 """
 
 from __future__ import annotations
 
 from pathlib import PurePosixPath
 
-from setdiff_bench.enhancers.base import TargetRef
-from setdiff_bench.errors import PacketError
-from setdiff_bench.packets.index import slug
-from setdiff_bench.types import PACKET_KEY_FIELDS
+from setdiff_bench.io.names import frame_relative, safe_component
+from setdiff_bench.types import PACKET_KEY_FIELDS, TargetRef
 
 IMAGES_DIR = "images"
 RUN_FILE = "run.json"
@@ -43,29 +42,6 @@ KEY_COLUMNS: tuple[str, ...] = (
     "view",
     "method",
 )
-
-
-def safe_component(text: str) -> str:
-    """A scene / group / protocol name as one path component.
-
-    Names are used as they are unless they are empty, ``.``/``..`` or contain a path separator or NUL;
-    those go through the packet-id slug (runs of characters other than ``A-Za-z0-9.+-`` become ``-``).
-    """
-    if not text or text in {".", ".."} or "/" in text or "\\" in text or "\0" in text:
-        return slug(text)
-    return text
-
-
-def frame_relative(frame: str) -> PurePosixPath:
-    """A frame name as a relative path without its extension (``CAM_FRONT/a.jpg`` → ``CAM_FRONT/a``).
-
-    Raises:
-        PacketError: an absolute name, or one with ``..`` or empty parts (it could escape its folder).
-    """
-    path = PurePosixPath(frame.replace("\\", "/"))
-    if not frame or path.is_absolute() or any(part in {"..", "."} for part in path.parts) or "//" in frame:
-        raise PacketError(f"frame name {frame!r} is not a safe relative file name")
-    return path.with_suffix("") if path.suffix else path
 
 
 def image_relative(ref: TargetRef) -> str:

@@ -30,7 +30,6 @@ was made from; a changed recipe makes ``prepare`` rewrite the packet).
 from __future__ import annotations
 
 import contextlib
-import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -40,6 +39,7 @@ import pyarrow.parquet as pq
 
 from setdiff_bench.errors import PacketError
 from setdiff_bench.io.atomic import atomic_path, is_stale_temporary
+from setdiff_bench.io.names import slug
 
 INDEX_FILE = "index.parquet"
 PACKETS_DIR = "packets"
@@ -80,14 +80,6 @@ SCHEMA = pa.schema(
         ("recipe", pa.string()),
     ]
 )
-
-_UNSAFE = re.compile(r"[^A-Za-z0-9.+-]+")
-
-
-def slug(text: str) -> str:
-    """A file-name-safe form of a scene or group name: runs of other characters become ``-``."""
-    out = _UNSAFE.sub("-", text).strip("-.")
-    return out or "x"
 
 
 def packet_id(protocol: str, scene: str, group: str, index: int) -> str:

@@ -45,8 +45,8 @@ from typing import Any
 import pandas as pd
 
 from setdiff_bench.errors import UsageError
-from setdiff_bench.evaluation.paths import METRICS_FILE
 from setdiff_bench.io.atomic import sha256_file, write_text_atomic
+from setdiff_bench.io.run_layout import METRICS_FILE
 from setdiff_bench.metrics.registry import get_metric
 from setdiff_bench.models.setdiff.packaged import packaged_models
 from setdiff_bench.pipeline.presets import (  # noqa: F401 (DEFAULT_OUT, DEMO_PRESETS: re-exported)

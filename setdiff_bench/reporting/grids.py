@@ -20,8 +20,8 @@ import numpy as np
 import pandas as pd
 
 from setdiff_bench.errors import UsageError
-from setdiff_bench.evaluation.paths import METRICS_FILE
 from setdiff_bench.io.images import quantize_uint8, read_rgb, write_png
+from setdiff_bench.io.run_layout import METRICS_FILE
 from setdiff_bench.loaders.common import natural_key
 from setdiff_bench.packets.store import PacketStore
 

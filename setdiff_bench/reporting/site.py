@@ -35,10 +35,10 @@ import numpy as np
 import pandas as pd
 
 from setdiff_bench.errors import UsageError
-from setdiff_bench.evaluation.paths import RUN_FILE
 from setdiff_bench.evaluation.profiles import DEFAULT_PROFILE, PROFILE_COLUMN
 from setdiff_bench.io.atomic import sha256_file, staged_folder
 from setdiff_bench.io.images import write_png
+from setdiff_bench.io.run_layout import RUN_FILE
 from setdiff_bench.loaders.common import natural_key
 from setdiff_bench.metrics.registry import METRICS
 from setdiff_bench.packets.index import INDEX_FILE

@@ -18,8 +18,8 @@ import numpy as np
 import pandas as pd
 
 from setdiff_bench.errors import UsageError
-from setdiff_bench.evaluation.paths import METRICS_FILE
 from setdiff_bench.io.images import quantize_uint8, read_rgb
+from setdiff_bench.io.run_layout import METRICS_FILE
 from setdiff_bench.packets.store import PacketStore
 
 #: Absolute error (0–1 scale, mean over RGB) shown as the brightest colour of an error map.

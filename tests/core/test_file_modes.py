@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from setdiff_bench.evaluation.paths import METRICS_FILE
 from setdiff_bench.io.atomic import atomic_path, current_umask, staging_dir, write_text_atomic
 from setdiff_bench.io.images import write_exr, write_png
+from setdiff_bench.io.run_layout import METRICS_FILE
 
 
 @pytest.fixture(params=[0o022, 0o027, 0o002])

@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import fields
 
 from setdiff_bench.enhancers.base import TargetRef
-from setdiff_bench.evaluation.paths import KEY_COLUMNS
+from setdiff_bench.io.run_layout import KEY_COLUMNS
 from setdiff_bench.packets.plan import PacketJob
 from setdiff_bench.packets.store import PacketHeader
 from setdiff_bench.types import PACKET_KEY_FIELDS, Packet, PacketKey

@@ -12,7 +12,9 @@ import pandas as pd
 import pytest
 
 from setdiff_bench.cli.main import main
-from setdiff_bench.evaluation.paths import (
+from setdiff_bench.evaluation.run import TIMING_COLUMNS
+from setdiff_bench.io.images import read_image_raw
+from setdiff_bench.io.run_layout import (
     ENHANCER_FILE,
     FRAGMENTS_DIR,
     KEY_COLUMNS,
@@ -20,8 +22,6 @@ from setdiff_bench.evaluation.paths import (
     METRICS_FILE,
     RUN_FILE,
 )
-from setdiff_bench.evaluation.run import TIMING_COLUMNS
-from setdiff_bench.io.images import read_image_raw
 from setdiff_bench.pipeline.demo import METHODS, SUMMARY_FILE
 from setdiff_bench.pipeline.stages import LEDGER_FILE
 from setdiff_bench.runtime.threads import compute_threads

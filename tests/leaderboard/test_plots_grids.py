@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 from setdiff_bench.errors import UsageError
-from setdiff_bench.evaluation.paths import METRICS_FILE
+from setdiff_bench.io.run_layout import METRICS_FILE
 from setdiff_bench.packets.store import PacketStore
 from setdiff_bench.reporting.grids import BAND, GAP, GridFrame, pick_frames, qualitative_grid
 from setdiff_bench.reporting.plots import (

@@ -30,8 +30,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from setdiff_bench.evaluation.paths import ENHANCER_FILE, FRAGMENTS_DIR, MANIFEST_FILE, METRICS_FILE, RUN_FILE
 from setdiff_bench.evaluation.run import RunSettings, comparable_metrics, run_method
+from setdiff_bench.io.run_layout import ENHANCER_FILE, FRAGMENTS_DIR, MANIFEST_FILE, METRICS_FILE, RUN_FILE
 from setdiff_bench.packets.index import PACKETS_DIR
 from setdiff_bench.packets.prepare import prepare
 from setdiff_bench.runtime.threads import torch_threads

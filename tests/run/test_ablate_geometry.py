@@ -11,7 +11,7 @@ from pathlib import Path
 import pandas as pd
 
 from setdiff_bench.cli.main import main
-from setdiff_bench.evaluation.paths import METRICS_FILE
+from setdiff_bench.io.run_layout import METRICS_FILE
 from setdiff_bench.models.setdiff.checkpoint import resolve_checkpoint
 from tests.models.test_store_training import CONFIG, write_store
 

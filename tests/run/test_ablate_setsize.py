@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from setdiff_bench.cli.main import main
-from setdiff_bench.evaluation.paths import METRICS_FILE
+from setdiff_bench.io.run_layout import METRICS_FILE
 from setdiff_bench.models.setdiff.checkpoint import save_checkpoint
 from tests.models.test_checkpoint import perturbed_model
 

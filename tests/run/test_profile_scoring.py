@@ -12,9 +12,9 @@ import pytest
 
 from setdiff_bench.cli.main import main
 from setdiff_bench.errors import UsageError
-from setdiff_bench.evaluation.paths import GROUPS_FILE, METRICS_FILE, PROFILE_FILE, PROFILES_DIR
 from setdiff_bench.evaluation.profile_scoring import score_run
 from setdiff_bench.evaluation.profiles import EvaluationProfile, get_profile
+from setdiff_bench.io.run_layout import GROUPS_FILE, METRICS_FILE, PROFILE_FILE, PROFILES_DIR
 from setdiff_bench.reporting.leaderboard import (
     LeaderboardError,
     build_leaderboard,

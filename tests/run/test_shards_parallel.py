@@ -18,8 +18,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from setdiff_bench.evaluation.paths import FRAGMENTS_DIR, METRICS_FILE
 from setdiff_bench.evaluation.run import comparable_metrics, fragment_path
+from setdiff_bench.io.run_layout import FRAGMENTS_DIR, METRICS_FILE
 from setdiff_bench.packets.store import PacketStore
 from tests.run.store_fixtures import StoreSpec, build_store, leaderboard_argv, run_argv
 

@@ -17,7 +17,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from setdiff_bench.evaluation.paths import METRICS_FILE
+from setdiff_bench.io.run_layout import METRICS_FILE
 from setdiff_bench.packets.index import INDEX_FILE
 from setdiff_bench.packets.prepare import prepare
 from setdiff_bench.runtime.threads import torch_threads

@@ -13,8 +13,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from setdiff_bench.evaluation.paths import IMAGES_DIR, METRICS_FILE
 from setdiff_bench.evaluation.run import RunSettings, comparable_metrics, run_method
+from setdiff_bench.io.run_layout import IMAGES_DIR, METRICS_FILE
 from setdiff_bench.reporting.leaderboard import build_leaderboard, load_runs, write_leaderboard
 from setdiff_bench.runtime.threads import torch_threads
 

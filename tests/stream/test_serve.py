@@ -18,9 +18,9 @@ import pytest
 import torch
 
 from setdiff_bench.enhancers.setdiff import load_enhancer
-from setdiff_bench.evaluation.paths import IMAGES_DIR
 from setdiff_bench.evaluation.stream import StreamSession, Views
 from setdiff_bench.io.images import read_rgb
+from setdiff_bench.io.run_layout import IMAGES_DIR
 from setdiff_bench.serve import enhancer_pb2 as pb
 from setdiff_bench.serve.client import EnhancerClient
 from setdiff_bench.serve.server import RunningServer, start_server

@@ -9,9 +9,9 @@ import pytest
 import torch
 
 from setdiff_bench.enhancers.setdiff import load_enhancer
-from setdiff_bench.evaluation.paths import IMAGES_DIR
 from setdiff_bench.evaluation.stream import StreamInputError, StreamSession, Views
 from setdiff_bench.io.images import read_rgb, uint8_to_float
+from setdiff_bench.io.run_layout import IMAGES_DIR
 from tests.stream.stream_fixtures import (
     HEIGHT,
     WIDTH,
