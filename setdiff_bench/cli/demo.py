@@ -1,6 +1,7 @@
 """``setdiff-bench demo``: the embedded synthetic benchmark end to end (see :mod:`setdiff_bench.pipeline.demo`).
 
-    setdiff-bench demo [--preset tiny|default|full] [--out runs/demo] [--train [--ablations]]
+    setdiff-bench demo [--benchmark driving|sparse] [--preset tiny|default|full] [--out runs/demo]
+                       [--train [--ablations]]
 
 The outputs go to a scratch folder (default ``runs/demo``, git-ignored); ``setdiff-bench publish``
 copies a finished run over the published results on purpose.
@@ -21,21 +22,35 @@ DESCRIPTION = (
     "reproject and the shipped DiFix and SetDiff models (tiny_difix, tiny_setdiff; trained on other "
     "scenes), and write the leaderboard, plots and grids into a scratch folder (default runs/demo, "
     "git-ignored; `setdiff-bench publish` copies a finished run to results/). --train makes every scene "
-    "and trains SetDiff and DiFix first. Every stage resumes.\n\n"
+    "and trains SetDiff and DiFix first. Every stage resumes. --benchmark sparse runs the sparse-view "
+    "benchmark instead (DL3DV-style walks, 3DGS on 3/6/9 views, shipped tiny_setdiff_sparse and "
+    "tiny_difix_sparse, the leaderboard in Table 4's layout beside the paper's rows).\n\n"
     "Examples:\n\n    setdiff-bench demo\n    setdiff-bench demo --preset tiny --out runs/smoke\n"
+    "    setdiff-bench demo --benchmark sparse --out runs/demo_sparse\n"
     "    setdiff-bench demo --train --setdiff-steps 1000 --difix-steps 1000\n"
     "    setdiff-bench demo --train --setdiff-steps 1000 --difix-steps 1000 --ablations"
 )
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from setdiff_bench.pipeline.presets import DEFAULT_OUT, DEMO_PRESETS
+    from setdiff_bench.pipeline.presets import DEFAULT_BENCHMARK, DEFAULT_OUT, DEMO_BENCHMARKS
 
+    parser.add_argument(
+        "--benchmark",
+        default=DEFAULT_BENCHMARK,
+        choices=tuple(DEMO_BENCHMARKS),
+        help="; ".join(f"{b.name}: {b.description}" for b in DEMO_BENCHMARKS.values())
+        + f" (default {DEFAULT_BENCHMARK})",
+    )
+    presets = DEMO_BENCHMARKS[DEFAULT_BENCHMARK].presets
     parser.add_argument(
         "--preset",
         default="default",
-        choices=tuple(DEMO_PRESETS),
-        help="; ".join(f"{p.name}: {p.description}" for p in DEMO_PRESETS.values()),
+        choices=tuple(presets),
+        help="; ".join(f"{p.name}: {p.description}" for p in presets.values())
+        + " (the sparse benchmark's presets of the same names run its walks: "
+        + "; ".join(f"{p.name}: {p.description}" for p in DEMO_BENCHMARKS["sparse"].presets.values())
+        + ")",
     )
     parser.add_argument(
         "--out",
@@ -67,7 +82,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def invocation(args: argparse.Namespace) -> str:
     """The command line that reproduces this demo, from the parsed arguments."""
-    parts = ["demo", "--preset", args.preset, "--out", str(args.out), "--seed", str(args.seed)]
+    parts = ["demo"]
+    parts += (
+        ["--benchmark", args.benchmark] if args.benchmark != "driving" else []
+    )  # the default: not repeated
+    parts += ["--preset", args.preset, "--out", str(args.out), "--seed", str(args.seed)]
     device = None if args.device == "auto" else args.device  # auto is the default: not repeated
     for flag, value in (
         ("--work", args.work),
@@ -95,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
     resolve_device(
         args.device
     )  # checked here; passed on as given (auto: not at all), so the stages resolve it
-    preset = get_demo_preset(args.preset)
+    preset = get_demo_preset(args.preset, args.benchmark)
     paths = DemoPaths(out=args.out, work=args.work or args.out / "work")
     device = None if args.device == "auto" else args.device  # the stages' own default is auto
     try:

@@ -31,6 +31,13 @@ Presets (``--preset``):
   (about 5 minutes on 2 CPU cores, measured in README.md); with ``--train``, all 6 scenes and short CPU
   training.
 * ``full``: the ``large`` synthetic preset (8 scenes at 512×288); meant for ``--train`` on a GPU.
+
+``--benchmark sparse`` runs the same stages on the sparse-view benchmark
+(:data:`setdiff_bench.pipeline.presets.DEMO_BENCHMARKS`): the ``sparse*`` synthetic presets' walks in
+DL3DV's layout, prepared with the packaged ``dl3dv_sparse_synthetic`` protocol (its listed test scenes
+``sparse_0000_00`` and ``sparse_0000_01``, so seed 0), the shipped ``tiny_setdiff_sparse`` and
+``tiny_difix_sparse``, and the leaderboard in Table 4's layout beside the paper's reported DL3DV rows,
+with the metrics-against-view-count plot.
 """
 
 from __future__ import annotations
@@ -52,7 +59,9 @@ from setdiff_bench.models.setdiff.packaged import packaged_models
 from setdiff_bench.pipeline.presets import (  # noqa: F401 (DEFAULT_OUT, DEMO_PRESETS: re-exported)
     DEFAULT_OUT,
     DEMO_PRESETS,
+    DemoBenchmark,
     DemoPreset,
+    get_benchmark,
     get_demo_preset,
 )
 from setdiff_bench.pipeline.stages import LEDGER_FILE, Pipeline, relative
@@ -62,9 +71,9 @@ from setdiff_bench.runtime.provenance import git_revision, package_versions
 from setdiff_bench.runtime.threads import compute_threads
 
 METHODS = ("identity", "reproject", "difix", "setdiff")
-VERDICT_METRICS = ("psnr", "ssim", "lpips")  # the +2-lane verdict's metrics, in table order
-#: The learned methods and the shipped models the demo evaluates unless ``--train``.
-SHIPPED_MODELS = {"setdiff": "tiny_setdiff", "difix": "tiny_difix"}
+VERDICT_METRICS = ("psnr", "ssim", "lpips")  # the verdict's metrics, in table order
+#: The learned methods and the shipped models the driving demo evaluates unless ``--train``.
+SHIPPED_MODELS = get_benchmark("driving").shipped
 #: The demo's summary in ``<out>``; written last, so a folder with it holds one complete run.
 SUMMARY_FILE = "demo.json"
 REPORT_FILE = "README.md"
@@ -93,31 +102,67 @@ class DemoPaths:
         return self.work / "runs"
 
 
-def evaluation_scene_indices(preset: DemoPreset, seed: int) -> list[int]:
-    """The generator indices of the preset's test scenes: the synthetic protocol's scene split over the
-    scene names ``synth`` gives the preset's scenes (:func:`setdiff_bench.synthetic.generate.scene_name`)."""
+def scene_namer(preset: DemoPreset) -> Any:
+    """``(seed, index) → scene name`` as ``synth`` names the preset's scenes."""
     # lazy: the CLI imports this module at startup (demo presets); the generator pulls in the 3DGS fitting code
-    from setdiff_bench.synthetic.generate import scene_name
-    from setdiff_bench.synthetic.presets import get_preset
+    if get_benchmark(preset.benchmark).dataset == "synthetic":
+        from setdiff_bench.synthetic.generate import scene_name
 
-    count = preset.scenes or get_preset(preset.synth_preset).num_scenes
-    names = [scene_name(seed, index) for index in range(count)]
-    assignment = load_protocol("synthetic").split.assign(names)
-    return [index for index, name in enumerate(names) if assignment[name] == "test"]
+        return scene_name
+    from setdiff_bench.synthetic.sparse import sparse_scene_name
+
+    return sparse_scene_name
 
 
-def check_unseen(test_scenes: list[tuple[int, int]]) -> dict[str, dict[str, Any]]:
+def scene_count(preset: DemoPreset) -> int:
+    """How many scenes (indices ``0 … count - 1``) the preset's benchmark holds."""
+    if preset.scenes:
+        return preset.scenes
+    if get_benchmark(preset.benchmark).dataset == "synthetic":
+        from setdiff_bench.synthetic.presets import get_preset
+
+        return get_preset(preset.synth_preset).num_scenes
+    from setdiff_bench.synthetic.sparse import get_sparse_preset
+
+    return get_sparse_preset(preset.synth_preset).num_scenes
+
+
+def evaluation_scene_indices(preset: DemoPreset, seed: int) -> list[int]:
+    """The generator indices of the preset's test scenes: the benchmark protocol's scene split over the
+    scene names ``synth`` gives the preset's scenes.
+
+    Raises:
+        UsageError: no scene of ``seed`` is a test scene (the sparse protocol lists seed 0's).
+    """
+    benchmark = get_benchmark(preset.benchmark)
+    name = scene_namer(preset)
+    names = [name(seed, index) for index in range(scene_count(preset))]
+    assignment = load_protocol(benchmark.protocol or benchmark.dataset).split.assign(names)
+    indices = [index for index, name in enumerate(names) if assignment[name] == "test"]
+    if not indices:
+        raise UsageError(
+            f"the {benchmark.name} benchmark's protocol has no test scene among seed {seed}'s scenes "
+            f"({names[0]} …); its test scenes are listed in protocol {benchmark.protocol}",
+            "--seed",
+        )
+    return indices
+
+
+def check_unseen(
+    test_scenes: list[tuple[int, int]], shipped_models: dict[str, str] | None = None
+) -> dict[str, dict[str, Any]]:
     """The shipped models' manifests, after checking that none was trained on a demo test scene.
 
     Args:
         test_scenes: ``(seed, index)`` of each test scene.
+        shipped_models: ``{method: packaged model}`` (default: the driving benchmark's).
 
     Raises:
         UsageError: a shipped model is missing, or its training scenes include a test scene.
     """
     shipped = packaged_models()
     manifests = {}
-    for method, name in SHIPPED_MODELS.items():
+    for method, name in (SHIPPED_MODELS if shipped_models is None else shipped_models).items():
         if name not in shipped:
             raise UsageError(
                 f"the shipped model {name!r} is not in this installation; run the demo with --train",
@@ -164,10 +209,10 @@ def run_demo(
         raise UsageError(
             "--setdiff-steps, --difix-steps and --ablations train models: add --train", "--train"
         )
-    from setdiff_bench.synthetic.generate import scene_name
-
+    benchmark = get_benchmark(preset.benchmark)
+    scene_name = scene_namer(preset)
     test_indices = evaluation_scene_indices(preset, seed)
-    shipped = {} if train else check_unseen([(seed, index) for index in test_indices])
+    shipped = {} if train else check_unseen([(seed, index) for index in test_indices], benchmark.shipped)
     base = Path.cwd()
     (paths.out / SUMMARY_FILE).unlink(missing_ok=True)  # until this run completes, the folder is not a run
     pipeline = Pipeline(cwd=base, quiet=not progress, ledger=paths.work / LEDGER_FILE)
@@ -195,7 +240,8 @@ def run_demo(
     pipeline.run("synth", synth + quiet)
     prepare = [
         "prepare",
-        "synthetic",
+        benchmark.dataset,
+        *(["--protocol", benchmark.protocol] if benchmark.protocol else []),
         "--root",
         rel(paths.scenes),
         "--fits",
@@ -207,11 +253,12 @@ def run_demo(
         "--workers",
         jobs,
     ]
-    if not train:
+    if not train and benchmark.protocol is None:
+        # only the test scenes exist here: the synthetic protocol's interleaved split over them would differ
         prepare += [part for index in test_indices for part in ("--test-scene", scene_name(seed, index))]
     pipeline.run("prepare", prepare + quiet)
     checkpoints = (
-        {method: rel(paths.checkpoints(method)) for method in configs} if train else dict(SHIPPED_MODELS)
+        {method: rel(paths.checkpoints(method)) for method in configs} if train else dict(benchmark.shipped)
     )
     for method in configs if train else ():
         command = [
@@ -257,7 +304,7 @@ def run_demo(
         [
             "leaderboard",
             "--dataset",
-            "synthetic",
+            benchmark.leaderboard,
             "--runs",
             rel(paths.runs),
             "--out",
@@ -269,6 +316,7 @@ def run_demo(
             preset.grid_frames,
             "--packets",
             rel(paths.packets),
+            *(["--with-reported"] if benchmark.with_reported else []),
         ],
     )
     if ablations:
@@ -304,7 +352,7 @@ def run_demo(
         if train
         else {
             method: {
-                "shipped": SHIPPED_MODELS[method],
+                "shipped": benchmark.shipped[method],
                 "files": m["files"],
                 "trained_on": m["data"]["scenes"],
                 "training_seeds": m["data"]["synthetic_seeds"],
@@ -350,7 +398,8 @@ def better(metric: str, value: float, other: float) -> bool:
 
 
 def lane_shift_verdict(metrics: pd.DataFrame, group: str = "lane+2") -> dict[str, Any]:
-    """SetDiff against ``identity`` and ``difix`` on one group: means and who wins each metric.
+    """SetDiff against ``identity`` and ``difix`` on one group (the benchmark's verdict group: +2 lanes,
+    3 views): means and who wins each metric.
 
     Args:
         metrics: per-target rows of the four runs (``metrics.parquet`` concatenated).
@@ -375,7 +424,9 @@ def lane_shift_verdict(metrics: pd.DataFrame, group: str = "lane+2") -> dict[str
 def summarize(
     paths: DemoPaths, preset: DemoPreset, steps: dict[str, int], pipeline: Pipeline, invocation: str
 ) -> dict[str, Any]:
-    """The demo's machine-readable summary: preset, stage commands and times, the +2-lane verdict."""
+    """The demo's machine-readable summary: preset, stage commands and times, the verdict on the benchmark's
+    verdict group (under its ``verdict_key``: ``lane_plus_2``, ``views_3``)."""
+    benchmark = get_benchmark(preset.benchmark)
     frames = [
         pd.read_parquet(paths.runs / m / METRICS_FILE)
         for m in METHODS
@@ -400,7 +451,7 @@ def summarize(
         ],
         "total_seconds": round(pipeline.elapsed_seconds(), 1),
         "this_run_seconds": round(pipeline.elapsed_seconds(this_run=True), 1),
-        "lane_plus_2": lane_shift_verdict(metrics) if len(metrics) else {},
+        benchmark.verdict_key: lane_shift_verdict(metrics, benchmark.verdict_group) if len(metrics) else {},
         "outputs": sorted(
             p.name
             for p in paths.out.iterdir()
@@ -412,8 +463,9 @@ def summarize(
 
 
 def report_markdown(summary: dict[str, Any], paths: DemoPaths) -> str:
-    """``<out>/README.md``: what ran, how long, the leaderboard, the +2-lane verdict and the files."""
-    lines = ["# Synthetic benchmark: SetDiff against the baselines", ""]
+    """``<out>/README.md``: what ran, how long, the leaderboard, the verdict and the files."""
+    benchmark = get_benchmark(summary["preset"].get("benchmark", "driving"))
+    lines = [f"# {benchmark.title}", ""]
     lines += [
         f"Produced by `{summary['invocation']}` (preset `{summary['preset']['name']}`: "
         f"{summary['preset']['description']}); total stage time {summary['total_seconds'] / 60:.1f} min.",
@@ -440,14 +492,15 @@ def report_markdown(summary: dict[str, Any], paths: DemoPaths) -> str:
     if models:
         lines.append(f"- Test scenes: {', '.join(summary.get('test_scenes', []))}.")
         lines.append("")
-    board = paths.out / "synthetic.md"
+    board = paths.out / f"{benchmark.leaderboard}.md"
     if board.is_file():
         lines += ["## Leaderboard (test scenes)", "", board.read_text(encoding="utf-8").strip(), ""]
-    verdict = summary.get("lane_plus_2") or {}
+        lines += [benchmark.note, ""] if benchmark.note else []
+    verdict = summary.get(benchmark.verdict_key) or {}
     if verdict.get("means"):
         specs = [get_metric(name) for name in VERDICT_METRICS]
         lines += [
-            f"## At +2 lanes ({verdict['targets']} targets)",
+            f"## {benchmark.verdict_title} ({verdict['targets']} targets)",
             "",
             "| method | " + " | ".join(f"{spec.label} {spec.arrow}" for spec in specs) + " |",
             "|---|" + "---:|" * len(specs),
@@ -464,7 +517,7 @@ def report_markdown(summary: dict[str, Any], paths: DemoPaths) -> str:
             wins = verdict.get(f"setdiff_beats_{other}")
             if wins:
                 said = ", ".join(f"{k.upper()} {'yes' if v else 'no'}" for k, v in wins.items())
-                lines.append(f"\nSetDiff beats `{other}` at +2 lanes: {said}.")
+                lines.append(f"\nSetDiff beats `{other}` {benchmark.verdict_title.lower()}: {said}.")
         lines.append("")
     for name, title in (
         ("ablation_geometry.md", "Geometry ablation"),

@@ -1,0 +1,67 @@
+"""``setdiff-bench demo --benchmark sparse``: the sparse-view benchmark's presets, test scenes and report."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from setdiff_bench.cli.main import main
+from setdiff_bench.errors import UsageError
+from setdiff_bench.pipeline.demo import DemoPaths, evaluation_scene_indices, report_markdown
+from setdiff_bench.pipeline.presets import DEMO_BENCHMARKS, get_demo_preset
+
+#: The sparse protocol's listed test scenes (protocols/splits/dl3dv_sparse_synthetic_test.txt), read by eye.
+LISTED_TEST_SCENES = ["sparse_0000_00", "sparse_0000_01"]
+
+
+def test_the_sparse_benchmark_tests_on_the_listed_scenes() -> None:
+    for name in ("tiny", "default", "full"):
+        assert evaluation_scene_indices(get_demo_preset(name, "sparse"), 0) == [0, 1]
+    listed = Path(__file__).resolve().parents[2] / "protocols" / "splits" / "dl3dv_sparse_synthetic_test.txt"
+    assert listed.read_text(encoding="utf-8").split() == LISTED_TEST_SCENES
+
+
+def test_a_seed_without_listed_test_scenes_is_refused() -> None:
+    with pytest.raises(UsageError, match="no test scene among seed 3's scenes") as error:
+        evaluation_scene_indices(get_demo_preset("default", "sparse"), 3)
+    assert error.value.one_line().startswith("--seed: ")
+
+
+def test_presets_share_names_across_benchmarks() -> None:
+    driving, sparse = (DEMO_BENCHMARKS[name].presets for name in ("driving", "sparse"))
+    assert list(driving) == list(sparse) == ["tiny", "default", "full"]
+    assert {p.benchmark for p in driving.values()} == {"driving"}
+    assert {p.benchmark for p in sparse.values()} == {"sparse"}
+    assert [p.synth_preset for p in sparse.values()] == ["sparse_tiny", "sparse", "sparse_large"]
+
+
+def test_unknown_benchmark_is_one_line_and_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exit_:
+        main(["demo", "--benchmark", "waymo", "--out", str(tmp_path / "d")])
+    assert exit_.value.code == 2 and "invalid choice: 'waymo'" in capsys.readouterr().err
+    assert not (tmp_path / "d").exists()
+
+
+def test_report_names_the_benchmark_and_its_verdict_group(tmp_path: Path) -> None:
+    board = "| Method | 3 views PSNR↑ |\n|---|---:|\n| identity | 19.84 |"
+    (tmp_path / "dl3dv.md").write_text(board, encoding="utf-8")
+    means = {"psnr": 20.0, "ssim": 0.7, "lpips": 0.3}
+    summary = {
+        "invocation": "setdiff-bench demo --benchmark sparse",
+        "preset": {"name": "default", "description": "d", "benchmark": "sparse"},
+        "total_seconds": 60.0,
+        "stages": [],
+        "outputs": ["dl3dv.md"],
+        "views_3": {
+            "group": "n3",
+            "targets": 196,
+            "means": {"identity": means, "setdiff": {**means, "psnr": 21.0}},
+            "setdiff_beats_identity": {"psnr": True, "ssim": False, "lpips": False},
+        },
+    }
+    text = report_markdown(summary, DemoPaths(out=tmp_path, work=tmp_path / "work"))
+    assert text.startswith("# Sparse-view synthetic benchmark")
+    assert board in text and "## At 3 views (196 targets)" in text
+    assert "real DL3DV captures" in text  # the paper's rows are not like for like
+    assert "SetDiff beats `identity` at 3 views: PSNR yes, SSIM no, LPIPS no." in text
