@@ -24,7 +24,7 @@ from __future__ import annotations
 import inspect
 import warnings
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from importlib import metadata
 from types import MappingProxyType
 from typing import Any, Protocol, runtime_checkable
@@ -205,15 +205,9 @@ def _plugin_spec(entry: metadata.EntryPoint) -> MethodSpec:
         raise UsageError(f"cannot load plugin method: {type(error).__name__}: {error}", where) from None
     if not isinstance(spec, MethodSpec):
         raise UsageError(f"plugin method is a {type(spec).__name__}, expected a MethodSpec", where)
-    return MethodSpec(
-        spec.name,
-        spec.factory,
-        spec.description,
-        spec.needs_weights,
-        spec.needs_gpu,
-        MappingProxyType(dict(spec.options)),
-        f"{entry.name} = {entry.value}",
-    )
+    # every field of the plugin's spec is kept (its fingerprint included, so that a resume with other weights
+    # is refused as for the built-ins); only the options are frozen and the source names the entry point
+    return replace(spec, options=MappingProxyType(dict(spec.options)), source=f"{entry.name} = {entry.value}")
 
 
 def available_methods() -> dict[str, MethodSpec]:
