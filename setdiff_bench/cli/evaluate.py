@@ -49,6 +49,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "cosine and Final_Score; nothing is downloaded",
     )
     parser.add_argument(
+        "--inception",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="FID Inception-v3 weights file (pytorch-fid / torch-fidelity): also write FID and KID of the "
+        "run's enhanced targets against the recorded frames (<run>/distribution.parquet); nothing is "
+        "downloaded",
+    )
+    parser.add_argument(
         "--euvs-compat-report",
         action="store_true",
         help="print the frames where EUVS's positional mask pairing differs from ours",
@@ -74,6 +83,11 @@ def run(args: argparse.Namespace) -> int:
         from setdiff_bench.metrics.dinov2 import load_dinov2
 
         dinov2 = load_dinov2(args.dinov2, device)
+    inception = None
+    if args.inception is not None:  # loaded before anything is scored or written
+        from setdiff_bench.metrics.inception import load_inception
+
+        inception = load_inception(args.inception, device)
     if args.euvs_compat_report and not profile.name.startswith("euvs"):
         raise UsageError(
             "--euvs-compat-report applies to EUVS profiles (euvs_official)", "--euvs-compat-report"
@@ -105,6 +119,10 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.euvs_compat_report:
         sys.stdout.write((out / EUVS_COMPAT_FILE).read_text())
+    if inception is not None:
+        from setdiff_bench.cli.run import print_distribution
+
+        print_distribution(args.run, args.packets, inception, args.inception)
     return 0
 
 

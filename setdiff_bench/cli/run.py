@@ -11,6 +11,9 @@ Examples::
     setdiff-bench run --method setdiff --checkpoint tiny_setdiff --packets runs/demo/work/packets --out runs/sd --shard 1/2
     setdiff-bench run --method setdiff --checkpoint tiny_setdiff --packets runs/demo/work/packets --out runs/sd --merge
 
+``--inception FILE`` adds FID and KID of the enhanced targets against the recorded frames of the same
+scenes (``<out>/distribution.parquet``; docs/any_capture.md), from a local Inception-v3 FID weights file.
+
 Shards (``--shard i/n``) may run at the same time on any machines into one folder on a shared
 filesystem; no file lock is used.  The shard that finds every fragment present merges them; on a
 network filesystem end with the same command plus ``--merge`` (it refuses while a fragment is missing).
@@ -84,6 +87,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="skip the up-front SHA-256 check of the packets' files (each file is still checked "
         "when it is read)",
     )
+    parser.add_argument(
+        "--inception",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="FID Inception-v3 weights (pytorch-fid's pt_inception-2015-12-05-6726825d.pth or "
+        "torch-fidelity's weights-inception-2015-12-05-6726825d.pth): also score FID / KID against the "
+        "recorded frames; nothing is downloaded",
+    )
     add_progress_argument(parser)
 
 
@@ -122,6 +134,11 @@ def run(args: argparse.Namespace) -> int:
         warp_cache=None if args.warp_cache == "none" else args.warp_cache,
     )
     out = args.out or Path("results") / "runs" / Path(args.packets).resolve().name / args.method
+    inception = None
+    if args.inception is not None:  # loaded first: a missing or wrong file stops the run before it writes
+        from setdiff_bench.metrics.inception import load_inception
+
+        inception = load_inception(args.inception, device)
     result = run_method(
         args.packets,
         out,
@@ -137,6 +154,8 @@ def run(args: argparse.Namespace) -> int:
         )
     if result.merged:
         print(f"complete: {out / METRICS_FILE}, {out / MANIFEST_FILE}")
+        if inception is not None:
+            print_distribution(out, args.packets, inception, args.inception)
     else:
         print(
             f"{result.remaining} packets of the selection remain for other shards; "
@@ -144,3 +163,13 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     return 0
+
+
+def print_distribution(run: Path, packets: Path, inception: object, weights: Path) -> None:
+    """Score FID / KID of a finished run (:func:`setdiff_bench.evaluation.distribution_scoring.score_distribution`)
+    and print one line per block and where the table is."""
+    from setdiff_bench.evaluation.distribution_scoring import DISTRIBUTION_FILE, score_distribution
+    from setdiff_bench.io.atomic import sha256_file
+
+    score_distribution(run, packets, inception, weights_sha256=sha256_file(weights), progress=print)  # type: ignore[arg-type]
+    print(f"distribution: {run / DISTRIBUTION_FILE}")

@@ -50,8 +50,8 @@ def resolve_metrics(names: str | Sequence[str], *, option: str = "--metrics") ->
     default, ``metrics`` for a Python parameter.
 
     Raises:
-        UsageError: an unknown name, a sequence metric (warp error is chosen with ``warp=``) or a profile
-            metric (``setdiff-bench evaluate`` computes it).
+        UsageError: an unknown name, a sequence metric (warp error is chosen with ``warp=``), a profile
+            metric (``setdiff-bench evaluate`` computes it) or a distribution metric (FID / KID: ``--inception``).
     """
     if isinstance(names, str):
         names = (
@@ -68,6 +68,10 @@ def resolve_metrics(names: str | Sequence[str], *, option: str = "--metrics") ->
         spec = METRICS[name]
         if spec.scope == "sequence":
             raise UsageError(f"{name} is a sequence metric; it is enabled with {warp}, not {option}", option)
+        if spec.scope == "distribution":
+            raise UsageError(
+                f"{name} is a distribution metric; it is enabled with --inception FILE, not {option}", option
+            )
         if spec.scope != "image":
             raise UsageError(
                 f"{name} is a {spec.scope} metric; `setdiff-bench evaluate` computes it, not {option}",

@@ -8,6 +8,8 @@ Specs reference their function as ``"module:attr"`` so that listing metrics impo
 ``fn(frames, reference, mask, **kwargs)`` per sequence and returns a 0-dim tensor.  The profile metrics
 (EUVS's DINOv2 cosine and ``Final_Score``) are per-target values that ``setdiff-bench evaluate`` computes
 from DINOv2 features and the EUVS metrics (:mod:`setdiff_bench.evaluation.profile_scoring`); ``run`` cannot select them.
+The distribution metrics (FID, KID) compare two sets of Inception features, ``fn(features_a, features_b)``
+(:mod:`setdiff_bench.metrics.distribution`); ``run`` / ``evaluate --inception FILE`` compute them per block.
 
 Presets (the metric sets papers report; docs/metrics.md, "Presets"):
 
@@ -40,8 +42,9 @@ class MetricSpec:
         higher_is_better: ranking direction (PSNR/SSIM True; LPIPS/warp error False); tables show it as
             :attr:`arrow` and bold the best value by it.
         function: ``"module:attr"`` of the implementation.
-        scope: ``"image"`` (per target image), ``"sequence"`` (per ordered sequence of frames) or
-            ``"profile"`` (per target, computed by profile scoring only).
+        scope: ``"image"`` (per target image), ``"sequence"`` (per ordered sequence of frames),
+            ``"profile"`` (per target, computed by profile scoring only) or ``"distribution"`` (per set
+            of images against a set of recorded frames, ``run`` / ``evaluate --inception``).
         kwargs: fixed keyword arguments that select the variant (border, net, input scaling, scale...).
         unit: unit of the values, for tables.
         needs_mask: the variant is defined with a mask (EUVS); without one, an all-ones mask is used.
@@ -55,7 +58,7 @@ class MetricSpec:
     name: str
     higher_is_better: bool
     function: str
-    scope: Literal["image", "sequence", "profile"] = "image"
+    scope: Literal["image", "sequence", "profile", "distribution"] = "image"
     kwargs: Mapping[str, Any] = field(default_factory=dict)
     unit: str = ""
     needs_mask: bool = False
@@ -79,11 +82,10 @@ class MetricSpec:
         if self.scope != "image":
             raise UsageError(
                 f"metric {self.name} is a {self.scope} metric, not an image metric; "
-                + (
-                    "call its function per sequence"
-                    if self.scope == "sequence"
-                    else "setdiff-bench evaluate computes it"
-                )
+                + {
+                    "sequence": "call its function per sequence",
+                    "distribution": "call its function on two feature sets (run / evaluate --inception)",
+                }.get(self.scope, "setdiff-bench evaluate computes it")
             )
         if mask is None and self.needs_mask:
             mask = torch.ones(pred.shape[0], 1, *pred.shape[-2:], dtype=torch.bool, device=pred.device)
@@ -119,6 +121,7 @@ _PSNR = "setdiff_bench.metrics.psnr:psnr"
 _SSIM = "setdiff_bench.metrics.ssim:ssim"
 _LPIPS = "setdiff_bench.metrics.lpips:lpips"
 _DINOV2 = "setdiff_bench.metrics.dinov2"
+_DISTRIBUTION = "setdiff_bench.metrics.distribution"
 
 METRICS: Mapping[str, MetricSpec] = MappingProxyType(
     {
@@ -240,6 +243,31 @@ METRICS: Mapping[str, MetricSpec] = MappingProxyType(
                 "EUVS Final_Score: 0.25 SSIM + 0.15 PSNR + 0.35 (1 - LPIPS) + 0.25 Cos (evaluate --dinov2)",
                 label="Final",
                 decimals=3,
+            ),
+            MetricSpec(
+                "fid",
+                False,
+                f"{_DISTRIBUTION}:fid",
+                "distribution",
+                MappingProxyType({}),
+                "",
+                False,
+                "FID: Frechet distance of Inception-v3 pool3 statistics vs the recorded frames (--inception)",
+                label="FID",
+                decimals=2,
+            ),
+            MetricSpec(
+                "kid",
+                False,
+                f"{_DISTRIBUTION}:kid",
+                "distribution",
+                MappingProxyType({}),
+                "",
+                False,
+                "KID: unbiased MMD^2, cubic polynomial kernel, Inception-v3 pool3 vs the recorded frames "
+                "(--inception)",
+                label="KID",
+                decimals=4,
             ),
         )
     }

@@ -27,6 +27,7 @@ def test_directions() -> None:
         "cos_dinov2",
         "final_score",
     }
+    assert {name for name, spec in METRICS.items() if spec.scope == "distribution"} == {"fid", "kid"}
 
 
 # The tables' label, decimals and arrow of every metric, written out by hand (the leaderboards' format):
@@ -38,6 +39,8 @@ DISPLAY = {
     "warp": ("Warp", 1, "↓"),
     "cos_dinov2": ("Cos", 3, "↑"),
     "final_score": ("Final", 3, "↑"),
+    "fid": ("FID", 2, "↓"),
+    "kid": ("KID", 4, "↓"),
 }
 
 
