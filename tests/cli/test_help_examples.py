@@ -24,19 +24,13 @@ defect was a demo command refused with "add --train") up to its first stage.
 
 from __future__ import annotations
 
-import argparse
-import os
-import re
-import shlex
 import shutil
-import signal
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
 from setdiff_bench.cli.main import build_parser, main
+from tests.cli.helpers import extract_examples, help_texts, run_example, small, words
 
 #: Verbs whose examples need the outputs of others run first (the rest run in alphabetical order).
 ORDER = (
@@ -60,53 +54,6 @@ EXTERNAL_REASONS = {
 }
 #: The demo command whose small form makes the folder the examples run in.
 WORLD_EXAMPLE = "setdiff-bench demo --train --setdiff-steps 1000 --difix-steps 1000"
-#: Size options and their small values.
-SMALL = {
-    "--steps": "2",
-    "--setdiff-steps": "2",
-    "--difix-steps": "2",
-    "--iterations": "20",
-    "--scenes": "1",
-    "--preset": "tiny",
-    "--port": "0",
-}
-
-
-def help_texts() -> dict[str, str]:
-    """``{"verb [sub]": help text}`` of every verb and sub-command."""
-    texts: dict[str, str] = {}
-
-    def walk(parser: argparse.ArgumentParser, name: str) -> None:
-        texts[name] = parser.format_help()
-        for action in parser._actions:
-            if isinstance(action, argparse._SubParsersAction):
-                for sub_name, sub_parser in action.choices.items():
-                    walk(sub_parser, f"{name} {sub_name}".strip())
-
-    walk(build_parser(), "")
-    return texts
-
-
-def extract_examples(text: str) -> list[str]:
-    """The ``setdiff-bench`` commands under every ``Examples:`` / ``Example:`` heading of a help text,
-    each as one line (a trailing ``\\`` joins the next line)."""
-    examples: list[str] = []
-    in_block = False
-    for line in text.splitlines():
-        stripped = line.strip()
-        if re.search(r"\bexamples?:$", stripped, re.IGNORECASE):
-            in_block = True
-            continue
-        if not in_block or not stripped:
-            continue
-        if not line.startswith(" "):
-            in_block = False
-            continue
-        if examples and examples[-1].endswith("\\"):
-            examples[-1] = examples[-1][:-1].rstrip() + " " + stripped
-        elif "setdiff-bench " in stripped and not stripped.startswith(("-", "[")):
-            examples.append(stripped)
-    return examples
 
 
 def all_examples() -> list[tuple[str, str]]:
@@ -121,60 +68,6 @@ def all_examples() -> list[tuple[str, str]]:
 
 def external_reason(example: str) -> str | None:
     return next((why for needle, why in EXTERNAL_REASONS.items() if needle in example), None)
-
-
-def small(example: str) -> str:
-    """``example`` at small sizes (module docstring)."""
-    for flag, value in SMALL.items():
-        example = re.sub(rf"(?<!\S){re.escape(flag)} \S+", f"{flag} {value}", example)
-    verb = example.split("setdiff-bench ", 1)[1].split()[0]
-    if verb in ("demo", "synth", "fit") and "--preset" not in example:
-        example += " --preset tiny"
-    if verb == "serve" and "--port" not in example:  # the default port may be taken: any free one
-        example = example.replace("setdiff-bench serve ", "setdiff-bench serve --port 0 ", 1)
-    return example
-
-
-def words(example: str) -> list[str]:
-    """The argument words after ``setdiff-bench`` (an environment prefix dropped)."""
-    return shlex.split(example.split("setdiff-bench ", 1)[1], comments=True)
-
-
-def run_example(example: str, world: Path) -> None:
-    """Run ``example`` (small) in ``world`` with bash; a ``serve`` example until it listens."""
-    command = small(example)
-    if " --allow-dirty" not in command and words(command)[0] == "publish" and _repository_is_dirty():
-        command += " --allow-dirty"  # publish refuses uncommitted code; tests run on work in progress
-    env = {
-        **os.environ,
-        "SETDIFF_THREADS": "1",
-        "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}",
-    }
-    if words(command)[0] == "serve":
-        process = subprocess.Popen(
-            ["bash", "-c", f"exec {command}"],
-            cwd=world,
-            env=env,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-        )
-        assert process.stdout is not None
-        first = process.stdout.readline()
-        process.send_signal(signal.SIGTERM)  # at once: serve prints its line after its handler is in
-        out, err = process.communicate(timeout=120)
-        assert first.startswith("serving on") and process.returncode == 0, (command, first, out, err)
-        return
-    result = subprocess.run(
-        ["bash", "-c", command], cwd=world, env=env, capture_output=True, text=True, timeout=900
-    )
-    assert result.returncode == 0, (command, result.stdout[-2000:], result.stderr[-2000:])
-
-
-def _repository_is_dirty() -> bool:
-    root = Path(__file__).resolve().parents[2]
-    status = subprocess.run(["git", "status", "--porcelain"], cwd=root, capture_output=True, text=True)
-    return status.returncode != 0 or bool(status.stdout.strip())
 
 
 @pytest.fixture(scope="module")

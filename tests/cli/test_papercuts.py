@@ -17,7 +17,7 @@ from setdiff_bench.evaluation.profiles import get_profile
 from setdiff_bench.models.setdiff.train import TrainResult
 from setdiff_bench.runtime.threads import torch_threads
 from tests.cli.conftest import IndexedFakeStore
-from tests.cli.test_help_examples import extract_examples, help_texts
+from tests.cli.helpers import extract_examples, help_texts
 from tests.models.setdiff_fixtures import train_argv
 from tests.models.test_cli_train import CONFIG
 from tests.run.store_fixtures import StoreSpec, build_store
@@ -118,7 +118,7 @@ def test_train_on_a_test_only_store(
 def test_autoencoder_crop_larger_than_frames_is_said(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """``train autoencoder --crop 64`` on 32x48 frames says the crops are clipped (32x48)."""
     store = build_store(tmp_path / "store", StoreSpec(split="train"))
-    import setdiff_bench.models.setdiff.autoencoder as autoencoder
+    import setdiff_bench.models.setdiff.autoencoder_train as autoencoder
 
     seen = {}
 
