@@ -1,4 +1,4 @@
-"""``setdiff-bench render``: render a 3DGS PLY at the cameras of a COLMAP model.
+"""``setdiff-bench render``: render a 3DGS PLY at the cameras of a COLMAP model, or along a novel trajectory.
 
 Writes, per view, ``<out>/<view>/rgb.png`` (8-bit), ``cmap.exr`` (float32 X, Y, Z: Eq. 1 world
 coordinates), ``depth.exr`` (float32 accumulated z) and ``alpha.png`` (8-bit accumulated opacity).
@@ -6,6 +6,13 @@ Each file is written atomically; an interrupted run resumes by skipping complete
 ``<out>/render.json`` records what the views are made from (the PLY's and COLMAP files' SHA-256,
 ``--downscale``, ``--backend``, ``--cmap-bound``); a rerun into the same folder resumes only when they
 match, and is refused in one line otherwise (render into another ``--out``, or delete the old one).
+
+``--trajectory`` renders a novel trajectory instead of the COLMAP cameras themselves: ``shift:N`` (each
+camera N scene units to its right; ``shift:-3`` is a 3 m lane shift to the left), ``yaw:D`` (each camera
+turned D degrees to the right) or a JSON file of poses (``[{"name", "c2w", "K"?, "width"?, "height"?}]``;
+:mod:`setdiff_bench.packets.trajectory`).  Views are named ``<view>@<trajectory>`` (``view_1@shift+3m``);
+they have no ground truth.  A trajectory that leaves the scene (the fit's Gaussian centres, 1st–99th
+percentile, joined with the recorded cameras, + 5 %), a non-rigid pose or a NaN is refused in one line before anything is written.
 
 Examples::
 
@@ -44,6 +51,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--images", nargs="+", metavar="NAME", help="only these COLMAP image names (default: all)"
     )
     parser.add_argument(
+        "--trajectory",
+        default=None,
+        metavar="SPEC",
+        help="render a novel trajectory from the COLMAP cameras: shift:METRES (to the right), "
+        "yaw:DEGREES (to the right) or a JSON file of poses; no ground truth exists for these views",
+    )
+    parser.add_argument(
         "--backend",
         choices=("torch", "gsplat"),
         default="torch",
@@ -74,6 +88,7 @@ def view_folder_name(image_name: str) -> str:
 
 def run(args: argparse.Namespace) -> int:
     # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
+    import numpy as np
     import torch
     from tqdm import tqdm
 
@@ -94,9 +109,12 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"images not in the COLMAP model: {', '.join(missing[:10])}", args.colmap)
     if args.downscale < 1:
         raise UsageError(f"--downscale must be ≥ 1, got {args.downscale}", "--downscale")
-    record = render_record(args, model.images_file)
-    done = [n for n in names if all((args.out / view_folder_name(n) / f).is_file() for f in OUTPUT_FILES)]
-    check_resume(args.out, record, done)  # before anything is read further or written
+    spec = None
+    if args.trajectory is not None:
+        from setdiff_bench.packets.trajectory import parse_trajectory
+
+        spec = parse_trajectory(args.trajectory)
+    record = render_record(args, model.images_file, spec)
     cameras = {}
     for name in names:
         camera = pinhole_camera(model.cameras[name])
@@ -106,41 +124,67 @@ def run(args: argparse.Namespace) -> int:
             )
         cameras[name] = camera
     distorted = [n for n in names if is_distorted(model.cameras[n])]
+    recorded_count = len(names)
+    folders = {name: view_folder_name(name) for name in names}
+    if spec is not None:
+        from setdiff_bench.packets.trajectory import novel_cameras
+
+        recorded_centres = np.stack([cameras[n].center for n in names])
+        novel = novel_cameras(spec, [(view_folder_name(n), cameras[n]) for n in names])
+        cameras = dict(novel)
+        names = [name for name, _ in novel]
+        folders = {name: name.replace("/", "__").replace("\\", "__") for name in names}
+    done = [n for n in names if all((args.out / folders[n] / f).is_file() for f in OUTPUT_FILES)]
+    check_resume(args.out, record, done)  # before anything is read further or written
     if distorted:  # said once, never silent: the renderer is pinhole
         print(
-            f"note: {len(distorted)} of {len(names)} camera(s) have lens distortion (first {distorted[0]!r}); "
+            f"note: {len(distorted)} of {recorded_count} camera(s) have lens distortion (first {distorted[0]!r}); "
             "rendered as the undistorted pinhole camera with the same K (fit and prepare undistort the "
             "captures to match)",
             file=sys.stderr,
         )
     gaussians = read_ply(args.ply).to(device)
+    if spec is not None:  # every novel camera inside the scene, checked before anything is written
+        from setdiff_bench.packets.trajectory import check_within_bounds, scene_bounds
+
+        bounds = scene_bounds(gaussians.means.detach().cpu().numpy(), recorded_centres)
+        check_within_bounds([(n, cameras[n]) for n in names], bounds, args.trajectory)
     args.out.mkdir(parents=True, exist_ok=True)
     if not (args.out / RECORD_FILE).is_file():
         write_text_atomic(args.out / RECORD_FILE, json.dumps(record, indent=1, sort_keys=True) + "\n")
     todo = [n for n in names if n not in done]
     for name in tqdm(todo, desc="render", unit="view", disable=True if args.no_progress else None):
-        folder = args.out / view_folder_name(name)
+        folder = args.out / folders[name]
         with torch.no_grad():
             out = render(gaussians, [cameras[name]], backend=args.backend, cmap_bound=args.cmap_bound)
         write_exr(folder / "cmap.exr", to_numpy_hwc(out.cmap[0]), ("X", "Y", "Z"))
         write_exr(folder / "depth.exr", to_numpy_hwc(out.depth[0]), ("Z",))
         write_png(folder / "alpha.png", to_numpy_hwc(out.alpha[0]))
         write_png(folder / "rgb.png", to_numpy_hwc(out.rgb[0]))  # last: its presence marks a complete view
-    print(f"rendered {len(todo)} view(s), {len(names) - len(todo)} already complete, into {args.out}")
+    along = "" if spec is None else f" of trajectory {spec.label} (no ground truth)"
+    print(f"rendered {len(todo)} view(s){along}, {len(names) - len(todo)} already complete, into {args.out}")
     return 0
 
 
-def render_record(args: argparse.Namespace, images_file: Path) -> dict[str, Any]:
+def render_record(args: argparse.Namespace, images_file: Path, spec: Any = None) -> dict[str, Any]:
     """What a render folder's views are made from: the inputs' SHA-256 and the settings that change pixels.
 
     Args:
         args: the parsed ``render`` arguments (``ply``, ``downscale``, ``backend``, ``cmap_bound``).
         images_file: the COLMAP ``images.bin`` / ``images.txt`` read (its ``cameras`` file beside it counts too).
+        spec: the parsed ``--trajectory`` (:class:`~setdiff_bench.packets.trajectory.TrajectorySpec`) or
+            ``None``; recorded as its label, and a pose file's SHA-256.
     """
     from setdiff_bench.io.atomic import sha256_file
 
     cameras_file = images_file.with_name("cameras" + images_file.suffix)
+    extra: dict[str, Any] = {}
+    if spec is not None:  # only with a trajectory, so records of plain renders stay as they were
+        extra["trajectory"] = spec.label
+        if spec.path is not None:
+            extra["trajectory_sha256"] = sha256_file(spec.path)
     return {
+        **extra,
         "format": RECORD_FORMAT,
         "ply_sha256": sha256_file(args.ply),
         "colmap_sha256": {f.name: sha256_file(f) for f in (cameras_file, images_file)},
@@ -182,6 +226,11 @@ def check_resume(out: Path, record: dict[str, Any], done: list[str]) -> None:
         differences.append("another --ply (SHA-256 differs)")
     if earlier.get("colmap_sha256") != record["colmap_sha256"]:
         differences.append("another --colmap model (SHA-256 differs)")
+    if (earlier.get("trajectory"), earlier.get("trajectory_sha256")) != (
+        record.get("trajectory"),
+        record.get("trajectory_sha256"),
+    ):
+        differences.append(f"--trajectory {earlier.get('trajectory') or 'not given'}")
     for setting in ("downscale", "backend", "cmap_bound"):
         if earlier.get(setting) != record[setting]:
             flag = "--" + setting.replace("_", "-")
