@@ -55,3 +55,17 @@ def test_a_tick_of_another_size_is_still_refused(checkpoint: Path) -> None:
     )
     with pytest.raises(StreamInputError, match="the session expects 45x27"):
         session.enhance(tick_frames(0, size=(32, 48)))
+
+
+@pytest.mark.parametrize(("method", "shipped"), [("setdiff", "tiny_setdiff"), ("difix", "tiny_difix")])
+def test_batch_run_of_shipped_models_on_an_odd_size_store(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, method: str, shipped: str
+) -> None:
+    """``run --method setdiff|difix --checkpoint tiny_*`` (the walk-through's door) on 45x27 packets."""
+    monkeypatch.setattr(stream_fixtures, "HEIGHT", SIZE[0])
+    monkeypatch.setattr(stream_fixtures, "WIDTH", SIZE[1])
+    references, frames = recorded_references(size=SIZE), tick_frames(2, size=SIZE)
+    write_tick_store(tmp_path / "store", references, frames, [0, 1, 2], 2)
+    run_batch(tmp_path / "store", tmp_path / "run", shipped, method=method)
+    written = sorted((tmp_path / "run" / IMAGES_DIR).rglob("*.png"))
+    assert len(written) == 3 and all(read_rgb(p).shape == (*SIZE, 3) for p in written)
