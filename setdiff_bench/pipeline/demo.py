@@ -149,17 +149,26 @@ def evaluation_scene_indices(preset: DemoPreset, seed: int) -> list[int]:
 
 
 def check_unseen(
-    test_scenes: list[tuple[int, int]], shipped_models: dict[str, str] | None = None
+    test_scenes: list[tuple[int, int]],
+    shipped_models: dict[str, str] | None = None,
+    scene_name: Any = None,
 ) -> dict[str, dict[str, Any]]:
     """The shipped models' manifests, after checking that none was trained on a demo test scene.
 
     Args:
         test_scenes: ``(seed, index)`` of each test scene.
         shipped_models: ``{method: packaged model}`` (default: the driving benchmark's).
+        scene_name: ``(seed, index) → scene name`` of the benchmark's scenes (default: the driving
+            benchmark's, :func:`setdiff_bench.synthetic.generate.scene_name`); compared with the training
+            scene names in each manifest (``data.scenes``), so a driving scene and a sparse walk of the same
+            ``(seed, index)`` are different scenes.
 
     Raises:
         UsageError: a shipped model is missing, or its training scenes include a test scene.
     """
+    if scene_name is None:
+        from setdiff_bench.synthetic.generate import scene_name
+    tested = {scene_name(seed, index) for seed, index in test_scenes}
     shipped = packaged_models()
     manifests = {}
     for method, name in (SHIPPED_MODELS if shipped_models is None else shipped_models).items():
@@ -169,10 +178,10 @@ def check_unseen(
                 "--train",
             )
         manifest = shipped[name].manifest
-        seen = {tuple(pair) for pair in manifest["data"]["synthetic_seeds"]} & set(test_scenes)
+        seen = tested & {str(scene).rsplit("/", 1)[-1] for scene in manifest["data"]["scenes"]}
         if seen:
             raise UsageError(
-                f"shipped model {name!r} was trained on scene (seed, index) {sorted(seen)[0]}, one of "
+                f"shipped model {name!r} was trained on scene {sorted(seen)[0]}, one of "
                 "this demo's test scenes: pick another --seed or use --train",
                 "--seed",
             )
@@ -212,7 +221,11 @@ def run_demo(
     benchmark = get_benchmark(preset.benchmark)
     scene_name = scene_namer(preset)
     test_indices = evaluation_scene_indices(preset, seed)
-    shipped = {} if train else check_unseen([(seed, index) for index in test_indices], benchmark.shipped)
+    shipped = (
+        {}
+        if train
+        else check_unseen([(seed, index) for index in test_indices], benchmark.shipped, scene_name)
+    )
     base = Path.cwd()
     (paths.out / SUMMARY_FILE).unlink(missing_ok=True)  # until this run completes, the folder is not a run
     pipeline = Pipeline(cwd=base, quiet=not progress, ledger=paths.work / LEDGER_FILE)
@@ -355,7 +368,7 @@ def run_demo(
                 "shipped": benchmark.shipped[method],
                 "files": m["files"],
                 "trained_on": m["data"]["scenes"],
-                "training_seeds": m["data"]["synthetic_seeds"],
+                "training_seeds": m["data"].get("synthetic_seeds", []),
             }
             for method, m in shipped.items()
         }
