@@ -1,8 +1,9 @@
 """``setdiff-bench fit``: fit a 3DGS model to a scene folder's training frames and write the standard PLY.
 
 The scene is read through the dataset loaders (synthetic, EUVS, or any COLMAP scene); its sparse
-points initialise the Gaussians.  ``--checkpoint DIR`` saves the full optimiser state every
-``--checkpoint-every`` iterations; rerunning the same command resumes from it.
+points initialise the Gaussians.  With ``--dataset D --root R``, ``--scene`` names the scene under the root
+and may be left out when the root holds exactly one.  ``--checkpoint DIR`` saves the full optimiser state
+every ``--checkpoint-every`` iterations; rerunning the same command resumes from it.
 
 Examples::
 
@@ -16,7 +17,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from setdiff_bench.cli import add_device_argument, add_option_argument, add_progress_argument
+from setdiff_bench.cli import add_device_argument, add_progress_argument
+from setdiff_bench.cli.list import add_loader_option_argument, loader_options
 
 VERB = "fit"
 HELP = "fit 3D Gaussian Splatting to a scene's training frames and write the standard PLY"
@@ -28,9 +30,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     parser.add_argument(
         "--scene",
-        required=True,
-        help="scene folder (synthetic, EUVS or COLMAP layout), or with "
-        "--dataset the scene's name under --root",
+        default=None,
+        help="scene folder (synthetic, EUVS or COLMAP layout), or with --dataset the scene's name under "
+        "--root (optional when the root holds one scene)",
     )
     parser.add_argument(
         "--dataset",
@@ -39,7 +41,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="read the scene through this dataset's loader (with --root and -o options)",
     )
     parser.add_argument("--root", type=Path, default=None, help="dataset folder for --dataset")
-    add_option_argument(parser, "loader option, e.g. -o missing=skip, -o images_dir=images_4")
+    add_loader_option_argument(parser, "e.g. -o missing=skip, -o images_dir=images_4")
     parser.add_argument(
         "--init",
         default="auto",
@@ -102,6 +104,40 @@ def fit_config(preset: str, iterations: int | None, seed: int):  # -> FitConfig
     return dataclasses.replace(base, seed=seed)
 
 
+def chosen_scene(args: argparse.Namespace, options: dict[str, object]) -> str:
+    """The scene to fit: ``--scene``, or with ``--dataset`` and no ``--scene`` the root's only scene.
+
+    Raises:
+        UsageError: (naming the flag to change) ``--root`` / ``-o`` without ``--dataset``, ``--dataset``
+            without ``--root``, no ``--scene`` without ``--dataset``, or a root of several scenes.
+        DatasetError: a root that holds no scene (from the dataset's lister).
+    """
+    from setdiff_bench.errors import DatasetError, UsageError
+
+    if args.dataset is None and (args.root is not None or options):
+        raise UsageError("--root and -o need --dataset", "--dataset")
+    if args.dataset is not None and args.root is None:
+        raise UsageError("--dataset needs --root (the dataset folder)", "--root")
+    if args.scene is not None:
+        return args.scene
+    if args.dataset is None:
+        raise UsageError(
+            "needed: a scene folder, or --dataset D --root R (whose only scene is then fitted)", "--scene"
+        )
+    from setdiff_bench.loaders import list_scenes
+
+    names = list_scenes(args.dataset, args.root, **options)
+    if not names:
+        raise DatasetError(f"no {args.dataset} scene under this root", args.root)
+    if len(names) > 1:
+        shown = ", ".join(names[:5]) + (", ..." if len(names) > 5 else "")
+        raise UsageError(
+            f"{args.root} holds {len(names)} {args.dataset} scenes ({shown}); pick one with --scene",
+            "--scene",
+        )
+    return names[0]
+
+
 def run(args: argparse.Namespace) -> int:
     import time
 
@@ -116,15 +152,9 @@ def run(args: argparse.Namespace) -> int:
 
         frames = parse_frame_list(args.frames)
     start = time.perf_counter()
-    from setdiff_bench.cli.list import parse_option
-    from setdiff_bench.errors import UsageError
-
-    options = dict(parse_option(text) for text in args.option)
-    if args.dataset is None and (args.root is not None or options):
-        raise UsageError("--root and -o need --dataset", "--dataset")
-    if args.dataset is not None and args.root is None:
-        raise UsageError("--dataset needs --root (the dataset folder)", "--root")
-    source = Path(args.scene) if args.dataset is None else args.root
+    options = loader_options(args)
+    scene = chosen_scene(args, options)
+    source = Path(scene) if args.dataset is None else args.root
     result = fit_scene(
         source,
         args.out,
@@ -135,7 +165,7 @@ def run(args: argparse.Namespace) -> int:
         checkpoint_every=args.checkpoint_every if args.checkpoint else 0,
         progress=not args.no_progress,
         dataset=args.dataset,
-        scene_name=args.scene if args.dataset else None,
+        scene_name=scene if args.dataset else None,
         loader_options=options,
         downscale=args.downscale,
         init=args.init,

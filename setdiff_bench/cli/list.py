@@ -103,8 +103,8 @@ def parse_option(text: str, flag: str = "-o/--option") -> tuple[str, Any]:
     """``KEY=VALUE`` → ``(key, value)``; the value is parsed as JSON when it is valid JSON, else kept as text.
 
     ``level=1`` → 1, ``sweeps=false`` → False, ``channels=["CAM_FRONT"]`` → list, ``version=v1.0-mini`` → str.
-    The one parser of every ``KEY=VALUE`` flag (``-o/--option``, ``prepare --loader-option``); ``flag`` is
-    the argument a malformed ``text`` is reported against.
+    The one parser of every ``KEY=VALUE`` flag (loader options: :func:`loader_options`; ``run -o``'s method
+    options); ``flag`` is the argument a malformed ``text`` is reported against.
     """
     key, sep, raw = text.partition("=")
     if not sep or not key.strip():
@@ -114,6 +114,27 @@ def parse_option(text: str, flag: str = "-o/--option") -> tuple[str, Any]:
     except json.JSONDecodeError:
         value = raw
     return key.strip(), value
+
+
+#: The loader-option flag's spellings, the same on every verb that reads a dataset (``list scenes``, ``fit``,
+#: ``prepare``): ``-o KEY=VALUE`` or ``--loader-option KEY=VALUE`` (``--option``: an older name, hidden).
+LOADER_OPTION_FLAGS = ("-o", "--loader-option")
+
+
+def add_loader_option_argument(parser: argparse.ArgumentParser, examples: str) -> None:
+    """The repeatable loader-option flag (:data:`LOADER_OPTION_FLAGS`, ``args.loader_option``); ``examples``
+    shows typical values, e.g. ``"e.g. -o missing=skip"``.  Read it with :func:`loader_options`."""
+    add_option_argument(
+        parser,
+        f"loader option, value parsed as JSON when valid ({examples}); repeatable",
+        LOADER_OPTION_FLAGS,
+    )
+    parser.add_argument("--option", dest="loader_option", action="append", help=argparse.SUPPRESS)
+
+
+def loader_options(args: argparse.Namespace) -> dict[str, Any]:
+    """``{key: value}`` of the loader-option flags given (:func:`parse_option`; a malformed one names the flag)."""
+    return dict(parse_option(text, "/".join(LOADER_OPTION_FLAGS)) for text in args.loader_option)
 
 
 def _scenes_arguments(parser: argparse.ArgumentParser) -> None:
@@ -128,9 +149,7 @@ def _scenes_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="NAME",
         help="only this scene (repeatable); default all",
     )
-    add_option_argument(
-        parser, "loader option, value parsed as JSON when valid (e.g. -o level=1, -o version=v1.0-mini)"
-    )
+    add_loader_option_argument(parser, "e.g. -o level=1, -o version=v1.0-mini")
     parser.add_argument("--names-only", action="store_true", help="print scene names without loading them")
     parser.add_argument("--json", action="store_true", help="one JSON object per scene instead of a table")
 
@@ -138,7 +157,7 @@ def _scenes_arguments(parser: argparse.ArgumentParser) -> None:
 def _scenes_run(args: argparse.Namespace) -> int:
     from setdiff_bench.loaders import list_scenes, load_scenes
 
-    options = dict(parse_option(text) for text in args.option)
+    options = loader_options(args)
     if args.names_only:
         names = list_scenes(args.dataset, args.root, **options)
         if args.scenes:
