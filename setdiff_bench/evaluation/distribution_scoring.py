@@ -32,7 +32,6 @@ import numpy as np
 import pandas as pd
 import torch
 
-from setdiff_bench.enhancers.base import TargetRef
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.atomic import atomic_path, write_text_atomic
 from setdiff_bench.io.images import read_rgb, to_tensor_chw
@@ -40,6 +39,7 @@ from setdiff_bench.io.run_layout import METRICS_FILE, image_relative
 from setdiff_bench.metrics.distribution import KID_SUBSET_SIZE, KID_SUBSETS, fid, kid
 from setdiff_bench.metrics.inception import inception_features
 from setdiff_bench.packets.store import PacketStore
+from setdiff_bench.types import TargetRef
 
 DISTRIBUTION_FILE = "distribution.parquet"
 DISTRIBUTION_INFO_FILE = "distribution.json"
