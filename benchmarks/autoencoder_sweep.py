@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from setdiff_bench.models.setdiff.autoencoder import (
+from setdiff_bench.models.setdiff.autoencoder_train import (
     AutoencoderTraining,
     FrameSet,
     fit_autoencoder,
@@ -52,7 +52,7 @@ def export_frames(packets: Path, to: Path, every: dict[str, int]) -> None:
     the splits' scenes.  Subsampling keeps the file small enough to travel to a lent GPU machine."""
     import cv2
 
-    from setdiff_bench.models.setdiff.autoencoder import ground_truth_frames
+    from setdiff_bench.models.setdiff.autoencoder_train import ground_truth_frames
     from setdiff_bench.packets.store import PacketStore
 
     store = PacketStore(packets)
@@ -182,11 +182,8 @@ def run_sweep(args: argparse.Namespace) -> None:
 def score_autoencoders(packets: Path, folders: list[Path]) -> None:
     """Print each autoencoder's reconstruction of *every* distinct test frame of a store (the sweep scores
     the subset that travelled), as JSON lines."""
-    from setdiff_bench.models.setdiff.autoencoder import (
-        ground_truth_frames,
-        load_autoencoder,
-        reconstruction_metrics,
-    )
+    from setdiff_bench.models.setdiff.autoencoder import load_autoencoder
+    from setdiff_bench.models.setdiff.autoencoder_train import ground_truth_frames, reconstruction_metrics
     from setdiff_bench.packets.store import PacketStore
 
     frames = ground_truth_frames(PacketStore(packets), "test")

@@ -94,7 +94,7 @@ def _autoencoder_defaults() -> dict[str, int | float]:
 
 
 def run_autoencoder(args: argparse.Namespace) -> int:
-    from setdiff_bench.models.setdiff.autoencoder import (
+    from setdiff_bench.models.setdiff.autoencoder_train import (
         AutoencoderTraining,
         check_settings,
         train_autoencoder,

@@ -287,8 +287,9 @@ def export(args: argparse.Namespace) -> int:
     from setdiff_bench.models.setdiff.averaging import check_average_count, run_checkpoints
     from setdiff_bench.models.setdiff.checkpoint import resolve_checkpoint, saved_step
     from setdiff_bench.models.setdiff.config import check_guidance_scale
+    from setdiff_bench.models.setdiff.export import export_enhancer
     from setdiff_bench.models.setdiff.manifest import read_manifest
-    from setdiff_bench.models.setdiff.packaged import export_enhancer, packaged_root
+    from setdiff_bench.models.setdiff.packaged import packaged_root
 
     if len(args.names) != 1 or not args.name:
         raise UsageError("export needs one training run folder and --name NAME", "export")

@@ -20,10 +20,10 @@ from setdiff_bench.enhancers.padding import crop, pad_packet, padded_size
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.atomic import sha256_file
 from setdiff_bench.models.setdiff import inference  # module attribute: looked up per call (tests replace it)
-from setdiff_bench.models.setdiff.checkpoint import CONFIG_FILE, WEIGHTS_FILE, load_model, resolve_checkpoint
+from setdiff_bench.models.setdiff.checkpoint import load_model, resolve_checkpoint
 from setdiff_bench.models.setdiff.config import check_guidance_scale
 from setdiff_bench.models.setdiff.domain import DataDomain, checkpoint_domain, domain_mismatch
-from setdiff_bench.models.setdiff.manifest import MANIFEST_FILE
+from setdiff_bench.models.setdiff.files import CONFIG_FILE, MANIFEST_FILE, WEIGHTS_FILE
 from setdiff_bench.models.setdiff.memory import inference_bytes
 from setdiff_bench.runtime.devices import resolve_device
 from setdiff_bench.types import Packet

@@ -8,8 +8,7 @@ from pathlib import Path
 import pytest
 
 from setdiff_bench.cli.main import main
-from setdiff_bench.models.setdiff.manifest import MANIFEST_FILE
-from setdiff_bench.models.setdiff.train import VALIDATION_FILE
+from setdiff_bench.models.setdiff.files import MANIFEST_FILE, VALIDATION_FILE
 from tests.cli.conftest import IndexedFakeStore
 from tests.models.setdiff_fixtures import train_argv
 from tests.models.test_cli_train import CONFIG

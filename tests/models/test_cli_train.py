@@ -14,7 +14,7 @@ import pytest
 
 from setdiff_bench.cli.main import main
 from setdiff_bench.models.setdiff.checkpoint import read_config, resolve_checkpoint
-from setdiff_bench.models.setdiff.manifest import MANIFEST_FILE
+from setdiff_bench.models.setdiff.files import MANIFEST_FILE
 from tests.models.setdiff_fixtures import TINY_SETDIFF_MODEL_TOML, make_sample, train_argv
 
 CONFIG = (

@@ -23,9 +23,14 @@ import pytest
 import torch
 from safetensors.torch import load_file
 
-from setdiff_bench.models.setdiff.checkpoint import WEIGHTS_FILE, resolve_checkpoint
-from setdiff_bench.models.setdiff.manifest import MANIFEST_FILE
-from setdiff_bench.models.setdiff.train import LOG_FILE, SAMPLES_FILE, VALIDATION_FILE
+from setdiff_bench.models.setdiff.checkpoint import resolve_checkpoint
+from setdiff_bench.models.setdiff.files import (
+    LOG_FILE,
+    MANIFEST_FILE,
+    SAMPLES_FILE,
+    VALIDATION_FILE,
+    WEIGHTS_FILE,
+)
 from tests.models.setdiff_fixtures import TINY_SETDIFF_MODEL_TOML, train_argv
 from tests.run.store_fixtures import StoreSpec, build_store
 

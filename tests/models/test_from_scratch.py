@@ -12,14 +12,9 @@ import pytest
 import torch
 
 from setdiff_bench.cli.main import main
-from setdiff_bench.models.setdiff.autoencoder import (
-    CONFIG_FILE,
-    MANIFEST_FILE,
-    WEIGHTS_FILE,
-    load_autoencoder,
-    read_autoencoder_config,
-)
+from setdiff_bench.models.setdiff.autoencoder import load_autoencoder, read_autoencoder_config
 from setdiff_bench.models.setdiff.config import model_config_from_dict
+from setdiff_bench.models.setdiff.files import AUTOENCODER_WEIGHTS_FILE, CONFIG_FILE, MANIFEST_FILE
 from setdiff_bench.models.setdiff.inference import enhance_packet
 from setdiff_bench.models.setdiff.inputs import (
     HOLE_AREA,
@@ -293,7 +288,7 @@ def test_train_autoencoder_and_build_a_model_on_it(tmp_path: Path) -> None:
         )
         == 0
     )
-    assert {p.name for p in out.iterdir()} == {CONFIG_FILE, WEIGHTS_FILE, MANIFEST_FILE}
+    assert {p.name for p in out.iterdir()} == {CONFIG_FILE, AUTOENCODER_WEIGHTS_FILE, MANIFEST_FILE}
     manifest = json.loads((out / MANIFEST_FILE).read_text())
     assert (
         manifest["settings"]["steps"] == 3 and manifest["train_frames"] == 6 and manifest["test_frames"] == 6
@@ -311,7 +306,7 @@ def test_train_autoencoder_and_build_a_model_on_it(tmp_path: Path) -> None:
     assert list(model.codec.vae.config.block_out_channels) == [8, 16, 16, 16]
     from safetensors.torch import load_file
 
-    saved = load_file(str(out / WEIGHTS_FILE))
+    saved = load_file(str(out / AUTOENCODER_WEIGHTS_FILE))
     state = model.codec.vae.state_dict()
     assert all(torch.equal(state[k], v) for k, v in saved.items())
     alone = load_autoencoder(out)  # the folder on its own, as benchmarks/autoencoder_sweep.py scores it

@@ -151,7 +151,8 @@ def tiny_checkpoint(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_optimizer_state_pickle_is_refused(
     payload: str, tiny_checkpoint: Path, tmp_path: Path, marker: Path
 ) -> None:
-    from setdiff_bench.models.setdiff.checkpoint import OPTIMIZER_FILE, load_training_state
+    from setdiff_bench.models.setdiff.checkpoint import load_training_state
+    from setdiff_bench.models.setdiff.files import OPTIMIZER_FILE
 
     folder = Path(shutil.copytree(tiny_checkpoint, tmp_path / "ckpt"))
     exploit = TouchExploit(marker) if payload == "touch" else SystemExploit(marker)
@@ -162,7 +163,8 @@ def test_optimizer_state_pickle_is_refused(
 
 
 def test_model_weights_pickle_is_refused(tiny_checkpoint: Path, tmp_path: Path, marker: Path) -> None:
-    from setdiff_bench.models.setdiff.checkpoint import WEIGHTS_FILE, load_model
+    from setdiff_bench.models.setdiff.checkpoint import load_model
+    from setdiff_bench.models.setdiff.files import WEIGHTS_FILE
 
     folder = Path(shutil.copytree(tiny_checkpoint, tmp_path / "ckpt"))
     torch.save(

@@ -20,13 +20,8 @@ from pathlib import Path
 import torch
 
 from setdiff_bench.errors import CheckpointError, UsageError
-from setdiff_bench.models.setdiff.checkpoint import (
-    CHECKPOINTS_DIR,
-    WEIGHTS_FILE,
-    check_compatible,
-    read_config,
-    saved_step,
-)
+from setdiff_bench.models.setdiff.checkpoint import check_compatible, read_config, saved_step
+from setdiff_bench.models.setdiff.files import CHECKPOINTS_DIR, WEIGHTS_FILE
 
 
 def check_average_count(count: int, where: str) -> int:

@@ -26,15 +26,16 @@ from setdiff_bench.errors import CheckpointError, UsageError, key_mismatch
 from setdiff_bench.io.atomic import new_file_mode, staged_folder, write_text_atomic
 from setdiff_bench.io.safetensors_header import sort_metadata
 from setdiff_bench.models.setdiff.config import Config, ModelConfig, config_from_dict
+from setdiff_bench.models.setdiff.files import (
+    CHECKPOINTS_DIR,
+    CONFIG_FILE,
+    LATEST_FILE,
+    OPTIMIZER_FILE,
+    TRAINER_FILE,
+    WEIGHTS_FILE,
+)
 from setdiff_bench.models.setdiff.model import SetDiffModel
 from setdiff_bench.models.setdiff.packaged import packaged_folder, packaged_names
-
-WEIGHTS_FILE = "model.safetensors"
-CONFIG_FILE = "config.json"
-OPTIMIZER_FILE = "optimizer.pt"
-TRAINER_FILE = "trainer.json"
-LATEST_FILE = "latest"
-CHECKPOINTS_DIR = "checkpoints"
 
 
 def resolve_checkpoint(path: str | os.PathLike[str]) -> Path:

@@ -33,6 +33,7 @@ import numpy as np
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.atomic import write_text_atomic
+from setdiff_bench.models.setdiff.autoencoder import read_autoencoder_config
 
 Method = Literal["setdiff", "difix"]
 Prediction = Literal["v_prediction", "epsilon"]
@@ -527,9 +528,6 @@ def model_config_from_dict(data: Mapping[str, Any]) -> ModelConfig:
         raise UsageError(f"unknown preset {preset_name!r}; known: {', '.join(PRESETS)}", "[model]")
     preset = copy.deepcopy(PRESETS[preset_name])
     if data.get("autoencoder") and not _complete_vae(data.get("vae", {})):
-        # lazy: the autoencoder module imports this one
-        from setdiff_bench.models.setdiff.autoencoder import read_autoencoder_config
-
         autoencoder = read_autoencoder_config(str(data["autoencoder"]))
         preset["vae"] = {**preset["vae"], **autoencoder}
         channels = int(autoencoder["latent_channels"])

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from setdiff_bench.models.setdiff.manifest import MANIFEST_FILE
+from setdiff_bench.models.setdiff.files import MANIFEST_FILE
 
 
 class OutOfDistributionWarning(UserWarning):

@@ -20,11 +20,11 @@ from typing import Any
 
 from setdiff_bench.errors import CheckpointError
 from setdiff_bench.io.atomic import write_text_atomic
+from setdiff_bench.models.setdiff.files import MANIFEST_FILE
 from setdiff_bench.packets.index import FILE_COLUMNS
 from setdiff_bench.runtime.provenance import git_revision
 from setdiff_bench.runtime.threads import compute_threads
 
-MANIFEST_FILE = "manifest.json"
 MANIFEST_FORMAT = "setdiff-enhancer-manifest/1"
 #: Synthetic scene folder names (``setdiff_bench.synthetic.generate.scene_name``): seed and index.
 SYNTHETIC_SCENE = re.compile(r"^scene_(\d{4,})_(\d{2,})$")

@@ -8,29 +8,27 @@ wall time, data hash, validation metrics) and a ``files`` table of each file's S
 * an **enhancer** (``tiny_setdiff``, ``tiny_difix``): a checkpoint folder (``config.json`` +
   ``model.safetensors``, :mod:`~setdiff_bench.models.setdiff.checkpoint`), named by ``--checkpoint``.
 
-``setdiff-bench weights list`` shows them, ``weights verify`` recomputes every SHA-256, and
-``weights export CKPT --name NAME`` turns a finished training run (its checkpoint and its training
-manifest, :mod:`~setdiff_bench.models.setdiff.manifest`) into such a folder.
+``setdiff-bench weights list`` shows them and ``weights verify`` recomputes every SHA-256.  This module is the
+lookup table only (it imports no model code); ``weights export CKPT --name NAME``, which turns a finished
+training run into such a folder, is :mod:`~setdiff_bench.models.setdiff.export`.
 """
 
 from __future__ import annotations
 
 import json
-import shutil
-from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from setdiff_bench.errors import CheckpointError, WeightsError
-from setdiff_bench.io.atomic import sha256_file, staged_folder, write_text_atomic
-from setdiff_bench.models.setdiff.manifest import MANIFEST_FILE
-
-PACKAGED_FOLDER = "weights"
-#: The file that tells the kinds apart: an enhancer checkpoint's weights, else an autoencoder's.
-ENHANCER_WEIGHTS = "model.safetensors"
-AUTOENCODER_WEIGHTS = "weights.safetensors"
+from setdiff_bench.errors import WeightsError
+from setdiff_bench.io.atomic import sha256_file
+from setdiff_bench.models.setdiff.files import (
+    AUTOENCODER_WEIGHTS_FILE,
+    MANIFEST_FILE,
+    PACKAGED_FOLDER,
+    WEIGHTS_FILE,
+)
 
 
 @dataclass(frozen=True)
@@ -65,11 +63,12 @@ def packaged_models(root: Path | None = None) -> dict[str, PackagedModel]:
     if not root.is_dir():
         return models
     for folder in sorted(p for p in root.iterdir() if p.is_dir()):
+        # the weights file tells the kinds apart: an enhancer checkpoint's, else an autoencoder's
         kind = (
             "enhancer"
-            if (folder / ENHANCER_WEIGHTS).is_file()
+            if (folder / WEIGHTS_FILE).is_file()
             else "autoencoder"
-            if (folder / AUTOENCODER_WEIGHTS).is_file()
+            if (folder / AUTOENCODER_WEIGHTS_FILE).is_file()
             else None
         )
         if kind is None or not (folder / MANIFEST_FILE).is_file():
@@ -116,54 +115,3 @@ def verify(model: PackagedModel) -> list[str]:
 def file_table(folder: Path, names: list[str]) -> dict[str, str]:
     """``{file name: SHA-256}`` of ``names`` in ``folder``."""
     return {name: sha256_file(folder / name) for name in sorted(names)}
-
-
-def export_enhancer(
-    checkpoint: Path,
-    training_manifest: dict[str, Any],
-    destination: Path,
-    extra: dict[str, Any] | None = None,
-    guidance_scale: float | None = None,
-    average: Sequence[Path] = (),
-) -> Path:
-    """Copy a checkpoint's weights and config into ``destination`` (replaced atomically) with a manifest.
-
-    Args:
-        checkpoint: a checkpoint folder (``config.json`` + ``model.safetensors``).
-        training_manifest: the training run's manifest (commands, seed, steps, data, validation).
-        destination: the new model folder, e.g. ``<package>/weights/tiny_setdiff``.
-        extra: more manifest entries (e.g. the export command, evaluation metrics).
-        guidance_scale: when given, the exported config's inference geometry-CFG scale (an inference
-            knob, not part of the architecture: the weights are copied unchanged); ``None`` keeps the
-            checkpoint's.
-        average: when given, checkpoint folders of the same run whose weights' uniform mean is exported
-            instead of ``checkpoint``'s (:mod:`~setdiff_bench.models.setdiff.averaging`); the config is
-            ``checkpoint``'s.
-
-    Raises:
-        CheckpointError: the checkpoint lacks a file.
-    """
-    # lazy: the checkpoint module imports this one
-    from setdiff_bench.models.setdiff.averaging import average_weights
-    from setdiff_bench.models.setdiff.checkpoint import CONFIG_FILE, WEIGHTS_FILE, read_config, write_weights
-
-    names = [CONFIG_FILE, WEIGHTS_FILE]
-    for name in names:
-        if not (checkpoint / name).is_file():
-            raise CheckpointError(f"checkpoint has no {name}", checkpoint)
-    config = read_config(checkpoint) if guidance_scale is not None or average else None
-    if config is not None and guidance_scale is not None:
-        config = replace(config, model=replace(config.model, guidance_scale=float(guidance_scale)))
-    averaged = average_weights(average) if average else None
-    with staged_folder(destination) as staging:
-        if config is not None and guidance_scale is not None:
-            write_text_atomic(staging / CONFIG_FILE, config.to_json() + "\n")
-        else:
-            shutil.copyfile(checkpoint / CONFIG_FILE, staging / CONFIG_FILE)
-        if config is not None and averaged is not None:
-            write_weights(staging / WEIGHTS_FILE, averaged, config)
-        else:
-            shutil.copyfile(checkpoint / WEIGHTS_FILE, staging / WEIGHTS_FILE)
-        manifest = {**training_manifest, **(extra or {}), "files": file_table(staging, names)}
-        write_text_atomic(staging / MANIFEST_FILE, json.dumps(manifest, indent=2, sort_keys=True) + "\n")
-    return destination

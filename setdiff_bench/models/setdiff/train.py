@@ -58,16 +58,13 @@ from setdiff_bench.models.setdiff.checkpoint import (
     step_folder,
 )
 from setdiff_bench.models.setdiff.config import Config, ModelConfig
+from setdiff_bench.models.setdiff.files import LATEST_FILE, LOG_FILE, SAMPLES_FILE, VALIDATION_FILE
 from setdiff_bench.models.setdiff.inference import enhance_packet
 from setdiff_bench.models.setdiff.inputs import training_set
 from setdiff_bench.models.setdiff.losses import ReconstructionLoss, latent_loss
 from setdiff_bench.models.setdiff.model import SetDiffModel
 from setdiff_bench.runtime.interrupts import Interrupted, stop_requested
 from setdiff_bench.types import TrainingSample
-
-LOG_FILE = "train_log.jsonl"
-VALIDATION_FILE = "validation.jsonl"
-SAMPLES_FILE = "samples.jsonl"
 
 
 @dataclass
@@ -217,7 +214,7 @@ def train(
 
     previous = None
     model_config = config.model
-    if resume and ((out / "latest").is_file()):
+    if resume and ((out / LATEST_FILE).is_file()):
         previous = resolve_checkpoint(out)
         saved = read_config(previous)
         check_compatible(saved, config, previous)
