@@ -10,6 +10,8 @@ import pytest
 from setdiff_bench.errors import UsageError
 from setdiff_bench.models.setdiff.config import (
     SD_TURBO_SCHEDULE,
+    ModelConfig,
+    TrainConfig,
     alphas_cumprod,
     check_guidance_scale,
     config_from_dict,
@@ -109,3 +111,48 @@ def test_guidance_scale_must_be_a_finite_positive_number() -> None:
             check_guidance_scale(bad, "x")
     with pytest.raises(UsageError, match="guidance_scale"):
         model_config_from_dict({**load_config("tiny_setdiff").model.to_dict(), "guidance_scale": 0.0})
+
+
+def test_the_architecture_is_the_fields_marked_so() -> None:
+    """A checkpoint's identity: these fields (declared with ARCHITECTURE metadata), not the inference knobs."""
+    assert set(ModelConfig().architecture()) == {
+        "method",
+        "unet",
+        "vae",
+        "scheduler",
+        "timestep",
+        "prediction",
+        "use_geometry",
+        "geometry_inputs",
+        "geometry_channels",
+        "geometry_groups",
+        "cmap_clip",
+        "vae_decoder",
+        "vae_lora_rank",
+        "vae_lora_alpha",
+        "skip_connections",
+        "skip_gamma",
+        "text_length",
+        "output_mode",
+        "attention_bias",
+        "attention_bias_layers",
+    }
+    knobs = ModelConfig(
+        guidance_scale=1.0, cfg_batched=False, max_references=2, targets_per_set=1, preset="tiny"
+    )
+    assert knobs.architecture() == ModelConfig().architecture()
+
+
+@pytest.mark.parametrize(
+    ("table", "values", "message"),
+    [
+        ("model", {"vae_decoder": "half"}, "vae_decoder must be lora, full or frozen, got 'half'"),
+        ("model", {"output_mode": "x"}, "output_mode must be 'direct' or 'residual', got 'x'"),
+        ("train", {"mixed_precision": "fp8"}, "mixed_precision must be auto, no, bf16 or fp16, got 'fp8'"),
+        ("train", {"lpips_net": "squeeze"}, "lpips_net must be 'vgg' or 'alex', got 'squeeze'"),
+    ],
+)
+def test_choices_are_spelled_from_their_literal_types(table: str, values: dict, message: str) -> None:
+    with pytest.raises(UsageError) as caught:
+        ModelConfig(**values) if table == "model" else TrainConfig(**values)
+    assert str(caught.value) == f"[{table}]: {message}"

@@ -27,12 +27,13 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields, replace
 from importlib import resources
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, get_args
 
 import numpy as np
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.atomic import write_text_atomic
+from setdiff_bench.io.jsonable import jsonable
 from setdiff_bench.models.setdiff.autoencoder import read_autoencoder_config
 
 Method = Literal["setdiff", "difix"]
@@ -41,6 +42,12 @@ DecoderTraining = Literal["lora", "full", "frozen"]
 OutputMode = Literal["direct", "residual"]
 AttentionBias = Literal["none", "cmap_distance"]
 AttentionBiasLayers = Literal["all", "lowest"]
+MixedPrecision = Literal["auto", "no", "bf16", "fp16"]
+LpipsNet = Literal["vgg", "alex"]
+
+#: Field metadata of the :class:`ModelConfig` fields that decide parameter names and shapes and the forward
+#: maths: :meth:`ModelConfig.architecture` (a checkpoint's identity) is made of these fields.
+ARCHITECTURE: Mapping[str, bool] = {"architecture": True}
 
 CONFIG_FORMAT = 1
 DEFAULT_PROMPT = "remove degradation"
@@ -217,59 +224,51 @@ class ModelConfig:
             torch's fused attention kernel).
     """
 
-    method: Method = "setdiff"
+    method: Method = field(default="setdiff", metadata=ARCHITECTURE)
     preset: str = "sd-turbo"
-    unet: Mapping[str, Any] = field(default_factory=lambda: copy.deepcopy(SD_TURBO_UNET))
-    vae: Mapping[str, Any] = field(default_factory=lambda: copy.deepcopy(SD_TURBO_VAE))
-    scheduler: Mapping[str, Any] = field(default_factory=lambda: dict(SD_TURBO_SCHEDULE))
-    timestep: int = 199
-    prediction: Prediction = "v_prediction"
-    use_geometry: bool = True
-    geometry_inputs: tuple[str, ...] = ("cmap", "plucker")
-    geometry_channels: tuple[int, ...] = (32, 64, 128, 256, 256)
-    geometry_groups: int = 8
-    cmap_clip: float = 10.0
+    unet: Mapping[str, Any] = field(
+        default_factory=lambda: copy.deepcopy(SD_TURBO_UNET), metadata=ARCHITECTURE
+    )
+    vae: Mapping[str, Any] = field(default_factory=lambda: copy.deepcopy(SD_TURBO_VAE), metadata=ARCHITECTURE)
+    scheduler: Mapping[str, Any] = field(
+        default_factory=lambda: dict(SD_TURBO_SCHEDULE), metadata=ARCHITECTURE
+    )
+    timestep: int = field(default=199, metadata=ARCHITECTURE)
+    prediction: Prediction = field(default="v_prediction", metadata=ARCHITECTURE)
+    use_geometry: bool = field(default=True, metadata=ARCHITECTURE)
+    geometry_inputs: tuple[str, ...] = field(default=("cmap", "plucker"), metadata=ARCHITECTURE)
+    geometry_channels: tuple[int, ...] = field(default=(32, 64, 128, 256, 256), metadata=ARCHITECTURE)
+    geometry_groups: int = field(default=8, metadata=ARCHITECTURE)
+    cmap_clip: float = field(default=10.0, metadata=ARCHITECTURE)
     geometry_dropout: float = 0.15
     guidance_scale: float = 2.0
     cfg_batched: bool = True
-    vae_decoder: DecoderTraining = "lora"
-    vae_lora_rank: int = 4
-    vae_lora_alpha: float = 8.0
-    skip_connections: bool = False
-    skip_gamma: float = 1.0
+    vae_decoder: DecoderTraining = field(default="lora", metadata=ARCHITECTURE)
+    vae_lora_rank: int = field(default=4, metadata=ARCHITECTURE)
+    vae_lora_alpha: float = field(default=8.0, metadata=ARCHITECTURE)
+    skip_connections: bool = field(default=False, metadata=ARCHITECTURE)
+    skip_gamma: float = field(default=1.0, metadata=ARCHITECTURE)
     text_prompt: str = DEFAULT_PROMPT
-    text_length: int = 77
+    text_length: int = field(default=77, metadata=ARCHITECTURE)
     learn_text_embedding: bool | None = None
     max_references: int | None = None
     targets_per_set: int | None = None
     pretrained: str | None = None
     autoencoder: str | None = None
-    output_mode: OutputMode = "direct"
-    attention_bias: AttentionBias = "none"
-    attention_bias_layers: AttentionBiasLayers = "all"
+    output_mode: OutputMode = field(default="direct", metadata=ARCHITECTURE)
+    attention_bias: AttentionBias = field(default="none", metadata=ARCHITECTURE)
+    attention_bias_layers: AttentionBiasLayers = field(default="all", metadata=ARCHITECTURE)
 
     def __post_init__(self) -> None:
         where = "[model]"
-        if self.output_mode not in ("direct", "residual"):
-            raise UsageError(f"output_mode must be 'direct' or 'residual', got {self.output_mode!r}", where)
-        if self.attention_bias not in ("none", "cmap_distance"):
-            raise UsageError(
-                f"attention_bias must be 'none' or 'cmap_distance', got {self.attention_bias!r}", where
-            )
-        if self.attention_bias_layers not in ("all", "lowest"):
-            raise UsageError(
-                f"attention_bias_layers must be 'all' or 'lowest', got {self.attention_bias_layers!r}", where
-            )
+        check_choice(self.output_mode, OutputMode, "output_mode", where)
+        check_choice(self.attention_bias, AttentionBias, "attention_bias", where)
+        check_choice(self.attention_bias_layers, AttentionBiasLayers, "attention_bias_layers", where)
         if self.attention_bias != "none" and not self.use_geometry:
             raise UsageError("attention_bias needs C-maps: set use_geometry = true", where)
-        if self.method not in ("setdiff", "difix"):
-            raise UsageError(f"method must be 'setdiff' or 'difix', got {self.method!r}", where)
-        if self.prediction not in ("v_prediction", "epsilon"):
-            raise UsageError(
-                f"prediction must be 'v_prediction' or 'epsilon', got {self.prediction!r}", where
-            )
-        if self.vae_decoder not in ("lora", "full", "frozen"):
-            raise UsageError(f"vae_decoder must be lora, full or frozen, got {self.vae_decoder!r}", where)
+        check_choice(self.method, Method, "method", where)
+        check_choice(self.prediction, Prediction, "prediction", where)
+        check_choice(self.vae_decoder, DecoderTraining, "vae_decoder", where, quoted=False)
         steps = int(self.scheduler["num_train_timesteps"])
         if not 0 <= self.timestep < steps:
             raise UsageError(f"timestep must be in [0, {steps}), got {self.timestep}", where)
@@ -333,37 +332,18 @@ class ModelConfig:
         return self.use_geometry and self.guidance_scale != 1.0
 
     def architecture(self) -> dict[str, Any]:
-        """The fields that decide parameter names/shapes and the forward maths (checkpoint identity).
+        """The fields that decide parameter names/shapes and the forward maths (checkpoint identity): those
+        declared with :data:`ARCHITECTURE` metadata.
 
         Inference knobs (guidance scale, CFG batching, set sizes) and the ``pretrained`` path are
         left out: a checkpoint may be used with other values of those.
         """
-        keep = (
-            "method",
-            "unet",
-            "vae",
-            "scheduler",
-            "timestep",
-            "prediction",
-            "use_geometry",
-            "geometry_inputs",
-            "geometry_channels",
-            "geometry_groups",
-            "cmap_clip",
-            "vae_decoder",
-            "vae_lora_rank",
-            "vae_lora_alpha",
-            "skip_connections",
-            "skip_gamma",
-            "text_length",
-            "output_mode",
-            "attention_bias",
-            "attention_bias_layers",
+        return jsonable(
+            {f.name: getattr(self, f.name) for f in fields(self) if f.metadata.get("architecture")}
         )
-        return _jsonable({name: getattr(self, name) for name in keep})
 
     def to_dict(self) -> dict[str, Any]:
-        return _jsonable(asdict(self))
+        return jsonable(asdict(self))
 
 
 @dataclass(frozen=True)
@@ -411,8 +391,8 @@ class TrainConfig:
     l2_weight: float = 1.0
     ssim_weight: float = 1.0
     lpips_weight: float = 1.0
-    lpips_net: str = "vgg"
-    mixed_precision: str = "auto"
+    lpips_net: LpipsNet = "vgg"
+    mixed_precision: MixedPrecision = "auto"
     checkpoint_every: int = 1000
     keep_checkpoints: int = 3
     validate_every: int = 1000
@@ -438,12 +418,8 @@ class TrainConfig:
             raise UsageError(
                 f"need 2 <= min_views <= max_views, got {self.min_views}, {self.max_views}", where
             )
-        if self.mixed_precision not in ("auto", "no", "bf16", "fp16"):
-            raise UsageError(
-                f"mixed_precision must be auto, no, bf16 or fp16, got {self.mixed_precision!r}", where
-            )
-        if self.lpips_net not in ("vgg", "alex"):
-            raise UsageError(f"lpips_net must be 'vgg' or 'alex', got {self.lpips_net!r}", where)
+        check_choice(self.mixed_precision, MixedPrecision, "mixed_precision", where, quoted=False)
+        check_choice(self.lpips_net, LpipsNet, "lpips_net", where)
         weights = (self.latent_weight, self.l2_weight, self.ssim_weight, self.lpips_weight)
         if min(weights) < 0 or sum(weights) == 0:
             raise UsageError("loss weights must be >= 0 and not all zero", where)
@@ -454,7 +430,7 @@ class TrainConfig:
         return self.l2_weight + self.ssim_weight + self.lpips_weight
 
     def to_dict(self) -> dict[str, Any]:
-        return _jsonable(asdict(self))
+        return jsonable(asdict(self))
 
 
 @dataclass(frozen=True)
@@ -470,6 +446,16 @@ class Config:
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), indent=2, sort_keys=True)
+
+
+def check_choice(value: Any, choices: Any, name: str, where: str, *, quoted: bool = True) -> None:
+    """Refuse ``value`` unless it is one of the ``Literal`` type ``choices``' values: ``<name> must be 'a' or 'b',
+    got 'c'`` (``a, b or c`` when not ``quoted``)."""
+    allowed = get_args(choices)
+    if value not in allowed:
+        words = [repr(choice) if quoted else str(choice) for choice in allowed]
+        spelled = f"{', '.join(words[:-1])} or {words[-1]}"
+        raise UsageError(f"{name} must be {spelled}, got {value!r}", where)
 
 
 def check_guidance_scale(value: Any, where: str) -> float:
@@ -566,15 +552,6 @@ def _build(cls: type, data: Mapping[str, Any], where: str) -> Any:
         return cls(**dict(data))
     except TypeError as error:
         raise UsageError(f"invalid {where}: {error}", where) from error
-
-
-def _jsonable(value: Any) -> Any:
-    """Tuples → lists, mappings → plain sorted dicts, recursively (a stable JSON form)."""
-    if isinstance(value, Mapping):
-        return {str(k): _jsonable(v) for k, v in sorted(value.items())}
-    if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
-    return value
 
 
 def config_toml_data(source: str | Path) -> dict[str, dict[str, Any]]:
