@@ -1,0 +1,16 @@
+"""SetDiff and, on the same code, its DiFix3D-style baseline (``method = "difix"`` in a model config: one
+reference and one target per set, RGB only, no geometry, no CFG).
+
+The folder as a tree, leaves first:
+
+* ``files`` — every file name of a checkpoint, a training run, an autoencoder and a shipped model;
+* ``packaged`` — the lookup table of the models shipped under ``weights/``;
+* ``autoencoder`` — finding and reading a trained tiny autoencoder (its training: ``autoencoder_train``);
+* ``config`` — the architecture presets, the ``ModelConfig`` / ``TrainConfig`` dataclasses, TOML I/O;
+* ``networks``, ``geometry_encoder``, ``set_mixer``, ``vae_codec``, ``inputs``, ``model`` — the model;
+* ``checkpoint``, ``averaging``, ``export`` — saving, loading, averaging and exporting weights;
+* ``inference``, ``memory``, ``domain`` — enhancing a packet, its memory bound, its training-data check;
+* ``losses``, ``manifest``, ``train`` — training and its provenance.
+
+``tests/core/test_import_graph.py`` keeps it a tree: no module here imports one that imports it back.
+"""
