@@ -46,12 +46,13 @@ inline names of the program or a verb (```setdiff-bench serve``` ...)          t
 ``ruff check .``, ``ruff format --check .``                                    not run here: tests/core/test_style.py
 =============================================================================  =========================================
 
-Cost (measured with ``--durations`` on the shared 2-core machine at load average 5, i.e. with about two
-other busy processes per core): 77 s of CPU (user + system) and 135 s of wall time for the whole module: the
-tiny demo 59 s wall, serve and drive 25 s, the Python block 18 s (7.7 s CPU: a fresh interpreter loads torch and
-``tiny_setdiff``), the TLS serve 12 s, the report 10 s, the listings 7 s; the parse checks take milliseconds.
-The chain is mostly one process at a time, so on an otherwise idle 2-core machine its wall time is close to its
-CPU time.  Nothing is marked slow: no faster test runs these commands.
+Cost, measured with ``--durations`` on the shared 2-core machine: 77 s of CPU (user + system, the whole module
+with its subprocesses); wall time 135 s at load average 5 and 102 s at load average 4 (two to three other busy
+processes per core).  At load 4: the tiny demo 47 s, serve and drive 16 s, the Python block 14 s (a fresh
+interpreter loads torch and ``tiny_setdiff``), the TLS serve 13 s (start-up only), the report 6 s, the
+listings 5 s; the parse checks take milliseconds.  The chain runs one process at a time but for serve and its
+client, so on an otherwise idle 2-core machine its wall time is about its CPU time.  Nothing is marked slow: no
+faster test runs these commands.
 """
 
 from __future__ import annotations
