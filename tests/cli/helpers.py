@@ -21,6 +21,8 @@ from pathlib import Path
 from setdiff_bench.cli.main import build_parser
 
 ROOT = Path(__file__).resolve().parents[2]
+#: How a documented command calls the program: the console script or the module (the README's first block).
+PROGRAM = re.compile(r"(?:setdiff-bench|python3? -m setdiff_bench) ")
 
 #: Size options and their small values (``small``).
 SMALL = {
@@ -76,17 +78,17 @@ def small(example: str) -> str:
     ``fit`` examples that name no preset, and ``--port 0`` added to ``serve`` examples that name no port."""
     for flag, value in SMALL.items():
         example = re.sub(rf"(?<!\S){re.escape(flag)} \S+", f"{flag} {value}", example)
-    verb = example.split("setdiff-bench ", 1)[1].split()[0]
+    verb = words(example)[0]
     if verb in ("demo", "synth", "fit") and "--preset" not in example:
         example += " --preset tiny"
     if verb == "serve" and "--port" not in example:  # the default port may be taken: any free one
-        example = example.replace("setdiff-bench serve ", "setdiff-bench serve --port 0 ", 1)
+        example = re.sub(r"(?<=serve) ", " --port 0 ", example, count=1)
     return example
 
 
 def words(example: str) -> list[str]:
-    """The argument words after ``setdiff-bench`` (an environment prefix dropped)."""
-    return shlex.split(example.split("setdiff-bench ", 1)[1], comments=True)
+    """The argument words after ``setdiff-bench`` or ``python3 -m setdiff_bench`` (a prefix dropped)."""
+    return shlex.split(PROGRAM.split(example, maxsplit=1)[1], comments=True)
 
 
 def command_environment() -> dict[str, str]:
@@ -142,16 +144,19 @@ def served(command: str, folder: Path) -> Iterator[str]:
     assert process.returncode == 0, (command, first, out, err)
 
 
-def run_example(example: str, world: Path) -> None:
-    """Run ``example`` (small) in ``world`` with bash; a ``serve`` example until it listens."""
+def run_example(example: str, world: Path) -> str:
+    """Run ``example`` (small) in ``world`` with bash; a ``serve`` example until it listens.
+
+    Returns:
+        What it printed on stdout (a ``serve`` example: its first line, ``serving on ...``).
+    """
     command = small(example)
     if " --allow-dirty" not in command and words(command)[0] == "publish" and repository_is_dirty():
         command += " --allow-dirty"  # publish refuses uncommitted code; tests run on work in progress
     if words(command)[0] == "serve":
-        with served(command, world):
-            pass
-        return
-    run_shell(command, world)
+        with served(command, world) as first:
+            return first
+    return run_shell(command, world).stdout
 
 
 def repository_is_dirty() -> bool:

@@ -8,8 +8,11 @@ one table below, so a command added to the README fails :func:`test_every_readme
 until it is run or the reason it is not is written down.
 
 The chain runs in a fresh folder with the repository's ``examples/`` linked in (the README's commands are
-written for a clone's root).  The one size change is the README's own: the demo runs at ``--preset tiny``
-(README: "Presets (``--preset tiny|default|full``)"), whose outputs are in the same places.
+written for a clone's root), through the help-examples helpers (:func:`tests.cli.helpers.run_example`, whose
+``small`` changes sizes only).  The one size change is the README's own: the demo runs at ``--preset tiny``
+(README: "Presets (``--preset tiny|default|full``)"), whose outputs are in the same places.  The service
+commands name port 50051: the plain one keeps it when it is free (its client then runs exactly as written); the
+TLS one, only started, takes a free port (``small``: ``--port 0``).
 
 =============================================================================  =========================================
 README command                                                                 here
@@ -27,8 +30,9 @@ the Python API block (``sb.PacketStore("runs/demo/work/packets")`` ...)        r
                                                                                for the client, if 50051 is taken)
 ``python examples/drive_packets.py --packets runs/demo/work/packets ...``      run against it: one PNG per target
 ``umask 077; python3 -c "import secrets; ..." > token``                        run
-``setdiff-bench serve ... --host 0.0.0.0 --tls-cert server.pem ...``           run until it listens (the test makes
-                                                                               ``server.pem`` / ``server.key``)
+``setdiff-bench serve ... --host 0.0.0.0 --tls-cert server.pem ...``           run until it listens, on a free port
+                                                                               (the test makes ``server.pem`` /
+                                                                               ``server.key``)
 the fox walk-through (``R=/data/fox`` ... ``leaderboard ... --out runs/fox``)  parsed; the block passes ``bash -n``
                                                                                (needs the instant-ngp fox capture)
 ``setdiff-bench list scenes --dataset euvs --root /data/EUVS`` and the EUVS    parsed (needs EUVS; the later ones read
@@ -72,7 +76,7 @@ import pandas as pd
 import pytest
 
 from setdiff_bench.cli.main import build_parser
-from tests.cli.helpers import ROOT, command_environment, run_shell, served
+from tests.cli.helpers import ROOT, command_environment, run_example, run_shell, served
 
 README = ROOT / "README.md"
 
@@ -286,8 +290,8 @@ def world(tmp_path_factory: pytest.TempPathFactory) -> Path:
         pytest.skip("the LPIPS weights do not resolve: the README's first command would download them")
     folder = tmp_path_factory.mktemp("readme")
     (folder / "examples").symlink_to(ROOT / "examples")
-    run_shell("python3 -m setdiff_bench weights lpips --download", folder)
-    run_shell("python3 -m setdiff_bench demo --preset tiny", folder)
+    run_example(_command("python3 -m setdiff_bench weights lpips"), folder)
+    run_example(_command("python3 -m setdiff_bench demo"), folder)  # small(): --preset tiny
     return folder
 
 
@@ -306,13 +310,13 @@ def test_the_demo_wrote_what_the_readme_says(world: Path) -> None:
 )
 def test_listing_commands_run(command: str, world: Path) -> None:
     assert command in COMMANDS
-    out = run_shell(command, world).stdout
+    out = run_example(command, world)
     expected = {"list datasets": "synthetic", "list methods": "setdiff", "weights list": "tiny_setdiff"}
     assert expected[command.split(" ", 1)[1]] in out
 
 
 def test_report_runs_on_the_demo(world: Path) -> None:
-    run_shell(_command("setdiff-bench report "), world)
+    run_example(_command("setdiff-bench report "), world)
     assert (world / "runs" / "report" / "index.html").is_file()
 
 
@@ -369,6 +373,5 @@ def test_token_and_tls_serve(world: Path) -> None:
     certificates = make_certificates(world / "certs")
     shutil.copy(certificates.server_cert, world / "server.pem")
     shutil.copy(certificates.server_key, world / "server.key")
-    serve, _ = _port_for(_command("setdiff-bench serve --checkpoint tiny_setdiff --host 0.0.0.0"))
-    with served(serve, world) as first:
-        assert "0.0.0.0:" in first and "token" in first
+    first = run_example(_command("setdiff-bench serve --checkpoint tiny_setdiff --host 0.0.0.0"), world)
+    assert "0.0.0.0:" in first and "token" in first  # small(): on a free port (--port 0)
