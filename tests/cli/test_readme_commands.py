@@ -96,7 +96,8 @@ RUN = {
     "setdiff-bench serve --checkpoint tiny_setdiff --host 0.0.0.0 --port 50051 --tls-cert server.pem "
     "--tls-key server.key --token-file token",
 }
-#: Commands not run, each with its reason; ``setdiff-bench`` ones are parsed (:func:`test_parsed_commands_parse`).
+#: What marks a command as needing external data (its shell lines pass ``bash -n``; ``setdiff-bench`` ones are
+#: parsed, :func:`test_parsed_commands_parse`), with the reason.
 EXTERNAL_DATA = {
     "/data/": "a dataset downloaded separately",
     "$R": "the instant-ngp fox capture (R=/data/fox)",
@@ -106,8 +107,10 @@ EXTERNAL_DATA = {
     "runs/euvs": "runs on EUVS",
     "data/synthetic/scene_0000_00": "a synthetic scene no README command writes",
 }
+#: Placeholder words of commands written for the reader to fill, and a value each is parsed with.
 PLACEHOLDERS = {"D": "synthetic", "R": "/data/root", "RUN_A": "runs/a", "RUN_B": "runs/b", "STORE": "packets"}
 PLACEHOLDERS |= {"DIR": "out", "OUT": "out", "HOST": "localhost"}
+#: Commands neither run nor parsed here, with the reason.
 NOT_RUN = {
     'python3 -m pip install torch==2.13.0 -e ".[model]"': "installs packages",
     'python3 -m pip install torch==2.13.0 -e ".[model,test]"': "installs packages",
@@ -120,7 +123,6 @@ NOT_RUN = {
 }
 #: Inline names of the program or one of its verbs (not commands): their ``--help`` is built.
 NAMES = {"setdiff-bench", "python3 -m setdiff_bench", "setdiff-bench synth", "setdiff-bench serve"}
-SHELL_ONLY = "shell"  # lines of the fox block that are not setdiff-bench commands: bash -n
 
 
 def _strip_comment(line: str) -> str:
@@ -167,7 +169,7 @@ def treatment(command: str) -> str:
         return "not run"
     if command in NAMES:
         return "name"
-    if external_reason(command) or command.startswith(("R=", "ls $R")):
+    if external_reason(command):
         return "external"
     if has_placeholder(command):
         return "placeholder"
