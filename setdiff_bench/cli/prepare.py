@@ -5,6 +5,15 @@ Examples::
     setdiff-bench prepare synthetic --root runs/demo/work/scenes --fits runs/demo/work/scenes --out runs/packets
     setdiff-bench prepare euvs --root /data/EUVS --fits fits/euvs --out packets/euvs --split test --workers 4
     setdiff-bench prepare dl3dv --root /data/DL3DV --fit --out packets/dl3dv --shard 0/8
+    setdiff-bench prepare synthetic --root runs/demo/work/scenes --fits runs/demo/work/scenes --out runs/packets \
+        --trajectory shift:-3 --trajectory shift:-6
+
+``--trajectory SPEC`` (repeatable) writes novel-trajectory packets instead of the protocol's groups: the
+fit frames' cameras moved by ``shift:METRES`` (to the right; negative: left), ``yaw:DEGREES`` or a JSON
+file of poses, rendered with C-maps and without ground truth; references are the recorded fit frames chosen
+by Eq. 2; the group is the trajectory (``shift-3m``) and the split ``test``.  ``run`` scores them with FID /
+KID (``--inception``) and names the paired metrics it skipped.  A camera leaving the scene is refused in
+one line before anything is written.
 
 Fits are looked up as ``<fits>/<scene>/<fit_key>.ply`` (then ``<fits>/<scene>/fits/<fit_key>.ply``);
 fit keys per protocol: see ``setdiff_bench.packets.prepare`` (EUVS ``level1..3``, Para-Lane ``clip_0``, nuScenes
@@ -54,6 +63,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         dest="groups",
         metavar="NAME",
         help="only this protocol group (repeatable), e.g. --group holdout8; default all",
+    )
+    parser.add_argument(
+        "--trajectory",
+        action="append",
+        dest="trajectories",
+        metavar="SPEC",
+        help="novel trajectory (repeatable): shift:METRES (right; negative: left), yaw:DEGREES or a JSON "
+        "file of poses; writes its packets (no ground truth, group e.g. shift+3m) instead of the "
+        "protocol's groups",
     )
     parser.add_argument("--workers", type=int, default=1, metavar="K", help="render processes (default 1)")
     parser.add_argument(
@@ -111,6 +129,7 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
         groups=args.groups,
         test_scenes=args.test_scenes,
+        trajectories=args.trajectories,
     )
     print(summary.line())
     return 0

@@ -13,6 +13,9 @@ Examples::
 
 ``--inception FILE`` adds FID and KID of the enhanced targets against the recorded frames of the same
 scenes (``<out>/distribution.parquet``; docs/any_capture.md), from a local Inception-v3 FID weights file.
+Targets without ground truth (``prepare --trajectory``) are enhanced and written; the paired metrics they
+cannot have (PSNR, SSIM, LPIPS, warp error) are named in one line (``skipped psnr, ssim, lpips for N
+target(s) without ground truth ...``) and in the manifest, and their columns are null.
 
 Shards (``--shard i/n``) may run at the same time on any machines into one folder on a shared
 filesystem; no file lock is used.  The shard that finds every fragment present merges them; on a
@@ -152,6 +155,8 @@ def run(args: argparse.Namespace) -> int:
         print(
             f"{args.method} [{shard}]: enhanced {result.enhanced} packets, {result.skipped} already done → {out}"
         )
+    if result.skipped_metrics is not None:  # novel-trajectory targets: one line naming what was not scored
+        print(result.skipped_metrics.line())
     if result.merged:
         print(f"complete: {out / METRICS_FILE}, {out / MANIFEST_FILE}")
         if inception is not None:

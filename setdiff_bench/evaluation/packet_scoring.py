@@ -16,7 +16,9 @@ The rules, in order:
    size (:func:`check_output`, else :class:`EnhancerOutputError`);
 3. it is rounded to the 8-bit grid, exactly as ``run`` writes it to PNG (:func:`~setdiff_bench.evaluation.
    scoring.quantize`), so a score never depends on precision a saved image does not have;
-4. every image metric is computed against the ground truth with the dynamic-object masks applied.
+4. every image metric is computed against the ground truth with the dynamic-object masks applied;
+   a target without ground truth (a novel-trajectory view, ``prepare --trajectory``) is enhanced and
+   returned like any other, its paired metrics are NaN and named in :attr:`PacketScore.skipped`.
 """
 
 from __future__ import annotations
@@ -51,10 +53,14 @@ class PacketScore:
     Attributes:
         packet_id: the packet's id in its store.
         enhanced: ``(M, 3, H, W)`` float32 on the CPU, on the 8-bit grid (what ``run`` writes as PNG).
-        scores: metric name → ``(M,)`` float64, one value per target in stored order.
+        scores: metric name → ``(M,)`` float64, one value per target in stored order; NaN for a target
+            without ground truth.
         elapsed_ms: the enhancer's wall time for the packet (``enhance()`` only; no I/O, no scoring).
         peak_memory_mb: on CUDA the most memory torch allocated during ``enhance()``; on the CPU the
             process's peak resident memory so far (MiB; the process peak includes the loaded model).
+        has_ground_truth: ``(M,)`` bool, which targets were scored (``None``: all of them).
+        skipped: the metrics not computed for some target because it has no ground truth (empty when
+            every target has it).
     """
 
     packet_id: str
@@ -62,6 +68,8 @@ class PacketScore:
     scores: dict[str, np.ndarray]
     elapsed_ms: float
     peak_memory_mb: float = float("nan")
+    has_ground_truth: np.ndarray | None = None
+    skipped: tuple[str, ...] = ()
 
     @property
     def ms_per_frame(self) -> float:
@@ -69,8 +77,12 @@ class PacketScore:
         return self.elapsed_ms / max(1, int(self.enhanced.shape[0]))
 
     def means(self) -> dict[str, float]:
-        """Metric name → mean over the packet's targets."""
-        return {name: float(np.mean(values)) for name, values in self.scores.items()}
+        """Metric name → mean over the packet's targets that have ground truth (a metric no target could
+        be scored on is left out: see :attr:`skipped`)."""
+        keep = self.has_ground_truth
+        if keep is None:
+            return {name: float(np.mean(values)) for name, values in self.scores.items()}
+        return {name: float(np.mean(values[keep])) for name, values in self.scores.items() if keep.any()}
 
 
 def check_output(output: Any, packet: Packet, name: str) -> torch.Tensor:
@@ -123,7 +135,9 @@ def score_packet(
         batch_size: images per metric call (bounds LPIPS memory; does not change the values).
 
     Returns:
-        The 8-bit enhanced images, per-target scores and the enhancer's time.
+        The 8-bit enhanced images, per-target scores and the enhancer's time.  Targets without ground
+        truth (novel-trajectory packets) are enhanced and get NaN scores; the metrics so skipped are
+        named in ``skipped``.
 
     Raises:
         SetDiffBenchError: an unknown packet or metric (named as the ``packet_id`` / ``metrics``
@@ -147,7 +161,15 @@ def score_packet(
     specs = _specs(metrics)
     target_device = torch.device(device if device is not None else getattr(enhancer, "device", None) or "cpu")
     packet = store.load_packet(packet_id)
-    gt, masks = store.load_ground_truth(packet_id)
+    has_gt = np.asarray(store.has_ground_truth(packet_id), dtype=bool)
+    scored = np.flatnonzero(has_gt)
+    gt, masks = (
+        store.load_ground_truth(packet_id)
+        if has_gt.all()
+        else store.load_ground_truth(packet_id, targets=[int(i) for i in scored])
+        if len(scored)
+        else (None, None)
+    )
     if target_device.type == "cuda":
         torch.cuda.synchronize(target_device)
         torch.cuda.reset_peak_memory_stats(target_device)
@@ -158,10 +180,25 @@ def score_packet(
     elapsed_ms = (time.perf_counter() - start) * 1000.0
     peak_memory_mb = peak_memory_bytes(target_device) / (1 << 20)
     enhanced = quantize(check_output(output, packet, enhancer.name))
-    scores = score_images(
-        specs, enhanced.to(target_device), gt.to(target_device), masks.to(target_device), batch_size
-    )
-    return PacketScore(packet_id, enhanced, scores, elapsed_ms, peak_memory_mb)
+    if has_gt.all():
+        assert gt is not None and masks is not None
+        scores = score_images(
+            specs, enhanced.to(target_device), gt.to(target_device), masks.to(target_device), batch_size
+        )
+        return PacketScore(packet_id, enhanced, scores, elapsed_ms, peak_memory_mb)
+    scores = {spec.name: np.full(len(has_gt), np.nan) for spec in specs}
+    if gt is not None and masks is not None:
+        paired = score_images(
+            specs,
+            enhanced[scored].to(target_device),
+            gt.to(target_device),
+            masks.to(target_device),
+            batch_size,
+        )
+        for name, values in paired.items():
+            scores[name][scored] = values
+    skipped = tuple(spec.name for spec in specs)
+    return PacketScore(packet_id, enhanced, scores, elapsed_ms, peak_memory_mb, has_gt, skipped)
 
 
 def peak_memory_bytes(device: torch.device) -> int:

@@ -34,6 +34,12 @@ timing columns.  Everything written is deterministic except timing and memory �
 ``peak_memory_mb`` and the manifest's ``timing`` block — so an interrupted-and-resumed run matches an uninterrupted one byte for
 byte in ``images/`` and in every other column (compare with :func:`comparable_metrics`).
 
+Targets without ground truth (novel trajectories, ``prepare --trajectory``) are enhanced and written like
+any other; their paired metrics (the image metrics, and warp error) are null in ``metrics.parquet``, named
+in :attr:`RunResult.skipped_metrics` (``run`` prints them in one line) and in the manifest's ``skipped`` entry
+(present only when something was skipped, so runs on packets with ground truth are unchanged).  FID / KID
+(``--inception``) score them without ground truth.
+
 Warp error (``warp``: ``auto`` = on for the protocols in :data:`SEQUENCE_PROTOCOLS`) is computed at
 merge time per (protocol, scene, sensor) sequence of targets sorted by timestamp, across groups (a
 camera's 10–15 s targets form one sequence), from the written 8-bit images and the ground truth.  The
@@ -48,7 +54,7 @@ import hashlib
 import json
 import os
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -98,7 +104,7 @@ from setdiff_bench.io.run_layout import (
 from setdiff_bench.metrics.registry import PRESETS, MetricSpec
 from setdiff_bench.packets.index import INDEX_FILE
 from setdiff_bench.packets.shards import Shard
-from setdiff_bench.packets.store import PacketStore, timestamp_or_none
+from setdiff_bench.packets.store import PacketStore, target_has_ground_truth, timestamp_or_none
 from setdiff_bench.runtime.provenance import device_description, git_revision, package_versions
 
 RUN_FORMAT = "setdiff-run/1"
@@ -161,6 +167,53 @@ class RunSettings:
         return identity
 
 
+@dataclass(frozen=True)
+class SkippedMetrics:
+    """Metrics a run could not compute for some targets because they have no ground truth.
+
+    Attributes:
+        metrics: metric names skipped (the run's image metrics, then ``warp`` when warp error is on).
+        targets: how many selected targets have no ground truth.
+        groups: the groups those targets are in, sorted.
+    """
+
+    metrics: tuple[str, ...]
+    targets: int
+    groups: tuple[str, ...]
+
+    def line(self) -> str:
+        """The one line ``run`` prints."""
+        return (
+            f"skipped {', '.join(self.metrics)} for {self.targets} target(s) without ground truth "
+            f"(groups {', '.join(self.groups)}): novel-trajectory views are scored by FID / KID (--inception FILE)"
+        )
+
+    def record(self) -> dict[str, Any]:
+        """The manifest's ``skipped`` entry."""
+        return {
+            "metrics": list(self.metrics),
+            "targets": self.targets,
+            "groups": list(self.groups),
+            "reason": "no ground truth (novel-trajectory targets); their metric columns are null",
+        }
+
+
+def skipped_metrics(
+    store: PacketStore, selection: Sequence[str], settings: RunSettings, specs: Sequence[MetricSpec]
+) -> SkippedMetrics | None:
+    """What a run over ``selection`` skips for lack of ground truth (``None`` when every target has it)."""
+    rows = pd.DataFrame(_target_rows(store, selection))
+    if rows.empty:
+        return None
+    without = rows[~target_has_ground_truth(rows)]
+    if without.empty:
+        return None
+    metrics = [spec.name for spec in specs]
+    if warp_enabled(settings, sorted(rows["protocol"].unique())):
+        metrics.append("warp")
+    return SkippedMetrics(tuple(metrics), len(without), tuple(sorted(without["group"].unique())))
+
+
 @dataclass
 class RunResult:
     """What one call of :func:`run_method` did.
@@ -171,6 +224,8 @@ class RunResult:
         skipped: packets of this shard already done.
         remaining: packets of the whole selection still without a fragment (other shards).
         merged: whether ``metrics.parquet`` is complete (written now or already up to date).
+        skipped_metrics: the paired metrics not computed for the selection's targets without ground
+            truth (``None``: every target has it).
     """
 
     out: Path
@@ -178,6 +233,7 @@ class RunResult:
     skipped: int
     remaining: int
     merged: bool
+    skipped_metrics: SkippedMetrics | None = None
 
     @property
     def metrics(self) -> pd.DataFrame:
@@ -247,7 +303,10 @@ def run_method(
     identity = settings.identity(index_sha256, model_files)
     _check_folder(out, identity)
     if merge_only:
-        return _merge_finished(store, out, settings, specs, selection)
+        return replace(
+            _merge_finished(store, out, settings, specs, selection),
+            skipped_metrics=skipped_metrics(store, selection, settings, specs),
+        )
     mine = shard.select(selection)
     todo = [pid for pid in mine if not fragment_path(out, pid).is_file()]
     targets = _target_rows(store, selection)
@@ -301,7 +360,8 @@ def run_method(
     if remaining == 0:
         merge_run(store, out, settings, specs, selection)
         merged = True
-    return RunResult(out, len(todo), len(mine) - len(todo), remaining, merged)
+    skipped = skipped_metrics(store, selection, settings, specs)
+    return RunResult(out, len(todo), len(mine) - len(todo), remaining, merged, skipped)
 
 
 def _merge_finished(
@@ -448,9 +508,11 @@ def _run_packet(
             }
         )
     per_frame = elapsed_ms / max(1, len(targets))
+    scored = result.has_ground_truth
     for position, record in enumerate(records):
-        for spec in specs:
-            record[spec.name] = float(scores[spec.name][position])
+        for spec in specs:  # null, not NaN, where there was nothing to compare with
+            unscored = scored is not None and not scored[position]
+            record[spec.name] = None if unscored else float(scores[spec.name][position])
         record["ms_per_frame"] = per_frame
         record["peak_memory_mb"] = result.peak_memory_mb
     _write_rows(fragment_path(out, packet_id), records, [spec.name for spec in specs])
@@ -550,6 +612,9 @@ def merge_run(
         with atomic_path(out / SEQUENCES_FILE) as tmp:
             pq.write_table(sequences, tmp, compression="zstd")
     manifest = _manifest(store, out, settings, specs, frame, sequences, fragments_sha256)
+    skipped = skipped_metrics(store, selection, settings, specs)
+    if skipped is not None:  # only then, so the manifests of runs with ground truth are unchanged
+        manifest["skipped"] = skipped.record()
     write_text_atomic(manifest_path, json.dumps(manifest, indent=2, sort_keys=True) + "\n")
 
 
@@ -588,6 +653,11 @@ def _sequence_table(store: PacketStore, out: Path, frame: pd.DataFrame, settings
         cache = default_warp_cache() if settings.warp_cache == "auto" else Path(settings.warp_cache)
     index = store.index
     targets = index[index["role"] == "target"]
+    without = targets[~target_has_ground_truth(targets)]
+    if len(without):  # novel-trajectory targets: no ground truth to take flow from (named as skipped)
+        unscored = set(zip(without["packet_id"], without["view"].astype(int), strict=True))
+        keep = [(p, int(v)) not in unscored for p, v in zip(frame["packet_id"], frame["view"], strict=True)]
+        frame = frame[np.asarray(keep, dtype=bool)]
     gt_hashes = (
         dict(zip(zip(targets["packet_id"], targets["view"].astype(int)), targets["gt_sha256"]))
         if "gt_sha256" in targets.columns

@@ -23,7 +23,8 @@ unknown), ``width, height``, ``K`` (9 floats, row-major, pixels at the working r
 ``w2c_world`` (16 floats, the dataset's world frame), ``scale`` (world units → packet units),
 ``overlap_score`` (Eq. 2 score of a reference, aggregated over the packet's targets; null for
 targets), file paths relative to the store with their SHA-256 (``image, cmap`` for every view;
-``gt, mask`` for targets, null for references), and ``recipe`` (SHA-256 of everything the packet
+``gt, mask`` for targets, null for references and for targets without ground truth: the novel-trajectory
+views of ``prepare --trajectory``), and ``recipe`` (SHA-256 of everything the packet
 was made from; a changed recipe makes ``prepare`` rewrite the packet).
 """
 

@@ -17,6 +17,17 @@ DL3DV ``n3``/``n6``/``n9``, synthetic ``lane0``.  The PLY must be in the loader'
 group's fit frames (loader resolution, dataset masks), writing ``<out>/fits/<scene>/<fit_key>.ply``
 (reused on a rerun; the fit itself checkpoints under ``<fit_key>.ckpt/`` and resumes).
 
+Novel trajectories
+------------------
+``trajectories`` (``--trajectory shift:3``, repeatable) writes, in place of the protocol's groups, the
+packets of each spec and fit: the fit frames' cameras moved along the trajectory are the targets (3DGS
+render and C-map, **no ground truth**: null ``gt`` / ``mask`` columns), the references are recorded fit
+frames chosen by Eq. 2, the group is the trajectory's label (``shift+3m``) and the split ``test``
+(:func:`~setdiff_bench.packets.plan.plan_trajectories`).  Every camera must stay in the scene bounds
+(:func:`~setdiff_bench.packets.trajectory.scene_bounds` of the fit); the check runs while planning, before
+any packet is written.  Such packets resume, shard and hash like any other; into a store that already
+holds the protocol's packets they are added beside them.
+
 Resume, shards, workers
 -----------------------
 A packet is skipped when its folder holds a fragment with the same recipe and every file matches its
@@ -38,7 +49,7 @@ import os
 import shutil
 import time
 from collections import OrderedDict
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import FIRST_EXCEPTION, ProcessPoolExecutor, wait
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -59,7 +70,15 @@ from setdiff_bench.io.images import read_mask, read_rgb, to_numpy_hwc
 from setdiff_bench.loaders import dataset_spec, list_scenes, load_scenes
 from setdiff_bench.loaders.common import select_scenes
 from setdiff_bench.packets.index import PACKETS_DIR, group_prefix, merge_index
-from setdiff_bench.packets.plan import Crop, GroupPlan, PacketJob, ViewJob, applicable_groups, plan_scene
+from setdiff_bench.packets.plan import (
+    Crop,
+    GroupPlan,
+    PacketJob,
+    ViewJob,
+    applicable_groups,
+    plan_scene,
+    plan_trajectories,
+)
 from setdiff_bench.packets.shards import Shard
 from setdiff_bench.packets.store import (
     PacketHeader,
@@ -68,6 +87,7 @@ from setdiff_bench.packets.store import (
     remove_temporaries,
     write_packet,
 )
+from setdiff_bench.packets.trajectory import TrajectorySpec, parse_trajectory
 from setdiff_bench.protocols import Protocol, load_protocol
 from setdiff_bench.runtime.devices import resolve_device
 from setdiff_bench.runtime.threads import torch_threads
@@ -262,6 +282,7 @@ def resample(
 
 def _capture(view: ViewJob, resolution: tuple[int, int]) -> np.ndarray:
     """The capture of ``view`` at the working resolution, ``(H, W, 3)`` float32 in [0, 1]."""
+    assert view.image_path is not None, "a novel-trajectory view has no capture"
     image = resample(read_rgb(view.image_path), view.crop, resolution)
     if is_distorted(view.camera):  # the renderer draws the pinhole camera: resample the capture to it
         image = undistort_image(image, view.camera)[0]
@@ -319,8 +340,8 @@ def build_packet(job: PacketJob, root: Path, backend: str, device: str) -> JobSt
                 else _capture(view, job.resolution),
                 cmap=to_numpy_hwc(normalised.cmaps[i]),
                 alpha=alpha[i, 0].numpy(),
-                gt=_capture(view, job.resolution) if is_target else None,
-                mask=_mask(view, job.resolution) if is_target else None,
+                gt=_capture(view, job.resolution) if is_target and view.image_path is not None else None,
+                mask=_mask(view, job.resolution) if is_target and view.image_path is not None else None,
                 overlap_score=view.overlap_score,
             )
         )
@@ -397,6 +418,7 @@ def prepare(
     progress: bool = True,
     groups: Sequence[str] | None = None,
     test_scenes: Sequence[str] | None = None,
+    trajectories: Sequence[str] | None = None,
 ) -> PrepareSummary:
     """Prepare the packets of ``dataset`` under ``protocol`` into the store ``out`` (module docstring).
 
@@ -420,12 +442,20 @@ def prepare(
         groups: only these protocol groups (default all), e.g. ``["holdout8"]`` of a generic capture.
         test_scenes: these scenes are the test scenes and every other one trains, in place of the
             protocol's split rule (:func:`declared_split`).
+        trajectories: novel-trajectory specs (``shift:N``, ``yaw:D``, a pose ``.json``;
+            :mod:`setdiff_bench.packets.trajectory`): instead of the protocol's groups, write per spec and
+            fit the packets whose targets are the fit frames' cameras moved along it, rendered with
+            C-maps and without ground truth, references chosen by Eq. 2 among the fit frames
+            (:func:`~setdiff_bench.packets.plan.plan_trajectories`; group ``shift+3m``, split ``test``).
+            A spec that does not parse, a pose file for several scenes, or a camera leaving the scene
+            bounds is refused before anything is written.
 
     Raises:
         UsageError / ProtocolError / DatasetError: bad arguments, a protocol that does not fit the
             dataset, missing fits or data.
     """
     dataset_spec(dataset)  # an unknown key is refused with the list of known ones
+    specs = parse_trajectories(trajectories or ())
     if threads < 1:
         raise UsageError(f"threads must be >= 1, got {threads}", "--threads")
     if cmap_precision not in ("float32", "half"):
@@ -453,7 +483,22 @@ def prepare(
             progress=progress,
             groups=groups,
             test_scenes=test_scenes,
+            trajectories=specs,
         )
+
+
+def parse_trajectories(texts: Sequence[str]) -> tuple[TrajectorySpec, ...]:
+    """Parse ``--trajectory`` values (:func:`~setdiff_bench.packets.trajectory.parse_trajectory`).
+
+    Raises:
+        UsageError: a spec that does not parse, or two specs with the same label (``shift:3``, ``shift:3.0``).
+    """
+    specs = tuple(parse_trajectory(text) for text in texts)
+    labels = [spec.label for spec in specs]
+    twice = sorted({label for label in labels if labels.count(label) > 1})
+    if twice:
+        raise UsageError(f"trajectory {twice[0]} given twice", "--trajectory")
+    return specs
 
 
 def _prepare(
@@ -477,6 +522,7 @@ def _prepare(
     progress: bool,
     groups: Sequence[str] | None = None,
     test_scenes: Sequence[str] | None = None,
+    trajectories: Sequence[TrajectorySpec] = (),
 ) -> PrepareSummary:
     started = time.perf_counter()
     spec = load_protocol(protocol or dataset)
@@ -519,6 +565,11 @@ def _prepare(
     chosen = [name for name in chosen if split == "all" or assignment[name] == split]
     summary = PrepareSummary()
     summary.split_counts = {s: sum(1 for n in chosen if assignment[n] == s) for s in ("train", "test")}
+    if len(chosen) > 1 and any(spec.kind == "poses" for spec in trajectories):
+        raise UsageError(
+            f"a pose file describes one scene's world, and {len(chosen)} scenes are selected; pass --scene",
+            "--trajectory",
+        )
     loaded = load_scenes(dataset, root, chosen, **options) if chosen else []
     summary.scenes = len(loaded)
 
@@ -538,14 +589,25 @@ def _prepare(
             )
         if source.fit:
             source.ensure(scene, fit_key, groups[0].select(scene).fit)
-        plans = plan_scene(
-            replace(spec, groups=tuple(groups)),
-            scene,
-            assignment[scene_name],
-            source,
-            backend=backend,
-            cmap_half=cmap_half,
-        )
+        if trajectories:
+            plans = plan_trajectories(
+                replace(spec, groups=tuple(groups)),
+                scene,
+                trajectories,
+                source,
+                _gaussian_centres(source),
+                backend=backend,
+                cmap_half=cmap_half,
+            )
+        else:
+            plans = plan_scene(
+                replace(spec, groups=tuple(groups)),
+                scene,
+                assignment[scene_name],
+                source,
+                backend=backend,
+                cmap_half=cmap_half,
+            )
         summary.removed += _remove_outdated(out, spec, plans)
         jobs += [job for plan in plans for job in plan.jobs]
     summary.fits_trained = source.trained
@@ -567,6 +629,16 @@ def _prepare(
     summary.index_written = merge_index(out)
     summary.wall_s = time.perf_counter() - started
     return summary
+
+
+def _gaussian_centres(source: FitSource) -> Callable[[str, str], np.ndarray]:
+    """``(scene, fit key) -> (N, 3)`` float32 Gaussian centres of the fit (world frame), for trajectory bounds."""
+
+    def centres(scene: str, fit_key: str) -> np.ndarray:
+        path, _ = source(scene, fit_key)
+        return read_ply(path).means.detach().cpu().numpy()
+
+    return centres
 
 
 def _units(protocol: Protocol, scenes: Iterable[Scene]) -> list[tuple[str, str]]:

@@ -14,7 +14,9 @@ Layout and index columns: :mod:`setdiff_bench.packets.index`.  Files per view:
   benchmarks/results/prepare.json); ``prepare(cmap_precision="half")`` stores half where disk is
   the constraint (the model's conditioning does not need more);
 * ``tgt_*_gt.png`` — 8-bit ground truth (the capture), ``tgt_*_mask.png`` — 8-bit, 255 = evaluate
-  (all 255 when the protocol uses no masks).
+  (all 255 when the protocol uses no masks).  A target on a novel trajectory (``prepare --trajectory``)
+  has neither: its ``gt`` / ``mask`` columns are null (:meth:`PacketStore.has_ground_truth`), and
+  ``run`` scores such targets only by what needs no ground truth (FID / KID).
 
 Writes are atomic: a packet is assembled in a temporary folder, its fragment index written last,
 then renamed into place; an interrupted write (SIGKILL) leaves only a ``.tmp-*`` folder that the next
@@ -70,8 +72,10 @@ class ViewContent:
         camera_world: the same camera in the dataset's world frame.
         image: ``(H, W, 3)`` float32 in [0, 1] (clean capture or render).
         cmap: ``(H, W, 3)`` float32 normalised Eq. 1 C-map.  alpha: ``(H, W)`` float32.
-        gt: ``(H, W, 3)`` float32 ground truth (targets), else ``None``.
-        mask: ``(H, W)`` bool, True = evaluate (targets), else ``None``.
+        gt: ``(H, W, 3)`` float32 ground truth (targets), else ``None``; a target without ground truth
+            (a novel-trajectory view) has ``None`` here and in ``mask``: its ``gt`` / ``mask`` index
+            columns and their SHA-256 are null, and every other file is hashed as usual.
+        mask: ``(H, W)`` bool, True = evaluate (targets with ground truth), else ``None``.
         overlap_score: Eq. 2 score (references), else ``None``.
     """
 
@@ -148,9 +152,9 @@ def _write_view(
         atomic=False,
     )
     files["cmap"] = f"{stem}_cmap.exr"
-    if role == "target":
-        if view.gt is None or view.mask is None:
-            raise ValueError(f"target {view.frame!r} needs ground truth and a mask")
+    if role == "target" and (view.gt is None) != (view.mask is None):
+        raise ValueError(f"target {view.frame!r} needs both ground truth and a mask, or neither")
+    if role == "target" and view.gt is not None and view.mask is not None:
         write_png(folder / f"{stem}_gt.png", view.gt, atomic=False)
         write_png(folder / f"{stem}_mask.png", view.mask.astype(bool), atomic=False)
         files["gt"], files["mask"] = f"{stem}_gt.png", f"{stem}_mask.png"
@@ -279,11 +283,31 @@ class PacketStore:
             },
         )
 
+    def has_ground_truth(self, packet_id: str) -> np.ndarray:
+        """``(M,)`` bool: which of the packet's targets (stored order) have ground truth and a mask.
+
+        Targets on a novel trajectory (``prepare --trajectory``) have neither.
+        """
+        rows = self.rows(packet_id)
+        return target_has_ground_truth(rows[rows["role"] == "target"])
+
     def load_ground_truth(
         self, packet_id: str, targets: Sequence[int] | None = None
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """``(gt (M, 3, H, W) float32 in [0, 1], masks (M, 1, H, W) bool)`` of the packet's targets."""
+        """``(gt (M, 3, H, W) float32 in [0, 1], masks (M, 1, H, W) bool)`` of the packet's targets.
+
+        Raises:
+            PacketError: a chosen target has no ground truth (a novel-trajectory view; check
+                :meth:`has_ground_truth` first).
+        """
         rows = _pick(self.rows(packet_id)[lambda r: r["role"] == "target"], targets)
+        without = rows[~target_has_ground_truth(rows)]
+        if len(without):
+            raise PacketError(
+                f"packet {packet_id!r} target {without['frame'].iloc[0]!r} has no ground truth "
+                "(a novel-trajectory view); only metrics that need none apply to it",
+                self.root / INDEX_FILE,
+            )
         gts, masks = [], []
         for _, row in rows.iterrows():
             size = (int(row["height"]), int(row["width"]))
@@ -299,10 +323,10 @@ class PacketStore:
     def training_dataset(
         self, split: str = "train", min_views: int = 8, max_views: int = 12, seed: int = 0
     ) -> PacketTrainingDataset:
-        """A torch ``Dataset`` of :class:`TrainingSample` over the packets of ``split`` (see the class)."""
-        return PacketTrainingDataset(
-            self, self.packet_ids(split), min_views=min_views, max_views=max_views, seed=seed
-        )
+        """A torch ``Dataset`` of :class:`TrainingSample` over the packets of ``split`` (see the class)
+        whose targets all have ground truth (novel-trajectory packets have none to train on)."""
+        ids = [pid for pid in self.packet_ids(split) if self.has_ground_truth(pid).all()]
+        return PacketTrainingDataset(self, ids, min_views=min_views, max_views=max_views, seed=seed)
 
     # ------------------------------------------------------------------ integrity
     def verify(self, packet_ids: Sequence[str] | None = None) -> list[str]:
@@ -373,6 +397,16 @@ def row_camera(row: pd.Series | dict[str, Any], source: str = "", world: bool = 
         raise PacketError(
             f"packet {row['packet_id']!r} view {row['frame']!r}: {exc.problem}", source
         ) from exc
+
+
+def target_has_ground_truth(rows: pd.DataFrame) -> np.ndarray:
+    """``(len(rows),)`` bool: index rows whose ``gt`` and ``mask`` files are recorded (not null)."""
+    if not len(rows):
+        return np.zeros(0, dtype=bool)
+    return np.array(
+        [isinstance(g, str) and isinstance(m, str) for g, m in zip(rows["gt"], rows["mask"], strict=True)],
+        dtype=bool,
+    )
 
 
 def _pick(rows: pd.DataFrame, positions: Sequence[int] | None) -> pd.DataFrame:
