@@ -38,7 +38,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.common import machine, time_call, write_result
-from setdiff_bench.models.setdiff.config import load_config
+from setdiff_bench.models.setdiff.config_io import load_config
 from setdiff_bench.models.setdiff.inputs import SetBatch
 from setdiff_bench.models.setdiff.model import SetDiffModel
 

@@ -119,7 +119,7 @@ def child(case: str) -> dict[str, Any]:
     import torch
 
     from setdiff_bench.models.setdiff.checkpoint import load_model, resolve_checkpoint
-    from setdiff_bench.models.setdiff.config import load_config
+    from setdiff_bench.models.setdiff.config_io import load_config
     from setdiff_bench.models.setdiff.inference import enhance_packet
     from setdiff_bench.models.setdiff.memory import inference_bytes
     from setdiff_bench.models.setdiff.model import SetDiffModel

@@ -179,7 +179,7 @@ def _check_inputs(args: argparse.Namespace) -> None:
                 args.packets,
             )
     if args.study == "geometry":
-        from setdiff_bench.models.setdiff.config import config_toml_data
+        from setdiff_bench.models.setdiff.config_io import config_toml_data
 
         if config_toml_data(args.config)["model"].get("method", "setdiff") != "setdiff":
             raise UsageError('the geometry ablation needs a SetDiff config (method = "setdiff")', args.config)
@@ -249,7 +249,7 @@ def _run_command(
 
 def _geometry(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocation: str) -> dict[str, Path]:
     from setdiff_bench.io.run_layout import METRICS_FILE
-    from setdiff_bench.models.setdiff.config import config_toml_data, write_config_toml
+    from setdiff_bench.models.setdiff.config_io import config_toml_data, write_config_toml
     from setdiff_bench.reporting import ablation
 
     base = config_toml_data(args.config)

@@ -134,7 +134,8 @@ def run_autoencoder(args: argparse.Namespace) -> int:
 
 def run(args: argparse.Namespace) -> int:
     from setdiff_bench.errors import UsageError
-    from setdiff_bench.models.setdiff.config import load_config, with_overrides
+    from setdiff_bench.models.setdiff.config import with_overrides
+    from setdiff_bench.models.setdiff.config_io import load_config
     from setdiff_bench.models.setdiff.train import last_validation, train
     from setdiff_bench.packets.store import PacketStore
     from setdiff_bench.runtime.interrupts import Interrupted, stop_at_safe_point

@@ -12,13 +12,8 @@ import torch
 import torch.nn.functional as F
 
 from setdiff_bench.cameras import Camera
-from setdiff_bench.models.setdiff.config import (
-    TINY_UNET,
-    TINY_VAE,
-    Config,
-    TrainConfig,
-    model_config_from_dict,
-)
+from setdiff_bench.models.setdiff.config import Config, TrainConfig, model_config_from_dict
+from setdiff_bench.models.setdiff.presets import TINY_UNET, TINY_VAE
 from setdiff_bench.types import Packet, TrainingSample, ViewSet
 
 

@@ -9,16 +9,14 @@ import pytest
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.models.setdiff.config import (
-    SD_TURBO_SCHEDULE,
     ModelConfig,
     TrainConfig,
-    alphas_cumprod,
     check_guidance_scale,
     config_from_dict,
-    load_config,
     model_config_from_dict,
-    packaged_configs,
 )
+from setdiff_bench.models.setdiff.config_io import load_config, packaged_configs
+from setdiff_bench.models.setdiff.presets import SD_TURBO_SCHEDULE, alphas_cumprod
 
 
 def test_packaged_configs_load() -> None:

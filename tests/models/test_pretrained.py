@@ -9,8 +9,9 @@ import pytest
 import torch
 
 from setdiff_bench.errors import WeightsError
-from setdiff_bench.models.setdiff.config import SD_TURBO_SCHEDULE, model_config_from_dict
+from setdiff_bench.models.setdiff.config import model_config_from_dict
 from setdiff_bench.models.setdiff.model import SetDiffModel
+from setdiff_bench.models.setdiff.presets import SD_TURBO_SCHEDULE
 from tests.models.setdiff_fixtures import SD_TURBO_SCHEDULER_JSON, write_diffusers_folder
 
 

@@ -7,7 +7,7 @@ import gc
 import pytest
 import torch
 
-from setdiff_bench.models.setdiff.config import load_config
+from setdiff_bench.models.setdiff.config_io import load_config
 from setdiff_bench.models.setdiff.inference import enhance_packet
 from setdiff_bench.models.setdiff.model import SetDiffModel
 from tests.models.setdiff_fixtures import make_packet

@@ -61,7 +61,7 @@ def test_through_the_attention_module() -> None:
 def test_install_replaces_only_self_attention() -> None:
     from diffusers import UNet2DConditionModel
 
-    from setdiff_bench.models.setdiff.config import TINY_UNET
+    from setdiff_bench.models.setdiff.presets import TINY_UNET
 
     unet = UNet2DConditionModel.from_config(dict(TINY_UNET))
     mixed = install_set_mixer(unet)

@@ -135,7 +135,7 @@ def test_lpips_converter_refuses_malicious_pickles(
 @pytest.fixture(scope="module")
 def tiny_checkpoint(tmp_path_factory: pytest.TempPathFactory) -> Path:
     from setdiff_bench.models.setdiff.checkpoint import save_checkpoint
-    from setdiff_bench.models.setdiff.config import load_config
+    from setdiff_bench.models.setdiff.config_io import load_config
     from setdiff_bench.models.setdiff.model import SetDiffModel
 
     config = load_config("tiny_setdiff")

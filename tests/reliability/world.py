@@ -61,7 +61,7 @@ class World:
     def setdiff_run(self) -> Path:
         """A training output folder of the packaged ``tiny_setdiff`` config after one (fake) step."""
         from setdiff_bench.models.setdiff.checkpoint import mark_latest, save_checkpoint, step_folder
-        from setdiff_bench.models.setdiff.config import load_config
+        from setdiff_bench.models.setdiff.config_io import load_config
         from setdiff_bench.models.setdiff.model import SetDiffModel
 
         out = self.base / "setdiff_run"

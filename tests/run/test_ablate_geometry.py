@@ -66,7 +66,8 @@ def test_variants_of_a_biased_config_bias_attention_only_where_they_see_c_maps()
     """The C-map attention bias is C-map geometry: None and Camera poses must train without it (else the
     'no geometry' row would still attend by C-map distance, and a biased config could not make a None row:
     the bias needs ``use_geometry``); the rows with C-maps keep the config's bias."""
-    from setdiff_bench.models.setdiff.config import config_from_dict, config_toml_data
+    from setdiff_bench.models.setdiff.config import config_from_dict
+    from setdiff_bench.models.setdiff.config_io import config_toml_data
     from setdiff_bench.reporting.ablation import GEOMETRY_VARIANTS
 
     biased = config_toml_data(

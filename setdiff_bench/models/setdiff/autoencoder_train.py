@@ -33,7 +33,6 @@ import torch
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.atomic import atomic_path, write_text_atomic
 from setdiff_bench.models.setdiff.autoencoder_settings import AutoencoderTraining
-from setdiff_bench.models.setdiff.config import TINY_VAE
 from setdiff_bench.models.setdiff.files import (
     AUTOENCODER_STATE_FILE,
     AUTOENCODER_WEIGHTS_FILE,
@@ -41,6 +40,7 @@ from setdiff_bench.models.setdiff.files import (
     MANIFEST_FILE,
 )
 from setdiff_bench.models.setdiff.packaged import file_table
+from setdiff_bench.models.setdiff.presets import TINY_VAE
 
 
 def tiny_vae_config(latent_channels: int, base_channels: int = 16) -> dict[str, Any]:

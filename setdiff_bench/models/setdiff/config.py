@@ -1,20 +1,9 @@
-"""SetDiff / DiFix configuration: the SD-Turbo architecture as data, a tiny CPU variant, TOML loading.
+"""SetDiff / DiFix configuration: the :class:`ModelConfig` and :class:`TrainConfig` dataclasses and how a
+``{"model": {...}, "train": {...}}`` table becomes them.
 
-Architectures (``preset``):
-
-* ``sd-turbo`` — stabilityai/sd-turbo's UNet and VAE configs (docs/model.md, "SD-Turbo UNet config"), i.e. the
-  SD 2.1-base UNet (865.9 M parameters).  Note the diffusers quirk: ``attention_head_dim=(5, 10, 20, 20)``
-  is really the *number of heads* per level (head dim 64).
-* ``tiny`` — the same classes (``UNet2DConditionModel``, ``AutoencoderKL``) with two UNet levels of
-  32/64 channels, one layer per block and a 16/32-channel VAE, so training and tests run on a CPU.
-
-A config file is TOML with a ``[model]`` table (``preset`` plus overrides, ``[model.unet]`` /
-``[model.vae]`` override single architecture keys) and a ``[train]`` table.  The packaged examples
-live in ``setdiff_bench/models/setdiff/configs/`` and can be named without a path
-(``tiny_setdiff``, ``sd_turbo_setdiff``, ...).  TOML has no null: a key left out means "default".
-
-Scheduler constants are the SD-Turbo ``scaled_linear`` schedule; ᾱ_t is computed analytically in
-float64 (:func:`alphas_cumprod`), never through ``DDPMScheduler`` (see docs/model.md, "Scheduler pitfalls").
+A model config starts from an architecture ``preset`` (the data: :mod:`~setdiff_bench.models.setdiff.presets`)
+with ``[model.unet]`` / ``[model.vae]`` overriding single architecture keys; reading and writing config TOML files
+(and the packaged examples, named without a path) is :mod:`~setdiff_bench.models.setdiff.config_io`.
 """
 
 from __future__ import annotations
@@ -22,19 +11,20 @@ from __future__ import annotations
 import copy
 import json
 import math
-import tomllib
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, fields, replace
-from importlib import resources
-from pathlib import Path
 from typing import Any, Literal, get_args
 
-import numpy as np
-
 from setdiff_bench.errors import UsageError
-from setdiff_bench.io.atomic import write_text_atomic
 from setdiff_bench.io.jsonable import jsonable
 from setdiff_bench.models.setdiff.autoencoder import read_autoencoder_config
+from setdiff_bench.models.setdiff.presets import (
+    PRESETS,
+    SD_TURBO_SCHEDULE,
+    SD_TURBO_UNET,
+    SD_TURBO_VAE,
+    alphas_cumprod,
+)
 
 Method = Literal["setdiff", "difix"]
 Prediction = Literal["v_prediction", "epsilon"]
@@ -51,127 +41,6 @@ ARCHITECTURE: Mapping[str, bool] = {"architecture": True}
 
 CONFIG_FORMAT = 1
 DEFAULT_PROMPT = "remove degradation"
-
-#: stabilityai/sd-turbo ``unet/config.json`` (docs/model.md, "SD-Turbo UNet config").
-SD_TURBO_UNET: dict[str, Any] = {
-    "sample_size": 64,
-    "in_channels": 4,
-    "out_channels": 4,
-    "center_input_sample": False,
-    "flip_sin_to_cos": True,
-    "freq_shift": 0,
-    "down_block_types": [
-        "CrossAttnDownBlock2D",
-        "CrossAttnDownBlock2D",
-        "CrossAttnDownBlock2D",
-        "DownBlock2D",
-    ],
-    "mid_block_type": "UNetMidBlock2DCrossAttn",
-    "up_block_types": ["UpBlock2D", "CrossAttnUpBlock2D", "CrossAttnUpBlock2D", "CrossAttnUpBlock2D"],
-    "only_cross_attention": False,
-    "block_out_channels": [320, 640, 1280, 1280],
-    "layers_per_block": 2,
-    "downsample_padding": 1,
-    "mid_block_scale_factor": 1,
-    "dropout": 0.0,
-    "act_fn": "silu",
-    "norm_num_groups": 32,
-    "norm_eps": 1e-5,
-    "cross_attention_dim": 1024,
-    "transformer_layers_per_block": 1,
-    "attention_head_dim": [5, 10, 20, 20],  # diffusers quirk: these are head *counts* (head dim 64)
-    "num_attention_heads": None,
-    "dual_cross_attention": False,
-    "use_linear_projection": True,
-    "upcast_attention": None,
-    "class_embed_type": None,
-    "addition_embed_type": None,
-    "num_class_embeds": None,
-    "resnet_time_scale_shift": "default",
-    "time_embedding_type": "positional",
-    "time_cond_proj_dim": None,
-    "conv_in_kernel": 3,
-    "conv_out_kernel": 3,
-    "attention_type": "default",
-    "mid_block_only_cross_attention": None,
-    "cross_attention_norm": None,
-    "addition_embed_type_num_heads": 64,
-}
-
-#: stabilityai/sd-turbo ``vae/config.json`` (docs/model.md, "SD-Turbo VAE config").
-SD_TURBO_VAE: dict[str, Any] = {
-    "in_channels": 3,
-    "out_channels": 3,
-    "latent_channels": 4,
-    "block_out_channels": [128, 256, 512, 512],
-    "layers_per_block": 2,
-    "norm_num_groups": 32,
-    "act_fn": "silu",
-    "down_block_types": ["DownEncoderBlock2D"] * 4,
-    "up_block_types": ["UpDecoderBlock2D"] * 4,
-    "sample_size": 768,
-    "scaling_factor": 0.18215,
-    "force_upcast": True,
-}
-
-#: stabilityai/sd-turbo ``scheduler/scheduler_config.json``, the keys that define ᾱ_t
-#: (docs/model.md, "SD-Turbo scheduler config").
-SD_TURBO_SCHEDULE: dict[str, Any] = {
-    "beta_start": 0.00085,
-    "beta_end": 0.012,
-    "beta_schedule": "scaled_linear",
-    "num_train_timesteps": 1000,
-}
-
-#: Same UNet class, CPU-sized: 2 levels (32, 64 ch), 1 layer per block, 2/4 heads of dim 16.
-TINY_UNET: dict[str, Any] = {
-    **SD_TURBO_UNET,
-    "sample_size": 8,
-    "down_block_types": ["CrossAttnDownBlock2D", "DownBlock2D"],
-    "up_block_types": ["UpBlock2D", "CrossAttnUpBlock2D"],
-    "block_out_channels": [32, 64],
-    "layers_per_block": 1,
-    "norm_num_groups": 8,
-    "cross_attention_dim": 32,
-    "attention_head_dim": [2, 4],
-}
-
-#: Same VAE class, CPU-sized: 4 levels (3 downsamplers → 8×), 16/32 channels, 1 layer per block.
-TINY_VAE: dict[str, Any] = {
-    **SD_TURBO_VAE,
-    "block_out_channels": [16, 32, 32, 32],
-    "layers_per_block": 1,
-    "norm_num_groups": 8,
-    "sample_size": 64,
-}
-
-PRESETS: dict[str, dict[str, Any]] = {
-    "sd-turbo": {"unet": SD_TURBO_UNET, "vae": SD_TURBO_VAE, "geometry_channels": [32, 64, 128, 256, 256]},
-    "tiny": {"unet": TINY_UNET, "vae": TINY_VAE, "geometry_channels": [8, 16, 16, 32, 32]},
-}
-
-
-def alphas_cumprod(
-    beta_start: float, beta_end: float, beta_schedule: str, num_train_timesteps: int
-) -> np.ndarray:
-    """ᾱ_t for t = 0 … T−1 in float64.
-
-    ``scaled_linear``: ``betas = linspace(√beta_start, √beta_end, T)²`` (SD-Turbo); ``linear``:
-    ``linspace(beta_start, beta_end, T)``.  ᾱ_t = Π_{s ≤ t} (1 − β_s).
-    """
-    if beta_schedule == "scaled_linear":
-        betas = (
-            np.linspace(math.sqrt(beta_start), math.sqrt(beta_end), num_train_timesteps, dtype=np.float64)
-            ** 2
-        )
-    elif beta_schedule == "linear":
-        betas = np.linspace(beta_start, beta_end, num_train_timesteps, dtype=np.float64)
-    else:
-        raise UsageError(
-            f"unsupported beta_schedule {beta_schedule!r} (expected scaled_linear or linear)",
-            "model.scheduler",
-        )
-    return np.cumprod(1.0 - betas)
 
 
 @dataclass(frozen=True)
@@ -469,33 +338,6 @@ def check_guidance_scale(value: Any, where: str) -> float:
     return scale
 
 
-def packaged_configs() -> dict[str, Path]:
-    """The example configs shipped with the package, by name (file stem)."""
-    folder = resources.files("setdiff_bench.models.setdiff") / "configs"
-    return {Path(str(p)).stem: Path(str(p)) for p in folder.iterdir() if str(p).endswith(".toml")}
-
-
-def load_config(source: str | Path) -> Config:
-    """Read a config from a TOML file, or a packaged config by name (``tiny_setdiff``, ...)."""
-    path = Path(source)
-    if not path.exists():
-        packaged = packaged_configs()
-        if str(source) in packaged:
-            path = packaged[str(source)]
-        else:
-            raise UsageError(
-                f"config file not found (packaged configs: {', '.join(sorted(packaged))})", source
-            )
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as error:
-        raise UsageError(f"cannot read config TOML: {error}", path) from error
-    try:
-        return config_from_dict(data, source=str(path))
-    except UsageError as error:
-        raise UsageError(error.one_line(), path) from error
-
-
 def config_from_dict(data: Mapping[str, Any], source: str = "") -> Config:
     """Build a :class:`Config` from ``{"model": {...}, "train": {...}}`` (TOML layout or saved JSON)."""
     unknown = set(data) - {"model", "train", "format"}
@@ -552,41 +394,3 @@ def _build(cls: type, data: Mapping[str, Any], where: str) -> Any:
         return cls(**dict(data))
     except TypeError as error:
         raise UsageError(f"invalid {where}: {error}", where) from error
-
-
-def config_toml_data(source: str | Path) -> dict[str, dict[str, Any]]:
-    """The raw ``{"model": {...}, "train": {...}}`` tables of a TOML config file or packaged name."""
-    load_config(source)  # validates, and resolves packaged names
-    path = Path(source) if Path(source).exists() else packaged_configs()[str(source)]
-    data = tomllib.loads(path.read_text(encoding="utf-8"))
-    return {table: dict(data.get(table, {})) for table in ("model", "train")}
-
-
-def write_config_toml(path: str | Path, data: Mapping[str, Mapping[str, Any]], comment: str = "") -> Path:
-    """Write ``{"model": {...}, "train": {...}}`` as a TOML config (flat tables of scalars and lists).
-
-    The result is validated by reading it back with :func:`load_config`.
-    """
-    lines = [f"# {line}" for line in comment.splitlines()] if comment else []
-    for table in ("model", "train"):
-        lines.append(f"[{table}]")
-        for key, value in data.get(table, {}).items():
-            if value is not None:
-                lines.append(f"{key} = {_toml_value(value, f'[{table}] {key}')}")
-        lines.append("")
-    path = Path(path)
-    write_text_atomic(path, "\n".join(lines))
-    load_config(path)
-    return path
-
-
-def _toml_value(value: Any, where: str) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int | float):
-        return repr(value)
-    if isinstance(value, str):
-        return json.dumps(value)
-    if isinstance(value, list | tuple):
-        return "[" + ", ".join(_toml_value(v, where) for v in value) + "]"
-    raise UsageError(f"cannot write {type(value).__name__} values to a TOML config", where)
