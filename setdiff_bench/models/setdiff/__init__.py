@@ -6,7 +6,8 @@ The folder as a tree, leaves first:
 * ``files`` — every file name of a checkpoint, a training run, an autoencoder and a shipped model;
 * ``packaged`` — the lookup table of the models shipped under ``weights/``;
 * ``autoencoder`` — finding and reading a trained tiny autoencoder (its training: ``autoencoder_train``);
-* ``config`` — the architecture presets, the ``ModelConfig`` / ``TrainConfig`` dataclasses, TOML I/O;
+* ``presets`` — the architectures as data; ``config`` — the ``ModelConfig`` / ``TrainConfig`` dataclasses;
+  ``config_io`` — config TOML files;
 * ``networks``, ``geometry_encoder``, ``set_mixer``, ``vae_codec``, ``inputs``, ``model`` — the model;
 * ``checkpoint``, ``averaging``, ``export`` — saving, loading, averaging and exporting weights;
 * ``inference``, ``memory``, ``domain`` — enhancing a packet, its memory bound, its training-data check;
