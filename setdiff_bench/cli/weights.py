@@ -251,8 +251,9 @@ def run_shipped(args: argparse.Namespace) -> int:
     if args.model == "list":
         from setdiff_bench.models.setdiff.domain import domain_of_manifest
 
+        width = max([len("name"), *(len(name) for name in models)])
         print(
-            f"{'name':<18} {'kind':<12} {'MB':>5} {'steps':>6}  trained on / data SHA-256 / training scenes"
+            f"{'name':<{width}} {'kind':<12} {'MB':>5} {'steps':>6}  trained on / data SHA-256 / training scenes"
         )
         for model in models.values():
             manifest = model.manifest
@@ -262,7 +263,7 @@ def run_shipped(args: argparse.Namespace) -> int:
             steps = manifest.get("steps") or manifest.get("settings", {}).get("steps", "?")
             domain = domain_of_manifest(manifest)
             print(
-                f"{model.name:<18} {model.kind:<12} {model.size_bytes() / 1e6:>5.1f} {steps!s:>6}  "
+                f"{model.name:<{width}} {model.kind:<12} {model.size_bytes() / 1e6:>5.1f} {steps!s:>6}  "
                 f"{domain.describe() if domain else 'unrecorded data'} / {digest[:12]} / {','.join(scenes)}"
             )
         return 0

@@ -65,3 +65,21 @@ def test_report_names_the_benchmark_and_its_verdict_group(tmp_path: Path) -> Non
     assert board in text and "## At 3 views (196 targets)" in text
     assert "real DL3DV captures" in text  # the paper's rows are not like for like
     assert "SetDiff beats `identity` at 3 views: PSNR yes, SSIM no, LPIPS no." in text
+
+
+def test_shipped_sparse_models_never_saw_a_sparse_test_walk() -> None:
+    from setdiff_bench.pipeline.demo import check_unseen
+    from setdiff_bench.synthetic.sparse import sparse_scene_name
+
+    shipped = DEMO_BENCHMARKS["sparse"].shipped
+    manifests = check_unseen([(0, 0), (0, 1)], shipped, sparse_scene_name)
+    assert set(manifests) == {"setdiff", "difix"}
+    for manifest in manifests.values():
+        assert manifest["data"]["datasets"] == ["dl3dv"]
+        assert not set(LISTED_TEST_SCENES) & set(manifest["data"]["scenes"])
+    # a walk they trained on is refused, by name: the driving scene of the same (seed, index) is not
+    with pytest.raises(UsageError, match="was trained on scene sparse_0000_02"):
+        check_unseen([(0, 2)], shipped, sparse_scene_name)
+    assert set(
+        check_unseen([(0, 2)], DEMO_BENCHMARKS["sparse"].shipped, lambda s, i: f"scene_{s:04d}_{i:02d}")
+    )
