@@ -92,6 +92,22 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(
             "--euvs-compat-report applies to EUVS profiles (euvs_official)", "--euvs-compat-report"
         )
+    if _without_ground_truth(args.run, args.packets):  # novel-trajectory targets: nothing paired to score
+        if inception is None:
+            raise UsageError(
+                "every target of this run is a novel-trajectory view without ground truth: no profile "
+                "metric applies; pass --inception FILE for FID / KID",
+                args.run,
+            )
+        print(
+            f"note: profile {profile.name} not scored: every target of this run is a novel-trajectory view "
+            "without ground truth",
+            file=sys.stderr,
+        )
+        from setdiff_bench.cli.run import print_distribution
+
+        print_distribution(args.run, args.packets, inception, args.inception)
+        return 0
     try:
         out = score_run(
             args.run,
@@ -124,6 +140,24 @@ def run(args: argparse.Namespace) -> int:
 
         print_distribution(args.run, args.packets, inception, args.inception)
     return 0
+
+
+def _without_ground_truth(run: Path, packets: Path) -> bool:
+    """Whether every target ``run`` scored lacks ground truth (a run on ``prepare --trajectory`` packets
+    only); ``False`` when the run or the store cannot be read (the profile scoring then says why)."""
+    import pandas as pd
+
+    from setdiff_bench.errors import SetDiffBenchError
+    from setdiff_bench.io.run_layout import METRICS_FILE
+    from setdiff_bench.packets.store import PacketStore, target_has_ground_truth
+
+    try:
+        scored = set(pd.read_parquet(run / METRICS_FILE, columns=["packet_id"])["packet_id"])
+        index = PacketStore(packets).index
+    except (OSError, ValueError, KeyError, SetDiffBenchError):
+        return False
+    rows = index[(index["role"] == "target") & index["packet_id"].isin(scored)]
+    return bool(len(rows)) and not target_has_ground_truth(rows).any()
 
 
 def _scored_size(tables: Path, packets: Path) -> tuple[int, int] | None:

@@ -39,8 +39,15 @@ def shifted_store(street: tuple[Path, StreetScene], tmp_path_factory: pytest.Tem
 
 @pytest.fixture(scope="package")
 def inception_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A random-weight FID Inception-v3 state dict (pytorch-fid's keys and shapes).  The convolutions are
+    He-initialised: with the module's default initialisation the pool3 features of these images are ~1e-7
+    and every FID ~1e-15, which would make any comparison of values vacuous."""
     with torch_threads(1):
         torch.manual_seed(0)
+        model = FIDInceptionV3()
+        for parameter in model.parameters():
+            if parameter.dim() == 4:
+                torch.nn.init.kaiming_normal_(parameter, nonlinearity="relu")
         path = tmp_path_factory.mktemp("inception") / "pt_inception-2015-12-05-6726825d.pth"
-        torch.save(FIDInceptionV3().state_dict(), path)
+        torch.save(model.state_dict(), path)
     return path
