@@ -83,3 +83,32 @@ def test_shipped_sparse_models_never_saw_a_sparse_test_walk() -> None:
     assert set(
         check_unseen([(0, 2)], DEMO_BENCHMARKS["sparse"].shipped, lambda s, i: f"scene_{s:04d}_{i:02d}")
     )
+
+
+def test_sparse_demo_end_to_end_with_the_shipped_models(tmp_path: Path) -> None:
+    """``demo --benchmark sparse --preset tiny``: the two listed test walks (64x40), their n3/n6/n9 fits, DL3DV
+    packets, the four methods with the shipped sparse models, and Table 4's layout beside the paper's rows."""
+    import json
+
+    import pandas as pd
+
+    out = tmp_path / "demo"
+    assert (
+        main(["demo", "--benchmark", "sparse", "--preset", "tiny", "--out", str(out), "--no-progress"]) == 0
+    )
+    summary = json.loads((out / "demo.json").read_text(encoding="utf-8"))
+    assert summary["test_scenes"] == LISTED_TEST_SCENES
+    assert {m["shipped"] for m in summary["models"].values()} == {"tiny_setdiff_sparse", "tiny_difix_sparse"}
+    assert summary["views_3"]["group"] == "n3" and summary["views_3"]["targets"] > 0
+    assert {"dl3dv.md", "dl3dv.parquet", "dl3dv.tex", "dl3dv_view_count.png", "dl3dv_grid.png"} <= set(
+        summary["outputs"]
+    )
+    board = pd.read_parquet(out / "dl3dv.parquet")
+    measured = board[board["source"] != "reported"]
+    assert set(measured["method"]) == {"identity", "reproject", "difix", "setdiff"}
+    assert (board["source"] == "reported").any()  # the paper's Table 4 rows beside ours
+    text = (out / "README.md").read_text(encoding="utf-8")
+    assert text.startswith("# Sparse-view synthetic benchmark") and "## At 3 views" in text
+    commands = [stage["command"] for stage in summary["stages"]]
+    assert any("prepare dl3dv --protocol dl3dv_sparse_synthetic" in c for c in commands)
+    assert any("--checkpoint tiny_setdiff_sparse" in c for c in commands)
