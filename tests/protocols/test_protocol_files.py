@@ -123,7 +123,8 @@ def test_invalid_protocol_files_name_the_file_and_key(tmp_path, base, old, new, 
 
 def test_unknown_protocol_lists_the_packaged_ones():
     with pytest.raises(
-        ProtocolError, match=r"unknown protocol 'waymo'.*colmap, dl3dv, dl3dv_sparse_synthetic, euvs, nerfstudio, nuscenes, "
+        ProtocolError,
+        match=r"unknown protocol 'waymo'.*colmap, dl3dv, dl3dv_sparse_synthetic, euvs, nerfstudio, nuscenes, ",
     ):
         load_protocol("waymo")
     with pytest.raises(ProtocolError, match="protocol file not found"):
