@@ -21,7 +21,7 @@ machine has no Inception weights and nothing is downloaded, so by default the fe
 ImageNet-trained network that is on the machine: the LPIPS AlexNet trunk's conv5 (ReLU), averaged over
 the image, 256 values, from images resized to a height of 224.  The JSON names which was used.
 
-    python3 benchmarks/trajectory_ranking.py --out /tmp/trajectory_ranking --scenes 4
+    python3 -m benchmarks.trajectory_ranking --out WORK --scenes 10   (from the repository root)
 """
 
 from __future__ import annotations
@@ -299,8 +299,8 @@ def main(argv: list[str] | None = None) -> int:
     payload = {
         "question": "on the same novel-trajectory frames, do FID / KID (vs the recorded frames) rank methods "
         "as PSNR / LPIPS (vs the true shifted frames) do?",
-        "command": "python3 benchmarks/trajectory_ranking.py "
-        + " ".join(argv if argv is not None else sys.argv[1:]),
+        "command": "python3 -m benchmarks.trajectory_ranking "
+        + " ".join("WORK" if a == str(args.out) else a for a in (argv if argv is not None else sys.argv[1:])),
         "revision": git_revision(),
         "preset": args.preset,
         "scenes": args.scenes,
