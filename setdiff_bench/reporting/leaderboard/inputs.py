@@ -1,0 +1,159 @@
+"""A leaderboard's inputs: the finished run folders under ``--runs`` (unfinished ones left out with a warning),
+their per-target and per-sequence rows, and the paper's reported numbers (``protocols/reported/*.csv``)."""
+
+from __future__ import annotations
+
+import json
+import warnings
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import pandas as pd
+import pyarrow as pa
+
+from setdiff_bench.errors import UsageError
+from setdiff_bench.io.run_layout import MANIFEST_FILE, METRICS_FILE, RUN_FILE, SEQUENCES_FILE
+from setdiff_bench.protocols import Layout
+from setdiff_bench.reporting.leaderboard.columns import LeaderboardError, dataset_layout
+
+
+class UnfinishedRunWarning(UserWarning):
+    """A run folder left out of a table because its run has not finished (shown as one line by the CLI)."""
+
+
+@dataclass(frozen=True)
+class UnfinishedRun:
+    """A folder claimed by ``run`` (``run.json``) whose ``manifest.json`` is not written yet: the run is still
+    going, was killed, or its shards are unfinished or not merged (``merge_run`` writes the manifest last)."""
+
+    folder: Path
+    method: str | None  # from run.json; None when it cannot be read
+
+    def problem(self) -> str:
+        """What is wrong and what to do (the folder is named beside it)."""
+        method = f" (method {self.method})" if self.method else ""
+        return (
+            f"run incomplete{method}: no {MANIFEST_FILE} yet (still running, killed, or shards unfinished or "
+            "not merged); finish it, or run the same `setdiff-bench run` command with --merge"
+        )
+
+
+def survey_runs(runs: str | Path) -> tuple[list[Path], list[UnfinishedRun]]:
+    """The finished run folders under ``runs`` and the unfinished ones, each sorted.
+
+    A folder with ``metrics.parquet`` is a finished run unless ``run`` claimed it (``run.json``) and has not
+    written its ``manifest.json`` (the last file a run writes, atomically); a claimed folder without the
+    manifest is unfinished.  Folders of other writers (evaluation profiles, tables made by hand) have no
+    ``run.json`` and count when their ``metrics.parquet`` exists.
+
+    Raises:
+        UsageError: ``runs`` is not a folder.
+    """
+    root = Path(runs)
+    if not root.is_dir():
+        raise UsageError("runs folder not found", root)
+    unfinished = []
+    for claimed in sorted(root.rglob(RUN_FILE)):
+        folder = claimed.parent
+        if not (folder / MANIFEST_FILE).is_file() or not (folder / METRICS_FILE).is_file():
+            unfinished.append(UnfinishedRun(folder, _claimed_method(claimed)))
+    skipped = {run.folder for run in unfinished}  # with the profile tables inside them
+    finished = sorted(p.parent for p in root.rglob(METRICS_FILE) if skipped.isdisjoint(p.parents))
+    return finished, unfinished
+
+
+def _claimed_method(run_file: Path) -> str | None:
+    """The method ``run.json`` names, or ``None`` when it cannot be read (being written, damaged)."""
+    try:
+        method = json.loads(run_file.read_text(encoding="utf-8")).get("method")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return method if isinstance(method, str) else None
+
+
+def find_runs(runs: str | Path) -> list[Path]:
+    """Every finished run folder (holding ``metrics.parquet``) under ``runs``, sorted.
+
+    Unfinished runs (:func:`survey_runs`) are left out, each with an :class:`UnfinishedRunWarning` naming it.
+
+    Raises:
+        UsageError: ``runs`` is not a folder.
+        LeaderboardError: every run under ``runs`` is unfinished (a table of none would say less).
+    """
+    finished, unfinished = survey_runs(runs)
+    require_finished(finished, unfinished)
+    warn_unfinished(unfinished)
+    return finished
+
+
+def require_finished(finished: Sequence[Path], unfinished: Sequence[UnfinishedRun]) -> None:
+    """Refuse a runs folder whose every run is unfinished, naming the first.
+
+    Raises:
+        LeaderboardError: no finished run and at least one unfinished one.
+    """
+    if unfinished and not finished:
+        first = unfinished[0]
+        raise LeaderboardError(first.problem() + _more(len(unfinished) - 1, "unfinished run"), first.folder)
+
+
+def warn_unfinished(unfinished: Sequence[UnfinishedRun]) -> None:
+    """One :class:`UnfinishedRunWarning` per run left out (the CLI prints each as one line)."""
+    for run in unfinished:
+        warnings.warn(f"{run.folder}: left out, {run.problem()}", UnfinishedRunWarning, stacklevel=3)
+
+
+def _more(count: int, what: str) -> str:
+    return f" (and {count} more {what}{'s' if count > 1 else ''})" if count else ""
+
+
+def load_runs(runs: str | Path | Sequence[Path]) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Per-target rows and per-sequence rows of every run (a ``run`` column names the folder)."""
+    folders = find_runs(runs) if isinstance(runs, str | Path) else [Path(p) for p in runs]
+    images, sequences = [], []
+    for folder in folders:
+        try:
+            images.append(pd.read_parquet(folder / METRICS_FILE).assign(run=str(folder)))
+            if (folder / SEQUENCES_FILE).is_file():
+                sequences.append(pd.read_parquet(folder / SEQUENCES_FILE).assign(run=str(folder)))
+        except (OSError, pa.ArrowException) as error:
+            raise LeaderboardError(f"unreadable run results ({type(error).__name__})", folder) from None
+    image_frame = pd.concat(images, ignore_index=True) if images else pd.DataFrame()
+    sequence_frame = pd.concat(sequences, ignore_index=True) if sequences else pd.DataFrame()
+    return image_frame, sequence_frame
+
+
+def load_reported(dataset: str | None = None, tables: Iterable[str] | None = None) -> pd.DataFrame:
+    """The paper's numbers from ``protocols/reported/*.csv`` (long format).
+
+    Columns: ``table, dataset, section, setting, group, method, method_id, metric, value`` (float),
+    ``printed`` (the text as typeset), ``decimals``, ``bold`` (bold in the paper), ``source``
+    (``"reported"``).  ``group`` is the protocol group the setting corresponds to (``""`` = all).
+    """
+    folder = resources.files("setdiff_bench.protocols") / "reported"
+    frames = []
+    for entry in sorted(folder.iterdir(), key=lambda e: e.name):
+        if entry.name.endswith(".csv"):
+            with entry.open() as handle:
+                frames.append(pd.read_csv(handle, dtype=str, keep_default_na=False))
+    frame = pd.concat(frames, ignore_index=True)
+    if dataset is not None:
+        frame = frame[frame["dataset"] == dataset]
+    if tables is not None:
+        frame = frame[frame["table"].isin(list(tables))]
+    frame = frame.rename(columns={"value": "printed"}).reset_index(drop=True)
+    frame["value"] = frame["printed"].astype(float)
+    frame["decimals"] = frame["printed"].map(lambda text: len(text.split(".")[1]) if "." in text else 0)
+    frame["bold"] = frame["bold"] == "1"
+    frame["source"] = "reported"
+    return frame
+
+
+def reported_for(dataset: str, layout: Layout | None = None) -> pd.DataFrame:
+    """The reported rows the dataset's layout mixes in (empty when the paper has none)."""
+    layout = layout or dataset_layout(dataset)
+    if not layout.reported_tables:
+        return load_reported(dataset).iloc[0:0]
+    return load_reported(dataset, layout.reported_tables)
