@@ -156,7 +156,7 @@ def run(args: argparse.Namespace) -> int:
             f"{args.method} [{shard}]: enhanced {result.enhanced} packets, {result.skipped} already done → {out}"
         )
     if result.skipped_metrics is not None:  # novel-trajectory targets: one line naming what was not scored
-        print(result.skipped_metrics.line())
+        print(result.skipped_metrics.line(distribution=inception is not None and result.merged))
     if result.merged:
         print(f"complete: {out / METRICS_FILE}, {out / MANIFEST_FILE}")
         if inception is not None:

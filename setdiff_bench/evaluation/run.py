@@ -181,11 +181,12 @@ class SkippedMetrics:
     targets: int
     groups: tuple[str, ...]
 
-    def line(self) -> str:
-        """The one line ``run`` prints."""
+    def line(self, distribution: bool = False) -> str:
+        """The one line ``run`` prints; ``distribution``: FID / KID are being computed (``--inception``)."""
+        how = "FID / KID below" if distribution else "FID / KID (--inception FILE)"
         return (
             f"skipped {', '.join(self.metrics)} for {self.targets} target(s) without ground truth "
-            f"(groups {', '.join(self.groups)}): novel-trajectory views are scored by FID / KID (--inception FILE)"
+            f"(groups {', '.join(self.groups)}): novel-trajectory views are scored by {how}"
         )
 
     def record(self) -> dict[str, Any]:
