@@ -136,7 +136,8 @@ def run(args: argparse.Namespace) -> int:
     from setdiff_bench.errors import UsageError
     from setdiff_bench.models.setdiff.config import with_overrides
     from setdiff_bench.models.setdiff.config_io import load_config
-    from setdiff_bench.models.setdiff.train import last_validation, train
+    from setdiff_bench.models.setdiff.train import train, training_device
+    from setdiff_bench.models.setdiff.train_log import last_validation
     from setdiff_bench.packets.store import PacketStore
     from setdiff_bench.runtime.interrupts import Interrupted, stop_at_safe_point
     from setdiff_bench.types import TrainingSample
@@ -176,7 +177,7 @@ def run(args: argparse.Namespace) -> int:
                 args.out,
                 validation=validation,
                 resume=not args.no_resume,
-                cpu=_on_cpu(args.device),
+                device=training_device(args.device),
                 progress=not args.no_progress,
             )
     except Interrupted:
@@ -231,25 +232,6 @@ def _check_split(store: object, split: str, packets: Path) -> None:
         "(setdiff-bench demo --train makes one)",
         packets,
     )
-
-
-def _on_cpu(device: str) -> bool:
-    """Whether ``--device`` puts training on the CPU; accelerate places the processes on GPUs itself.
-
-    Raises:
-        UsageError: a numbered GPU (``cuda:N``); choose GPUs with ``CUDA_VISIBLE_DEVICES`` or accelerate.
-    """
-    from setdiff_bench.errors import UsageError
-    from setdiff_bench.runtime.devices import resolve_device
-
-    resolved = resolve_device(device)
-    if resolved not in ("cpu", "cuda"):
-        raise UsageError(
-            f"train runs where accelerate puts it: pick GPUs with CUDA_VISIBLE_DEVICES or "
-            f"`accelerate launch`, not --device {device}",
-            "--device",
-        )
-    return resolved == "cpu"
 
 
 def _latest_step(out: Path) -> int:

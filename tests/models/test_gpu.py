@@ -35,5 +35,5 @@ def test_bf16_training_step(tmp_path: Path) -> None:
     config = dataclasses.replace(
         config, train=dataclasses.replace(config.train, steps=2, mixed_precision="bf16")
     )
-    result = train(config, [make_sample(2, 2)], tmp_path, cpu=False, progress=False)
+    result = train(config, [make_sample(2, 2)], tmp_path, device="cuda", progress=False)
     assert result.step == 2 and all(torch.isfinite(torch.tensor(list(result.losses.values()))))
