@@ -28,7 +28,7 @@ the Python API block (``sb.PacketStore("runs/demo/work/packets")`` ...)        r
 ``setdiff-bench serve --checkpoint tiny_setdiff --port 50051``                 run while the next command drives it
                                                                                (another free port, and ``--address``
                                                                                for the client, if 50051 is taken)
-``python examples/drive_packets.py --packets runs/demo/work/packets ...``      run against it: one PNG per target
+``python3 examples/drive_packets.py --packets runs/demo/work/packets ...``      run against it: one PNG per target
 ``umask 077; python3 -c "import secrets; ..." > token``                        run
 ``setdiff-bench serve ... --host 0.0.0.0 --tls-cert server.pem ...``           run until it listens, on a free port
                                                                                (the test makes ``server.pem`` /
@@ -39,7 +39,7 @@ the fox walk-through (``R=/data/fox`` ... ``leaderboard ... --out runs/fox``)  p
 ``prepare`` / ``train`` / ``run`` / ``leaderboard`` / ``ablate`` lines         what ``prepare euvs`` writes)
 ``setdiff-bench fit --scene data/synthetic/scene_0000_00 --out lane0.ply``     parsed (no README command writes
                                                                                ``data/synthetic``)
-``python examples/drive_packets.py --packets STORE ... --address HOST:50051``  options checked against its ``--help``
+``python3 examples/drive_packets.py --packets STORE ... --address HOST:50051``  options checked against its ``--help``
 inline commands with placeholders (``D``, ``R``, ``RUN_A``, ``STORE``,         parsed with the placeholders filled,
 ``tiny_setdiff|sd_turbo_setdiff``, ``...``)                                    each alternative; ``...``: options
                                                                                checked against the verb's parser
@@ -91,7 +91,7 @@ RUN = {
     "setdiff-bench report --runs runs/demo/work/runs --packets runs/demo/work/packets --out runs/report",
     "python:api",
     "setdiff-bench serve --checkpoint tiny_setdiff --port 50051",
-    "python examples/drive_packets.py --packets runs/demo/work/packets --out enhanced",
+    "python3 examples/drive_packets.py --packets runs/demo/work/packets --out enhanced",
     'umask 077; python3 -c "import secrets; print(secrets.token_urlsafe(32))" > token',
     "setdiff-bench serve --checkpoint tiny_setdiff --host 0.0.0.0 --port 50051 --tls-cert server.pem "
     "--tls-key server.key --token-file token",
@@ -255,7 +255,7 @@ def test_shell_blocks_are_valid_bash() -> None:
 
 
 def test_drive_packets_takes_the_options_the_readme_gives() -> None:
-    drives = [c for c in COMMANDS if c.startswith("python examples/drive_packets.py")]
+    drives = [c for c in COMMANDS if c.startswith("python3 examples/drive_packets.py")]
     assert len(drives) == 2
     result = subprocess.run(
         [sys.executable, str(ROOT / "examples" / "drive_packets.py"), "--help"],
@@ -356,7 +356,7 @@ def test_serve_and_drive_the_demo_packets(world: Path) -> None:
     """The service block: serve, then replay the demo's store through it; one PNG per target of the demo's
     ``run --method setdiff`` (read from that run's metrics, not from the client)."""
     serve, address = _port_for(_command("setdiff-bench serve --checkpoint tiny_setdiff --port 50051"))
-    drive = _command("python examples/drive_packets.py --packets runs/demo/work/packets")
+    drive = _command("python3 examples/drive_packets.py --packets runs/demo/work/packets")
     with served(serve, world):
         run_shell(drive + address, world)
     targets = pd.read_parquet(world / "runs/demo/work/runs/setdiff/metrics.parquet")
