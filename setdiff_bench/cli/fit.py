@@ -18,6 +18,7 @@ import argparse
 from pathlib import Path
 
 from setdiff_bench.cli import add_device_argument, add_progress_argument
+from setdiff_bench.cli.declared import registry_names
 from setdiff_bench.cli.list import add_loader_option_argument, loader_options
 
 VERB = "fit"
@@ -65,7 +66,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--preset",
         default="default",
-        choices=("tiny", "default", "large", "standard"),
+        choices=(*registry_names("setdiff_bench.synthetic.presets", "PRESETS"), "standard"),
         help="schedule: a synthetic preset's fit, or 'standard' (Inria 30k iterations)",
     )
     parser.add_argument(

@@ -9,8 +9,10 @@ from __future__ import annotations
 import argparse
 import math
 from pathlib import Path
+from typing import get_args
 
 from setdiff_bench.cli import add_device_argument
+from setdiff_bench.models.setdiff.methods import Method
 from setdiff_bench.serve.settings import DEFAULT_HOST, SESSION_BYTES_PER_PIXEL, ServeSettings
 
 VERB = "serve"
@@ -50,7 +52,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--method",
         default="setdiff",
-        choices=("setdiff", "difix"),
+        choices=get_args(Method),
         help="what the checkpoint was trained as (default %(default)s; `weights list` shows the shipped ones)",
     )
     parser.add_argument("--host", default=defaults.host, help="interface to bind (default %(default)s)")

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from setdiff_bench.cli import add_device_argument, add_progress_argument
+from setdiff_bench.cli.declared import registry_names
 
 VERB = "synth"
 HELP = "generate synthetic multi-lane street scenes (EUVS layout) and fit their 3DGS"
@@ -37,7 +38,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--preset",
         default="default",
-        choices=("tiny", "default", "large", "sparse_tiny", "sparse", "sparse_large"),
+        choices=registry_names("setdiff_bench.synthetic.presets", "PRESETS")
+        + registry_names("setdiff_bench.synthetic.sparse", "SPARSE_PRESETS"),
         help="tiny: seconds, for tests; default: ~10 min on 2 CPU cores; large: for a GPU; sparse*: "
         "handheld walks in DL3DV's layout with n3/n6/n9 fits (docs/synthetic_format.md)",
     )

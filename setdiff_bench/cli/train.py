@@ -136,6 +136,7 @@ def run(args: argparse.Namespace) -> int:
     from setdiff_bench.errors import UsageError
     from setdiff_bench.models.setdiff.config import with_overrides
     from setdiff_bench.models.setdiff.config_io import load_config
+    from setdiff_bench.models.setdiff.files import LATEST_FILE
     from setdiff_bench.models.setdiff.train import train, training_device
     from setdiff_bench.models.setdiff.train_log import last_validation
     from setdiff_bench.packets.store import PacketStore
@@ -151,7 +152,7 @@ def run(args: argparse.Namespace) -> int:
         config = dataclasses.replace(
             config, model=dataclasses.replace(config.model, pretrained=str(args.pretrained))
         )
-    if args.no_resume and (args.out / "latest").exists():
+    if args.no_resume and (args.out / LATEST_FILE).exists():
         raise UsageError(
             "output folder already holds a training run (drop --no-resume to continue it)", args.out
         )

@@ -18,6 +18,7 @@ from typing import Any, Literal, get_args
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.jsonable import jsonable
 from setdiff_bench.models.setdiff.autoencoder import read_autoencoder_config
+from setdiff_bench.models.setdiff.methods import Method
 from setdiff_bench.models.setdiff.presets import (
     PRESETS,
     SD_TURBO_SCHEDULE,
@@ -26,7 +27,6 @@ from setdiff_bench.models.setdiff.presets import (
     alphas_cumprod,
 )
 
-Method = Literal["setdiff", "difix"]
 Prediction = Literal["v_prediction", "epsilon"]
 DecoderTraining = Literal["lora", "full", "frozen"]
 OutputMode = Literal["direct", "residual"]
