@@ -17,8 +17,7 @@ from importlib import import_module
 from typing import TYPE_CHECKING, Any
 
 from setdiff_bench.errors import SetDiffBenchError, UsageError
-
-__version__ = "0.1.0"
+from setdiff_bench.version import __version__
 
 #: Public name → ``"module:attribute"`` it is loaded from on first use.
 _LAZY: dict[str, str] = {

@@ -26,9 +26,9 @@ from types import ModuleType
 from typing import NoReturn
 
 import setdiff_bench.cli as cli_package
-from setdiff_bench import __version__
 from setdiff_bench.errors import SetDiffBenchError
 from setdiff_bench.runtime.threads import verb_threads
+from setdiff_bench.version import __version__
 
 
 def verb_module_names() -> list[str]:

@@ -41,7 +41,6 @@ from typing import Any, TypeVar
 import grpc
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 
-from setdiff_bench import __version__
 from setdiff_bench.errors import MemoryNeedError, SetDiffBenchError
 from setdiff_bench.evaluation.stream import StreamInputError, StreamSession
 from setdiff_bench.serve import enhancer_pb2 as pb
@@ -49,6 +48,7 @@ from setdiff_bench.serve import enhancer_pb2_grpc as pb_grpc
 from setdiff_bench.serve.security import TokenSource, check_bind
 from setdiff_bench.serve.settings import ServeSettings, reference_bytes
 from setdiff_bench.serve.wire import from_views, images_to_arrays
+from setdiff_bench.version import __version__
 
 #: The fully qualified service name (health checks may ask for it).
 SERVICE_NAME = pb.DESCRIPTOR.services_by_name["Enhancer"].full_name
