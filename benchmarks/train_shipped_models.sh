@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Regenerate the models shipped in setdiff_bench/models/setdiff/weights/ with the toolkit's own commands:
-# 14 scenes of the default synthetic preset (seed 0, indices 0-13), their packets, then tiny SetDiff and tiny
+# Regenerate the models shipped in setdiff_bench/models/setdiff/weights/ with the toolkit's own commands.
+# The driving models here; at the end, the sparse-view models (tiny_setdiff_sparse, tiny_difix_sparse) by
+# benchmarks/train_sparse_models.sh into WORK_DIR/sparse, exported beside them.  Driving: 14 scenes of the default synthetic preset (seed 0, indices 0-13), their packets, then tiny SetDiff and tiny
 # DiFix trained on the 11 training scenes, exported with their manifests.  Scenes _02 and _04 (the default
 # demo's test scenes) and _07 (a test scene of the `full` demo preset) are declared test scenes, so no demo
 # preset evaluates on a scene a shipped model saw (a test checks it from the manifests).  The tiny
@@ -39,3 +40,4 @@ wait $setdiff
 wait $difix
 $bench weights export "$work/ckpt/setdiff" --name tiny_setdiff --to "$export_dir" --average 2 --guidance-scale 1.5
 $bench weights export "$work/ckpt/difix" --name tiny_difix --to "$export_dir" --average 2
+bash "$(dirname "$0")/train_sparse_models.sh" "$work/sparse" "$export_dir"
