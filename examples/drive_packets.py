@@ -27,6 +27,7 @@ import torch
 
 from setdiff_bench.errors import SetDiffBenchError
 from setdiff_bench.evaluation.stream import Views
+from setdiff_bench.geometry import denormalize_cmaps
 from setdiff_bench.io.images import write_png
 from setdiff_bench.packets.index import INDEX_FILE
 from setdiff_bench.packets.store import PacketStore, row_camera
@@ -35,13 +36,12 @@ from setdiff_bench.types import ViewSet
 
 
 def world_views(view_set: ViewSet, rows: list, anchor_world, scale: float, source: str) -> Views:
-    """A packet's views back in the world frame: ``c = Rᵀ (c' / scale − alpha · t)`` (``R, t`` of the anchor)."""
+    """A packet's views back in the world frame (:func:`~setdiff_bench.geometry.denormalize_cmaps`, ``R, t`` of the
+    anchor)."""
     cameras = [row_camera(row, source, world=True) for row in rows]
-    # np.array copies: a camera's arrays are read-only, and torch warns on wrapping a non-writable array
-    rotation = torch.from_numpy(np.array(anchor_world.R, dtype=np.float64))
-    translation = torch.from_numpy(np.array(anchor_world.t, dtype=np.float64)).view(1, 3, 1, 1)
-    local = view_set.cmaps.to(torch.float64) / scale - view_set.alphas.to(torch.float64) * translation
-    cmaps = torch.einsum("ji,vjhw->vihw", rotation, local).float()
+    cmaps = denormalize_cmaps(
+        view_set.cmaps, view_set.alphas, anchor_world.R, anchor_world.t, scale, dtype=torch.float32
+    )
     images = torch.round(view_set.images * 255).to(torch.uint8)
     return Views(
         images=images, cameras=cameras, cmaps=cmaps, alphas=view_set.alphas, names=list(view_set.names)

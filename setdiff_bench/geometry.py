@@ -118,6 +118,42 @@ def normalize_packet(
     return NormalizedPacket(new_cameras, new_cmaps, rotation, translation, scale)
 
 
+def denormalize_cmaps(
+    cmaps: torch.Tensor,
+    alphas: torch.Tensor,
+    rotation: np.ndarray,
+    translation: np.ndarray,
+    scale: float,
+    *,
+    dtype: torch.dtype | None = None,
+) -> torch.Tensor:
+    """C-maps moved back from a packet's normalised frame to the world frame: the inverse of
+    :func:`normalize_packet`'s ``c' = scale · (R c + alpha · t)``, i.e. ``c = Rᵀ (c' / scale − alpha · t)``.
+
+    A stream-API client that sends a stored packet's views needs it (a packet stores its C-maps normalised; the
+    session takes world-frame ones), as ``examples/drive_packets.py`` does.  Computed in float64.
+
+    Args:
+        cmaps: ``(V, 3, H, W)`` C-maps in the normalised frame (:attr:`NormalizedPacket.cmaps`, a packet's views).
+        alphas: ``(V, 1, H, W)`` accumulated opacities of the same render.
+        rotation, translation, scale: the map (:class:`NormalizedPacket`; for a stored packet, the anchor
+            camera's world ``R``, ``t`` and :attr:`Packet.scale`).
+        dtype: of the result (default: ``cmaps``'s).
+
+    Example::
+
+        normalized = normalize_packet(cameras, cmaps, first_target, alphas=alphas)
+        world = denormalize_cmaps(
+            normalized.cmaps, alphas, normalized.rotation, normalized.translation, normalized.scale
+        )  # ≈ cmaps
+    """
+    # np.array copies: a camera's arrays are read-only, and torch warns on wrapping a non-writable array
+    R = torch.from_numpy(np.array(rotation, dtype=np.float64))
+    t = torch.from_numpy(np.array(translation, dtype=np.float64)).view(1, 3, 1, 1)
+    local = cmaps.to(torch.float64) / scale - alphas.to(torch.float64) * t
+    return torch.einsum("ji,vjhw->vihw", R, local).to(dtype or cmaps.dtype)
+
+
 def view_overlap_score(
     a: Camera, b: Camera, d_max: float, *, alpha: float = OVERLAP_ALPHA, beta: float = OVERLAP_BETA
 ) -> float:
