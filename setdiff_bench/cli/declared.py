@@ -1,35 +1,76 @@
 """Names the CLI offers as choices, read from the library module that declares them without importing it.
 
 A parser is built for every ``--help``, which must not import the heavy libraries (``tests/cli/
-test_help_latency.py``); the synthetic preset registries live in modules that import torch.  So their keys are
-read from the modules' sources, as :func:`setdiff_bench.cli.main.verb_summaries` reads the verb list;
-``tests/cli/test_declared_choices.py`` checks them against the imported registries.
+test_help_latency.py``); the synthetic preset registries, the leaderboard's formats and the LPIPS trunks live
+in modules that import torch or pandas.  So their names are read from the modules' sources, as
+:func:`setdiff_bench.cli.main.verb_summaries` reads the verb list; ``tests/cli/test_declared_choices.py`` checks
+them against the imported modules.
 """
 
 from __future__ import annotations
 
 import ast
+import importlib.machinery
 import importlib.util
 from pathlib import Path
+from typing import Any
+
+
+def module_source(module: str) -> Path:
+    """The source file of ``module``, found without importing it or the packages between it and the top one
+    (``setdiff_bench.reporting.leaderboard.render`` does not run the leaderboard package's ``__init__``).
+
+    Raises:
+        LookupError: no such module.
+    """
+    parts = module.split(".")
+    spec = importlib.util.find_spec(parts[0])
+    for depth in range(2, len(parts) + 1):
+        if spec is None or spec.submodule_search_locations is None:
+            break
+        spec = importlib.machinery.PathFinder.find_spec(
+            ".".join(parts[:depth]), spec.submodule_search_locations
+        )
+    if spec is None or spec.origin is None or spec.name != module:
+        spec = importlib.util.find_spec(module)  # a package mapped elsewhere: its parents are imported
+    if spec is None or spec.origin is None:
+        raise LookupError(f"module {module} not found")
+    return Path(spec.origin)
+
+
+def _assigned(module: str, name: str) -> ast.expr:
+    """The expression assigned to ``name`` at the top of ``module``'s source."""
+    tree = ast.parse(module_source(module).read_text(encoding="utf-8"))
+    for node in tree.body:
+        target = node.targets[0] if isinstance(node, ast.Assign) and len(node.targets) == 1 else None
+        target = node.target if isinstance(node, ast.AnnAssign) else target
+        if isinstance(target, ast.Name) and target.id == name and node.value is not None:
+            return node.value
+    raise LookupError(f"{module} assigns no {name}")
+
+
+def declared_value(module: str, name: str) -> Any:
+    """The literal (a string, a number, a tuple of them, ...) assigned to ``name`` at the top of ``module``
+    (e.g. ``setdiff_bench.evaluation.profiles.DEFAULT_PROFILE``), read from its source.
+
+    Raises:
+        LookupError: no such assignment, or not a literal.
+    """
+    try:
+        return ast.literal_eval(_assigned(module, name))
+    except ValueError:
+        raise LookupError(f"{module}.{name} is not a literal") from None
 
 
 def registry_names(module: str, name: str) -> tuple[str, ...]:
     """The keys, in order, of the dict literal assigned to ``name`` at the top of ``module`` (a registry such as
-    ``setdiff_bench.synthetic.presets.PRESETS``), read from its source; ``module`` is not imported (its parent
-    packages are).
+    ``setdiff_bench.synthetic.presets.PRESETS``), read from its source.
 
     Raises:
-        LookupError: ``module`` has no such assignment, or its keys are not all string literals.
+        LookupError: ``module`` has no such assignment, or it is not a dict with string literal keys.
     """
-    spec = importlib.util.find_spec(module)
-    if spec is None or spec.origin is None:
-        raise LookupError(f"module {module} not found")
-    tree = ast.parse(Path(spec.origin).read_text(encoding="utf-8"))
-    for node in tree.body:
-        target = node.targets[0] if isinstance(node, ast.Assign) and len(node.targets) == 1 else None
-        target = node.target if isinstance(node, ast.AnnAssign) else target
-        if isinstance(target, ast.Name) and target.id == name and isinstance(node.value, ast.Dict):
-            keys = [key.value if isinstance(key, ast.Constant) else None for key in node.value.keys]
-            if all(isinstance(key, str) for key in keys):
-                return tuple(keys)  # type: ignore[arg-type]
-    raise LookupError(f"{module}.{name} is not a dict literal with string keys")
+    value = _assigned(module, name)
+    keys = [key.value if isinstance(key, ast.Constant) else None for key in getattr(value, "keys", [None])]
+    if not isinstance(value, ast.Dict) or not all(isinstance(key, str) for key in keys):
+        raise LookupError(f"{module}.{name} is not a dict literal with string keys")
+    return tuple(keys)  # type: ignore[arg-type]

@@ -27,6 +27,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from setdiff_bench.cli.declared import declared_value
 from setdiff_bench.reporting.bootstrap import BootstrapSettings
 
 VERB = "leaderboard"
@@ -39,7 +40,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--dataset", required=True, help="dataset key (euvs, paralane, nuscenes, dl3dv, synthetic, ...)"
     )
     parser.add_argument("--runs", type=Path, default=Path("results/runs"), help="folder searched for runs")
-    parser.add_argument("--format", default="parquet,latex,md", help="comma list of parquet, latex, md")
+    formats = declared_value("setdiff_bench.reporting.leaderboard.render", "FORMATS")
+    parser.add_argument("--format", default=",".join(formats), help=f"comma list of {', '.join(formats)}")
     parser.add_argument("--out", type=Path, default=Path("results/leaderboards"), help="output folder")
     parser.add_argument(
         "--with-reported",
@@ -55,7 +57,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--profile",
-        default="paper",
+        default=declared_value("setdiff_bench.evaluation.profiles", "DEFAULT_PROFILE"),
         help="evaluation profile to tabulate (paper = plain runs; others come from "
         "`setdiff-bench evaluate`); named in every caption",
     )

@@ -14,6 +14,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from setdiff_bench.cli.declared import declared_value
+
 VERB = "weights"
 HELP = "LPIPS weights (convert, check) and the shipped models (list, verify, export)"
 DESCRIPTION = (
@@ -53,7 +55,10 @@ def _lpips_arguments(parser: argparse.ArgumentParser) -> None:
         "--check", action="store_true", help="exit 0 when usable weights resolve (and validate), 2 otherwise"
     )
     parser.add_argument(
-        "--net", choices=["alex", "vgg", "all"], default="all", help="trunk(s) (default: all)"
+        "--net",
+        choices=[*declared_value("setdiff_bench.metrics.lpips_arch", "NETS"), "all"],
+        default="all",
+        help="trunk(s) (default: all)",
     )
     parser.add_argument(
         "--out", metavar="DIR", help="destination folder for --from (default: the user cache)"

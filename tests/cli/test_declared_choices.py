@@ -7,19 +7,29 @@ from typing import get_args
 
 import pytest
 
-from setdiff_bench.cli import fit, serve, synth
-from setdiff_bench.cli.declared import registry_names
+from setdiff_bench.cli import fit, leaderboard, serve, synth, weights
+from setdiff_bench.cli.declared import declared_value, module_source, registry_names
+from setdiff_bench.evaluation.profiles import DEFAULT_PROFILE
+from setdiff_bench.metrics.lpips_arch import NETS
 from setdiff_bench.models.setdiff.config import ModelConfig
 from setdiff_bench.models.setdiff.methods import Method
+from setdiff_bench.reporting.leaderboard import FORMATS
 from setdiff_bench.synthetic.presets import PRESETS
 from setdiff_bench.synthetic.sparse import SPARSE_PRESETS
 
 
-def choices(module: object, flag: str) -> tuple[str, ...]:
+def option(module: object, flag: str, *words: str) -> argparse.Action:
     parser = argparse.ArgumentParser()
     module.add_arguments(parser)  # type: ignore[attr-defined]
+    if words:  # a sub-command's option
+        (sub,) = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+        parser = sub.choices[words[0]]
     (action,) = [a for a in parser._actions if flag in a.option_strings]
-    return tuple(action.choices)
+    return action
+
+
+def choices(module: object, flag: str, *words: str) -> tuple[str, ...]:
+    return tuple(option(module, flag, *words).choices)
 
 
 def test_registry_names_are_the_imported_registries_keys() -> None:
@@ -27,9 +37,21 @@ def test_registry_names_are_the_imported_registries_keys() -> None:
     assert registry_names("setdiff_bench.synthetic.sparse", "SPARSE_PRESETS") == tuple(SPARSE_PRESETS)
 
 
-def test_registry_names_refuses_what_is_not_a_dict_literal() -> None:
+def test_declared_values_are_the_imported_ones() -> None:
+    assert declared_value("setdiff_bench.reporting.leaderboard.render", "FORMATS") == FORMATS
+    assert declared_value("setdiff_bench.evaluation.profiles", "DEFAULT_PROFILE") == DEFAULT_PROFILE
+    assert declared_value("setdiff_bench.metrics.lpips_arch", "NETS") == NETS
+
+
+def test_module_source_and_refusals() -> None:
+    assert module_source("setdiff_bench.reporting.leaderboard.render").name == "render.py"
+    assert module_source("setdiff_bench.protocols.parser").name == "parser.py"  # a package mapped elsewhere
     with pytest.raises(LookupError):
         registry_names("setdiff_bench.synthetic.presets", "get_preset")
+    with pytest.raises(LookupError):
+        declared_value("setdiff_bench.synthetic.presets", "PRESETS")  # calls, not a literal
+    with pytest.raises(LookupError):
+        module_source("setdiff_bench.no_such_module")
 
 
 def test_cli_choices_come_from_the_library() -> None:
@@ -37,3 +59,6 @@ def test_cli_choices_come_from_the_library() -> None:
     assert choices(fit, "--preset") == (*PRESETS, "standard")
     assert choices(serve, "--method") == get_args(Method)
     assert ModelConfig.__dataclass_fields__["method"].type in ("Method", Method)
+    assert option(leaderboard, "--format").default == ",".join(FORMATS)
+    assert option(leaderboard, "--profile").default == DEFAULT_PROFILE
+    assert choices(weights, "--net", "lpips") == (*NETS, "all")
