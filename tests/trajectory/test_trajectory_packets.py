@@ -240,3 +240,29 @@ def test_bad_pose_files_are_one_line_and_nothing_is_written(
     out = tmp_path / "store"
     line = _refused([*prepare_argv(root, out), "--trajectory", str(path)], out, capsys)
     assert str(path) in line and problem in line.lower(), line
+
+
+def test_a_yaw_turns_each_fit_camera_in_place(street: tuple[Path, StreetScene], tmp_path: Path) -> None:
+    root, scene = street
+    out = tmp_path / "store"
+    with torch_threads(1):
+        prepare("synthetic", root, out, fits=root, progress=False, trajectories=["yaw:10"])
+    targets = pd.read_parquet(out / "index.parquet").query("role == 'target'").sort_values("view")
+    assert set(targets["group"]) == {"yaw+10deg"}
+    for row, base_name in zip(targets.to_dict("records"), scene.train, strict=True):
+        base, camera = scene.cameras[base_name], row_camera(row, world=True)
+        np.testing.assert_allclose(camera.center, base.center, atol=1e-9)
+        cos = float(camera.view_direction @ base.view_direction)
+        assert cos == pytest.approx(np.cos(np.radians(10.0)), abs=1e-12)
+        # turned right: the new optical axis leans toward the old right axis (R[0])
+        assert float(camera.view_direction @ base.R[0]) == pytest.approx(np.sin(np.radians(10.0)), abs=1e-12)
+
+
+def test_names_of_trajectory_frames_and_groups() -> None:
+    from setdiff_bench.packets.plan import trajectory_frame_name, trajectory_group_name
+
+    assert trajectory_frame_name("lane0_front_000.png", "shift+3m") == "lane0_front_000@shift+3m.png"
+    assert trajectory_frame_name("CAM_FRONT/a.b.jpg", "yaw-5deg") == "CAM_FRONT/a.b@yaw-5deg.jpg"
+    assert trajectory_frame_name("frame", "shift+3m") == "frame@shift+3m"
+    assert trajectory_group_name("shift+3m", "lane0", ["lane0", "lane0"]) == "shift+3m"
+    assert trajectory_group_name("shift+3m", "n3", ["holdout8", "n3"]) == "shift+3m@n3"
