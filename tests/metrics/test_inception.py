@@ -22,6 +22,9 @@ def random_weights(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, FIDI
     with torch_threads(1):
         torch.manual_seed(0)
         model = FIDInceptionV3().eval()
+        for parameter in model.parameters():  # He-initialised: the default gives pool3 features of ~1e-7
+            if parameter.dim() == 4:
+                torch.nn.init.kaiming_normal_(parameter, nonlinearity="relu")
         for module in model.modules():  # non-trivial batch-norm statistics, so loading them is tested
             if isinstance(module, torch.nn.BatchNorm2d):
                 module.running_mean.uniform_(-0.1, 0.1)
@@ -48,6 +51,9 @@ def test_loaded_network_gives_the_saved_networks_features(random_weights) -> Non
         features = inception_features(loaded, list(images), batch_size=2)
     assert features.shape == (2, 2048) and features.dtype == np.float64
     assert np.array_equal(features, expected.double().numpy())
+    # features well above zero, and different for different images: the equality above is not vacuous
+    assert np.abs(features).mean() > 1e-2
+    assert np.abs(features[0] - features[1]).mean() > 1e-3
 
 
 def test_state_dict_without_num_batches_tracked_loads(random_weights, tmp_path: Path) -> None:

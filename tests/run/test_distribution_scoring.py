@@ -47,6 +47,20 @@ def _fid_scipy(a: np.ndarray, b: np.ndarray) -> float:
     return float(d @ d + np.trace(s1) + np.trace(s2) - 2 * np.trace(scipy.linalg.sqrtm(s1 @ s2)).real)
 
 
+def _fid_gram(a: np.ndarray, b: np.ndarray) -> float:
+    """FID of few features in many dimensions, where scipy's ``sqrtm`` of a singular 2048×2048 product is slow
+    and inaccurate: ``tr (Σ₁Σ₂)^½`` is the sum of the roots of the eigenvalues of the ``(m, m)`` symmetric
+    matrix ``A Bᵀ B Aᵀ / ((m−1)(n−1))`` (A, B centred), which shares the non-zero eigenvalues of ``Σ₁Σ₂``."""
+    m, n = len(a), len(b)
+    ca, cb = a - a.mean(0), b - b.mean(0)
+    cross = ca @ cb.T
+    values = np.linalg.eigvalsh(cross @ cross.T / ((m - 1) * (n - 1)))
+    d = a.mean(0) - b.mean(0)
+    return float(
+        d @ d + (ca**2).sum() / (m - 1) + (cb**2).sum() / (n - 1) - 2 * np.sqrt(values.clip(0)).sum()
+    )
+
+
 def _kid_loops(a: np.ndarray, b: np.ndarray) -> float:
     k = lambda x, y: (float(x @ y) / len(x) + 1.0) ** 3  # noqa: E731
     m, n = len(a), len(b)
@@ -80,11 +94,24 @@ def test_blocks_score_against_the_recorded_frames(store: Path, identity_run: Pat
 
 @pytest.fixture(scope="module")
 def inception_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A random-weight FID Inception-v3 in pytorch-fid's format.  The convolutions are He-initialised (as in
+    ``tests/trajectory/conftest.py``): with the default initialisation the pool3 features are ~1e-7 and every
+    FID ~1e-15, so a value check would pass for any set."""
     with torch_threads(1):
         torch.manual_seed(0)
+        model = FIDInceptionV3()
+        for parameter in model.parameters():
+            if parameter.dim() == 4:
+                torch.nn.init.kaiming_normal_(parameter, nonlinearity="relu")
         path = tmp_path_factory.mktemp("inception") / "pt_inception-2015-12-05-6726825d.pth"
-        torch.save(FIDInceptionV3().state_dict(), path)
+        torch.save(model.state_dict(), path)
     return path
+
+
+def _pixels(path: Path) -> torch.Tensor:
+    """``(3, H, W)`` float32 in [0, 1], read with PIL."""
+    array = np.asarray(Image.open(path).convert("RGB"), dtype=np.float32) / 255.0
+    return torch.from_numpy(array).permute(2, 0, 1)
 
 
 def test_run_with_inception_writes_the_distribution_table(
@@ -111,7 +138,23 @@ def test_run_with_inception_writes_the_distribution_table(
     assert f"distribution: {out / DISTRIBUTION_FILE}" in printed
     table = pd.read_parquet(out / DISTRIBUTION_FILE)
     assert len(table) == 2 and (table["enhanced"] == 6).all() and (table["recorded"] == 4).all()
-    assert (table["fid"] >= 0).all() and np.isfinite(table["kid"]).all()
+    # every block recomputed: PIL-read images through the saved network called directly (features well away
+    # from zero), FID through the Gram matrix's eigenvalues and KID with loops
+    model = FIDInceptionV3().eval()
+    model.load_state_dict(torch.load(inception_file, weights_only=True))
+    index = pd.read_parquet(store / "index.parquet")
+    for row in table.to_dict("records"):
+        enhanced = sorted((out / "images" / row["protocol"] / row["group"]).rglob("*.png"))
+        refs = index[(index["role"] == "ref") & (index["group"] == row["group"])].drop_duplicates(
+            ["scene", "frame"]
+        )
+        with torch_threads(1), torch.no_grad():
+            a = model(torch.stack([_pixels(p) for p in enhanced])).double().numpy()
+            b = model(torch.stack([_pixels(store / p) for p in refs["image"]])).double().numpy()
+        assert np.abs(a).mean() > 1e-2 and np.abs(b).mean() > 1e-2
+        assert _fid_gram(a, b) > 1e-2 and abs(_kid_loops(a, b)) > 1e-4
+        assert row["fid"] == pytest.approx(_fid_gram(a, b), rel=1e-4)
+        assert row["kid"] == pytest.approx(_kid_loops(a, b), rel=1e-4)
 
 
 def test_missing_inception_file_is_one_line_and_nothing_is_written(
