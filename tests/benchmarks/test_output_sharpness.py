@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from benchmarks.output_sharpness import laplacian_energy, main, summary
-from tests.models.test_store_training import write_store
+from tests.models.setdiff_fixtures import write_store
 
 
 def grey(values: np.ndarray) -> np.ndarray:

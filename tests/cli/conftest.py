@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.models.test_cli_train import FakeStore
+from tests.models.setdiff_fixtures import FakeStore
 
 
 class IndexedFakeStore(FakeStore):

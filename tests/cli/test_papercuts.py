@@ -18,8 +18,8 @@ from setdiff_bench.models.setdiff.train import TrainResult
 from setdiff_bench.runtime.threads import torch_threads
 from tests.cli.conftest import IndexedFakeStore
 from tests.cli.helpers import extract_examples, help_texts
+from tests.models.setdiff_fixtures import CLI_TRAIN_CONFIG as CONFIG
 from tests.models.setdiff_fixtures import train_argv
-from tests.models.test_cli_train import CONFIG
 from tests.run.store_fixtures import StoreSpec, build_store
 
 

@@ -10,8 +10,8 @@ import pytest
 from setdiff_bench.cli.main import main
 from setdiff_bench.models.setdiff.files import MANIFEST_FILE, VALIDATION_FILE
 from tests.cli.conftest import IndexedFakeStore
+from tests.models.setdiff_fixtures import CLI_TRAIN_CONFIG as CONFIG
 from tests.models.setdiff_fixtures import train_argv
-from tests.models.test_cli_train import CONFIG
 
 
 def test_noop_rerun_keeps_validation(

@@ -1,19 +1,27 @@
-"""Helpers for the SetDiff tests: small packets with real cameras, and tiny configs."""
+"""Fixtures of the SetDiff tests (imported by tests in other folders too): small packets with real cameras, tiny
+configs (:func:`tiny_config` in memory, :func:`tiny_config_toml` the one writer of the ``train`` verb's TOML
+configs), a real two-packet store (:func:`write_store`), an in-memory store for the ``train`` verb
+(:class:`FakeStore`) and an untrained residual model (:func:`residual_model`)."""
 
 from __future__ import annotations
 
 import json
 import math
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
+import pandas as pd
 import torch
 import torch.nn.functional as F
 
 from setdiff_bench.cameras import Camera
 from setdiff_bench.models.setdiff.config import Config, TrainConfig, model_config_from_dict
+from setdiff_bench.models.setdiff.model import SetDiffModel
 from setdiff_bench.models.setdiff.presets import TINY_UNET, TINY_VAE
+from setdiff_bench.packets.index import merge_index
+from setdiff_bench.packets.store import PacketHeader, ViewContent, write_packet
 from setdiff_bench.types import Packet, TrainingSample, ViewSet
 
 
@@ -175,15 +183,157 @@ def write_diffusers_folder(root: Path, *, text: bool) -> tuple[Any, Any]:
     return unet, vae
 
 
-#: The ``[model]`` table of a TOML config for the tiny SetDiff trained through the ``train`` verb in tests.
-TINY_SETDIFF_MODEL_TOML = """[model]
-preset = "tiny"
-method = "setdiff"
-vae_decoder = "full"
-skip_connections = true
-"""
-
-
 def train_argv(config: Path | str, packets: Path | str, out: Path | str, *options: str) -> list[str]:
     """The words of ``setdiff-bench train --config C --packets P --out O`` followed by ``options``."""
     return ["train", "--config", str(config), "--packets", str(packets), "--out", str(out), *options]
+
+
+#: The ``[model]`` table of the tiny SetDiff the tests train through the ``train`` verb.
+TINY_MODEL: dict[str, object] = {
+    "preset": "tiny",
+    "method": "setdiff",
+    "vae_decoder": "full",
+    "skip_connections": True,
+}
+
+
+def _toml_value(value: object) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, int | float):
+        return repr(value)
+    raise TypeError(f"no TOML spelling for {value!r}")
+
+
+def tiny_config_toml(model: Mapping[str, object] | None = None, **train: object) -> str:
+    """The text of a TOML config for the ``train`` verb: the ``[model]`` table (default :data:`TINY_MODEL`)
+    and a ``[train]`` table of ``train`` (none when empty); the one place the tests write such a config."""
+    tables = [("model", TINY_MODEL if model is None else model)] + ([("train", train)] if train else [])
+    return "\n".join(
+        f"[{name}]\n" + "".join(f"{key} = {_toml_value(value)}\n" for key, value in table.items())
+        for name, table in tables
+    )
+
+
+#: The config of the ``train`` verb tests on an in-memory store (:class:`FakeStore`).
+CLI_TRAIN_CONFIG = tiny_config_toml(
+    steps=2,
+    learning_rate=1e-3,
+    min_views=2,
+    max_views=4,
+    lpips_weight=0.0,
+    validation_packets=1,
+    validate_every=2,
+    checkpoint_every=1,
+    log_every=1,
+)
+#: The config of the tests that train on a real packet store (:func:`write_store`).
+STORE_TRAIN_CONFIG = tiny_config_toml(
+    steps=2,
+    learning_rate=1e-3,
+    min_views=3,
+    max_views=4,
+    lpips_weight=0.0,
+    validation_packets=1,
+    validate_every=2,
+    checkpoint_every=2,
+)
+
+
+def contents(views: ViewSet, gt: torch.Tensor | None = None) -> list[ViewContent]:
+    items = []
+    for i, camera in enumerate(views.cameras):
+        items.append(
+            ViewContent(
+                frame=views.names[i],
+                sensor="front",
+                traversal="lane0",
+                timestamp_us=i,
+                camera=camera,
+                camera_world=camera,
+                image=views.images[i].permute(1, 2, 0).numpy(),
+                cmap=views.cmaps[i].permute(1, 2, 0).numpy(),
+                alpha=views.alphas[i, 0].numpy(),
+                gt=None if gt is None else gt[i].permute(1, 2, 0).numpy(),
+                mask=None if gt is None else np.ones(gt.shape[-2:], dtype=bool),
+                overlap_score=None if gt is not None else 1.0 - 0.1 * i,
+            )
+        )
+    return items
+
+
+def write_store(root: Path) -> None:
+    """A real packet store of two packets (split train and test) of three references and three targets."""
+    for split, seed in (("train", 0), ("test", 1)):
+        sample = make_sample(3, 3, seed=seed)
+        header = PacketHeader(
+            packet_id=f"{split}-0",
+            **UNIT_LABELS,
+            split=split,
+            scene=f"s{seed}",
+            fit_key="fit",
+            scale=1.0,
+            recipe="r",
+        )
+        write_packet(
+            root,
+            header,
+            contents(sample.packet.references),
+            contents(sample.packet.targets, sample.target_gt),
+        )
+    merge_index(root)
+
+
+class FakeStore:
+    """The PacketStore interface the train verb uses, over two in-memory samples."""
+
+    calls: ClassVar[list[tuple[str, object]]] = []
+
+    def __init__(self, root: Path) -> None:
+        self.root = Path(root)
+        self.samples = {"train-0": make_sample(2, 2, seed=0), "test-0": make_sample(1, 2, seed=1)}
+        # index rows as prepare writes them (only the columns the training manifest reads)
+        self.index = pd.DataFrame(
+            {
+                "packet_id": ["train-0", "train-0", "test-0"],
+                "split": ["train", "train", "test"],
+                "scene": ["scene_0003_01", "scene_0003_01", "scene_0003_02"],
+                "dataset": ["synthetic"] * 3,
+                "height": [32, 32, 32],
+                "width": [32, 32, 32],
+                **{f"{c}_sha256": ["a" * 64, "b" * 64, "c" * 64] for c in ("image", "cmap", "gt")},
+                "mask_sha256": ["", "d" * 64, ""],
+            }
+        )
+
+    def training_dataset(
+        self, split: str = "train", min_views: int = 8, max_views: int = 12, seed: int = 0
+    ) -> list:
+        FakeStore.calls.append(("training_dataset", (split, min_views, max_views, seed)))
+        return [s for k, s in self.samples.items() if k.startswith(split)]
+
+    def packet_ids(self, split: str) -> list[str]:
+        return [k for k in self.samples if k.startswith(split)]
+
+    def load_packet(self, packet_id: str) -> object:
+        return self.samples[packet_id].packet
+
+    def load_ground_truth(self, packet_id: str) -> tuple[object, object]:
+        sample = self.samples[packet_id]
+        return sample.target_gt, sample.target_masks
+
+
+def residual_model(**overrides: object) -> SetDiffModel:
+    torch.manual_seed(0)
+    config = model_config_from_dict(
+        {
+            "preset": "tiny",
+            "output_mode": "residual",
+            "skip_connections": True,
+            "vae_decoder": "full",
+            **overrides,
+        }
+    )
+    return SetDiffModel(config).eval()

@@ -7,70 +7,14 @@ import json
 import sys
 import types
 from pathlib import Path
-from typing import ClassVar
 
-import pandas as pd
 import pytest
 
 from setdiff_bench.cli.main import main
 from setdiff_bench.models.setdiff.checkpoint import read_config, resolve_checkpoint
 from setdiff_bench.models.setdiff.files import MANIFEST_FILE
-from tests.models.setdiff_fixtures import TINY_SETDIFF_MODEL_TOML, make_sample, train_argv
-
-CONFIG = (
-    TINY_SETDIFF_MODEL_TOML
-    + """
-[train]
-steps = 2
-learning_rate = 1e-3
-min_views = 2
-max_views = 4
-lpips_weight = 0.0
-validation_packets = 1
-validate_every = 2
-checkpoint_every = 1
-log_every = 1
-"""
-)
-
-
-class FakeStore:
-    """The PacketStore interface the train verb uses, over two in-memory samples."""
-
-    calls: ClassVar[list[tuple[str, object]]] = []
-
-    def __init__(self, root: Path) -> None:
-        self.root = Path(root)
-        self.samples = {"train-0": make_sample(2, 2, seed=0), "test-0": make_sample(1, 2, seed=1)}
-        # index rows as prepare writes them (only the columns the training manifest reads)
-        self.index = pd.DataFrame(
-            {
-                "packet_id": ["train-0", "train-0", "test-0"],
-                "split": ["train", "train", "test"],
-                "scene": ["scene_0003_01", "scene_0003_01", "scene_0003_02"],
-                "dataset": ["synthetic"] * 3,
-                "height": [32, 32, 32],
-                "width": [32, 32, 32],
-                **{f"{c}_sha256": ["a" * 64, "b" * 64, "c" * 64] for c in ("image", "cmap", "gt")},
-                "mask_sha256": ["", "d" * 64, ""],
-            }
-        )
-
-    def training_dataset(
-        self, split: str = "train", min_views: int = 8, max_views: int = 12, seed: int = 0
-    ) -> list:
-        FakeStore.calls.append(("training_dataset", (split, min_views, max_views, seed)))
-        return [s for k, s in self.samples.items() if k.startswith(split)]
-
-    def packet_ids(self, split: str) -> list[str]:
-        return [k for k in self.samples if k.startswith(split)]
-
-    def load_packet(self, packet_id: str) -> object:
-        return self.samples[packet_id].packet
-
-    def load_ground_truth(self, packet_id: str) -> tuple[object, object]:
-        sample = self.samples[packet_id]
-        return sample.target_gt, sample.target_masks
+from tests.models.setdiff_fixtures import CLI_TRAIN_CONFIG as CONFIG
+from tests.models.setdiff_fixtures import FakeStore, tiny_config_toml, train_argv
 
 
 @pytest.fixture
@@ -116,6 +60,6 @@ def test_train_verb_errors(
     assert code == 2
     assert "config file not found" in capsys.readouterr().err
     bad = tmp_path / "bad.toml"
-    bad.write_text("[model]\npreset = 'tiny'\nunknown_key = 1\n")
+    bad.write_text(tiny_config_toml(model={"preset": "tiny", "unknown_key": 1}))
     assert main(train_argv(bad, "p", tmp_path / "o")) == 2
     assert "unknown keys ['unknown_key']" in capsys.readouterr().err

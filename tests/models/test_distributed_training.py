@@ -31,26 +31,25 @@ from setdiff_bench.models.setdiff.files import (
     VALIDATION_FILE,
     WEIGHTS_FILE,
 )
-from tests.models.setdiff_fixtures import TINY_SETDIFF_MODEL_TOML, train_argv
+from tests.models.setdiff_fixtures import tiny_config_toml, train_argv
 from tests.run.store_fixtures import StoreSpec, build_store
 
 STEPS = 8
-CONFIG = (
-    TINY_SETDIFF_MODEL_TOML
-    + """
-[train]
-steps = {steps}
-learning_rate = 1e-3
-gradient_accumulation = {accumulation}
-min_views = 2
-max_views = 4
-lpips_weight = 0.0
-validation_packets = 2
-validate_every = 4
-checkpoint_every = 2
-log_every = 1
-"""
-)
+
+
+def config(steps: int, accumulation: int) -> str:
+    return tiny_config_toml(
+        steps=steps,
+        learning_rate=1e-3,
+        gradient_accumulation=accumulation,
+        min_views=2,
+        max_views=4,
+        lpips_weight=0.0,
+        validation_packets=2,
+        validate_every=4,
+        checkpoint_every=2,
+        log_every=1,
+    )
 
 
 def free_port() -> int:
@@ -113,7 +112,7 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     configs = {}
     for accumulation in (1, 2):
         configs[accumulation] = root / f"accumulation{accumulation}.toml"
-        configs[accumulation].write_text(CONFIG.format(steps=STEPS, accumulation=accumulation))
+        configs[accumulation].write_text(config(STEPS, accumulation))
     outs = {"one": root / "one_process", "two": root / "two_processes", "killed": root / "killed"}
     run(train_command(configs[2], store, outs["one"], 1))
     run(train_command(configs[1], store, outs["two"], 2))

@@ -30,22 +30,14 @@ from setdiff_bench.models.setdiff.set_mixer import (
     distance_bias,
     token_grid,
 )
-from tests.models.setdiff_fixtures import make_packet, make_sample, train_argv
-from tests.models.test_store_training import write_store
-
-
-def residual_model(**overrides: object) -> SetDiffModel:
-    torch.manual_seed(0)
-    config = model_config_from_dict(
-        {
-            "preset": "tiny",
-            "output_mode": "residual",
-            "skip_connections": True,
-            "vae_decoder": "full",
-            **overrides,
-        }
-    )
-    return SetDiffModel(config).eval()
+from tests.models.setdiff_fixtures import (
+    make_packet,
+    make_sample,
+    residual_model,
+    tiny_config_toml,
+    train_argv,
+    write_store,
+)
 
 
 @pytest.mark.parametrize(
@@ -327,7 +319,7 @@ def test_autoencoder_width_not_a_multiple_of_8_is_refused(
 
 def test_missing_autoencoder_is_one_clear_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     config = tmp_path / "c.toml"
-    config.write_text('[model]\npreset = "tiny"\nautoencoder = "no_such_autoencoder"\n')
+    config.write_text(tiny_config_toml(model={"preset": "tiny", "autoencoder": "no_such_autoencoder"}))
     write_store(tmp_path / "packets")
     code = main(train_argv(config, tmp_path / "packets", tmp_path / "run", "--no-progress"))
     err = capsys.readouterr().err.strip().splitlines()

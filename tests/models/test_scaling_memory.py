@@ -15,8 +15,7 @@ from setdiff_bench.models.setdiff import model as model_module
 from setdiff_bench.models.setdiff import set_mixer
 from setdiff_bench.models.setdiff.inference import enhance_packet
 from setdiff_bench.models.setdiff.set_mixer import BIAS_DISTANCE_CAP, biased_attention
-from tests.models.setdiff_fixtures import make_packet
-from tests.models.test_from_scratch import residual_model
+from tests.models.setdiff_fixtures import make_packet, residual_model
 
 
 def explicit_attention(

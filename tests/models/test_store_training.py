@@ -5,77 +5,15 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import numpy as np
 import torch
 
 from setdiff_bench.cli.main import main
 from setdiff_bench.enhancers.base import create_enhancer
 from setdiff_bench.models.setdiff.checkpoint import resolve_checkpoint
 from setdiff_bench.models.setdiff.inputs import training_set
-from setdiff_bench.packets.index import merge_index
-from setdiff_bench.packets.store import PacketHeader, PacketStore, ViewContent, write_packet
-from setdiff_bench.types import ViewSet
-from tests.models.setdiff_fixtures import UNIT_LABELS, make_sample, train_argv
-
-CONFIG = """
-[model]
-preset = "tiny"
-vae_decoder = "full"
-skip_connections = true
-
-[train]
-steps = 2
-learning_rate = 1e-3
-min_views = 3
-max_views = 4
-lpips_weight = 0.0
-validation_packets = 1
-validate_every = 2
-checkpoint_every = 2
-"""
-
-
-def contents(views: ViewSet, gt: torch.Tensor | None = None) -> list[ViewContent]:
-    items = []
-    for i, camera in enumerate(views.cameras):
-        items.append(
-            ViewContent(
-                frame=views.names[i],
-                sensor="front",
-                traversal="lane0",
-                timestamp_us=i,
-                camera=camera,
-                camera_world=camera,
-                image=views.images[i].permute(1, 2, 0).numpy(),
-                cmap=views.cmaps[i].permute(1, 2, 0).numpy(),
-                alpha=views.alphas[i, 0].numpy(),
-                gt=None if gt is None else gt[i].permute(1, 2, 0).numpy(),
-                mask=None if gt is None else np.ones(gt.shape[-2:], dtype=bool),
-                overlap_score=None if gt is not None else 1.0 - 0.1 * i,
-            )
-        )
-    return items
-
-
-def write_store(root: Path) -> None:
-    for split, seed in (("train", 0), ("test", 1)):
-        sample = make_sample(3, 3, seed=seed)
-        header = PacketHeader(
-            packet_id=f"{split}-0",
-            **UNIT_LABELS,
-            split=split,
-            scene=f"s{seed}",
-            fit_key="fit",
-            scale=1.0,
-            recipe="r",
-        )
-        write_packet(
-            root,
-            header,
-            contents(sample.packet.references),
-            contents(sample.packet.targets, sample.target_gt),
-        )
-    merge_index(root)
+from setdiff_bench.packets.store import PacketStore
+from tests.models.setdiff_fixtures import STORE_TRAIN_CONFIG as CONFIG
+from tests.models.setdiff_fixtures import UNIT_LABELS, train_argv, write_store
 
 
 def test_train_on_a_packet_store_and_enhance(tmp_path: Path) -> None:

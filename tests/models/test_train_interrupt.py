@@ -13,24 +13,20 @@ from pathlib import Path
 
 from setdiff_bench.models.setdiff.checkpoint import resolve_checkpoint
 from setdiff_bench.models.setdiff.train import checkpoint_interval
-from tests.models.setdiff_fixtures import train_argv
-from tests.models.test_store_training import write_store
+from tests.models.setdiff_fixtures import tiny_config_toml, train_argv, write_store
 
 STEPS = 40
-CONFIG = f"""
-[model]
-preset = "tiny"
-
-[train]
-steps = {STEPS}
-learning_rate = 1e-3
-min_views = 3
-max_views = 4
-lpips_weight = 0.0
-validation_packets = 0
-log_every = 1
-checkpoint_every = 500
-"""
+CONFIG = tiny_config_toml(
+    model={"preset": "tiny"},
+    steps=STEPS,
+    learning_rate=1e-3,
+    min_views=3,
+    max_views=4,
+    lpips_weight=0.0,
+    validation_packets=0,
+    log_every=1,
+    checkpoint_every=500,
+)
 
 
 def test_checkpoint_interval() -> None:

@@ -13,7 +13,8 @@ import pandas as pd
 from setdiff_bench.cli.main import main
 from setdiff_bench.io.run_layout import METRICS_FILE
 from setdiff_bench.models.setdiff.checkpoint import resolve_checkpoint
-from tests.models.test_store_training import CONFIG, write_store
+from tests.models.setdiff_fixtures import STORE_TRAIN_CONFIG as CONFIG
+from tests.models.setdiff_fixtures import write_store
 
 METRICS = ("psnr", "ssim", "lpips")
 
