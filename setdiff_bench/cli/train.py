@@ -139,6 +139,7 @@ def run(args: argparse.Namespace) -> int:
     from setdiff_bench.models.setdiff.files import LATEST_FILE
     from setdiff_bench.models.setdiff.train import train, training_device
     from setdiff_bench.models.setdiff.train_log import last_validation
+    from setdiff_bench.packets.index import NoGroundTruthError
     from setdiff_bench.packets.store import PacketStore
     from setdiff_bench.runtime.interrupts import Interrupted, stop_at_safe_point
     from setdiff_bench.types import TrainingSample
@@ -164,8 +165,15 @@ def run(args: argparse.Namespace) -> int:
     )
     validation = []
     if tc.validation_packets > 0:
-        for packet_id in list(store.packet_ids(args.validation_split))[: tc.validation_packets]:
-            gt, masks = store.load_ground_truth(packet_id)
+        # the first packets whose targets all have ground truth: a novel-trajectory packet (no ground truth,
+        # PacketStore.has_ground_truth) is skipped, not a reason to stop
+        for packet_id in store.packet_ids(args.validation_split):
+            if len(validation) == tc.validation_packets:
+                break
+            try:
+                gt, masks = store.load_ground_truth(packet_id)
+            except NoGroundTruthError:
+                continue
             validation.append(
                 TrainingSample(packet=store.load_packet(packet_id), target_gt=gt, target_masks=masks)
             )

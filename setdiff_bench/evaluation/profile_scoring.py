@@ -178,6 +178,13 @@ def score_run(
             "scoring under a profile needs the packet store the run was made on (--packets)", run
         )
     store = PacketStore(packets)
+    rows, without = _with_ground_truth(rows, store)
+    if not len(rows):
+        raise UsageError(
+            f"profile {profile.name}: every target of this run is a novel-trajectory view without ground "
+            "truth; no profile metric applies (FID / KID score them: --inception FILE)",
+            run,
+        )
     if profile.needs_dataset and data is None:
         raise UsageError(f"profile {profile.name} scores the original images: pass the dataset root (--data)")
     originals = _Originals(data) if profile.needs_dataset else None
@@ -214,6 +221,11 @@ def score_run(
         with atomic_path(out / name) as tmp:
             table.to_parquet(tmp, index=False)
     notes = _coverage_notes(profile, rows, store)
+    if without:
+        notes.append(
+            f"{without} target(s) without ground truth (novel-trajectory views) left out: no profile metric "
+            "applies to them"
+        )
     info = {
         "profile": _jsonable(asdict(profile)),
         "run": str(run.resolve()),
@@ -230,6 +242,19 @@ def score_run(
             by_scene.setdefault(str(row.scene), []).append(str(row.frame))
         write_text_atomic(out / EUVS_COMPAT_FILE, compat_report(by_scene))
     return out
+
+
+def _with_ground_truth(rows: pd.DataFrame, store: Any) -> tuple[pd.DataFrame, int]:
+    """The run's metric rows whose target has ground truth (:meth:`PacketStore.has_ground_truth`, by the
+    row's ``packet_id`` and target ``view``), and how many were left out (novel-trajectory views)."""
+    flags: dict[str, np.ndarray] = {}
+    keep = []
+    for packet_id, view in zip(rows["packet_id"], rows["view"], strict=True):
+        if packet_id not in flags:
+            flags[packet_id] = store.has_ground_truth(packet_id)
+        keep.append(bool(flags[packet_id][int(view)]))
+    mask = np.array(keep, dtype=bool)
+    return rows[mask], int((~mask).sum())
 
 
 def _coverage_notes(profile: EvaluationProfile, rows: pd.DataFrame, store: Any) -> list[str]:

@@ -48,6 +48,12 @@ TEMP_PREFIX = ".tmp-"
 ROLES = ("ref", "target")
 FILE_COLUMNS = ("image", "cmap", "gt", "mask")
 
+
+class NoGroundTruthError(PacketError):
+    """A target chosen for ground truth has none: its ``gt`` / ``mask`` columns are null (a novel-trajectory
+    view, ``prepare --trajectory``)."""
+
+
 SCHEMA = pa.schema(
     [
         ("packet_id", pa.string()),

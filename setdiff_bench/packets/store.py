@@ -50,6 +50,7 @@ from setdiff_bench.packets.index import (
     INDEX_FILE,
     PACKETS_DIR,
     TEMP_PREFIX,
+    NoGroundTruthError,
     merge_index,
     read_rows,
     write_rows,
@@ -297,13 +298,13 @@ class PacketStore:
         """``(gt (M, 3, H, W) float32 in [0, 1], masks (M, 1, H, W) bool)`` of the packet's targets.
 
         Raises:
-            PacketError: a chosen target has no ground truth (a novel-trajectory view; check
+            NoGroundTruthError: a chosen target has no ground truth (a novel-trajectory view; check
                 :meth:`has_ground_truth` first).
         """
         rows = _pick(self.rows(packet_id)[lambda r: r["role"] == "target"], targets)
         without = rows[~target_has_ground_truth(rows)]
         if len(without):
-            raise PacketError(
+            raise NoGroundTruthError(
                 f"packet {packet_id!r} target {without['frame'].iloc[0]!r} has no ground truth "
                 "(a novel-trajectory view); only metrics that need none apply to it",
                 self.root / INDEX_FILE,

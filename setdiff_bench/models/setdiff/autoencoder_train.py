@@ -70,7 +70,9 @@ class FrameSet:
 def ground_truth_frames(store: Any, split: str) -> FrameSet:
     """Every distinct ground-truth frame of ``split`` in a packet store: clean references and target GT.
 
-    Frames are deduplicated by their file's SHA-256 (references recur across packets).
+    Frames are deduplicated by their file's SHA-256 (references recur across packets).  Targets without
+    ground truth (novel-trajectory views, :meth:`PacketStore.has_ground_truth`) are left out; their
+    packets' references are recorded frames and count.
     """
     # lazy: OpenImageIO is needed only to read a store; training from frames in memory runs without it
     from setdiff_bench.io.images import read_rgb
@@ -80,6 +82,8 @@ def ground_truth_frames(store: Any, split: str) -> FrameSet:
         rows = store.rows(packet_id)
         for _, row in rows.iterrows():
             column = "image" if row["role"] == "ref" else "gt"
+            if column == "gt" and not isinstance(row["gt"], str):
+                continue  # a novel-trajectory target: no ground-truth frame
             digest = str(row[f"{column}_sha256"])
             if digest in seen:
                 continue
