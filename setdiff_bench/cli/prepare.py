@@ -15,6 +15,16 @@ by Eq. 2; the group is the trajectory (``shift-3m``) and the split ``test``.  ``
 KID (``--inception``) and names the paired metrics it skipped.  A camera leaving the scene is refused in
 one line before anything is written.
 
+``--pairs RECIPES`` writes training packets from the capture alone, instead of the protocol's groups:
+``sparse:N`` (fit on every N-th recorded frame, targets the frames between), ``underfit:F`` (the fit stopped
+at F = 0.25..0.75 of its iterations, targets the recorded frames), ``cross-camera[:CAMERA]`` (fit on one
+camera, targets the others).  Targets keep their ground truth; references are recorded frames the degraded
+fit saw, chosen by Eq. 2; the group is the recipe (``sparse4``).  With ``--fit`` the degraded fits are made
+here (``<out>/fits/<scene>/<fit_key>@<recipe>.ply``).  Example::
+
+    setdiff-bench prepare synthetic --root data/synthetic --fit --fit-iterations 2000 --out packets/pairs \
+        --split train --pairs sparse:4,underfit:0.5
+
 Fits are looked up as ``<fits>/<scene>/<fit_key>.ply`` (then ``<fits>/<scene>/fits/<fit_key>.ply``);
 fit keys per protocol: see ``setdiff_bench.packets.prepare`` (EUVS ``level1..3``, Para-Lane ``clip_0``, nuScenes
 ``first_10s``, DL3DV ``n3/n6/n9``, synthetic ``lane0``).  A rerun skips complete packets.
@@ -73,6 +83,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "file of poses; writes its packets (no ground truth, group e.g. shift+3m) instead of the "
         "protocol's groups",
     )
+    parser.add_argument(
+        "--pairs",
+        action="append",
+        metavar="RECIPES",
+        help="training-pair recipes, comma-separated: sparse[:N] (fit on every N-th recorded frame, N >= 2, "
+        "default 4), underfit[:F] (stop the fit at F = 0.25..0.75 of its iterations, default 0.5), "
+        "cross-camera[:CAMERA] (fit on one camera); writes their packets (targets with ground truth, "
+        "group e.g. sparse4) instead of the protocol's groups",
+    )
     parser.add_argument("--workers", type=int, default=1, metavar="K", help="render processes (default 1)")
     parser.add_argument(
         "--shard", default="0/1", metavar="i/n", help="process work units i, i+n, ... (default 0/1)"
@@ -130,6 +149,7 @@ def run(args: argparse.Namespace) -> int:
         groups=args.groups,
         test_scenes=args.test_scenes,
         trajectories=args.trajectories,
+        pairs=args.pairs,
     )
     print(summary.line())
     return 0

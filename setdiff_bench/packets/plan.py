@@ -39,6 +39,7 @@ from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import ProtocolError, UsageError
 from setdiff_bench.geometry import max_pairwise_distance, overlap_score_matrix, select_references
 from setdiff_bench.packets.index import packet_id
+from setdiff_bench.packets.recipes import PairRecipe, RecipeFrames
 from setdiff_bench.packets.trajectory import TrajectorySpec, check_within_bounds, novel_cameras, scene_bounds
 from setdiff_bench.protocols import GroupSpec, Protocol
 from setdiff_bench.types import Frame, PacketKey, Scene
@@ -96,6 +97,7 @@ class PacketJob(PacketKey):
     cmap_half: bool = False
     recipe: str = ""
     trajectory: str | None = None
+    pairs: str | None = None
 
 
 @dataclass(frozen=True)
@@ -373,6 +375,8 @@ def _with_recipe(job: PacketJob, protocol: Protocol, fit_sha: str, backend: str)
     }
     if job.trajectory is not None:  # only then: the recipes of packets with ground truth stay as they were
         content["trajectory"] = job.trajectory
+    if job.pairs is not None:  # likewise for training-pair recipes (packets.recipes)
+        content["pairs"] = job.pairs
     digest = hashlib.sha256(
         json.dumps(content, sort_keys=True, separators=(",", ":")).encode("utf-8")
     ).hexdigest()
@@ -531,3 +535,83 @@ def _trajectory_targets(
         )
         out.append((view, native))
     return out
+
+
+# ---------------------------------------------------------------------- training-pair recipes
+def plan_recipe_pairs(
+    protocol: Protocol,
+    scene: Scene,
+    split: str,
+    fit_key: str,
+    fit_keys: Sequence[str],
+    pairs: Sequence[tuple[PairRecipe, RecipeFrames]],
+    fit_path_for: Any,
+    *,
+    backend: str = "torch",
+    cmap_half: bool = False,
+) -> list[GroupPlan]:
+    """Plan the training-pair packets of one (scene, protocol fit key): one group per recipe
+    (:mod:`setdiff_bench.packets.recipes`).
+
+    Each recipe's degraded fit is ``<fit_key><suffix>`` (``lane0@sparse4``).  Its targets are recorded
+    frames with their ground truth and mask, cut into packets as the scene's split cuts protocol targets
+    (``packets.<split>_views`` minus the references), and each chunk gets the protocol's ``N`` references
+    chosen by Eq. 2 (:func:`_references`, the scene's ``d_max``) among the recorded frames the degraded fit
+    saw.  For ``underfit`` the fit saw every target: a chunk's own targets are left out of its candidates
+    (the clean capture of a target is never its reference), ``N`` is at most the fit frames minus one and a
+    chunk holds at most ``fit frames − N`` targets.
+
+    Args:
+        protocol: the protocol.
+        scene: the loaded scene.
+        split: the scene's split (packet and reference counts).
+        fit_key: the protocol fit key whose fit frames are the recorded frames.
+        fit_keys: every fit key of the scene's groups (group names get ``@<fit key>`` when several).
+        pairs: each recipe with its frames (:func:`~setdiff_bench.packets.recipes.recipe_frames`).
+        fit_path_for: ``callable(scene_name, fit_key) -> (Path, sha256)`` of a fit PLY.
+        backend, cmap_half: as :func:`plan_scene` (part of the recipe hash).
+    """
+    resolution = scene_resolution(protocol, scene)
+    centers = np.stack([f.camera.center for f in scene.frames])
+    d_max = max_pairwise_distance(centers)
+    center = tuple(float(v) for v in centers.mean(axis=0))
+    bound = protocol.cmap_clip * d_max if protocol.cmap_clip > 0 and d_max > 0 else None
+    plans = []
+    for recipe, frames in pairs:
+        degraded_key = f"{fit_key}{frames.fit_suffix}"
+        fit_path, fit_sha = fit_path_for(scene.name, degraded_key)
+        name = trajectory_group_name(recipe.label, fit_key, fit_keys)
+        if frames.disjoint:
+            n_ref = min(protocol.references_for(split), len(frames.fit))
+            per_packet = protocol.views_for(split) - n_ref
+        else:
+            n_ref = min(protocol.references_for(split), len(frames.fit) - 1)
+            per_packet = min(protocol.views_for(split) - n_ref, len(frames.fit) - n_ref)
+        jobs, start = [], 0
+        for index, size in enumerate(chunk_sizes(len(frames.targets), per_packet)):
+            chunk = frames.targets[start : start + size]
+            start += size
+            chosen = {f.name for f in chunk}
+            candidates = [f for f in frames.fit if frames.disjoint or f.name not in chosen]
+            job = PacketJob(
+                packet_id=packet_id(protocol.name, scene.name, name, index),
+                dataset=scene.dataset,
+                protocol=protocol.name,
+                group=name,
+                split=split,
+                scene=scene.name,
+                fit_key=degraded_key,
+                fit_path=fit_path,
+                references=_references(
+                    protocol, [f.camera for f in chunk], candidates, n_ref, d_max, resolution
+                ),
+                targets=tuple(view_job(protocol, f, resolution, target=True) for f in chunk),
+                resolution=resolution,
+                cmap_bound=bound,
+                cmap_center=center,
+                cmap_half=cmap_half,
+                pairs=recipe.label,
+            )
+            jobs.append(_with_recipe(job, protocol, fit_sha, backend))
+        plans.append(GroupPlan(scene.name, name, degraded_key, frames.fit, tuple(jobs)))
+    return plans

@@ -76,9 +76,11 @@ from setdiff_bench.packets.plan import (
     PacketJob,
     ViewJob,
     applicable_groups,
+    plan_recipe_pairs,
     plan_scene,
     plan_trajectories,
 )
+from setdiff_bench.packets.recipes import PairRecipe, RecipeFrames, parse_pairs, recipe_frames
 from setdiff_bench.packets.shards import Shard
 from setdiff_bench.packets.store import (
     PacketHeader,
@@ -167,8 +169,14 @@ class FitSource:
     def existing(self, scene: str, fit_key: str) -> Path | None:
         return next((p for p in self.candidates(scene, fit_key) if p.is_file()), None)
 
-    def ensure(self, scene: Scene, fit_key: str, fit_frames: Sequence[Frame]) -> None:
-        """Train the fit if ``--fit`` and it does not exist yet."""
+    def ensure(
+        self, scene: Scene, fit_key: str, fit_frames: Sequence[Frame], *, stop_fraction: float | None = None
+    ) -> None:
+        """Train the fit if ``--fit`` and it does not exist yet.
+
+        ``stop_fraction`` (the ``underfit`` recipe): run the schedule of the full fit but stop after
+        ``max(1, round(stop_fraction × iterations))`` iterations.
+        """
         if not self.fit or self.existing(scene.name, fit_key) is not None:
             return
 
@@ -181,7 +189,8 @@ class FitSource:
             )
         device = resolve_device(self.fit_device)
         views = load_fit_views(scene, [f.name for f in fit_frames], downscale=self.downscale)
-
+        stop = None if stop_fraction is None else max(1, round(stop_fraction * config.iterations))
+        options = {} if stop is None else {"stop_after": stop}  # only then: full fits are called as before
         fit_views_to_ply(
             scene,
             views,
@@ -191,6 +200,7 @@ class FitSource:
             checkpoint_dir=target.with_suffix(".ckpt"),
             checkpoint_every=1000,
             progress=self.progress,
+            **options,
         )
         shutil.rmtree(target.with_suffix(".ckpt"), ignore_errors=True)
         self.trained += 1
@@ -419,6 +429,7 @@ def prepare(
     groups: Sequence[str] | None = None,
     test_scenes: Sequence[str] | None = None,
     trajectories: Sequence[str] | None = None,
+    pairs: Sequence[str] | None = None,
 ) -> PrepareSummary:
     """Prepare the packets of ``dataset`` under ``protocol`` into the store ``out`` (module docstring).
 
@@ -449,6 +460,13 @@ def prepare(
             (:func:`~setdiff_bench.packets.plan.plan_trajectories`; group ``shift+3m``, split ``test``).
             A spec that does not parse, a pose file for several scenes, or a camera leaving the scene
             bounds is refused before anything is written.
+        pairs: training-pair recipes (``["sparse:4,underfit:0.5,cross-camera"]``;
+            :mod:`setdiff_bench.packets.recipes`): instead of the protocol's groups, write per recipe and
+            fit the packets whose targets are recorded frames with their ground truth, rendered from a 3DGS
+            degraded as the recipe says (fit key ``<fit_key>@<label>``, trained here with ``fit``), with
+            references chosen by Eq. 2 among the recorded frames it saw (group ``sparse4``, the scene's
+            split).  An unknown recipe, a parameter out of range, or a recipe a scene cannot follow
+            (``cross-camera`` on one camera) is refused before anything is written.
 
     Raises:
         UsageError / ProtocolError / DatasetError: bad arguments, a protocol that does not fit the
@@ -456,6 +474,9 @@ def prepare(
     """
     dataset_spec(dataset)  # an unknown key is refused with the list of known ones
     specs = parse_trajectories(trajectories or ())
+    recipes = parse_pairs(pairs or ())
+    if specs and recipes:
+        raise UsageError("give --pairs or --trajectory, not both (run prepare once for each)", "--pairs")
     if threads < 1:
         raise UsageError(f"threads must be >= 1, got {threads}", "--threads")
     if cmap_precision not in ("float32", "half"):
@@ -484,6 +505,7 @@ def prepare(
             groups=groups,
             test_scenes=test_scenes,
             trajectories=specs,
+            pairs=recipes,
         )
 
 
@@ -523,6 +545,7 @@ def _prepare(
     groups: Sequence[str] | None = None,
     test_scenes: Sequence[str] | None = None,
     trajectories: Sequence[TrajectorySpec] = (),
+    pairs: Sequence[PairRecipe] = (),
 ) -> PrepareSummary:
     started = time.perf_counter()
     spec = load_protocol(protocol or dataset)
@@ -577,6 +600,8 @@ def _prepare(
     mine = shard.select(units)
     jobs: list[PacketJob] = []
     by_name = {s.name: s for s in loaded}
+    # every recipe's frames of every unit first: a recipe a scene cannot follow stops before any fit is made
+    recipe_plan = _recipe_frames(spec, by_name, mine, pairs)
     for scene_name, fit_key in mine:
         scene = by_name[scene_name]
         groups = [g for g in applicable_groups(spec, scene) if g.fit_key == fit_key]
@@ -587,6 +612,26 @@ def _prepare(
                 f"different fit frames in scene {scene_name!r}",
                 spec.path,
             )
+        if pairs:
+            for _, frames in recipe_plan[(scene_name, fit_key)]:
+                if source.fit:
+                    source.ensure(
+                        scene, f"{fit_key}{frames.fit_suffix}", frames.fit, stop_fraction=frames.stop_fraction
+                    )
+            plans = plan_recipe_pairs(
+                spec,
+                scene,
+                assignment[scene_name],
+                fit_key,
+                [g.fit_key for g in applicable_groups(spec, scene)],
+                recipe_plan[(scene_name, fit_key)],
+                source,
+                backend=backend,
+                cmap_half=cmap_half,
+            )
+            summary.removed += _remove_outdated(out, spec, plans)
+            jobs += [job for plan in plans for job in plan.jobs]
+            continue
         if source.fit:
             source.ensure(scene, fit_key, groups[0].select(scene).fit)
         if trajectories:
@@ -629,6 +674,28 @@ def _prepare(
     summary.index_written = merge_index(out)
     summary.wall_s = time.perf_counter() - started
     return summary
+
+
+def _recipe_frames(
+    protocol: Protocol,
+    scenes: Mapping[str, Scene],
+    units: Sequence[tuple[str, str]],
+    pairs: Sequence[PairRecipe],
+) -> dict[tuple[str, str], list[tuple[PairRecipe, RecipeFrames]]]:
+    """``(scene, fit key) → [(recipe, its frames)]``: each recipe applied to the unit's recorded frames (the
+    fit frames its groups share; :func:`~setdiff_bench.packets.recipes.recipe_frames`).
+
+    Raises:
+        UsageError: a recipe the scene cannot follow (raised before anything is fitted or written).
+    """
+    out: dict[tuple[str, str], list[tuple[PairRecipe, RecipeFrames]]] = {}
+    for scene_name, fit_key in units if pairs else ():
+        scene = scenes[scene_name]
+        group = next(g for g in applicable_groups(protocol, scene) if g.fit_key == fit_key)
+        recorded = group.select(scene).fit
+        where = f"scene {scene_name!r} (fit {fit_key!r})"
+        out[(scene_name, fit_key)] = [(recipe, recipe_frames(recipe, recorded, where)) for recipe in pairs]
+    return out
 
 
 def _gaussian_centres(source: FitSource) -> Callable[[str, str], np.ndarray]:
