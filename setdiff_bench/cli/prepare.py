@@ -36,6 +36,7 @@ import argparse
 from pathlib import Path
 
 from setdiff_bench.cli import add_device_argument, add_option_argument, add_progress_argument
+from setdiff_bench.cli.declared import registry_names
 
 VERB = "prepare"
 HELP = "turn a dataset and 3DGS fits into render/ground-truth packets for a protocol"
@@ -116,7 +117,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default="float32",
         help="C-map EXR precision (float32: exact geometry; half: ~3.5x smaller files)",
     )
-    parser.add_argument("--fit-iterations", type=int, default=30_000, help="3DGS iterations with --fit")
+    parser.add_argument(
+        "--fit-iterations",
+        type=int,
+        default=None,
+        help="3DGS iterations with --fit (default 30000; with --fit-preset: the preset's schedule rescaled to them)",
+    )
+    parser.add_argument(
+        "--fit-preset",
+        choices=(*registry_names("setdiff_bench.synthetic.presets", "PRESETS"), "standard"),
+        default=None,
+        help="with --fit: the 3DGS configuration of a synthetic preset (as fit --preset), e.g. to make "
+        "--pairs fits as the synthetic scenes' own fits were made",
+    )
     add_progress_argument(parser, "--quiet")  # --quiet: the older name, hidden, kept for one release
 
 
@@ -128,6 +141,11 @@ def run(args: argparse.Namespace) -> int:
     from setdiff_bench.runtime.devices import resolve_device
 
     loader_options = dict(parse_option(text, "--loader-option") for text in args.loader_option)
+    config = None
+    if args.fit_preset is not None:
+        from setdiff_bench.cli.fit import fit_config
+
+        config = fit_config(args.fit_preset, args.fit_iterations, seed=0)
     summary = prepare(
         args.dataset,
         args.root,
@@ -144,7 +162,8 @@ def run(args: argparse.Namespace) -> int:
         threads=args.threads,
         cmap_precision=args.cmap_precision,
         loader_options=loader_options,
-        fit_iterations=args.fit_iterations,
+        fit_iterations=30_000 if args.fit_iterations is None else args.fit_iterations,
+        fit_config=config,
         progress=not args.no_progress,
         groups=args.groups,
         test_scenes=args.test_scenes,

@@ -146,6 +146,7 @@ class FitSource:
         fit: bool,
         out: Path,
         fit_iterations: int = 30_000,
+        fit_config: FitConfig | None = None,
         fit_device: str = "auto",
         progress: bool = True,
         downscale: int = 1,
@@ -156,6 +157,7 @@ class FitSource:
             )
         self.fits_dir, self.fit, self.out = fits_dir, fit, out
         self.fit_iterations, self.fit_device, self.progress = fit_iterations, fit_device, progress
+        self.fit_config = fit_config  # when given: the whole fit configuration (fit_iterations unused)
         self.downscale = downscale  # fit at the protocol's working scale ([images] downscale)
         self.trained = 0
         self._hashes: dict[Path, str] = {}
@@ -181,7 +183,9 @@ class FitSource:
             return
 
         target = self.candidates(scene.name, fit_key)[0]
-        if self.fit_iterations == FitConfig().iterations:
+        if self.fit_config is not None:
+            config = self.fit_config
+        elif self.fit_iterations == FitConfig().iterations:
             config = FitConfig()
         else:
             config = FitConfig.schedule(
@@ -423,6 +427,7 @@ def prepare(
     device: str = "auto",
     loader_options: Mapping[str, Any] | None = None,
     fit_iterations: int = 30_000,
+    fit_config: FitConfig | None = None,
     threads: int = 1,
     cmap_precision: str = "float32",
     progress: bool = True,
@@ -447,7 +452,10 @@ def prepare(
             ``workers`` for parallelism, or more threads for large CPU renders).
         backend, device: renderer (``auto``/``torch``/``gsplat``) and torch device (``auto``/``cpu``/``cuda``).
         loader_options: override the protocol's ``[loader]`` options.
-        fit_iterations: 3DGS iterations with ``fit``.
+        fit_iterations: 3DGS iterations with ``fit`` (the standard schedule compressed to them).
+        fit_config: the whole 3DGS configuration with ``fit``, in place of ``fit_iterations`` (e.g. the fit
+            of a synthetic preset, so that degraded recipe fits differ from the scene's own fit only as the
+            recipe says).
         cmap_precision: ``"float32"`` (default) or ``"half"`` C-map EXRs (see :mod:`setdiff_bench.packets.store`).
         progress: show tqdm bars.
         groups: only these protocol groups (default all), e.g. ``["holdout8"]`` of a generic capture.
@@ -499,6 +507,7 @@ def prepare(
             device=device,
             loader_options=loader_options,
             fit_iterations=fit_iterations,
+            fit_config=fit_config,
             threads=threads,
             cmap_half=cmap_precision == "half",
             progress=progress,
@@ -540,6 +549,7 @@ def _prepare(
     loader_options: Mapping[str, Any] | None,
     fit_iterations: int,
     threads: int,
+    fit_config: FitConfig | None = None,
     cmap_half: bool,
     progress: bool,
     groups: Sequence[str] | None = None,
@@ -573,6 +583,7 @@ def _prepare(
         fit=fit,
         out=out,
         fit_iterations=fit_iterations,
+        fit_config=fit_config,
         progress=progress,
         downscale=spec.images.downscale,
     )
