@@ -5,7 +5,7 @@ Examples::
     setdiff-bench prepare synthetic --root runs/demo/work/scenes --fits runs/demo/work/scenes --out runs/packets
     setdiff-bench prepare euvs --root /data/EUVS --fits fits/euvs --out packets/euvs --split test --workers 4
     setdiff-bench prepare dl3dv --root /data/DL3DV --fit --out packets/dl3dv --shard 0/8
-    setdiff-bench prepare synthetic --root runs/demo/work/scenes --fits runs/demo/work/scenes --out runs/packets \
+    setdiff-bench prepare synthetic --root runs/demo/work/scenes --fits runs/demo/work/scenes --out runs/packets \\
         --trajectory shift:-3 --trajectory shift:-6
 
 ``--trajectory SPEC`` (repeatable) writes novel-trajectory packets instead of the protocol's groups: the
@@ -22,7 +22,7 @@ camera, targets the others).  Targets keep their ground truth; references are re
 fit saw, chosen by Eq. 2; the group is the recipe (``sparse4``).  With ``--fit`` the degraded fits are made
 here (``<out>/fits/<scene>/<fit_key>@<recipe>.ply``).  Example::
 
-    setdiff-bench prepare synthetic --root data/synthetic --fit --fit-iterations 2000 --out packets/pairs \
+    setdiff-bench prepare synthetic --root data/synthetic --fit --fit-iterations 2000 --out packets/pairs \\
         --split train --pairs sparse:4,underfit:0.5
 
 Fits are looked up as ``<fits>/<scene>/<fit_key>.ply`` (then ``<fits>/<scene>/fits/<fit_key>.ply``);

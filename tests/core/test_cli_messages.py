@@ -19,10 +19,11 @@ def test_help_keeps_examples_on_their_own_lines(capsys: pytest.CaptureFixture[st
     text = capsys.readouterr().out
     lines = text.splitlines()
     examples = [line.strip() for line in lines if line.strip().startswith("setdiff-bench prepare ")]
-    assert len(examples) == 3 and all(
+    assert len(examples) >= 3 and all(
         line.startswith("    setdiff-bench prepare") for line in lines if line.strip() in examples
     )
     assert "Examples:" in text and "Examples::" not in text and "``" not in text
+    assert not any("  --" in line for line in examples)  # a continuation joined into one line, not a gap
 
 
 def test_one_error_prefix_for_usage_and_runtime_errors(
