@@ -247,6 +247,17 @@ def _run_command(
     return [*command, *_run_args(args)]
 
 
+def _store_label(packets: Path) -> str:
+    """What the tables' captions call the packet store: its protocols' names (``the synthetic streets`` for the
+    driving benchmark's ``synthetic`` protocol, as the captions always said)."""
+    from setdiff_bench.packets.store import PacketStore
+
+    protocols = sorted({str(p) for p in PacketStore(packets).index["protocol"].unique()})
+    if protocols == ["synthetic"]:
+        return "the synthetic streets"
+    return "protocol " + ", ".join(protocols)
+
+
 def _geometry(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocation: str) -> dict[str, Path]:
     from setdiff_bench.io.run_layout import METRICS_FILE
     from setdiff_bench.models.setdiff.config_io import config_toml_data, write_config_toml
@@ -295,7 +306,7 @@ def _geometry(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocati
     labels = {variant.key: variant.label for variant in variants}
     models_results = ablation.ModelResults(per_model, labels, models)
     frame = ablation.geometry_frame(models_results.means())
-    caption = "Geometric grounding ablation on the synthetic streets (paper Table 5 shape)"
+    caption = f"Geometric grounding ablation on {_store_label(args.packets)} (paper Table 5 shape)"
     commands = f"`{invocation}`, which ran:\n\n" + pipeline.commands_markdown()
     ordering = ablation.ordering_geometry(frame, models_results.per_model)
     markdown = ablation.geometry_markdown(frame, ordering, commands, caption, models_results.spread_notes())
@@ -325,7 +336,7 @@ def _setsize(args: argparse.Namespace, pipeline: Pipeline, work: Path, invocatio
     models_results = ablation.ModelResults(per_model, labels, [str(checkpoint) for checkpoint in checkpoints])
     means = models_results.means()
     frame = ablation.setsize_frame(means)
-    caption = "Set-size ablation on the synthetic streets (paper Table 6, one row per set size)"
+    caption = f"Set-size ablation on {_store_label(args.packets)} (paper Table 6, one row per set size)"
     commands = f"`{invocation}`, which ran:\n\n" + pipeline.commands_markdown()
     targets = int(next(iter(means.values()))["targets"])
     ordering = ablation.ordering_setsize(means, models_results.per_model)
