@@ -35,8 +35,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from setdiff_bench.cli import add_device_argument, add_option_argument, add_progress_argument
+from setdiff_bench.cli import add_device_argument, add_progress_argument
 from setdiff_bench.cli.declared import registry_names
+from setdiff_bench.cli.list import add_loader_option_argument, loader_options
 
 VERB = "prepare"
 HELP = "turn a dataset and 3DGS fits into render/ground-truth packets for a protocol"
@@ -105,12 +106,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="renderer (auto: gsplat on CUDA when installed, else torch)",
     )
     add_device_argument(parser, "the torch backend's device")
-    add_option_argument(
-        parser,
-        "override a loader option of the protocol (value parsed as JSON when it parses, "
-        'e.g. level=1, version="v1.0-mini")',
-        names=("--loader-option",),
-    )
+    add_loader_option_argument(parser, 'overrides the protocol\'s; e.g. -o level=1, -o version="v1.0-mini"')
     parser.add_argument(
         "--cmap-precision",
         choices=("float32", "half"),
@@ -135,12 +131,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
-    from setdiff_bench.cli.list import parse_option
     from setdiff_bench.packets.prepare import prepare
     from setdiff_bench.packets.shards import Shard
     from setdiff_bench.runtime.devices import resolve_device
 
-    loader_options = dict(parse_option(text, "--loader-option") for text in args.loader_option)
+    options = loader_options(args)
     config = None
     if args.fit_preset is not None:
         from setdiff_bench.cli.fit import fit_config
@@ -161,7 +156,7 @@ def run(args: argparse.Namespace) -> int:
         device=resolve_device(args.device),
         threads=args.threads,
         cmap_precision=args.cmap_precision,
-        loader_options=loader_options,
+        loader_options=options,
         fit_iterations=30_000 if args.fit_iterations is None else args.fit_iterations,
         fit_config=config,
         progress=not args.no_progress,

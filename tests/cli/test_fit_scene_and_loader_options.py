@@ -89,6 +89,11 @@ def test_every_spelling_reaches_the_loader(
         == 2
     )
     assert one_line(capsys) == f"setdiff-bench fit: error: {refused}"
+    packets = tmp_path / "packets"
+    prepare = ["prepare", "synthetic", "--root", str(one), "--fits", str(one), "--out", str(packets)]
+    assert main([*prepare, flag, "bogus=1", "--no-progress"]) == 2
+    assert one_line(capsys).endswith(refused)
+    assert not packets.exists()
     assert main([*listing, flag, "no_value"]) == 2
     assert one_line(capsys) == (
         "setdiff-bench list: error: -o/--loader-option: option 'no_value' must look like KEY=VALUE"
@@ -96,7 +101,7 @@ def test_every_spelling_reaches_the_loader(
     assert not out.exists()
 
 
-@pytest.mark.parametrize("verb", [["list", "scenes"], ["fit"]])
+@pytest.mark.parametrize("verb", [["list", "scenes"], ["fit"], ["prepare"]])
 def test_help_documents_one_spelling(verb: list[str], capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit):
         main([*verb, "--help"])
