@@ -50,14 +50,14 @@ def protocol_path(name_or_path: str | os.PathLike[str]) -> Path:
     candidate = Path(text)
     if candidate.suffix == ".toml" or os.sep in text or "/" in text:
         if not candidate.is_file():
-            raise ProtocolError("protocol file not found", candidate)
+            raise ProtocolError("protocol file not found", candidate, parameter="protocol")
         return candidate
     packaged = protocol_dir() / f"{text}.toml"
     if not packaged.is_file():
         raise ProtocolError(
             f"unknown protocol {text!r}; packaged: {', '.join(list_protocols())} "
             "(or pass a path to a .toml file)",
-            protocol_dir(),
+            parameter="protocol",
         )
     return packaged
 

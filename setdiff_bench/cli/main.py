@@ -1,7 +1,9 @@
 """Entry point of the ``setdiff-bench`` console script.
 
 Every :class:`~setdiff_bench.errors.SetDiffBenchError` becomes one line on stderr
-(``setdiff-bench <verb>: error: <file>: <problem>``) and exit code 2, with no traceback.  So do
+(``setdiff-bench <verb>: error: <file>: <problem>``) and exit code 2, with no traceback; an error that names
+the library parameter at fault is printed with the verb's option for it instead (``--checkpoint nope:
+checkpoint not found ...``, :func:`parameter_options`).  So do
 operating-system errors on the user's paths (``--out`` under a file, a full disk, no permission:
 ``OSError`` with its file name) and argparse usage errors (one line naming the argument, instead of
 argparse's usage block).  Set ``SETDIFF_DEBUG=1`` to see tracebacks.
@@ -149,15 +151,45 @@ def build_parser(argv: Sequence[str] | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+def command_parsers(
+    parser: argparse.ArgumentParser, args: argparse.Namespace
+) -> list[argparse.ArgumentParser]:
+    """The parsers ``args`` went through, outermost first: ``setdiff-bench weights list`` → the top parser,
+    the ``weights`` parser and the ``weights list`` sub-parser."""
+    chain = [parser]
+    while True:
+        sub = next((a for a in chain[-1]._actions if isinstance(a, argparse._SubParsersAction)), None)
+        name = getattr(args, sub.dest, None) if sub is not None else None
+        if sub is None or name not in sub.choices:
+            return chain
+        chain.append(sub.choices[name])
+
+
 def chosen_parser(parser: argparse.ArgumentParser, args: argparse.Namespace) -> argparse.ArgumentParser:
     """The innermost parser ``args`` went through: ``setdiff-bench weights list`` → the ``weights list``
     sub-parser, so that a usage error names the help that lists the right options."""
-    while True:
-        sub = next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)), None)
-        name = getattr(args, sub.dest, None) if sub is not None else None
-        if sub is None or name not in sub.choices:
-            return parser
-        parser = sub.choices[name]
+    return command_parsers(parser, args)[-1]
+
+
+def parameter_options(parser: argparse.ArgumentParser, args: argparse.Namespace) -> dict[str, str]:
+    """How the command line ``args`` came from spells each library parameter: ``{dest: option}`` for every
+    argument of the parsers it went through (``{"checkpoint": "--checkpoint", "source": "--from"}``; ``""`` for
+    a positional argument, which an error then names by its value alone), so that an error raised with
+    ``parameter="source"`` names ``--from``
+    (:meth:`~setdiff_bench.errors.SetDiffBenchError.one_line`).
+
+    A sub-command's argument wins over its verb's of the same ``dest``, a long option over a short one, and a
+    shown option over a hidden one.
+    """
+    options: dict[str, str] = {}
+    for command in reversed(command_parsers(parser, args)):
+        actions = sorted(command._actions, key=lambda action: action.help == argparse.SUPPRESS)  # shown first
+        for action in actions:
+            if action.dest in (argparse.SUPPRESS, "help") or isinstance(action, argparse._SubParsersAction):
+                continue
+            long = [option for option in action.option_strings if option.startswith("--")]
+            options.setdefault(action.dest, (long or action.option_strings or [""])[0])
+    return options
 
 
 @contextlib.contextmanager
@@ -192,7 +224,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SetDiffBenchError as error:
         if os.environ.get("SETDIFF_DEBUG"):
             raise
-        print(f"setdiff-bench {args.verb}: error: {error.one_line()}", file=sys.stderr)
+        options = parameter_options(parser, args)
+        print(f"setdiff-bench {args.verb}: error: {error.one_line(options)}", file=sys.stderr)
         return 2
     except OSError as error:  # the user's paths: --out under a file, disk full, permission denied
         if os.environ.get("SETDIFF_DEBUG"):
