@@ -4,7 +4,8 @@ A parser is built for every ``--help``, which must not import the heavy librarie
 test_help_latency.py``); the synthetic preset registries, the leaderboard's formats and the LPIPS trunks live
 in modules that import torch or pandas.  So their names are read from the modules' sources, as
 :func:`setdiff_bench.cli.main.verb_summaries` reads the verb list; ``tests/cli/test_declared_choices.py`` checks
-them against the imported modules.
+them against the imported modules.  A registry whose module imports nothing heavy (the loaders' ``DATASETS``,
+built by a comprehension that no source reader should evaluate) is imported: :func:`dataset_names`.
 """
 
 from __future__ import annotations
@@ -74,3 +75,17 @@ def registry_names(module: str, name: str) -> tuple[str, ...]:
     if not isinstance(value, ast.Dict) or not all(isinstance(key, str) for key in keys):
         raise LookupError(f"{module}.{name} is not a dict literal with string keys")
     return tuple(keys)  # type: ignore[arg-type]
+
+
+def dataset_names() -> tuple[str, ...]:
+    """The dataset keys of the loader registry (:data:`setdiff_bench.loaders.DATASETS`), in order.
+
+    ``setdiff_bench.loaders`` itself imports only the standard library, the error classes and the lazy loader
+    (each loader module is imported when its dataset is read), so it is imported here: reading the keys from
+    its source would mean evaluating the comprehension that builds the registry.
+    ``tests/cli/test_help_latency.py`` checks that ``prepare --help`` still imports nothing heavy.
+    """
+    # lazy: only the parser of a verb that offers datasets needs the registry
+    from setdiff_bench.loaders import DATASETS
+
+    return tuple(DATASETS)

@@ -36,7 +36,7 @@ import argparse
 from pathlib import Path
 
 from setdiff_bench.cli import add_device_argument, add_progress_argument
-from setdiff_bench.cli.declared import registry_names
+from setdiff_bench.cli.declared import dataset_names, registry_names
 from setdiff_bench.cli.list import add_loader_option_argument, loader_options
 
 VERB = "prepare"
@@ -45,7 +45,12 @@ DESCRIPTION = __doc__
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("dataset", help="dataset key: euvs, paralane, nuscenes, dl3dv, synthetic")
+    parser.add_argument(
+        "dataset",
+        choices=dataset_names(),
+        metavar="DATASET",
+        help="dataset key (`setdiff-bench list datasets`): %(choices)s",
+    )
     parser.add_argument("--root", required=True, type=Path, help="dataset root")
     parser.add_argument("--protocol", help="packaged protocol name or a .toml path (default: the dataset's)")
     fits = parser.add_mutually_exclusive_group(required=True)

@@ -263,7 +263,9 @@ def create_enhancer(name: str, *, optional: Mapping[str, Any] | None = None, **o
     """
     methods = available_methods()
     if name not in methods:
-        raise UsageError(f"unknown method {name!r}; available: {', '.join(sorted(methods))}", "--method")
+        raise UsageError(
+            f"unknown method {name!r}; available: {', '.join(sorted(methods))}", parameter="method"
+        )
     spec = methods[name]
     factory = spec.load_factory()
     accepted, var_kw = factory_parameters(factory)

@@ -57,7 +57,7 @@ class PrecomputedEnhancer:
     def __init__(self, source: str | Path) -> None:
         root = Path(source).expanduser()
         if not root.is_dir():
-            raise UsageError("precomputed images folder not found", root)
+            raise UsageError("precomputed images folder not found", root, parameter="source")
         if (root / MANIFEST_FILE).is_file() and (root / IMAGES_DIR).is_dir():
             root = root / IMAGES_DIR
         self.root = root.resolve()
@@ -127,5 +127,5 @@ class PrecomputedEnhancer:
 def create(source: str | None = None) -> PrecomputedEnhancer:
     """Factory of ``--method precomputed`` (``source`` is ``--from DIR``)."""
     if not source:
-        raise UsageError("method 'precomputed' needs --from DIR (a folder of enhanced images)", "--from")
+        raise UsageError("method 'precomputed' needs a folder of enhanced images", parameter="source")
     return PrecomputedEnhancer(source)

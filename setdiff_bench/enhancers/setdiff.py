@@ -159,9 +159,9 @@ def load_enhancer(
     """
     if not checkpoint:
         raise UsageError(
-            f"method {method!r} needs a trained model: pass --checkpoint CKPT "
-            "(train one with `setdiff-bench train`)",
-            "--checkpoint",
+            f"method {method!r} needs a trained model: pass a checkpoint folder, a training output folder "
+            "or a shipped model's name (train one with `setdiff-bench train`)",
+            parameter="checkpoint",
         )
     device = resolve_device(None if device is None else str(device))
     dtype = dtype or ("bfloat16" if str(device).startswith("cuda") else "float32")

@@ -296,7 +296,7 @@ def run_method(
     if settings.method not in available_methods() and enhancer is None:
         raise UsageError(
             f"unknown method {settings.method!r}; available: {', '.join(sorted(available_methods()))}",
-            "--method",
+            parameter="method",
         )
     index_sha256 = sha256_file(Path(store.root) / INDEX_FILE)
     spec = available_methods().get(settings.method)

@@ -233,7 +233,9 @@ class PacketStore:
         index_file = self.root / INDEX_FILE
         if not index_file.is_file():
             raise PacketError(
-                "no index.parquet here; create the store with `setdiff-bench prepare`", self.root
+                "no index.parquet here; create the store with `setdiff-bench prepare`",
+                self.root,
+                parameter="packets",
             )
         self.index: pd.DataFrame = read_rows(index_file).to_pandas()
         self._rows: dict[str, pd.DataFrame] = {

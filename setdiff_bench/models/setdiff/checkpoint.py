@@ -54,8 +54,10 @@ def resolve_checkpoint(path: str | os.PathLike[str]) -> Path:
         raise CheckpointError(f"'latest' names {candidate.name!r}, which has no {WEIGHTS_FILE}", latest)
     if not path.exists():
         known = ", ".join(packaged_names("enhancer")) or "none"
-        raise CheckpointError(f"checkpoint not found (shipped models: {known})", path)
-    raise CheckpointError(f"not a checkpoint: no {WEIGHTS_FILE} and no '{LATEST_FILE}' file", path)
+        raise CheckpointError(f"checkpoint not found (shipped models: {known})", path, parameter="checkpoint")
+    raise CheckpointError(
+        f"not a checkpoint: no {WEIGHTS_FILE} and no '{LATEST_FILE}' file", path, parameter="checkpoint"
+    )
 
 
 def read_config(checkpoint: str | os.PathLike[str]) -> Config:

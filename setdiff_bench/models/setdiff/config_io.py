@@ -35,7 +35,9 @@ def load_config(source: str | Path) -> Config:
             path = packaged[str(source)]
         else:
             raise UsageError(
-                f"config file not found (packaged configs: {', '.join(sorted(packaged))})", source
+                f"config file not found (packaged configs: {', '.join(sorted(packaged))})",
+                source,
+                parameter="config",
             )
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
