@@ -210,7 +210,7 @@ def test_precomputed_wrong_size_names_the_file(store: Path, identity_run: Path, 
 
 
 def test_precomputed_needs_from(store: Path, tmp_path: Path) -> None:
-    with pytest.raises(UsageError, match="needs --from DIR"):
+    with pytest.raises(UsageError, match=r"^source: method 'precomputed' needs a folder of enhanced images$"):
         run_method(store, tmp_path / "pre", RunSettings("precomputed"), progress=False)
 
 
