@@ -17,6 +17,10 @@ excludes 0, and the Markdown lists every interval and the scenes each method win
 before anything is written.  A run still being written under ``--runs`` (``run.json`` but no ``manifest.json``
 yet) is left out with one warning line naming its folder; it is refused when ``--methods`` names its method
 and no finished run has it, or when every run is unfinished.
+
+Runs scored with ``--inception`` (``run`` / ``evaluate``) add ``fid`` / ``kid`` columns to the blocks their
+``distribution.parquet`` has; novel-trajectory blocks (``prepare --trajectory``: no ground truth) show FID / KID
+only, their PSNR / SSIM / LPIPS "–" (not computed).  Tables of other runs are unchanged.
 """
 
 from __future__ import annotations
@@ -174,6 +178,7 @@ def run(args: argparse.Namespace) -> int:
         FORMATS,
         LeaderboardError,
         build_leaderboard,
+        load_distribution,
         load_runs,
         profile_rows,
         reported_for,
@@ -221,6 +226,7 @@ def run(args: argparse.Namespace) -> int:
         against=args.against,
         bootstrap=settings,
         cost=args.cost,
+        distribution=load_distribution(finished),
     )
     if args.with_reported and not any(row.source == "measured" for row in board.rows):
         found = sorted(set(images["dataset"])) if len(images) else []

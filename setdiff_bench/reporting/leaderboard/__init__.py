@@ -12,6 +12,14 @@ cell is the mean over sequences.  A method whose rows in a block miss targets th
 is refused with an error naming the method, the block and the missing frames — a mean over a subset
 is never shown.  A method with no rows at all in a block shows "–".
 
+FID / KID (issue 41): runs scored with ``--inception`` hold ``distribution.parquet`` (one row per block,
+:mod:`setdiff_bench.evaluation.distribution_scoring`); their values become ``fid`` / ``kid`` columns of the
+group blocks that have them (:func:`load_distribution`, ``build_leaderboard(distribution=)``), with a caption
+line naming the reference set and the Inception weights.  A group whose targets have no ground truth
+(novel-trajectory packets: every image metric null) is a block of its own showing FID / KID only, its image
+metrics "–" (not computed, never NaN: the Parquet has no such cell), and the pooled block leaves it out.
+Tables of runs without distribution files are unchanged.
+
 Best per column: bold, decided on the values as displayed (measured values at their metric's
 ``decimals``, e.g. PSNR 2, SSIM/LPIPS 3, warp 1; reported numbers at their printed precision), so ties
 share the bold.  Column headers, decimals and direction (``higher_is_better``, shown as ↑/↓) are read
@@ -33,7 +41,7 @@ Modules, leaves first: :mod:`.columns` (layout, blocks, each metric's header/dec
 """
 
 from setdiff_bench.protocols import Block, Layout
-from setdiff_bench.reporting.leaderboard.aggregate import build_leaderboard, scored_size
+from setdiff_bench.reporting.leaderboard.aggregate import DISTRIBUTION_METRICS, build_leaderboard, scored_size
 from setdiff_bench.reporting.leaderboard.columns import (
     ALL,
     COST,
@@ -50,6 +58,7 @@ from setdiff_bench.reporting.leaderboard.inputs import (
     UnfinishedRun,
     UnfinishedRunWarning,
     find_runs,
+    load_distribution,
     load_reported,
     load_runs,
     reported_for,
@@ -74,6 +83,7 @@ __all__ = [
     "ALL",
     "COST",
     "COST_COLUMNS",
+    "DISTRIBUTION_METRICS",
     "FORMATS",
     "LATEX_SPECIALS",
     "SECTIONS",
@@ -90,6 +100,7 @@ __all__ = [
     "find_runs",
     "higher_is_better",
     "latex_escape",
+    "load_distribution",
     "load_reported",
     "load_runs",
     "md_escape",

@@ -50,6 +50,7 @@ def build_leaderboard(
     against: str | None = None,
     bootstrap: BootstrapSettings | None = None,
     cost: bool = False,
+    distribution: pd.DataFrame | None = None,
 ) -> Leaderboard:
     """Aggregate runs (and optional reported rows) of ``dataset`` into a :class:`Leaderboard`.
 
@@ -69,9 +70,16 @@ def build_leaderboard(
             to it (:mod:`setdiff_bench.reporting.paired`; image metrics only, warp error is per sequence).
         bootstrap: how those intervals are drawn (default :class:`BootstrapSettings`).
         cost: add a "Cost" block of :data:`COST_COLUMNS` (ms per frame, peak memory) per measured method.
+        distribution: FID / KID rows (:func:`~setdiff_bench.reporting.leaderboard.inputs.load_distribution`),
+            or ``None``: every group block a measured method has a row for gets ``fid`` and ``kid`` columns
+            after its image metrics (the pooled block none: a set metric of the pooled frames is not a mean of
+            the blocks').  A group whose targets have no ground truth (every image metric null: novel
+            trajectories) gets a block of its own even where the layout pools every group, shows no image
+            metric value ("–", not computed) and is left out of the pooled block's means.
 
     Raises:
-        LeaderboardError: no rows, a metric column missing, duplicate rows, or a method missing rows.
+        LeaderboardError: no rows, a metric column missing, duplicate rows, a method missing rows, two FID / KID
+            rows for one method and block, or FID / KID computed with different Inception weights.
         UsageError: ``against`` is not a measured method of the table.
     """
     layout = layout or dataset_layout(dataset)
@@ -86,7 +94,13 @@ def build_leaderboard(
         profile=profile,
     )
     spec = get_profile(profile)
-    blocks = _blocks(layout, frame)
+    blind = _groups_without_ground_truth(frame, metric_names)
+    paired = frame[~frame["group"].isin(blind)] if blind else frame  # the rows image metrics average
+    blocks = _blocks(layout, frame, blind)
+    dist = _select_distribution(distribution, dataset, frame, split if spec.scenes == "split" else None)
+    # a block too small for FID / KID (fewer than 2 images on a side: null in every run) gets no such columns
+    valued = dist[dist[list(DISTRIBUTION_METRICS)].notna().any(axis=1)] if dist is not None else None
+    dist_groups = set(valued["group"]) if valued is not None else set()
     seq = sequences if sequences is not None and len(sequences) else None
     if seq is not None:
         seq = seq[(seq["dataset"] == dataset) & seq["method"].isin(frame["method"].unique())]
@@ -96,7 +110,15 @@ def build_leaderboard(
         if (seq is not None and m in seq.columns and len(seq))
         or (reported is not None and len(reported) and m in set(reported["metric"]))
     )
-    columns = [(b, metric_names + (seq_names if b.key == ALL else ())) for b in blocks]
+    columns = [
+        (
+            b,
+            metric_names
+            + (seq_names if b.key == ALL else ())
+            + (DISTRIBUTION_METRICS if b.key != ALL and b.key in dist_groups else ()),
+        )
+        for b in blocks
+    ]
     rows = (
         _reported_rows(reported, blocks, layout.reported_tables)
         if reported is not None and len(reported)
@@ -107,7 +129,7 @@ def build_leaderboard(
         rows.append(
             _measured_row(
                 method,
-                frame,
+                paired,
                 seq,
                 blocks,
                 metric_names,
@@ -115,13 +137,15 @@ def build_leaderboard(
                 scene_mean=spec.aggregation == "scene_mean",
             )
         )
+        if dist is not None:
+            _distribution_cells(rows[-1], dist, blocks)
     _check_complete(frame, blocks)
     if cost:
         columns.append(_cost_column(rows, frame))
     settings = bootstrap or BootstrapSettings()
     if against is not None:
         _add_differences(
-            rows, frame, dataset, against, order, blocks, metric_names, settings, spec.aggregation
+            rows, paired, dataset, against, order, blocks, metric_names, settings, spec.aggregation
         )
     filled = {key for row in rows for key, _ in row.values}
     columns = [(block, metrics) for block, metrics in columns if block.key in filled]
@@ -145,6 +169,7 @@ def build_leaderboard(
     )
     board.best = best_cells(board)
     board.notes = _notes(board, frame, seq)
+    board.notes += _distribution_notes(board, dist, blind)
     if spec.aggregation == "scene_mean":
         board.notes[0] = board.notes[0].replace(
             "Cells are means of per-image values over each block's targets",
@@ -153,16 +178,129 @@ def build_leaderboard(
     return board
 
 
-def _blocks(layout: Layout, frame: pd.DataFrame) -> list[Block]:
+def _blocks(layout: Layout, frame: pd.DataFrame, blind: frozenset[str] = frozenset()) -> list[Block]:
     """The table's blocks: the layout's (plus one per group it does not name, unless it pools every group), or
-    one per group found."""
+    one per group found.  A group without ground truth (``blind``) always gets its own block, named by its
+    group (``shift+3m``): the pooled block leaves it out."""
     groups = sorted(frame["group"].unique(), key=natural_key) if len(frame) else []
     blocks = list(layout.blocks) if layout.blocks is not None else [Block(g, g) for g in groups]
     if layout.blocks is not None and groups:
-        unknown = [g for g in groups if g not in {b.key for b in blocks}]
-        if unknown and not any(b.key == ALL for b in blocks):
-            blocks += [Block(g, g) for g in unknown]
+        pools = any(b.key == ALL for b in blocks)
+        unknown = [g for g in groups if g not in {b.key for b in blocks} and (not pools or g in blind)]
+        blocks += [Block(g, g) for g in unknown]
     return blocks
+
+
+#: The distribution metrics a block shows when its runs were scored with ``--inception`` (registry names).
+DISTRIBUTION_METRICS = ("fid", "kid")
+
+
+def _groups_without_ground_truth(frame: pd.DataFrame, metric_names: Sequence[str]) -> frozenset[str]:
+    """Groups whose every row has every image metric null: targets without ground truth (novel-trajectory
+    packets, ``prepare --trajectory``), which ``run`` leaves unscored.  A group with any value is not one."""
+    names = [m for m in metric_names if m in frame.columns]
+    if not len(frame) or not names:
+        return frozenset()
+    empty = frame[names].isna().all(axis=1).groupby(frame["group"]).all()
+    return frozenset(str(group) for group, blind in empty.items() if blind)
+
+
+def _select_distribution(
+    distribution: pd.DataFrame | None, dataset: str, frame: pd.DataFrame, split: str | None
+) -> pd.DataFrame | None:
+    """The FID / KID rows of the table's measured methods, dataset and split, one per (method, group); ``None``
+    when there are none.
+
+    Raises:
+        LeaderboardError: two rows for one method and group (two scored runs of a method), or rows computed
+            with different Inception weights (their values cannot share a column).
+    """
+    if distribution is None or not len(distribution) or not len(frame):
+        return None
+    dist = distribution[
+        (distribution["dataset"] == dataset)
+        & distribution["method"].isin(set(frame["method"]))
+        & distribution["group"].isin(set(frame["group"]))
+    ]
+    if split is not None:
+        dist = dist[dist["split"] == split]
+    if not len(dist):
+        return None
+    duplicated = dist[dist.duplicated(["method", "group"], keep=False)]
+    if len(duplicated):
+        first = duplicated.iloc[0]
+        runs = sorted(duplicated[duplicated["method"] == first["method"]]["run"].unique())
+        raise LeaderboardError(
+            f"method {first['method']!r} has FID / KID for block {first['group']!r} in {len(runs)} runs "
+            f"({', '.join(runs)}); keep one run per method"
+        )
+    weights = dist.drop_duplicates("inception_sha256")
+    if len(weights) > 1:
+        shown = ", ".join(
+            f"{str(sha)[:12] if isinstance(sha, str) else 'unrecorded'} ({run})"
+            for sha, run in weights[["inception_sha256", "run"]].itertuples(index=False)
+        )
+        raise LeaderboardError(
+            f"runs scored FID / KID with different Inception weights: {shown}; rescore them with one "
+            "--inception file (setdiff-bench evaluate RUN --inception FILE)"
+        )
+    return dist.reset_index(drop=True)
+
+
+def _distribution_cells(row: Row, dist: pd.DataFrame, blocks: Sequence[Block]) -> None:
+    """Fill ``row``'s FID / KID cells from its method's distribution rows (a null value stays out: "–");
+    the count is the block's enhanced targets."""
+    own = dist[dist["method"] == row.method].set_index("group")
+    for block in blocks:
+        if block.key == ALL or block.key not in own.index:
+            continue
+        record = own.loc[block.key]
+        for metric in DISTRIBUTION_METRICS:
+            value = record[metric]
+            if pd.isna(value):
+                continue
+            row.values[(block.key, metric)] = float(value)
+            row.decimals[(block.key, metric)] = metric_decimals(metric)
+            row.counts[(block.key, metric)] = int(record["enhanced"])
+
+
+def _distribution_notes(board: Leaderboard, dist: pd.DataFrame | None, blind: frozenset[str]) -> list[str]:
+    """The caption lines of FID / KID (what they compare, with which network) and of blocks without ground
+    truth (why their image metrics show "–")."""
+    notes = []
+    shown = {block.key for block, metrics in board.columns if set(DISTRIBUTION_METRICS) & set(metrics)}
+    if dist is not None and shown:
+        first = dist.iloc[0]
+        sha, name = first["inception_sha256"], first["inception_file"]
+        network = (name + ", " if isinstance(name, str) else "") + (
+            f"SHA-256 {sha[:12]}…" if isinstance(sha, str) else "weights not recorded"
+        )
+        notes.append(
+            "FID / KID: each block's enhanced targets against the recorded frames its packets carry as "
+            "references (each once per scene), pooled over the block's scenes; Inception-v3 pool3 features "
+            f"({network}, from distribution.json). They depend on the set sizes: compare them only within a "
+            "block."
+        )
+    shown_blind = sorted(blind & {block.key for block, _ in board.columns}, key=natural_key)
+    hidden = sorted(blind - set(shown_blind), key=natural_key)
+    if hidden:
+        notes.append(
+            f"Not in the table: {', '.join(hidden)}, whose targets have no ground truth (novel trajectories); "
+            "score the runs with --inception FILE for their FID / KID."
+        )
+    if shown_blind:
+        names = shown_blind
+        notes.append(
+            f"–: not computed. The targets of {', '.join(names)} have no ground truth (novel trajectories), "
+            "so their image metrics are null and those blocks are scored by FID / KID only"
+            + (
+                ""
+                if not any(b.key == ALL for b, _ in board.columns)
+                else "; the pooled block leaves them out"
+            )
+            + "."
+        )
+    return notes
 
 
 def _cost_column(rows: Sequence[Row], frame: pd.DataFrame) -> tuple[Block, tuple[str, ...]]:

@@ -14,6 +14,8 @@ import pandas as pd
 import pyarrow as pa
 
 from setdiff_bench.errors import UsageError
+from setdiff_bench.evaluation.distribution_scoring import COLUMNS as DISTRIBUTION_COLUMNS
+from setdiff_bench.evaluation.distribution_scoring import DISTRIBUTION_FILE, DISTRIBUTION_INFO_FILE
 from setdiff_bench.io.run_layout import MANIFEST_FILE, METRICS_FILE, RUN_FILE, SEQUENCES_FILE
 from setdiff_bench.protocols import Layout
 from setdiff_bench.reporting.leaderboard.columns import LeaderboardError, dataset_layout
@@ -123,6 +125,51 @@ def load_runs(runs: str | Path | Sequence[Path]) -> tuple[pd.DataFrame, pd.DataF
     image_frame = pd.concat(images, ignore_index=True) if images else pd.DataFrame()
     sequence_frame = pd.concat(sequences, ignore_index=True) if sequences else pd.DataFrame()
     return image_frame, sequence_frame
+
+
+def load_distribution(folders: Sequence[Path]) -> pd.DataFrame:
+    """FID / KID rows of every run folder that has them (``distribution.parquet``, written by
+    ``run`` / ``evaluate --inception``), with ``run`` (the folder) and the Inception weights the run used, read
+    from ``distribution.json`` beside it: ``inception_sha256`` and ``inception_file`` (the file name, when
+    recorded; ``None`` otherwise).  Folders without the file contribute nothing; no folder has one: an empty
+    frame with those columns.
+
+    Raises:
+        LeaderboardError: a distribution table or its ``distribution.json`` cannot be read, or lacks columns.
+    """
+    columns = [*DISTRIBUTION_COLUMNS, "run", "inception_sha256", "inception_file"]
+    frames = []
+    for folder in (Path(p) for p in folders):
+        path = folder / DISTRIBUTION_FILE
+        if not path.is_file():
+            continue
+        try:
+            table = pd.read_parquet(path)
+        except (OSError, pa.ArrowException) as error:
+            raise LeaderboardError(f"unreadable FID / KID table ({type(error).__name__})", path) from None
+        missing = [c for c in DISTRIBUTION_COLUMNS if c not in table.columns]
+        if missing:
+            raise LeaderboardError(f"FID / KID table lacks column(s) {', '.join(missing)}", path)
+        info: dict[str, object] = {}
+        info_path = folder / DISTRIBUTION_INFO_FILE
+        if info_path.is_file():
+            try:
+                info = json.loads(info_path.read_text(encoding="utf-8"))
+            except (OSError, ValueError):
+                raise LeaderboardError("unreadable FID / KID settings (not JSON)", info_path) from None
+            if not isinstance(info, dict):
+                raise LeaderboardError("FID / KID settings are not a JSON object", info_path)
+        sha, name = info.get("inception_sha256"), info.get("inception_file")
+        frames.append(
+            table[list(DISTRIBUTION_COLUMNS)].assign(
+                run=str(folder),
+                inception_sha256=sha if isinstance(sha, str) else None,
+                inception_file=name if isinstance(name, str) else None,
+            )
+        )
+    if not frames:
+        return pd.DataFrame(columns=columns)
+    return pd.concat(frames, ignore_index=True)[columns]
 
 
 def load_reported(dataset: str | None = None, tables: Iterable[str] | None = None) -> pd.DataFrame:
