@@ -199,3 +199,37 @@ def test_fid_from_different_networks_is_refused(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "different Inception weights" in err[0]
     assert not out.exists()
+
+
+def test_a_shift_block_with_ground_truth_shows_both(
+    mixed_runs: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Where the shifted frames have ground truth (the synthetic world renders any pose, as
+    benchmarks/trajectory_ranking.py does), the same shift block shows PSNR / SSIM / LPIPS beside FID / KID
+    over the same targets: here the run's null image metrics are filled with known values."""
+    _, runs = mixed_runs
+    copied = tmp_path / "runs"
+    filled: dict[str, pd.DataFrame] = {}
+    for offset, method in enumerate(METHODS):
+        shutil.copytree(runs / method, copied / method)
+        path = copied / method / "metrics.parquet"
+        metrics = pd.read_parquet(path)
+        shifted = metrics["group"].isin(GROUPS)
+        values = np.arange(shifted.sum(), dtype=np.float64)
+        metrics.loc[shifted, "psnr"] = 20.0 + offset + values
+        metrics.loc[shifted, "ssim"] = 0.5 + 0.01 * values
+        metrics.loc[shifted, "lpips"] = 0.1 + 0.001 * values
+        metrics.to_parquet(path, index=False)
+        filled[method] = metrics
+    md, _, frame = _table(copied, tmp_path / "tables", capsys)
+    assert "–: not computed" not in md and not frame["value"].isna().any()
+    for method in METHODS:
+        dist = pd.read_parquet(copied / method / "distribution.parquet").set_index("group")
+        for group in GROUPS:
+            cells = frame[(frame["method"] == method) & (frame["block"] == group)].set_index("metric")
+            assert set(cells.index) == {*PAIRED, "fid", "kid"}
+            rows = filled[method][filled[method]["group"] == group]
+            for metric in PAIRED:
+                assert cells.loc[metric, "value"] == pytest.approx(float(rows[metric].mean()), rel=1e-12)
+            assert cells.loc["fid", "value"] == dist.loc[group, "fid"]
+            assert cells.loc["psnr", "count"] == cells.loc["fid", "count"] == len(rows)
