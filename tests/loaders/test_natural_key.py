@@ -22,6 +22,7 @@ def test_zero_padding_ties_break_on_the_text() -> None:
 
 
 def test_leaderboard_and_grids_use_the_loaders_key() -> None:
-    from setdiff_bench.reporting import grids, leaderboard
+    from setdiff_bench.reporting import grids
+    from setdiff_bench.reporting.leaderboard import aggregate
 
-    assert leaderboard.natural_key is natural_key and grids.natural_key is natural_key
+    assert aggregate.natural_key is natural_key and grids.natural_key is natural_key
