@@ -26,12 +26,13 @@ from typing import Any
 import pandas as pd
 
 from setdiff_bench.io.run_layout import METRICS_FILE
+from setdiff_bench.pipeline.presets import DEMO_BENCHMARKS
 from setdiff_bench.reporting.bootstrap import BootstrapSettings
 from setdiff_bench.reporting.paired import pair_targets, paired_differences
 
 METRICS = ("psnr", "ssim", "lpips")
-#: The group each benchmark's verdict is taken on (pipeline.presets.DEMO_BENCHMARKS).
-VERDICT_GROUPS = {"driving": "lane+2", "sparse": "n3"}
+#: The group each benchmark's verdict is taken on, as the demo declares it.
+VERDICT_GROUPS = {name: benchmark.verdict_group for name, benchmark in DEMO_BENCHMARKS.items()}
 
 
 def read_run(folder: Path) -> pd.DataFrame:

@@ -15,23 +15,18 @@ import torch
 from setdiff_bench.errors import WeightsError
 from setdiff_bench.metrics.inception import FIDInceptionV3, inception_features, load_inception
 from setdiff_bench.runtime.threads import torch_threads
+from tests.metrics.inception_fixtures import random_inception, save_inception
 
 
 @pytest.fixture(scope="module")
 def random_weights(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, FIDInceptionV3]:
-    with torch_threads(1):
-        torch.manual_seed(0)
-        model = FIDInceptionV3().eval()
-        for parameter in model.parameters():  # He-initialised: the default gives pool3 features of ~1e-7
-            if parameter.dim() == 4:
-                torch.nn.init.kaiming_normal_(parameter, nonlinearity="relu")
+    model = random_inception()
+    with torch_threads(1), torch.no_grad():
         for module in model.modules():  # non-trivial batch-norm statistics, so loading them is tested
             if isinstance(module, torch.nn.BatchNorm2d):
                 module.running_mean.uniform_(-0.1, 0.1)
                 module.running_var.uniform_(0.5, 1.5)
-        path = tmp_path_factory.mktemp("inception") / "pt_inception-2015-12-05-6726825d.pth"
-        torch.save(model.state_dict(), path)
-    return path, model
+    return save_inception(model, tmp_path_factory.mktemp("inception")), model
 
 
 def test_architecture_has_torchvisions_inception3_parameter_count() -> None:

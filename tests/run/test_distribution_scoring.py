@@ -27,6 +27,7 @@ from setdiff_bench.evaluation.distribution_scoring import (
 )
 from setdiff_bench.metrics.inception import FIDInceptionV3
 from setdiff_bench.runtime.threads import torch_threads
+from tests.metrics.inception_fixtures import random_inception, save_inception
 
 
 class ChannelMeans(torch.nn.Module):
@@ -94,18 +95,8 @@ def test_blocks_score_against_the_recorded_frames(store: Path, identity_run: Pat
 
 @pytest.fixture(scope="module")
 def inception_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A random-weight FID Inception-v3 in pytorch-fid's format.  The convolutions are He-initialised (as in
-    ``tests/trajectory/conftest.py``): with the default initialisation the pool3 features are ~1e-7 and every
-    FID ~1e-15, so a value check would pass for any set."""
-    with torch_threads(1):
-        torch.manual_seed(0)
-        model = FIDInceptionV3()
-        for parameter in model.parameters():
-            if parameter.dim() == 4:
-                torch.nn.init.kaiming_normal_(parameter, nonlinearity="relu")
-        path = tmp_path_factory.mktemp("inception") / "pt_inception-2015-12-05-6726825d.pth"
-        torch.save(model.state_dict(), path)
-    return path
+    """A random-weight FID Inception-v3 in pytorch-fid's format (:mod:`tests.metrics.inception_fixtures`)."""
+    return save_inception(random_inception(), tmp_path_factory.mktemp("inception"))
 
 
 def _pixels(path: Path) -> torch.Tensor:

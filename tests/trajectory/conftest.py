@@ -7,11 +7,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-import torch
 
-from setdiff_bench.metrics.inception import FIDInceptionV3
 from setdiff_bench.packets.prepare import prepare
 from setdiff_bench.runtime.threads import torch_threads
+from tests.metrics.inception_fixtures import random_inception, save_inception
 from tests.packets.packet_fixtures import StreetScene, write_scene
 
 #: The trajectories of the tests: 3 m and 6 m to the left of lane 0 (``shift`` is metres to the right).
@@ -39,15 +38,5 @@ def shifted_store(street: tuple[Path, StreetScene], tmp_path_factory: pytest.Tem
 
 @pytest.fixture(scope="package")
 def inception_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A random-weight FID Inception-v3 state dict (pytorch-fid's keys and shapes).  The convolutions are
-    He-initialised: with the module's default initialisation the pool3 features of these images are ~1e-7
-    and every FID ~1e-15, which would make any comparison of values vacuous."""
-    with torch_threads(1):
-        torch.manual_seed(0)
-        model = FIDInceptionV3()
-        for parameter in model.parameters():
-            if parameter.dim() == 4:
-                torch.nn.init.kaiming_normal_(parameter, nonlinearity="relu")
-        path = tmp_path_factory.mktemp("inception") / "pt_inception-2015-12-05-6726825d.pth"
-        torch.save(model.state_dict(), path)
-    return path
+    """A random-weight FID Inception-v3 in pytorch-fid's format (:mod:`tests.metrics.inception_fixtures`)."""
+    return save_inception(random_inception(), tmp_path_factory.mktemp("inception"))
