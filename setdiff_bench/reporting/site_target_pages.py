@@ -1,0 +1,121 @@
+"""The report site's target pages (``targets/<target>.html``) and their pictures
+(``images/<target>/*.png``): render, each method and ground truth side by side, a before/after slider per
+method, error maps |image − GT| on one scale, the target's metrics and gains, and its sequence's videos."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+from setdiff_bench.io.images import write_png
+from setdiff_bench.reporting.leaderboard import metric_arrow, metric_decimals, metric_header
+from setdiff_bench.reporting.site_html import (
+    SLIDER_SCRIPT,
+    cell_class,
+    esc,
+    number,
+    page,
+    signed,
+    video_players,
+)
+from setdiff_bench.reporting.site_targets import TargetRecord, target_gain
+from setdiff_bench.reporting.targets import ERROR_MAP_FULL_SCALE, TargetImages, error_map
+from setdiff_bench.reporting.video import VideoRecord, slug
+
+
+def target_page(
+    record: TargetRecord,
+    methods: Sequence[str],
+    metrics: Sequence[str],
+    baseline: str | None,
+    *,
+    previous: TargetRecord | None,
+    following: TargetRecord | None,
+    command: str | None,
+    videos: Sequence[VideoRecord] = (),
+) -> str:
+    """The page of one target: pictures, sliders, error maps, metrics (images under ``../images``) and the
+    ``videos`` of its camera sequence (under ``../videos``)."""
+    folder = f"../images/{record.slug}"
+    shown = [m for m in methods if m != baseline]
+    render_label = f"3DGS render (= {baseline})" if baseline in record.values else "3DGS render"
+
+    def figure(src: str, caption: str) -> str:
+        return f'<figure><img src="{folder}/{src}" alt="{esc(caption)}"><figcaption>{esc(caption)}</figcaption></figure>'
+
+    def psnr_of(method: str) -> str:
+        value = record.values.get(method, {}).get(metrics[0]) if metrics else None
+        return (
+            f" — {metric_header(metrics[0])} {value:.{metric_decimals(metrics[0])}f}"
+            if value is not None
+            else ""
+        )
+
+    pictures = (
+        figure("render.png", render_label + (psnr_of(baseline) if baseline else ""))
+        + "".join(figure(f"{slug(m)}.png", m + psnr_of(m)) for m in shown)
+        + figure("gt.png", "ground truth")
+    )
+    errors = figure("render.err.png", "|render − GT|") + "".join(
+        figure(f"{slug(m)}.err.png", f"|{m} − GT|") for m in shown
+    )
+    sliders = "".join(
+        f'<div class="cmpwrap"><div>render ◀ ▶ {esc(m)}</div><div class="cmp" data-method="{esc(m)}">'
+        f'<img class="after" src="{folder}/{slug(m)}.png" alt="{esc(m)}">'
+        f'<img class="before" src="{folder}/render.png" alt="render">'
+        f'<input type="range" min="0" max="100" value="50" aria-label="render / {esc(m)}"></div></div>'
+        for m in shown
+    )
+    head = "".join(f"<th>{esc(metric_header(m))}{esc(metric_arrow(m, False))}</th>" for m in metrics)
+    gains = "".join(f"<th>{esc(metric_header(m))} gain</th>" for m in metrics) if baseline else ""
+    rows = []
+    for method in [m for m in methods if m in record.values]:
+        values = record.values[method]
+        cells = "".join(
+            f"<td>{number(values.get(m, float('nan')), metric_decimals(m))}</td>" for m in metrics
+        )
+        if baseline:
+            for m in metrics:
+                value = target_gain(record, method, m, baseline)
+                cells += f"<td{cell_class(value)}>{signed(value, metric_decimals(m))}</td>"
+        rows.append(f'<tr><td class="l">{esc(method)}</td>{cells}</tr>')
+    nav = " ".join(
+        f'<a href="{r.slug}.html">{label}</a>'
+        for r, label in ((previous, "◀ previous"), (following, "next ▶"))
+        if r is not None
+    )
+    body = (
+        f"<p>{nav} · dataset {esc(record.dataset)} · packet {esc(record.key.packet_id)} target "
+        f'{record.key.view}</p><div class="strip">{pictures}</div>'
+        f'<h2>Before / after</h2><p class="note">Drag a slider: the render on the left of it, the method\'s '
+        f"output on the right.</p>{sliders}"
+        f'<h2>Error maps</h2><p class="note">Mean absolute RGB error against the ground truth; black = '
+        f"none, brightest = {ERROR_MAP_FULL_SCALE:g} (on a 0–1 scale) or more, the same scale in every map."
+        f'</p><div class="strip">{errors}</div>'
+        f'<h2>Metrics</h2><table><thead><tr><th class="l">Method</th>{head}{gains}</tr></thead>'
+        f"<tbody>{''.join(rows)}</tbody></table>"
+    )
+    if videos:
+        position = videos[0].sequence.targets.index(record.key) + 1
+        body += (
+            f"<h2>Its sequence: {esc(videos[0].sequence.title)}</h2><p class='note'>This target is frame "
+            f"{position} of {len(videos[0].sequence.targets)}; render | method | ground truth.</p>"
+            + video_players(videos, "../videos/")
+        )
+    title = f"{record.scene} / {record.group} / {record.frame}"
+    return page(title, body, root="../", script=SLIDER_SCRIPT, command=command)
+
+
+def write_target_images(
+    images: TargetImages, record: TargetRecord, methods: Sequence[str], folder: Path
+) -> None:
+    """The pictures of one target page: render, each method, ground truth, and their error maps."""
+    folder.mkdir(parents=True, exist_ok=True)
+    render, truth = images.render(record.key), images.ground_truth(record.key)
+    write_png(folder / "render.png", render, atomic=False)
+    write_png(folder / "gt.png", truth, atomic=False)
+    write_png(folder / "render.err.png", error_map(render, truth), atomic=False)
+    for method in methods:
+        output = images.output(method, record.key)
+        write_png(folder / f"{slug(method)}.png", output, atomic=False)
+        write_png(folder / f"{slug(method)}.err.png", error_map(output, truth), atomic=False)
