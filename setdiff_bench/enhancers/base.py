@@ -36,8 +36,43 @@ from setdiff_bench.runtime.lazy import load_attribute
 from setdiff_bench.types import Packet, TargetRef
 
 ENTRY_POINT_GROUP = "setdiff_bench.enhancers"
-#: Command-line spelling of factory options whose flag differs from ``--<option-name>``.
-OPTION_FLAGS = {"source": "--from"}
+
+
+class MethodOptionError(UsageError):
+    """A method was given options its factory does not take.
+
+    The message names each option as the caller spells it: a Python caller reads the factory's keywords
+    (``method 'identity' does not take source (it takes: no options)``); the command line, which passes
+    the verb's ``{dest: option}`` spelling to :meth:`one_line`, reads its flags
+    (``--method: method 'identity' does not take --from (it takes: no options)``), and a key that is no
+    flag of the verb (given with ``-o key=value``) by its name.
+
+    Args:
+        method: the registry key of the method.
+        unknown: the options given that the factory does not take, sorted.
+        accepted: the options the factory takes, sorted.
+    """
+
+    def __init__(self, method: str, unknown: Sequence[str], accepted: Sequence[str]) -> None:
+        self.method = method
+        self.unknown = tuple(unknown)
+        self.accepted = tuple(accepted)
+        super().__init__(self.describe(None), parameter="method")
+
+    def describe(self, options: Mapping[str, str] | None) -> str:
+        """The problem with each option spelled by ``options`` (``{dest: flag}``) where it has one."""
+
+        def spell(key: str) -> str:
+            return (options or {}).get(key) or key
+
+        takes = ", ".join(spell(key) for key in self.accepted) or "no options"
+        return f"method {self.method!r} does not take {', '.join(spell(k) for k in self.unknown)} (it takes: {takes})"
+
+    def one_line(self, options: Mapping[str, str] | None = None) -> str:
+        """``where: problem`` as :meth:`SetDiffBenchError.one_line`, the options spelled by ``options``."""
+        where = self.where(options)
+        problem = self.describe(options)
+        return f"{where}: {problem}" if where else problem
 
 
 class RegistryWarning(UserWarning):
@@ -258,8 +293,8 @@ def create_enhancer(name: str, *, optional: Mapping[str, Any] | None = None, **o
             ``None`` values are dropped, the rest update the spec's default options.
 
     Raises:
-        UsageError: unknown method, an option the method does not take, or a factory that does not
-            return an :class:`Enhancer`.
+        UsageError: unknown method, an option the method does not take (:class:`MethodOptionError`), or a
+            factory that does not return an :class:`Enhancer`.
     """
     methods = available_methods()
     if name not in methods:
@@ -272,12 +307,7 @@ def create_enhancer(name: str, *, optional: Mapping[str, Any] | None = None, **o
     given = {k: v for k, v in options.items() if v is not None}
     unknown = sorted(k for k in given if k not in accepted and not var_kw)
     if unknown:
-        flags = ", ".join(OPTION_FLAGS.get(k, f"--{k.replace('_', '-')}") for k in unknown)
-        takes = (
-            ", ".join(OPTION_FLAGS.get(k, f"--{k.replace('_', '-')}") for k in sorted(accepted))
-            or "no options"
-        )
-        raise UsageError(f"method {name!r} does not take {flags} (it takes: {takes})", "--method")
+        raise MethodOptionError(name, unknown, sorted(accepted))
     extra = {k: v for k, v in (optional or {}).items() if v is not None and (k in accepted or var_kw)}
     merged = {**spec.options, **extra, **given}
     enhancer = factory(**merged)

@@ -101,6 +101,15 @@ CASES: list[tuple[list[str], str]] = [
         "setdiff-bench run: error: --from nowhere: precomputed images folder not found",
     ),
     (
+        ["run", "--method", "identity", "--from", "x", "--packets", "{store}", "--out", "out"],
+        "setdiff-bench run: error: --method: method 'identity' does not take --from (it takes: no options)",
+    ),
+    (
+        ["run", "--method", "reproject", "-o", "nope=1", "--packets", "{store}", "--out", "out"],
+        "setdiff-bench run: error: --method: method 'reproject' does not take nope (it takes: "
+        "alpha_threshold, --device, min_weight, surface, tolerance)",
+    ),
+    (
         ["run", "--method", "identity", "--packets", "nostore", "--out", "out"],
         f"setdiff-bench run: error: --packets nostore: {NO_STORE}",
     ),
@@ -176,6 +185,17 @@ PYTHON_CASES: list[tuple[Callable[[], object], str, str]] = [
         lambda: create_enhancer("nope"),
         "method",
         f"method: unknown method 'nope'; available: {METHODS}",
+    ),
+    (
+        lambda: create_enhancer("identity", source="x"),
+        "method",
+        "method: method 'identity' does not take source (it takes: no options)",
+    ),
+    (
+        lambda: create_enhancer("reproject", nope=1),
+        "method",
+        "method: method 'reproject' does not take nope (it takes: alpha_threshold, device, min_weight, surface, "
+        "tolerance)",
     ),
     (lambda: PacketStore("nostore"), "packets", f"packets='nostore': {NO_STORE}"),
     (

@@ -63,7 +63,9 @@ def test_identity_returns_the_render() -> None:
 def test_unknown_method_and_options_are_one_line_errors() -> None:
     with pytest.raises(UsageError, match="unknown method 'nope'; available: difix, identity"):
         create_enhancer("nope")
-    with pytest.raises(UsageError, match=r"method 'identity' does not take --from \(it takes: no options\)"):
+    with pytest.raises(
+        UsageError, match=r"^method: method .identity. does not take source \(it takes: no options\)$"
+    ):
         create_enhancer("identity", source="x")
     assert isinstance(create_enhancer("identity", optional={"device": "cuda"}), IdentityEnhancer)
 

@@ -162,7 +162,7 @@ def test_registry_options_and_validation() -> None:
     assert enhancer.options["tolerance"] == 0.1 and enhancer.options["device"] == "cpu"
     with pytest.raises(UsageError, match="tolerance"):
         create_enhancer("reproject", tolerance=-1.0)
-    with pytest.raises(UsageError, match="does not take --checkpoint"):
+    with pytest.raises(UsageError, match="does not take checkpoint "):
         create_enhancer("reproject", checkpoint="x")
 
 
