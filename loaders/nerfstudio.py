@@ -39,7 +39,7 @@ from typing import Any, Literal
 import numpy as np
 
 from setdiff_bench.cameras import Camera, Distortion, check_rotation, float_errors_raised, intrinsics_matrix
-from setdiff_bench.errors import CameraError, DatasetError
+from setdiff_bench.errors import CameraError, DatasetError, DatasetWarning
 from setdiff_bench.io.paths import resolve_inside
 from setdiff_bench.types import Frame, Scene
 
@@ -162,7 +162,9 @@ def read_transforms(
         if missing == "error" or not out:
             hint = "; pass -o missing=skip to leave them out" if missing == "error" else ""
             raise DatasetError(f"{counted} (first: {absent[0]}){hint}", transforms)
-        warnings.warn(f"{transforms}: {counted}; skipped (first: {absent[0].name})", stacklevel=2)
+        warnings.warn(
+            f"{transforms}: {counted}; skipped (first: {absent[0].name})", DatasetWarning, stacklevel=2
+        )
     return out
 
 

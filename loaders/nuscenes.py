@@ -40,7 +40,7 @@ from pathlib import Path
 from typing import Any
 
 from setdiff_bench.cameras import Camera, numeric_array, rigid_from_quaternion
-from setdiff_bench.errors import DatasetError, ImageError
+from setdiff_bench.errors import DatasetError, DatasetWarning, ImageError
 from setdiff_bench.io.paths import resolve_inside
 from setdiff_bench.types import Frame, Scene
 
@@ -197,6 +197,7 @@ class _Table:
             warnings.warn(
                 f"{path}: {rounded} {name} {fields} values are fractional microseconds; "
                 "rounded to the nearest microsecond",
+                DatasetWarning,
                 stacklevel=2,
             )
         return cls(name, path, rows)

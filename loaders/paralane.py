@@ -42,7 +42,7 @@ from typing import Literal
 import numpy as np
 
 from setdiff_bench.cameras import rigid_from_quaternion
-from setdiff_bench.errors import DatasetError
+from setdiff_bench.errors import DatasetError, DatasetWarning
 from setdiff_bench.io.paths import resolve_inside
 from setdiff_bench.types import Frame, Scene
 
@@ -207,6 +207,7 @@ def _resolve_images(clip_dir: Path, names: list[str], source: Path) -> dict[str,
     warnings.warn(
         f"{source}: image names do not match images/<timestamp>/{SENSOR_FILE}; pairing the "
         f"{len(names)} images with the timestamp folders by sorted order",
+        DatasetWarning,
         stacklevel=3,
     )
     return {name: folder / SENSOR_FILE for name, folder in zip(sorted(names, key=natural_key), folders)}

@@ -129,3 +129,17 @@ def key_mismatch(expected: Iterable[str], found: Iterable[str], examples: int = 
         f"{len(missing)} missing (e.g. {missing[:examples]}), "
         f"{len(unexpected)} unexpected (e.g. {unexpected[:examples]})"
     )
+
+
+class SetDiffBenchWarning(UserWarning):
+    """A toolkit warning: the work goes on, but the user should know.  The CLI shows each as one line
+    ``setdiff-bench <verb>: warning: <message>`` on stderr (:func:`setdiff_bench.cli.main.one_line_warnings`)."""
+
+
+class DatasetWarning(SetDiffBenchWarning):
+    """A dataset on disk is read with a repair: frames skipped, values rounded, files paired by order."""
+
+
+class FallbackWarning(SetDiffBenchWarning):
+    """A slower or weaker path is taken because the preferred one is unavailable (a native library, a
+    compiler, enough triangulated points, gradient statistics)."""

@@ -35,6 +35,7 @@ from typing import ClassVar
 
 import torch
 
+from setdiff_bench.errors import FallbackWarning
 from setdiff_bench.gaussians.backends.torch_ref import quaternion_to_rotation
 from setdiff_bench.gaussians.optim import GaussianParameters
 
@@ -200,6 +201,7 @@ class DensificationStrategy:
                 warnings.warn(
                     "densification found no view-space gradient statistics (the render backend's "
                     "meta['means2d'] had no .grad); no Gaussians were added",
+                    FallbackWarning,
                     stacklevel=2,
                 )
                 state.warned_no_grad = True

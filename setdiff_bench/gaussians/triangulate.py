@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 
 from setdiff_bench.cameras import matrix_to_quaternion
-from setdiff_bench.errors import DatasetError, UsageError
+from setdiff_bench.errors import DatasetError, FallbackWarning, UsageError
 from setdiff_bench.gaussians.fit_data import FitView
 from setdiff_bench.types import Scene
 
@@ -127,7 +127,9 @@ def initial_points(
                 scene.root,
             )
         warnings.warn(
-            f"{scene.root}: triangulation gave {len(xyz)} points; starting from random points", stacklevel=2
+            f"{scene.root}: triangulation gave {len(xyz)} points; starting from random points",
+            FallbackWarning,
+            stacklevel=2,
         )
         return None, None
     return xyz, rgb

@@ -35,7 +35,7 @@ from typing import Any
 
 import torch
 
-from setdiff_bench.errors import UsageError
+from setdiff_bench.errors import FallbackWarning, UsageError
 from setdiff_bench.gaussians.backends import torch_ref
 
 SOURCE = Path(__file__).with_name("cpu_rasterizer.cpp")
@@ -98,6 +98,7 @@ def load() -> ctypes.CDLL | None:
                 _build_error = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
                 warnings.warn(
                     f"native CPU rasteriser unavailable ({_build_error}); using the pure-PyTorch one",
+                    FallbackWarning,
                     stacklevel=2,
                 )
     return _library

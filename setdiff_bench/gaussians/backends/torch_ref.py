@@ -27,6 +27,8 @@ from dataclasses import dataclass
 
 import torch
 
+from setdiff_bench.errors import FallbackWarning
+
 ALPHA_MAX = 0.99
 ALPHA_MIN = 1.0 / 255.0
 TRANSMITTANCE_MIN = 1e-4
@@ -355,6 +357,10 @@ def _chunk_step_function(work: int) -> Callable[..., tuple[torch.Tensor, torch.T
         try:
             _COMPILED_STEP = torch.compile(composite_chunk, dynamic=True)
         except Exception as exc:  # torch.compile unsupported on this platform
-            warnings.warn(f"torch.compile unavailable ({exc}); using the eager rasteriser", stacklevel=2)
+            warnings.warn(
+                f"torch.compile unavailable ({exc}); using the eager rasteriser",
+                FallbackWarning,
+                stacklevel=2,
+            )
             _COMPILED_STEP = composite_chunk
     return _COMPILED_STEP
