@@ -33,15 +33,52 @@ fit keys per protocol: see ``setdiff_bench.packets.prepare`` (EUVS ``level1..3``
 from __future__ import annotations
 
 import argparse
+import ast
 from pathlib import Path
+from typing import Any
 
 from setdiff_bench.cli import add_device_argument, add_progress_argument
-from setdiff_bench.cli.declared import dataset_names, registry_names
+from setdiff_bench.cli.declared import dataset_names, module_source, registry_names
 from setdiff_bench.cli.list import add_loader_option_argument, loader_options
 
 VERB = "prepare"
 HELP = "turn a dataset and 3DGS fits into render/ground-truth packets for a protocol"
 DESCRIPTION = __doc__
+#: Where the 3DGS fit configuration is declared: ``--fit-iterations``' default is its ``iterations`` field.
+FIT_CONFIG = ("setdiff_bench.gaussians.fit", "FitConfig")
+
+
+def declared_field_default(module: str, cls: str, name: str) -> Any:
+    """The literal default of field ``name`` of the class ``cls`` defined in ``module`` (or in the module that
+    ``module`` imports it from), read from the sources without importing them: ``--help`` may not load torch,
+    which :mod:`setdiff_bench.gaussians.fit` imports (:mod:`setdiff_bench.cli.declared`).
+
+    Raises:
+        LookupError: no such class or field, or a default that is not a literal.
+    """
+    tree = ast.parse(module_source(module).read_text(encoding="utf-8"))
+    for node in tree.body:
+        if isinstance(node, ast.ClassDef) and node.name == cls:
+            for item in node.body:
+                if (
+                    isinstance(item, ast.AnnAssign)
+                    and isinstance(item.target, ast.Name)
+                    and item.target.id == name
+                    and item.value is not None
+                ):
+                    try:
+                        return ast.literal_eval(item.value)
+                    except ValueError:
+                        raise LookupError(f"{module}.{cls}.{name}'s default is not a literal") from None
+            raise LookupError(f"{module}.{cls} declares no field {name} with a default")
+        if (
+            isinstance(node, ast.ImportFrom)
+            and node.module
+            and node.level == 0
+            and any(alias.name == cls and alias.asname in (None, cls) for alias in node.names)
+        ):
+            return declared_field_default(node.module, cls, name)  # a re-export: follow it
+    raise LookupError(f"{module} defines no class {cls}")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -122,7 +159,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--fit-iterations",
         type=int,
         default=None,
-        help="3DGS iterations with --fit (default 30000; with --fit-preset: the preset's schedule rescaled to them)",
+        help=f"3DGS iterations with --fit (default {declared_field_default(*FIT_CONFIG, 'iterations')}; "
+        "with --fit-preset: the preset's schedule rescaled to them)",
     )
     parser.add_argument(
         "--fit-preset",
@@ -136,7 +174,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
-    from setdiff_bench.packets.prepare import prepare
+    from setdiff_bench.packets.fits import DEFAULT_FIT_ITERATIONS
+    from setdiff_bench.packets.prepare import PrepareSettings, prepare
     from setdiff_bench.packets.shards import Shard
     from setdiff_bench.runtime.devices import resolve_device
 
@@ -146,10 +185,7 @@ def run(args: argparse.Namespace) -> int:
         from setdiff_bench.cli.fit import fit_config
 
         config = fit_config(args.fit_preset, args.fit_iterations, seed=0)
-    summary = prepare(
-        args.dataset,
-        args.root,
-        args.out,
+    settings = PrepareSettings(
         protocol=args.protocol,
         fits=args.fits,
         fit=args.fit,
@@ -162,7 +198,7 @@ def run(args: argparse.Namespace) -> int:
         threads=args.threads,
         cmap_precision=args.cmap_precision,
         loader_options=options,
-        fit_iterations=30_000 if args.fit_iterations is None else args.fit_iterations,
+        fit_iterations=DEFAULT_FIT_ITERATIONS if args.fit_iterations is None else args.fit_iterations,
         fit_config=config,
         progress=not args.no_progress,
         groups=args.groups,
@@ -170,5 +206,6 @@ def run(args: argparse.Namespace) -> int:
         trajectories=args.trajectories,
         pairs=args.pairs,
     )
+    summary = prepare(args.dataset, args.root, args.out, settings)
     print(summary.line())
     return 0

@@ -8,7 +8,7 @@ import numpy as np
 
 from setdiff_bench.cameras import Camera, Distortion
 from setdiff_bench.packets.plan import Crop, ViewJob
-from setdiff_bench.packets.prepare import _capture, _mask
+from setdiff_bench.packets.worker import _capture, _mask
 
 WIDTH, HEIGHT = 160, 120
 K = np.array([[100.0, 0.0, 80.0], [0.0, 100.0, 60.0], [0.0, 0.0, 1.0]])

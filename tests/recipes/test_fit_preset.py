@@ -43,17 +43,17 @@ def test_the_protocol_fit_made_by_prepare_is_the_generators_own(world: Path, tmp
 def test_underfit_with_a_preset_stops_its_schedule(
     world: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    import setdiff_bench.packets.prepare as prepare_module
+    import setdiff_bench.packets.fits as fits_module
     from setdiff_bench.synthetic.presets import get_preset
 
     seen = []
-    fit = prepare_module.fit_views_to_ply
+    fit = fits_module.fit_views_to_ply
 
     def spy(scene, views, config, out, **kwargs):
         seen.append((config, kwargs.get("stop_after")))
         return fit(scene, views, config, out, **kwargs)
 
-    monkeypatch.setattr(prepare_module, "fit_views_to_ply", spy)
+    monkeypatch.setattr(fits_module, "fit_views_to_ply", spy)
     out = tmp_path / "store"
     with torch_threads(1):
         argv = [

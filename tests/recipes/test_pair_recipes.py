@@ -17,7 +17,7 @@ from typing import Any
 import pandas as pd
 import pytest
 
-import setdiff_bench.packets.prepare as prepare_module
+import setdiff_bench.packets.fits as fits_module
 from setdiff_bench.cli.main import main
 from setdiff_bench.packets.prepare import prepare
 from setdiff_bench.packets.store import PacketStore
@@ -78,7 +78,7 @@ def capture(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def fit_calls(monkeypatch: pytest.MonkeyPatch) -> list[dict[str, Any]]:
     """Each degraded fit's frame names, iterations and ``stop_after`` (the real fit still runs)."""
     calls: list[dict[str, Any]] = []
-    load, fit = prepare_module.load_fit_views, prepare_module.fit_views_to_ply
+    load, fit = fits_module.load_fit_views, fits_module.fit_views_to_ply
 
     def load_spy(scene: Any, names: list[str], **kwargs: Any) -> Any:
         calls.append({"frames": list(names)})
@@ -90,8 +90,8 @@ def fit_calls(monkeypatch: pytest.MonkeyPatch) -> list[dict[str, Any]]:
         )
         return fit(scene, views, config, out, **kwargs)
 
-    monkeypatch.setattr(prepare_module, "load_fit_views", load_spy)
-    monkeypatch.setattr(prepare_module, "fit_views_to_ply", fit_spy)
+    monkeypatch.setattr(fits_module, "load_fit_views", load_spy)
+    monkeypatch.setattr(fits_module, "fit_views_to_ply", fit_spy)
     return calls
 
 
