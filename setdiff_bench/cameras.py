@@ -10,34 +10,59 @@ Numbers are float64 numpy arrays: poses are small and precision matters more tha
 
 from __future__ import annotations
 
-import contextlib
-import math
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
 
+from setdiff_bench.camera_values import float_errors_raised, numeric_array
 from setdiff_bench.errors import CameraError
+from setdiff_bench.intrinsics import (
+    Distortion,
+    apply_distortion,
+    intrinsics_from_colmap,
+    intrinsics_matrix,
+    invert_distortion,
+)
+from setdiff_bench.rotations import (
+    ORTHONORMAL_TOLERANCE,
+    QUATERNION_NORM_TOLERANCE,
+    QuaternionOrder,
+    check_rotation,
+    invert_rigid,
+    look_at,
+    matrix_to_quaternion,
+    quaternion_to_matrix,
+    rigid_from_quaternion,
+)
 
-QuaternionOrder = Literal["wxyz", "xyzw"]
-ORTHONORMAL_TOLERANCE = 1e-4
-QUATERNION_NORM_TOLERANCE = 1e-3
+__all__ = [
+    "MAX_IMAGE_SIDE",
+    "OPENGL_TO_OPENCV",
+    "ORTHONORMAL_TOLERANCE",
+    "QUATERNION_NORM_TOLERANCE",
+    "Camera",
+    "Distortion",
+    "QuaternionOrder",
+    "apply_distortion",
+    "check_rotation",
+    "float_errors_raised",
+    "intrinsics_from_colmap",
+    "intrinsics_matrix",
+    "invert_distortion",
+    "invert_rigid",
+    "look_at",
+    "matrix_to_quaternion",
+    "numeric_array",
+    "quaternion_to_matrix",
+    "rigid_from_quaternion",
+]
+
 OPENGL_TO_OPENCV = np.diag([1.0, -1.0, -1.0, 1.0])
 #: Largest image side accepted (pixels).  Larger sizes are corrupt data: pycolmap reads a width of -32 in
 #: ``cameras.txt`` as 2**64 - 32.  Raise it here for gigapixel captures.
 MAX_IMAGE_SIDE = 1 << 16
-
-
-@dataclass(frozen=True)
-class Distortion:
-    """Lens distortion kept on a camera; ``model`` follows COLMAP names (``OPENCV``: k1 k2 p1 p2)."""
-
-    model: str
-    params: tuple[float, ...]
-
-    def is_zero(self) -> bool:
-        return all(abs(p) == 0.0 for p in self.params)
 
 
 @dataclass(frozen=True, eq=False)
@@ -317,25 +342,6 @@ class Camera:
         return f"Camera({self.width}x{self.height}, f=({self.fx:.2f},{self.fy:.2f}), c={self.center.round(3).tolist()})"
 
 
-# ---------------------------------------------------------------------- helpers
-def check_rotation(R: np.ndarray, where: str) -> None:
-    """Raise :class:`CameraError` unless ``R`` is orthonormal within 1e-4 with determinant +1."""
-    R = np.asarray(R, dtype=np.float64)
-    if not np.isfinite(R).all():
-        raise CameraError("rotation has NaN or infinite values", where)
-    largest = float(np.abs(R).max())
-    if largest > 1.0 + ORTHONORMAL_TOLERANCE:  # checked first: R·Rᵀ of huge entries would overflow
-        raise CameraError(f"rotation is not orthonormal (an entry has magnitude {largest:.3g} > 1)", where)
-    error = float(np.abs(R @ R.T - np.eye(3)).max())
-    if error > ORTHONORMAL_TOLERANCE:
-        raise CameraError(
-            f"rotation is not orthonormal (max |R·Rᵀ − I| = {error:.2e} > {ORTHONORMAL_TOLERANCE:g})", where
-        )
-    det = float(np.linalg.det(R))
-    if det < 0:
-        raise CameraError(f"rotation has determinant {det:.4f} (a reflection, expected +1)", where)
-
-
 def _finite_c2w(c2w: object, source: str) -> np.ndarray:
     """A camera-to-world ``(4, 4)`` matrix from a ``(4, 4)`` or ``(3, 4)`` one; :class:`CameraError` for another
     shape or a NaN or infinite value."""
@@ -347,204 +353,3 @@ def _finite_c2w(c2w: object, source: str) -> np.ndarray:
     if not np.isfinite(c2w).all():
         raise CameraError("camera has NaN or infinite values", source)
     return c2w
-
-
-def invert_rigid(T: np.ndarray) -> np.ndarray:
-    """Inverse of a ``(4, 4)`` rigid transform ``[R t; 0 1]`` → ``[Rᵀ −Rᵀt; 0 1]``."""
-    T = np.asarray(T, dtype=np.float64)
-    out = np.eye(4)
-    out[:3, :3] = T[:3, :3].T
-    out[:3, 3] = -T[:3, :3].T @ T[:3, 3]
-    return out
-
-
-@contextlib.contextmanager
-def float_errors_raised(source: str) -> Iterator[None]:
-    """Turn floating-point overflow and invalid operations in the block into a :class:`CameraError`.
-
-    They only happen for absurd values read from a file (1e308 in a pose); numpy would otherwise print
-    a ``RuntimeWarning`` line and carry ``inf``/``NaN`` on.
-    """
-    try:
-        with np.errstate(over="raise", invalid="raise", divide="raise"):
-            yield
-    except FloatingPointError as error:
-        raise CameraError(
-            f"camera arithmetic overflowed or became invalid ({error}); values out of range", source
-        ) from None
-
-
-def numeric_array(values: object, what: str, source: str) -> np.ndarray:
-    """``values`` as a float64 array; a :class:`CameraError` naming ``what`` when they are not numbers
-    (a string, a ragged nested list, an integer too large for a float: values read from dataset files)."""
-    try:
-        return np.asarray(values, dtype=np.float64)
-    except (TypeError, ValueError, OverflowError):
-        raise CameraError(f"{what} must be numbers, got {_preview(values)}", source) from None
-
-
-def _preview(values: object, limit: int = 80) -> str:
-    text = repr(values)
-    return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
-def quaternion_to_matrix(
-    q: Sequence[float],
-    *,
-    order: QuaternionOrder,
-    source: str = "quaternion",
-    tolerance: float = QUATERNION_NORM_TOLERANCE,
-) -> np.ndarray:
-    """Unit quaternion → ``(3, 3)`` rotation.
-
-    Args:
-        q: four numbers; ``order`` names their layout explicitly (``"wxyz"`` or ``"xyzw"``).
-        tolerance: largest accepted deviation of the norm from 1 (the input is then renormalised).
-
-    Raises:
-        CameraError: wrong length, non-finite, or norm off by more than ``tolerance``.
-    """
-    q = numeric_array(q, "quaternion", source).reshape(-1)
-    if q.shape != (4,):
-        raise CameraError(f"quaternion must have 4 numbers, got {q.size}", source)
-    if not np.isfinite(q).all():
-        raise CameraError("quaternion has NaN or infinite values", source)
-    if order == "xyzw":
-        x, y, z, w = q
-    elif order == "wxyz":
-        w, x, y, z = q
-    else:
-        raise ValueError(f"unknown quaternion order {order!r}; use 'wxyz' or 'xyzw'")
-    norm = math.hypot(w, x, y, z)  # no overflow for huge components
-    if abs(norm - 1.0) > tolerance:
-        raise CameraError(f"quaternion ({order}) has norm {norm:.6f}, not 1 within {tolerance:g}", source)
-    w, x, y, z = w / norm, x / norm, y / norm, z / norm
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
-def rigid_from_quaternion(
-    quaternion: Sequence[float],
-    translation: Sequence[float],
-    *,
-    order: QuaternionOrder,
-    source: str = "transform",
-) -> np.ndarray:
-    """``(4, 4)`` rigid transform ``[R(q) t; 0 1]`` from a pose record (quaternion norm checked).
-
-    For chains of dataset poses, e.g. nuScenes camera-to-world
-    ``rigid_from_quaternion(ego_pose...) @ rigid_from_quaternion(calibrated_sensor...)``.
-    """
-    T = np.eye(4)
-    T[:3, :3] = quaternion_to_matrix(quaternion, order=order, source=source)
-    t = numeric_array(translation, "translation", source).reshape(-1)
-    if t.shape != (3,) or not np.isfinite(t).all():
-        raise CameraError(f"translation must be 3 finite numbers, got {_preview(translation)}", source)
-    T[:3, 3] = t
-    return T
-
-
-def matrix_to_quaternion(R: np.ndarray, *, order: QuaternionOrder) -> np.ndarray:
-    """``(3, 3)`` rotation → unit quaternion with non-negative scalar part, in the named order."""
-    R = np.asarray(R, dtype=np.float64)
-    trace = np.trace(R)
-    if trace > 0:
-        s = 2.0 * np.sqrt(trace + 1.0)
-        w, x, y, z = 0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s
-    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2])
-        w, x, y, z = (R[2, 1] - R[1, 2]) / s, 0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s
-    elif R[1, 1] > R[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2])
-        w, x, y, z = (R[0, 2] - R[2, 0]) / s, (R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s
-    else:
-        s = 2.0 * np.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1])
-        w, x, y, z = (R[1, 0] - R[0, 1]) / s, (R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s
-    q = np.array([w, x, y, z])
-    q /= np.linalg.norm(q)
-    if q[0] < 0:
-        q = -q
-    return q if order == "wxyz" else q[[1, 2, 3, 0]]
-
-
-def intrinsics_matrix(fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
-    """``(3, 3)`` pinhole K."""
-    return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
-
-
-def intrinsics_from_colmap(
-    model: str, params: Sequence[float], *, source: str = ""
-) -> tuple[np.ndarray, Distortion | None]:
-    """COLMAP camera model + params → ``(K, distortion)``.
-
-    Supported: SIMPLE_PINHOLE (f cx cy), PINHOLE (fx fy cx cy), SIMPLE_RADIAL (f cx cy k),
-    RADIAL (f cx cy k1 k2), OPENCV (fx fy cx cy k1 k2 p1 p2).
-    """
-    p = [float(v) for v in params]
-    counts = {"SIMPLE_PINHOLE": 3, "PINHOLE": 4, "SIMPLE_RADIAL": 4, "RADIAL": 5, "OPENCV": 8}
-    if model not in counts:
-        raise CameraError(
-            f"unsupported COLMAP camera model {model}; supported: {', '.join(counts)}", source or "camera"
-        )
-    if len(p) != counts[model]:
-        raise CameraError(f"{model} needs {counts[model]} parameters, got {len(p)}", source or "camera")
-    if model == "SIMPLE_PINHOLE":
-        return intrinsics_matrix(p[0], p[0], p[1], p[2]), None
-    if model == "PINHOLE":
-        return intrinsics_matrix(*p), None
-    if model == "SIMPLE_RADIAL":
-        return intrinsics_matrix(p[0], p[0], p[1], p[2]), Distortion("OPENCV", (p[3], 0.0, 0.0, 0.0))
-    if model == "RADIAL":
-        return intrinsics_matrix(p[0], p[0], p[1], p[2]), Distortion("OPENCV", (p[3], p[4], 0.0, 0.0))
-    return intrinsics_matrix(*p[:4]), Distortion("OPENCV", tuple(p[4:8]))
-
-
-def apply_distortion(distortion: Distortion, xn: np.ndarray, yn: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """OpenCV radial-tangential distortion (k1 k2 p1 p2) of normalised coordinates."""
-    k1, k2, p1, p2 = (list(distortion.params) + [0.0] * 4)[:4]
-    r2 = xn * xn + yn * yn
-    radial = 1.0 + k1 * r2 + k2 * r2 * r2
-    xd = xn * radial + 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn)
-    yd = yn * radial + p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn
-    return xd, yd
-
-
-def invert_distortion(
-    distortion: Distortion, xd: np.ndarray, yd: np.ndarray, iterations: int = 20
-) -> tuple[np.ndarray, np.ndarray]:
-    """Undo :func:`apply_distortion` by fixed-point iteration (as OpenCV's ``undistortPoints``)."""
-    k1, k2, p1, p2 = (list(distortion.params) + [0.0] * 4)[:4]
-    xn, yn = xd.copy(), yd.copy()
-    for _ in range(iterations):
-        r2 = xn * xn + yn * yn
-        radial = 1.0 + k1 * r2 + k2 * r2 * r2
-        dx = 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn)
-        dy = p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn
-        xn = (xd - dx) / radial
-        yn = (yd - dy) / radial
-    return xn, yn
-
-
-def look_at(
-    center: Sequence[float], target: Sequence[float], up: Sequence[float] = (0.0, 0.0, 1.0)
-) -> np.ndarray:
-    """``(4, 4)`` OpenCV world-to-camera matrix of a camera at ``center`` looking at ``target``.
-
-    ``up`` is the world's up direction; the camera's −y axis points along its projection.
-    """
-    center = np.asarray(center, dtype=np.float64)
-    forward = np.asarray(target, dtype=np.float64) - center
-    forward /= np.linalg.norm(forward)
-    right = np.cross(forward, np.asarray(up, dtype=np.float64))
-    right /= np.linalg.norm(right)
-    down = np.cross(forward, right)
-    R = np.stack([right, down, forward])  # rows: camera axes in world coordinates
-    w2c = np.eye(4)
-    w2c[:3, :3] = R
-    w2c[:3, 3] = -R @ center
-    return w2c
