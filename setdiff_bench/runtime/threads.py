@@ -43,6 +43,17 @@ def compute_threads() -> int:
     return count
 
 
+def threads_in_force() -> int:
+    """The intra-op thread count this process computes with now, for records of a run: torch's own count
+    once torch is imported, else the ``OMP_NUM_THREADS`` torch will read (set by :func:`verb_threads`), else
+    :func:`compute_threads`.  Differs from :func:`compute_threads` inside :func:`torch_threads` blocks and in
+    processes whose caller set another count (a demo lane runs with its share of the cores)."""
+    if "torch" in sys.modules:
+        return int(sys.modules["torch"].get_num_threads())
+    text = os.environ.get("OMP_NUM_THREADS", "").strip()
+    return int(text) if text.isdigit() and int(text) > 0 else compute_threads()
+
+
 @contextlib.contextmanager
 def verb_threads() -> Iterator[int]:
     """Run a verb with :func:`compute_threads` torch threads; yields the count.

@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from setdiff_bench.errors import UsageError
-from setdiff_bench.runtime.threads import compute_threads, torch_threads, verb_threads
+from setdiff_bench.runtime.threads import compute_threads, threads_in_force, torch_threads, verb_threads
 
 
 def test_count_inside_and_restored_after_an_exception() -> None:
@@ -39,3 +39,13 @@ def test_verb_threads_sets_and_restores(monkeypatch: pytest.MonkeyPatch) -> None
     with verb_threads() as count:
         assert count == target == torch.get_num_threads()
     assert torch.get_num_threads() == before
+
+
+def test_threads_in_force_is_the_count_torch_computes_with(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Records of a run state the count in force, not the machine's: inside ``torch_threads(k)`` it is k
+    whatever ``SETDIFF_THREADS`` says (a demo lane runs with its share of the cores)."""
+    monkeypatch.setenv("SETDIFF_THREADS", "4")
+    with torch_threads(1):
+        assert threads_in_force() == 1 and compute_threads() == 4
+    with torch_threads(3):
+        assert threads_in_force() == 3

@@ -23,7 +23,7 @@ from setdiff_bench.io.atomic import write_text_atomic
 from setdiff_bench.models.setdiff.files import MANIFEST_FILE
 from setdiff_bench.packets.index import FILE_COLUMNS
 from setdiff_bench.runtime.provenance import git_revision
-from setdiff_bench.runtime.threads import compute_threads
+from setdiff_bench.runtime.threads import threads_in_force
 
 MANIFEST_FORMAT = "setdiff-enhancer-manifest/1"
 #: Synthetic scene folder names (``setdiff_bench.synthetic.generate.scene_name``): seed and index.
@@ -131,7 +131,7 @@ def record_training_session(
             "end_step": end_step,
             "wall_seconds": round(wall_seconds, 1),
             "code": git_revision(),
-            "torch_threads": compute_threads(),
+            "torch_threads": threads_in_force(),
         }
     )
     manifest["wall_seconds"] = round(sum(s["wall_seconds"] for s in manifest["sessions"]), 1)
