@@ -14,7 +14,7 @@ from collections.abc import Iterable, Sequence
 from concurrent.futures import FIRST_EXCEPTION, ProcessPoolExecutor, wait
 from pathlib import Path
 
-from setdiff_bench.packets.plan import PacketJob
+from setdiff_bench.packets.jobs import PacketJob
 from setdiff_bench.packets.worker import JobStats, build_many, build_packet, init_worker
 
 

@@ -29,8 +29,9 @@ from setdiff_bench.gaussians.ply import read_ply
 from setdiff_bench.gaussians.render import render
 from setdiff_bench.geometry import normalize_packet
 from setdiff_bench.io.images import read_mask, read_rgb, to_numpy_hwc
-from setdiff_bench.packets.plan import Crop, PacketJob, ViewJob
+from setdiff_bench.packets.jobs import PacketJob
 from setdiff_bench.packets.store import PacketHeader, ViewContent, write_packet
+from setdiff_bench.packets.working_view import Crop, ViewJob
 from setdiff_bench.types import key_fields
 from setdiff_bench.undistort import is_distorted, undistort_image, undistortion_maps
 
