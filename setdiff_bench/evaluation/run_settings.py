@@ -1,0 +1,96 @@
+"""The run contract: the settings that decide a run's results, recorded in ``run.json``.
+
+A resumed run, or another shard of the same run, must have the same :meth:`RunSettings.identity`;
+:func:`jsonable_options` is how options and metric arguments are written into ``run.json``,
+``enhancer.json`` and ``manifest.json``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+
+from setdiff_bench.metrics.registry import PRESETS
+
+RUN_FORMAT = "setdiff-run/1"
+#: Protocols whose targets are time-ordered camera sequences: warp error with ``warp="auto"``.
+SEQUENCE_PROTOCOLS = frozenset({"nuscenes"})
+#: Columns that are measurements of time, not results: excluded from byte-identity comparisons.
+
+WarpMode = Literal["auto", "on", "off"]
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """Everything that decides a run's results (recorded in ``run.json``; a resume must match).
+
+    Attributes:
+        method: registry name (``setdiff-bench list methods``).
+        options: factory options given by the user (``checkpoint``, ``source`` for ``--from``, plugin options).
+        split: ``"train"``/``"test"`` or ``None`` for every packet.
+        metrics: image metric names (default: the ``standard`` preset: PSNR, SSIM, LPIPS-alex).
+        warp: warp error per sequence: ``auto`` (on for :data:`SEQUENCE_PROTOCOLS`), ``on`` or ``off``.
+        flow_method: optical flow for warp error (``deepflow`` or ``dis``).
+        device: where the enhancer (if it takes ``device``) and the metrics run.
+        batch_size: images per metric call (bounds LPIPS memory); does not change results.
+        warp_cache: folder caching the ground truth's flow per sequence (shared by every method; keyed
+            by the ground-truth files' SHA-256 and the flow method); ``"auto"`` = the user cache
+            (:func:`setdiff_bench.evaluation.scoring.default_warp_cache`), ``None`` = no cache.  Does not change results.
+    """
+
+    method: str
+    options: Mapping[str, Any] = field(default_factory=dict)
+    split: str | None = "test"
+    metrics: tuple[str, ...] = PRESETS["standard"]
+    warp: WarpMode = "auto"
+    flow_method: str = "deepflow"
+    device: str = "cpu"
+    batch_size: int = 8
+    warp_cache: str | None = "auto"
+
+    def identity(self, index_sha256: str, model_files: Mapping[str, str] | None = None) -> dict[str, Any]:
+        """The ``run.json`` content: what must not change between a run and its resumption.
+
+        ``model_files`` (``{file: SHA-256}`` from the method's fingerprint, e.g. a checkpoint's weights and
+        config) is recorded when the method has one, so that the same ``--checkpoint`` naming other weights
+        (retrained, re-exported, a newer shipped model) does not resume into stale results.
+        """
+        identity = {
+            "format": RUN_FORMAT,
+            "method": self.method,
+            "options": jsonable_options(dict(self.options)),
+            "split": self.split,
+            "metrics": list(self.metrics),
+            "warp": self.warp,
+            "flow_method": self.flow_method,
+            "device": self.device,
+            "index_sha256": index_sha256,
+        }
+        if model_files:
+            identity["model_files"] = dict(sorted(model_files.items()))
+        return identity
+
+
+def warp_enabled(settings: RunSettings, protocols: Sequence[str]) -> bool:
+    """Whether warp error is computed for a run over ``protocols``."""
+    if settings.warp == "auto":
+        return any(protocol in SEQUENCE_PROTOCOLS for protocol in protocols)
+    return settings.warp == "on"
+
+
+def jsonable_options(value: Any) -> Any:
+    """Options as JSON values (paths and other objects become strings)."""
+    if isinstance(value, Mapping):
+        return {str(k): jsonable_options(v) for k, v in sorted(value.items(), key=lambda kv: str(kv[0]))}
+    if isinstance(value, list | tuple):
+        return [jsonable_options(v) for v in value]
+    if isinstance(value, bool | int | str) or value is None:
+        return value
+    if isinstance(value, float):
+        return value if np.isfinite(value) else str(value)
+    if hasattr(value, "__dataclass_fields__"):
+        return jsonable_options(asdict(value))
+    return str(value)
