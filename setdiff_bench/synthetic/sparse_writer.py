@@ -1,0 +1,113 @@
+"""Writing a sparse-view scene in DL3DV's on-disk layout (read by ``loaders/dl3dv.py`` unchanged): the
+``images_4`` frames, the COLMAP model at the full resolution with the SfM-like points, and
+``scene.json`` (docs/synthetic_format.md, "Sparse-view scenes"); :func:`generate_sparse_scene` builds,
+renders and writes a scene through a staging folder.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from setdiff_bench.errors import UsageError
+from setdiff_bench.io.atomic import staged_folder, write_text_atomic
+from setdiff_bench.io.images import write_png
+from setdiff_bench.synthetic.capture import CapturedFrame
+from setdiff_bench.synthetic.colmap_writer import ColmapImage, write_colmap_model
+from setdiff_bench.synthetic.rig import intrinsics
+from setdiff_bench.synthetic.sfm import sample_sparse_points
+from setdiff_bench.synthetic.sparse_build import SparseBuild, build_sparse_scene, render_sparse_frames
+from setdiff_bench.synthetic.sparse_names import FORMAT, FULL_SCALE, IMAGES_DIR, fit_views, sparse_scene_name
+from setdiff_bench.synthetic.sparse_preset import SparsePreset
+from setdiff_bench.synthetic.world import SFM_CATEGORIES
+
+
+def sparse_description(build: SparseBuild, num_points: int) -> dict[str, object]:
+    """The ``scene.json`` object (docs/synthetic_format.md, "Sparse-view scenes")."""
+    p = build.preset
+    fx, fy, cx, cy = intrinsics(p.width, p.height, p.hfov_deg)
+    return {
+        "format": FORMAT,
+        "scene": build.name,
+        "seed": build.seed,
+        "index": build.index,
+        "preset": p.name,
+        "kind": "walk",
+        "width": p.width,
+        "height": p.height,
+        "images_dir": IMAGES_DIR,
+        "full_resolution": [p.width * FULL_SCALE, p.height * FULL_SCALE],
+        "camera": {"model": "OPENCV", "hfov_deg": p.hfov_deg, "fx": fx, "fy": fy, "cx": cx, "cy": cy},
+        "units": "metres",
+        "world_up": [0, 0, 1],
+        "num_frames": p.frames,
+        "path_length_m": float(np.sum(np.linalg.norm(np.diff(build.walk.positions, axis=0), axis=1))),
+        "heading_range_deg": [
+            float(np.degrees(build.walk.headings.min())),
+            float(np.degrees(build.walk.headings.max())),
+        ],
+        "height_range_m": [float(build.walk.positions[:, 2].min()), float(build.walk.positions[:, 2].max())],
+        "fit_views": fit_views(p),
+        "num_points3d": num_points,
+    }
+
+
+def write_sparse_scene(build: SparseBuild, frames: Sequence[CapturedFrame], destination: Path) -> None:
+    """Write the DL3DV layout of the scene into ``destination`` (an empty folder)."""
+    p = build.preset
+    for frame in frames:
+        write_png(destination / IMAGES_DIR / frame.name, frame.rgb)
+    eligible = torch.zeros(len(build.static), dtype=torch.bool)
+    for category in SFM_CATEGORIES:
+        eligible |= build.categories == category
+    points = sample_sparse_points(build.static, eligible, list(frames), p.points3d, build.sparse_rng)
+    images = [
+        ColmapImage(f.name, "camera", f.camera.resized(p.width * FULL_SCALE, p.height * FULL_SCALE))
+        for f in frames
+    ]
+    write_colmap_model(
+        destination / "colmap" / "sparse" / "0", images, points.xyz, points.rgb, camera_model="OPENCV"
+    )
+    description = sparse_description(build, int(points.xyz.shape[0]))
+    write_text_atomic(destination / "scene.json", json.dumps(description, indent=1, sort_keys=True) + "\n")
+
+
+def generate_sparse_scene(
+    out_root: str | os.PathLike[str],
+    preset: SparsePreset,
+    seed: int,
+    index: int,
+    *,
+    overwrite: bool = False,
+    progress: Callable[[int, int], None] | None = None,
+    device: str | torch.device = "cpu",
+) -> Path:
+    """Generate sparse-view scene ``index`` of ``seed`` under ``out_root``; returns its folder.
+
+    A complete existing scene (its ``scene.json`` present, same preset) is kept unless ``overwrite``;
+    the scene is written in a staging folder and renamed into place when complete.
+    """
+    root = Path(out_root)
+    final = root / sparse_scene_name(seed, index)
+    if (final / "scene.json").is_file() and not overwrite:
+        try:
+            existing = json.loads((final / "scene.json").read_text(encoding="utf-8")).get("preset")
+        except (OSError, json.JSONDecodeError, AttributeError):
+            existing = None
+        if existing != preset.name:
+            raise UsageError(
+                f"scene exists with preset {existing!r}, not {preset.name!r}; pass --overwrite to regenerate it",
+                final / "scene.json",
+            )
+        return final
+    root.mkdir(parents=True, exist_ok=True)
+    build = build_sparse_scene(preset, seed, index)
+    frames = render_sparse_frames(build, progress, device)
+    with staged_folder(final) as staging:
+        write_sparse_scene(build, frames, staging)
+    return final
