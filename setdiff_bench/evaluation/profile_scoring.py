@@ -43,6 +43,7 @@ from setdiff_bench.evaluation.profiles import (
 )
 from setdiff_bench.io.atomic import atomic_path, write_text_atomic
 from setdiff_bench.io.images import read_mask, read_rgb
+from setdiff_bench.io.jsonable import jsonable
 from setdiff_bench.io.run_layout import (
     EUVS_COMPAT_FILE,
     GROUPS_FILE,
@@ -227,7 +228,7 @@ def score_run(
             "applies to them"
         )
     info = {
-        "profile": _jsonable(asdict(profile)),
+        "profile": jsonable(asdict(profile)),
         "run": str(run.resolve()),
         "packets": str(Path(packets).resolve()),
         "data": str(Path(data).resolve()) if data else None,
@@ -298,11 +299,3 @@ class _Originals:
         resolution = protocol.images.resolution or (height, width)
         crop = crop_window(width, height, resolution, protocol.images.resize)
         return original, mask, (crop.left, crop.top, crop.width, crop.height)
-
-
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
-    return value
