@@ -30,9 +30,7 @@ a silently different input or ground truth; hashing costs a few ms next to decod
 from __future__ import annotations
 
 import os
-import shutil
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -42,182 +40,40 @@ import torch
 
 from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import PacketError, SetDiffBenchError
-from setdiff_bench.geometry import renormalize
-from setdiff_bench.io.atomic import sha256_file, staged_folder
-from setdiff_bench.io.images import read_exr, read_mask, read_rgb, to_tensor_chw, write_exr, write_png
-from setdiff_bench.packets.index import (
-    FILE_COLUMNS,
-    INDEX_FILE,
-    PACKETS_DIR,
-    TEMP_PREFIX,
-    NoGroundTruthError,
-    merge_index,
-    read_rows,
-    write_rows,
+from setdiff_bench.io.atomic import sha256_file
+from setdiff_bench.io.images import read_exr, read_mask, read_rgb, to_tensor_chw
+from setdiff_bench.packets.index import INDEX_FILE, NoGroundTruthError, merge_index, read_rows
+from setdiff_bench.packets.training_dataset import PacketTrainingDataset
+from setdiff_bench.packets.writer import (
+    CMAP_CHANNELS,
+    EXR_ATTRIBUTES,
+    PacketHeader,
+    ViewContent,
+    file_problems,
+    packet_dir,
+    packet_is_complete,
+    remove_temporaries,
+    write_packet,
 )
-from setdiff_bench.types import Packet, PacketKey, TrainingSample, ViewSet
+from setdiff_bench.types import Packet, PacketKey, ViewSet
 
-CMAP_CHANNELS = ("X", "Y", "Z", "A")
-#: OpenEXR stamps the write time unless a DateTime is given; a fixed one keeps files byte-identical.
-EXR_ATTRIBUTES = {"DateTime": "1970:01:01 00:00:00", "Software": "setdiff-bench"}
-
-
-# ---------------------------------------------------------------------- writing
-@dataclass
-class ViewContent:
-    """One view to write.
-
-    Attributes:
-        frame, sensor, traversal, timestamp_us: where it comes from.
-        camera: the camera in the packet's normalised frame (working resolution).
-        camera_world: the same camera in the dataset's world frame.
-        image: ``(H, W, 3)`` float32 in [0, 1] (clean capture or render).
-        cmap: ``(H, W, 3)`` float32 normalised Eq. 1 C-map.  alpha: ``(H, W)`` float32.
-        gt: ``(H, W, 3)`` float32 ground truth (targets), else ``None``; a target without ground truth
-            (a novel-trajectory view) has ``None`` here and in ``mask``: its ``gt`` / ``mask`` index
-            columns and their SHA-256 are null, and every other file is hashed as usual.
-        mask: ``(H, W)`` bool, True = evaluate (targets with ground truth), else ``None``.
-        overlap_score: Eq. 2 score (references), else ``None``.
-    """
-
-    frame: str
-    sensor: str
-    traversal: str
-    timestamp_us: int | None
-    camera: Camera
-    camera_world: Camera
-    image: np.ndarray
-    cmap: np.ndarray
-    alpha: np.ndarray
-    gt: np.ndarray | None = None
-    mask: np.ndarray | None = None
-    overlap_score: float | None = None
+__all__ = [
+    "CMAP_CHANNELS",
+    "EXR_ATTRIBUTES",
+    "PacketHeader",
+    "PacketStore",
+    "PacketTrainingDataset",
+    "ViewContent",
+    "packet_dir",
+    "packet_is_complete",
+    "remove_temporaries",
+    "row_camera",
+    "target_has_ground_truth",
+    "timestamp_or_none",
+    "write_packet",
+]
 
 
-@dataclass(frozen=True)
-class PacketHeader(PacketKey):
-    """Packet-level columns of the index: the packet's key, then how it was made."""
-
-    fit_key: str
-    scale: float
-    recipe: str
-    cmap_half: bool = False
-
-
-def packet_dir(root: Path, packet_id: str) -> Path:
-    return root / PACKETS_DIR / packet_id
-
-
-def remove_temporaries(root: Path, packet_id: str) -> None:
-    """Delete ``.tmp-<packet_id>-*`` folders left by an interrupted write of this packet."""
-    folder = root / PACKETS_DIR
-    if folder.is_dir():
-        for stale in folder.glob(f"{TEMP_PREFIX}{packet_id}-*"):
-            shutil.rmtree(stale, ignore_errors=True)
-
-
-def write_packet(
-    root: Path, header: PacketHeader, references: Sequence[ViewContent], targets: Sequence[ViewContent]
-) -> list[dict[str, Any]]:
-    """Write one packet folder atomically; returns its index rows.
-
-    The folder is built under ``packets/.tmp-<id>-<random>`` (files, then the fragment ``index.parquet``)
-    and swapped in as ``packets/<id>`` (replacing an incomplete or outdated one; :func:`staged_folder`).
-    """
-    base = root / PACKETS_DIR
-    base.mkdir(parents=True, exist_ok=True)
-    remove_temporaries(root, header.packet_id)
-    final = packet_dir(root, header.packet_id)
-    with staged_folder(final, prefix=f"{TEMP_PREFIX}{header.packet_id}-", suffix="") as tmp:
-        rows = [_write_view(root, tmp, header, "ref", i, v) for i, v in enumerate(references)]
-        rows += [_write_view(root, tmp, header, "target", i, v) for i, v in enumerate(targets)]
-        write_rows(tmp / INDEX_FILE, rows, atomic=False)
-    return rows
-
-
-def _write_view(
-    root: Path, folder: Path, header: PacketHeader, role: str, position: int, view: ViewContent
-) -> dict[str, Any]:
-    stem = f"{'ref' if role == 'ref' else 'tgt'}_{position:02d}"
-    relative = Path(PACKETS_DIR) / header.packet_id
-    files: dict[str, str | None] = dict.fromkeys(FILE_COLUMNS)
-    write_png(folder / f"{stem}_rgb.png", view.image, atomic=False)
-    files["image"] = f"{stem}_rgb.png"
-    cmap = np.concatenate([view.cmap, view.alpha[:, :, None]], axis=2).astype(np.float32)
-    write_exr(
-        folder / f"{stem}_cmap.exr",
-        cmap,
-        CMAP_CHANNELS,
-        half=header.cmap_half,
-        attributes=EXR_ATTRIBUTES,
-        atomic=False,
-    )
-    files["cmap"] = f"{stem}_cmap.exr"
-    if role == "target" and (view.gt is None) != (view.mask is None):
-        raise ValueError(f"target {view.frame!r} needs both ground truth and a mask, or neither")
-    if role == "target" and view.gt is not None and view.mask is not None:
-        write_png(folder / f"{stem}_gt.png", view.gt, atomic=False)
-        write_png(folder / f"{stem}_mask.png", view.mask.astype(bool), atomic=False)
-        files["gt"], files["mask"] = f"{stem}_gt.png", f"{stem}_mask.png"
-    row: dict[str, Any] = {
-        "packet_id": header.packet_id,
-        "role": role,
-        "view": position,
-        "dataset": header.dataset,
-        "protocol": header.protocol,
-        "group": header.group,
-        "split": header.split,
-        "scene": header.scene,
-        "fit_key": header.fit_key,
-        "frame": view.frame,
-        "sensor": view.sensor,
-        "traversal": view.traversal,
-        "timestamp_us": view.timestamp_us,
-        "width": view.camera.width,
-        "height": view.camera.height,
-        "K": [float(v) for v in view.camera.K.reshape(-1)],
-        "w2c": [float(v) for v in view.camera.w2c.reshape(-1)],
-        "w2c_world": [float(v) for v in view.camera_world.w2c.reshape(-1)],
-        "scale": float(header.scale),
-        "overlap_score": None if view.overlap_score is None else float(view.overlap_score),
-        "recipe": header.recipe,
-    }
-    for column, name in files.items():
-        row[column] = None if name is None else (relative / name).as_posix()
-        row[f"{column}_sha256"] = None if name is None else sha256_file(folder / name)
-    return row
-
-
-def packet_is_complete(root: Path, packet_id: str, recipe: str) -> bool:
-    """Whether ``packets/<id>`` holds a fragment with this ``recipe`` whose files all match their hashes."""
-    fragment = packet_dir(root, packet_id) / INDEX_FILE
-    if not fragment.is_file():
-        return False
-    try:
-        rows = read_rows(fragment).to_pylist()
-    except PacketError:
-        return False
-    if not rows or any(r["recipe"] != recipe or r["packet_id"] != packet_id for r in rows):
-        return False
-    return not _file_problems(root, rows)
-
-
-def _file_problems(root: Path, rows: Sequence[dict[str, Any]]) -> list[str]:
-    problems = []
-    for row in rows:
-        for column in FILE_COLUMNS:
-            relative = row[column]
-            if not isinstance(relative, str):  # null (pandas may give None or NaN)
-                continue
-            path = root / relative
-            if not path.is_file():
-                problems.append(f"{relative}: missing")
-            elif sha256_file(path) != row[f"{column}_sha256"]:
-                problems.append(f"{relative}: SHA-256 mismatch")
-    return problems
-
-
-# ---------------------------------------------------------------------- reading
 class PacketStore:
     """A prepared packet store (``setdiff-bench prepare ... --out ROOT``).
 
@@ -336,7 +192,7 @@ class PacketStore:
         """Re-hash every file of the given packets (default all); returns one line per problem (empty = OK)."""
         problems = []
         for pid in self.packet_ids() if packet_ids is None else packet_ids:
-            problems += [f"{pid}: {p}" for p in _file_problems(self.root, self.rows(pid).to_dict("records"))]
+            problems += [f"{pid}: {p}" for p in file_problems(self.root, self.rows(pid).to_dict("records"))]
         return problems
 
     def merge(self) -> bool:
@@ -425,70 +281,3 @@ def _pick(rows: pd.DataFrame, positions: Sequence[int] | None) -> pd.DataFrame:
 def timestamp_or_none(value: Any) -> int | None:
     """A ``timestamp_us`` cell as an ``int``, or ``None`` when missing (``None``/NaN/NA)."""
     return None if value is None or pd.isna(value) else int(value)
-
-
-# ---------------------------------------------------------------------- training
-class PacketTrainingDataset(torch.utils.data.Dataset):
-    """Training samples drawn from stored packets: variable set size, random order within roles.
-
-    Item ``index`` of epoch ``e`` (:meth:`set_epoch`) uses ``numpy.random.default_rng([seed, e, index])``:
-
-    1. the set size is uniform in ``[min_views, max_views]`` (capped by the packet's view count);
-    2. references and targets keep the packet's proportion (at least one target, and one reference
-       when the packet has any);
-    3. the chosen references and targets are each randomly permuted (the paper's permutation π);
-    4. the subset is re-normalised so its own first target is the identity and its largest pairwise
-       camera distance is 1 — the invariant every packet satisfies at inference.
-
-    Only the chosen views' files are read.  ``Packet.scale`` composes both normalisations.
-    """
-
-    def __init__(
-        self,
-        store: PacketStore,
-        packet_ids: Sequence[str],
-        *,
-        min_views: int = 8,
-        max_views: int = 12,
-        seed: int = 0,
-    ) -> None:
-        if not 2 <= min_views <= max_views:
-            raise ValueError(f"need 2 <= min_views <= max_views, got {min_views}, {max_views}")
-        self.store, self.packet_ids = store, list(packet_ids)
-        self.min_views, self.max_views, self.seed, self.epoch = min_views, max_views, seed, 0
-
-    def __len__(self) -> int:
-        return len(self.packet_ids)
-
-    def set_epoch(self, epoch: int) -> None:
-        """Select the epoch whose random draws :meth:`__getitem__` makes."""
-        self.epoch = int(epoch)
-
-    def choose(self, index: int) -> tuple[list[int], list[int]]:
-        """Reference and target positions of item ``index`` in the current epoch (rules in the class doc)."""
-        rows = self.store.rows(self.packet_ids[index])
-        n_ref, n_tgt = int((rows["role"] == "ref").sum()), int((rows["role"] == "target").sum())
-        rng = np.random.default_rng([self.seed, self.epoch, index])
-        total = n_ref + n_tgt
-        size = int(rng.integers(min(self.min_views, total), min(self.max_views, total) + 1))
-        refs = min(max(round(size * n_ref / total), 1 if n_ref else 0), n_ref, size - 1)
-        targets = min(size - refs, n_tgt)
-        refs = min(size - targets, n_ref)
-        return (
-            [int(i) for i in rng.permutation(n_ref)[:refs]],
-            [int(i) for i in rng.permutation(n_tgt)[:targets]],
-        )
-
-    def __getitem__(self, index: int) -> TrainingSample:
-        packet_id = self.packet_ids[index]
-        ref_ids, tgt_ids = self.choose(index)
-        packet = self.store.load_packet(packet_id, ref_ids, tgt_ids)
-        gt, masks = self.store.load_ground_truth(packet_id, tgt_ids)
-        packet = renormalize(packet)
-        packet.metadata = {
-            **packet.metadata,
-            "reference_positions": tuple(ref_ids),
-            "target_positions": tuple(tgt_ids),
-            "epoch": self.epoch,
-        }
-        return TrainingSample(packet=packet, target_gt=gt, target_masks=masks)
