@@ -176,5 +176,12 @@ def print_distribution(run: Path, packets: Path, inception: object, weights: Pat
     from setdiff_bench.evaluation.distribution_scoring import DISTRIBUTION_FILE, score_distribution
     from setdiff_bench.io.atomic import sha256_file
 
-    score_distribution(run, packets, inception, weights_sha256=sha256_file(weights), progress=print)  # type: ignore[arg-type]
+    score_distribution(  # type: ignore[arg-type]
+        run,
+        packets,
+        inception,
+        weights_sha256=sha256_file(weights),
+        weights_file=weights.name,
+        progress=print,
+    )
     print(f"distribution: {run / DISTRIBUTION_FILE}")

@@ -121,6 +121,7 @@ def score_distribution(
     settings: DistributionSettings | None = None,
     *,
     weights_sha256: str | None = None,
+    weights_file: str | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> pd.DataFrame:
     """FID and KID of every block of a finished run (module docstring); writes and returns the table.
@@ -132,6 +133,8 @@ def score_distribution(
             (:func:`setdiff_bench.metrics.inception.load_inception`).
         settings: KID subsets, seed, batch size.
         weights_sha256: the Inception file's SHA-256, recorded in ``distribution.json``.
+        weights_file: the Inception file's name (no folder: a record names no path of the machine), recorded
+            in ``distribution.json`` as ``inception_file`` beside the hash; the leaderboard's caption shows it.
         progress: called with one line per block scored.
     """
     settings = settings or DistributionSettings()
@@ -182,6 +185,7 @@ def score_distribution(
         table.to_parquet(tmp, index=False)
     info = {
         "inception_sha256": weights_sha256,
+        "inception_file": None if weights_file is None else Path(weights_file).name,
         "settings": asdict(settings),
         "columns": list(COLUMNS),
         "reference_set": "the recorded frames the run's packets carry as references, once per scene",

@@ -9,6 +9,7 @@ pytorch-fid state-dict format.
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
@@ -75,8 +76,20 @@ def test_blocks_score_against_the_recorded_frames(store: Path, identity_run: Pat
     run = tmp_path / "run"
     shutil.copytree(identity_run, run)
     lines: list[str] = []
-    table = score_distribution(run, store, ChannelMeans(), weights_sha256="abc", progress=lines.append)
+    table = score_distribution(
+        run,
+        store,
+        ChannelMeans(),
+        weights_sha256="abc",
+        weights_file="/m/pt_inception.pth",
+        progress=lines.append,
+    )
     assert (run / DISTRIBUTION_FILE).is_file() and (run / DISTRIBUTION_INFO_FILE).is_file()
+    info = json.loads((run / DISTRIBUTION_INFO_FILE).read_text())
+    assert (info["inception_sha256"], info["inception_file"]) == (
+        "abc",
+        "pt_inception.pth",
+    )  # the name, no folder
     assert pd.read_parquet(run / DISTRIBUTION_FILE).equals(table)
     index = pd.read_parquet(store / "index.parquet")
     assert sorted(table["group"]) == sorted(set(index["group"]))
