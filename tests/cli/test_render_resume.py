@@ -14,8 +14,8 @@ import pytest
 
 from setdiff_bench.cli.main import main
 from setdiff_bench.gaussians.ply import write_ply
-from tests.gaussians.test_render import random_scene
-from tests.gaussians.test_render_cli import render_args, write_inputs, write_model
+from tests.gaussians.gaussian_fixtures import random_scene
+from tests.gaussians.render_fixtures import render_args, write_inputs, write_model
 
 
 def _snapshot(folder: Path) -> dict[str, bytes]:

@@ -1,4 +1,5 @@
-"""Small 3DGS models and PLY headers for the tests, written independently of :mod:`setdiff_bench.gaussians.ply`."""
+"""Small 3DGS models (:func:`random_model`; :func:`random_scene`, a cloud in front of a camera at the origin)
+and PLY headers for the tests, written independently of :mod:`setdiff_bench.gaussians.ply`."""
 
 from __future__ import annotations
 
@@ -16,6 +17,21 @@ def random_model(n: int = 20, degree: int = 3, generator: torch.Generator | None
         torch.randn(n, 3, generator=g),
         torch.randn(n, generator=g),
         torch.randn(n, (degree + 1) ** 2, 3, generator=g),
+    )
+
+
+def random_scene(n: int, seed: int, dtype=torch.float32) -> GaussianModel:
+    g = torch.Generator().manual_seed(seed)
+    means = torch.randn(n, 3, generator=g, dtype=torch.float64) * torch.tensor(
+        [1.5, 1.0, 1.0], dtype=torch.float64
+    )
+    means[:, 2] += 6.0
+    return GaussianModel(
+        means=means.to(dtype),
+        quats=torch.randn(n, 4, generator=g, dtype=torch.float64).to(dtype),
+        log_scales=(torch.rand(n, 3, generator=g, dtype=torch.float64) * 1.2 - 2.6).to(dtype),
+        opacity_logits=torch.randn(n, generator=g, dtype=torch.float64).to(dtype),
+        sh=(torch.randn(n, 4, 3, generator=g, dtype=torch.float64) * 0.4).to(dtype),
     )
 
 

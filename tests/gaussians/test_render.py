@@ -12,6 +12,7 @@ from setdiff_bench.cameras import Camera, intrinsics_matrix, look_at
 from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.gaussians.render import render
 from setdiff_bench.gaussians.sh import SH_C0
+from tests.gaussians.gaussian_fixtures import random_scene
 
 F = 50.0
 
@@ -93,21 +94,6 @@ def test_rgb_only_render_matches_full_render() -> None:
     rgb_only = render(g, cam, with_geometry=False)
     assert rgb_only.cmap is None
     assert torch.allclose(full.rgb, rgb_only.rgb, atol=1e-6)
-
-
-def random_scene(n: int, seed: int, dtype=torch.float32) -> GaussianModel:
-    g = torch.Generator().manual_seed(seed)
-    means = torch.randn(n, 3, generator=g, dtype=torch.float64) * torch.tensor(
-        [1.5, 1.0, 1.0], dtype=torch.float64
-    )
-    means[:, 2] += 6.0
-    return GaussianModel(
-        means=means.to(dtype),
-        quats=torch.randn(n, 4, generator=g, dtype=torch.float64).to(dtype),
-        log_scales=(torch.rand(n, 3, generator=g, dtype=torch.float64) * 1.2 - 2.6).to(dtype),
-        opacity_logits=torch.randn(n, generator=g, dtype=torch.float64).to(dtype),
-        sh=(torch.randn(n, 4, 3, generator=g, dtype=torch.float64) * 0.4).to(dtype),
-    )
 
 
 def scene_camera(width: int = 40, height: int = 30) -> Camera:

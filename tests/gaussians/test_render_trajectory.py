@@ -15,7 +15,7 @@ from setdiff_bench.gaussians.render import render
 from setdiff_bench.io.images import read_exr
 from setdiff_bench.loaders.colmap import read_colmap_model
 from setdiff_bench.packets.trajectory import shifted
-from tests.gaussians.test_render_cli import render_args, write_inputs
+from tests.gaussians.render_fixtures import render_args, write_inputs
 
 
 def test_shifted_trajectory_renders_the_moved_cameras(

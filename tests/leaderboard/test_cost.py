@@ -15,7 +15,7 @@ from setdiff_bench.reporting.leaderboard import (
     render_markdown,
     to_frame,
 )
-from tests.leaderboard.test_leaderboard import table
+from tests.leaderboard.leaderboard_fixtures import table
 
 
 def timed() -> pd.DataFrame:

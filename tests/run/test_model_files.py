@@ -15,7 +15,7 @@ from setdiff_bench.evaluation.run import RunSettings, run_method
 from setdiff_bench.io.run_layout import METRICS_FILE, RUN_FILE
 from setdiff_bench.models.setdiff.checkpoint import save_checkpoint
 from setdiff_bench.runtime.threads import torch_threads
-from tests.models.test_checkpoint import perturbed_model
+from tests.models.setdiff_fixtures import perturbed_model
 
 
 def _save(folder: Path, head_seed: int) -> Path:
