@@ -1,2 +1,13 @@
-"""Stage 1, dataset → packets: planning (:mod:`.plan`), rendering and writing (:mod:`.prepare`),
-the on-disk store (:mod:`.store`) and its index (:mod:`.index`), and ``--shard`` splitting (:mod:`.shards`)."""
+"""Stage 1, dataset → packets, in the order the data flows:
+
+* options of a call: :mod:`.prepare_settings`; the call itself (scenes, units, resume, index): :mod:`.prepare`;
+* fits, found or trained: :mod:`.fits`;
+* planning (:mod:`.plan`, the protocol's groups): views at the working resolution (:mod:`.working_view`),
+  packing targets and choosing references (:mod:`.packing`), jobs and their recipe hash (:mod:`.jobs`),
+  novel trajectories (:mod:`.trajectory`, :mod:`.plan_trajectories`) and training pairs (:mod:`.recipes`,
+  :mod:`.plan_pairs`);
+* rendering and writing one packet (:mod:`.worker`), many of them (:mod:`.execute`), its files
+  (:mod:`.writer`);
+* the on-disk store (:mod:`.store`) and its index (:mod:`.index`), training samples from it
+  (:mod:`.training_dataset`), and ``--shard`` splitting (:mod:`.shards`).
+"""

@@ -23,7 +23,7 @@ import numpy as np
 
 from setdiff_bench.packets.working_view import ViewJob
 from setdiff_bench.protocols import Protocol
-from setdiff_bench.types import Frame, PacketKey
+from setdiff_bench.types import Frame, PacketKey, key_fields
 
 PACKET_FORMAT = "setdiff-packets/1"
 
@@ -78,12 +78,7 @@ def with_recipe(job: PacketJob, protocol: Protocol, fit_sha: str, backend: str) 
 
     content = {
         "format": PACKET_FORMAT,
-        "packet_id": job.packet_id,
-        "dataset": job.dataset,
-        "protocol": job.protocol,
-        "group": job.group,
-        "split": job.split,
-        "scene": job.scene,
+        **key_fields(job),
         "fit_key": job.fit_key,
         "fit_sha256": fit_sha,
         "resolution": list(job.resolution),
@@ -100,6 +95,7 @@ def with_recipe(job: PacketJob, protocol: Protocol, fit_sha: str, backend: str) 
         content["trajectory"] = job.trajectory
     if job.pairs is not None:  # likewise for training-pair recipes (packets.recipes)
         content["pairs"] = job.pairs
+    # sorted keys: the hash does not depend on the order the fields are listed in
     digest = hashlib.sha256(
         json.dumps(content, sort_keys=True, separators=(",", ":")).encode("utf-8")
     ).hexdigest()

@@ -69,9 +69,9 @@ from setdiff_bench.packets.plan import (
 from setdiff_bench.packets.prepare_settings import SPLIT_CHOICES, PrepareSettings
 from setdiff_bench.packets.recipes import PairRecipe, RecipeFrames, parse_pairs, recipe_frames
 from setdiff_bench.packets.shards import Shard  # the type of PrepareSettings.shard, for callers
-from setdiff_bench.packets.store import packet_is_complete, remove_temporaries
 from setdiff_bench.packets.trajectory import TrajectorySpec, parse_trajectory
 from setdiff_bench.packets.worker import JobStats, build_packet, resample
+from setdiff_bench.packets.writer import packet_is_complete, remove_temporaries
 from setdiff_bench.protocols import Protocol, load_protocol
 from setdiff_bench.runtime.devices import resolve_device
 from setdiff_bench.runtime.threads import torch_threads

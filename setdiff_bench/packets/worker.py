@@ -6,7 +6,7 @@ the targets (RGB, C-map ``(M, 3, H, W)``, alpha ``(M, 1, H, W)``) and the refere
 the working resolution ``(H, W)`` (cropped and resized as :mod:`setdiff_bench.packets.plan` says, then
 resampled to the pinhole camera when the capture is distorted), normalises the packet into its first
 target's frame at unit extent (:func:`setdiff_bench.geometry.normalize_packet`) and writes it
-(:func:`setdiff_bench.packets.store.write_packet`).
+(:func:`setdiff_bench.packets.writer.write_packet`).
 
 Process-global caches: the last fit read (one model per process: jobs arrive grouped by fit) and up to
 :data:`_REFERENCE_CACHE_SIZE` reference renders of that model, reused by every packet that shares them.
@@ -30,8 +30,8 @@ from setdiff_bench.gaussians.render import render
 from setdiff_bench.geometry import normalize_packet
 from setdiff_bench.io.images import read_mask, read_rgb, to_numpy_hwc
 from setdiff_bench.packets.jobs import PacketJob
-from setdiff_bench.packets.store import PacketHeader, ViewContent, write_packet
 from setdiff_bench.packets.working_view import Crop, ViewJob
+from setdiff_bench.packets.writer import PacketHeader, ViewContent, write_packet
 from setdiff_bench.types import key_fields
 from setdiff_bench.undistort import is_distorted, undistort_image, undistortion_maps
 

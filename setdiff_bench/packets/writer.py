@@ -30,7 +30,7 @@ from setdiff_bench.packets.index import (
     read_rows,
     write_rows,
 )
-from setdiff_bench.types import PacketKey
+from setdiff_bench.types import PacketKey, key_fields
 
 CMAP_CHANNELS = ("X", "Y", "Z", "A")
 #: OpenEXR stamps the write time unless a DateTime is given; a fixed one keeps files byte-identical.
@@ -134,15 +134,10 @@ def _write_view(
         write_png(folder / f"{stem}_gt.png", view.gt, atomic=False)
         write_png(folder / f"{stem}_mask.png", view.mask.astype(bool), atomic=False)
         files["gt"], files["mask"] = f"{stem}_gt.png", f"{stem}_mask.png"
-    row: dict[str, Any] = {
-        "packet_id": header.packet_id,
+    row: dict[str, Any] = {  # any order: write_rows orders the columns by the index SCHEMA
+        **key_fields(header),
         "role": role,
         "view": position,
-        "dataset": header.dataset,
-        "protocol": header.protocol,
-        "group": header.group,
-        "split": header.split,
-        "scene": header.scene,
         "fit_key": header.fit_key,
         "frame": view.frame,
         "sensor": view.sensor,
