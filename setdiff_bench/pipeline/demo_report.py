@@ -1,0 +1,93 @@
+"""The demo's report (``<out>/README.md``): what ran and how long, the models, the leaderboard, the verdict
+table and the files, from the summary :mod:`.demo_summary` makes."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from setdiff_bench.metrics.registry import get_metric
+from setdiff_bench.pipeline.demo_layout import DemoPaths
+from setdiff_bench.pipeline.demo_stages import METHODS
+from setdiff_bench.pipeline.demo_summary import VERDICT_METRICS
+from setdiff_bench.pipeline.presets import get_benchmark
+
+
+def report_markdown(summary: dict[str, Any], paths: DemoPaths) -> str:
+    """``<out>/README.md``: what ran, how long, the leaderboard, the verdict and the files."""
+    benchmark = get_benchmark(summary["preset"].get("benchmark", "driving"))
+    lines = [f"# {benchmark.title}", ""]
+    lines += [
+        f"Produced by `{summary['invocation']}` (preset `{summary['preset']['name']}`: "
+        f"{summary['preset']['description']}); total stage time {summary['total_seconds'] / 60:.1f} min.",
+        "",
+    ]
+    provenance = summary.get("provenance") or {}
+    if provenance:
+        git = provenance["git"]
+        revision = (git["revision"] or "unknown")[:12] + (" with uncommitted changes" if git["dirty"] else "")
+        lines += [
+            f"Code revision {revision}; seed {provenance['seed']}; {provenance['torch_threads']} torch "
+            f"threads on {provenance['machine']['cpu']} (set `SETDIFF_THREADS` to repeat it elsewhere).",
+            "",
+        ]
+    models = summary.get("models") or {}
+    for method, model in models.items():
+        if "shipped" in model:
+            lines.append(
+                f"- `{method}`: the shipped model `{model['shipped']}`, trained on "
+                f"{', '.join(model['trained_on'])} (none of them a test scene here)."
+            )
+        else:
+            lines.append(f"- `{method}`: trained by this demo ({summary['training_steps'][method]} steps).")
+    if models:
+        lines.append(f"- Test scenes: {', '.join(summary.get('test_scenes', []))}.")
+        lines.append("")
+    board = paths.out / f"{benchmark.leaderboard}.md"
+    if board.is_file():
+        lines += ["## Leaderboard (test scenes)", "", board.read_text(encoding="utf-8").strip(), ""]
+        lines += [benchmark.note, ""] if benchmark.note else []
+    verdict = summary.get(benchmark.verdict_key) or {}
+    if verdict.get("means"):
+        specs = [get_metric(name) for name in VERDICT_METRICS]
+        lines += [
+            f"## {benchmark.verdict_title} ({verdict['targets']} targets)",
+            "",
+            "| method | " + " | ".join(f"{spec.label} {spec.arrow}" for spec in specs) + " |",
+            "|---|" + "---:|" * len(specs),
+        ]
+        for method in METHODS:
+            if method in verdict["means"]:
+                m = verdict["means"][method]
+                lines.append(
+                    f"| {method} | "
+                    + " | ".join(f"{m[spec.name]:.{spec.decimals}f}" for spec in specs)
+                    + " |"
+                )
+        for other in ("identity", "difix"):
+            wins = verdict.get(f"setdiff_beats_{other}")
+            if wins:
+                said = ", ".join(f"{k.upper()} {'yes' if v else 'no'}" for k, v in wins.items())
+                lines.append(f"\nSetDiff beats `{other}` {benchmark.verdict_title.lower()}: {said}.")
+        lines.append("")
+    for name, title in (
+        ("ablation_geometry.md", "Geometry ablation"),
+        ("ablation_setsize.md", "Set-size ablation"),
+    ):
+        if (paths.out / name).is_file():
+            lines += [f"- {title}: [{name}]({name})"]
+    lines += ["", "## Commands, in order", ""]
+    for stage in summary["stages"]:
+        timing = f"{stage['seconds']:.0f} s"
+        if stage.get("resumed"):
+            timing += f", resumed: work done by an earlier run; this run {stage['rerun_seconds']:.0f} s"
+        if stage.get("concurrent_group") is not None:
+            timing += f", concurrent group {stage['concurrent_group']} lane {stage['lane']}"
+        lines.append(f"1. `{stage['command']}` ({stage['name']}, {timing})")
+    lines += ["", "## Files", ""]
+    lines += [f"- `{name}`" for name in summary["outputs"]]
+    lines += [
+        "",
+        f"Intermediate data (scenes, packets, checkpoints, runs): `{paths.work}` (not versioned).",
+        "",
+    ]
+    return "\n".join(lines)

@@ -1,0 +1,113 @@
+"""The demo's machine-readable summary (``<out>/demo.json``): preset, stage commands and times, the
+provenance the numbers depend on, and the verdict on the benchmark's verdict group (SetDiff against
+``identity`` and ``difix``, per metric in its direction)."""
+
+from __future__ import annotations
+
+import os
+import platform
+from dataclasses import asdict
+from typing import Any
+
+import pandas as pd
+
+from setdiff_bench.io.run_layout import METRICS_FILE
+from setdiff_bench.metrics.registry import get_metric
+from setdiff_bench.pipeline.demo_layout import REPORT_FILE, SUMMARY_FILE, DemoPaths
+from setdiff_bench.pipeline.demo_stages import METHODS
+from setdiff_bench.pipeline.presets import DemoPreset, get_benchmark
+from setdiff_bench.pipeline.stages import Pipeline
+from setdiff_bench.runtime.provenance import git_revision, package_versions
+from setdiff_bench.runtime.threads import compute_threads
+
+VERDICT_METRICS = ("psnr", "ssim", "lpips")  # the verdict's metrics, in table order
+
+
+def run_provenance(seed: int) -> dict[str, Any]:
+    """What the numbers depend on: code revision, seed, torch thread count, versions, CPU.
+
+    On the same machine the same command gives byte-identical scenes, fits, packets, checkpoints and
+    leaderboards; another thread count, CPU instruction set, torch build or a GPU changes the last bits
+    of every float sum, and training amplifies them (README "Reproducibility").
+    """
+    return {
+        "git": git_revision(),
+        "seed": seed,
+        "torch_threads": compute_threads(),
+        "machine": {
+            "cpu": platform.processor() or platform.machine(),
+            "cpu_count": os.cpu_count(),
+            "system": platform.system(),
+        },
+        "versions": package_versions(),
+    }
+
+
+def better(metric: str, value: float, other: float) -> bool:
+    """Whether ``value`` is strictly better than ``other`` in ``metric``'s direction (``MetricSpec``)."""
+    return value > other if get_metric(metric).higher_is_better else value < other
+
+
+def lane_shift_verdict(metrics: pd.DataFrame, group: str = "lane+2") -> dict[str, Any]:
+    """SetDiff against ``identity`` and ``difix`` on one group (the benchmark's verdict group: +2 lanes,
+    3 views): means and who wins each metric.
+
+    Args:
+        metrics: per-target rows of the four runs (``metrics.parquet`` concatenated).
+    """
+    rows = metrics[metrics["group"] == group]
+    means = rows.groupby("method")[list(VERDICT_METRICS)].mean()
+    verdict: dict[str, Any] = {
+        "group": group,
+        "targets": int((rows["method"] == "setdiff").sum()),
+        "means": {m: {k: float(v) for k, v in means.loc[m].items()} for m in means.index},
+    }
+    if "setdiff" in means.index:
+        for other in ("identity", "difix"):
+            if other in means.index:
+                verdict[f"setdiff_beats_{other}"] = {
+                    name: bool(better(name, means.loc["setdiff", name], means.loc[other, name]))
+                    for name in VERDICT_METRICS
+                }
+    return verdict
+
+
+def summarize(
+    paths: DemoPaths, preset: DemoPreset, steps: dict[str, int], pipeline: Pipeline, invocation: str
+) -> dict[str, Any]:
+    """The demo's machine-readable summary: preset, stage commands and times, the verdict on the benchmark's
+    verdict group (under its ``verdict_key``: ``lane_plus_2``, ``views_3``)."""
+    benchmark = get_benchmark(preset.benchmark)
+    frames = [
+        pd.read_parquet(paths.runs / m / METRICS_FILE)
+        for m in METHODS
+        if (paths.runs / m / METRICS_FILE).is_file()
+    ]
+    metrics = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+    return {
+        "invocation": invocation,
+        "preset": asdict(preset),
+        "training_steps": steps,
+        "stages": [
+            {
+                "name": r.name,
+                "command": r.command,
+                "seconds": round(r.seconds, 1),
+                "resumed": r.resumed,
+                "rerun_seconds": None if r.rerun_seconds is None else round(r.rerun_seconds, 1),
+                "concurrent_group": r.group,
+                "lane": r.lane,
+            }
+            for r in pipeline.records
+        ],
+        "total_seconds": round(pipeline.elapsed_seconds(), 1),
+        "this_run_seconds": round(pipeline.elapsed_seconds(this_run=True), 1),
+        benchmark.verdict_key: lane_shift_verdict(metrics, benchmark.verdict_group) if len(metrics) else {},
+        "outputs": sorted(
+            p.name
+            for p in paths.out.iterdir()
+            if p.is_file() and not p.name.startswith(".") and p.name not in (REPORT_FILE, SUMMARY_FILE)
+        )
+        if paths.out.is_dir()
+        else [],
+    }
