@@ -26,8 +26,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.common import machine, time_call, write_result
 from setdiff_bench.cli.fit import fit_config
 from setdiff_bench.cli.list import parse_option
-from setdiff_bench.gaussians.fit import _Trainer, initial_model
+from setdiff_bench.gaussians.fit import initial_model
 from setdiff_bench.gaussians.fit_data import load_fit_scene, load_fit_views, select_fit_frames
+from setdiff_bench.gaussians.fit_trainer import Trainer
 from setdiff_bench.gaussians.render import render
 
 
@@ -69,7 +70,7 @@ def main() -> None:
     config = fit_config("default", max(300, args.steps + 1), seed=0)
 
     start = time.perf_counter()
-    trainer = _Trainer(views, initial_model(views, scene.points3d, scene.points_rgb, config), config, device)
+    trainer = Trainer(views, initial_model(views, scene.points3d, scene.points_rgb, config), config, device)
     setup_s = time.perf_counter() - start
     start = time.perf_counter()
     trainer.step()

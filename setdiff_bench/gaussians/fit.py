@@ -73,8 +73,6 @@ __all__ = [
     "split_settings",
 ]
 
-_Trainer = Trainer  # the name benchmarks/fit.py imports
-
 
 @dataclass
 class FitResult:

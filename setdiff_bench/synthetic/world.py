@@ -24,7 +24,6 @@ from setdiff_bench.synthetic.layout import StreetLayout
 from setdiff_bench.synthetic.soup import GaussianSoup
 from setdiff_bench.synthetic.world_buildings import facade_soup
 from setdiff_bench.synthetic.world_detail import FACADE_DETAIL, Detail
-from setdiff_bench.synthetic.world_ground import _road_texture as _road_texture
 from setdiff_bench.synthetic.world_ground import ground_soup
 from setdiff_bench.synthetic.world_objects import car_soup, foliage_soup, street_object_soup
 from setdiff_bench.synthetic.world_sky import SKY_RADIUS_M, far_background_soup, sky_soup

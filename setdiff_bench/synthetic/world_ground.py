@@ -30,7 +30,7 @@ def _chunks(
     return out
 
 
-def _road_texture(layout: StreetLayout, rng: np.random.Generator, y0: float) -> Texture:
+def road_texture(layout: StreetLayout, rng: np.random.Generator, y0: float) -> Texture:
     """Asphalt with painted markings baked in; ``u`` = x − x_min, ``v`` = y − y0."""
     asphalt = tx.asphalt_texture(rng, layout.asphalt_color, lane_width=layout.lane_width)
     white = np.array([0.92, 0.92, 0.9])
@@ -67,7 +67,7 @@ def _road_texture(layout: StreetLayout, rng: np.random.Generator, y0: float) -> 
 
 def ground_soup(layout: StreetLayout, detail: Detail, rng: np.random.Generator) -> GaussianSoup:
     soup = GaussianSoup()
-    road_tex = _road_texture(layout, rng, layout.road_right)
+    road_tex = road_texture(layout, rng, layout.road_right)
     _ground_grid(
         soup, layout, detail, layout.road_right, layout.road_left, 0.0, road_tex, 1.0, align=layout.lane_width
     )

@@ -15,7 +15,8 @@ from setdiff_bench.synthetic.generate import build_scene
 from setdiff_bench.synthetic.layout import LANE_WIDTH_M, random_layout
 from setdiff_bench.synthetic.presets import get_preset
 from setdiff_bench.synthetic.rig import RIG, rig_camera
-from setdiff_bench.synthetic.world import CATEGORIES, _road_texture
+from setdiff_bench.synthetic.world import CATEGORIES
+from setdiff_bench.synthetic.world_ground import road_texture
 from tests.synthetic.synthetic_fixtures import SEED, small_preset
 
 
@@ -54,7 +55,7 @@ def test_world_has_every_category_and_a_moderate_size():
 
 def test_lane_markings_are_painted_on_lane_boundaries():
     layout = random_layout(np.random.default_rng(3), -10.0, 70.0)
-    texture = _road_texture(layout, np.random.default_rng(0), layout.road_right)
+    texture = road_texture(layout, np.random.default_rng(0), layout.road_right)
     x = np.linspace(0.0, 30.0, 301)
     on_boundary = texture(
         x - layout.x_min, np.full_like(x, LANE_WIDTH_M)
