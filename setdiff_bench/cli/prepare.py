@@ -56,7 +56,9 @@ def declared_field_default(module: str, cls: str, name: str) -> Any:
     Raises:
         LookupError: no such class or field, or a default that is not a literal.
     """
-    tree = ast.parse(module_source(module).read_text(encoding="utf-8"))
+    source = module_source(module)
+    tree = ast.parse(source.read_text(encoding="utf-8"))
+    package = module if source.name == "__init__.py" else module.rpartition(".")[0]
     for node in tree.body:
         if isinstance(node, ast.ClassDef) and node.name == cls:
             for item in node.body:
@@ -71,13 +73,12 @@ def declared_field_default(module: str, cls: str, name: str) -> Any:
                     except ValueError:
                         raise LookupError(f"{module}.{cls}.{name}'s default is not a literal") from None
             raise LookupError(f"{module}.{cls} declares no field {name} with a default")
-        if (
-            isinstance(node, ast.ImportFrom)
-            and node.module
-            and node.level == 0
-            and any(alias.name == cls and alias.asname in (None, cls) for alias in node.names)
-        ):
-            return declared_field_default(node.module, cls, name)  # a re-export: follow it
+        if isinstance(node, ast.ImportFrom) and any(
+            alias.name == cls and alias.asname in (None, cls) for alias in node.names
+        ):  # a re-export: follow it (``from .fit_config import FitConfig`` too)
+            base = package.rsplit(".", node.level - 1)[0] if node.level else ""  # level 1: this package
+            origin = ".".join(part for part in (base, node.module or "") if part)
+            return declared_field_default(origin, cls, name)
     raise LookupError(f"{module} defines no class {cls}")
 
 

@@ -39,6 +39,13 @@ def test_declared_field_default_follows_a_re_export(tmp_path: Path, monkeypatch:
     )
     monkeypatch.syspath_prepend(str(tmp_path))
     assert declared_field_default("face_mod", "FitConfig", "iterations") == FitConfig().iterations
+    package = tmp_path / "face_pkg"
+    package.mkdir()
+    (package / "__init__.py").write_text("from .config import Settings\n", encoding="utf-8")
+    (package / "config.py").write_text("class Settings:\n    iterations: int = 7\n", encoding="utf-8")
+    (package / "face.py").write_text("from .config import Settings\n", encoding="utf-8")
+    assert declared_field_default("face_pkg", "Settings", "iterations") == 7
+    assert declared_field_default("face_pkg.face", "Settings", "iterations") == 7
     with pytest.raises(LookupError):
         declared_field_default(*FIT_CONFIG, "no_such_field")
     with pytest.raises(LookupError):
