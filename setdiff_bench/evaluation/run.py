@@ -45,6 +45,12 @@ merge time per (protocol, scene, sensor) sequence of targets sorted by timestamp
 camera's 10–15 s targets form one sequence), from the written 8-bit images and the ground truth.  The
 ground truth's flow and occlusion mask are cached (``warp_cache``, keyed by the ground-truth files'
 SHA-256), so scoring a second method on the same store does not recompute optical flow.
+
+This module is the orchestration (:func:`run_method`) and the face of the concepts it uses, each in a
+module of its own and re-exported here: the run contract (:mod:`.run_settings`), the run folder's claim and
+resume (:mod:`.run_folder`), one packet's images and fragment (:mod:`.run_packet`), the per-target rows
+(:mod:`.run_rows`), warp error per sequence (:mod:`.sequences`), the manifest (:mod:`.run_manifest`), the
+merge (:mod:`.run_merge`) and what a call did (:mod:`.run_result`).
 """
 
 from __future__ import annotations
