@@ -45,13 +45,14 @@ VERB = "prepare"
 HELP = "turn a dataset and 3DGS fits into render/ground-truth packets for a protocol"
 DESCRIPTION = __doc__
 #: Where the 3DGS fit configuration is declared: ``--fit-iterations``' default is its ``iterations`` field.
-FIT_CONFIG = ("setdiff_bench.gaussians.fit", "FitConfig")
+FIT_CONFIG = ("setdiff_bench.gaussians.fit_config", "FitConfig")
 
 
 def declared_field_default(module: str, cls: str, name: str) -> Any:
     """The literal default of field ``name`` of the class ``cls`` defined in ``module`` (or in the module that
     ``module`` imports it from), read from the sources without importing them: ``--help`` may not load torch,
-    which :mod:`setdiff_bench.gaussians.fit` imports (:mod:`setdiff_bench.cli.declared`).
+    which importing :mod:`setdiff_bench.gaussians.fit_config` does through its package
+    (:mod:`setdiff_bench.cli.declared`).
 
     Raises:
         LookupError: no such class or field, or a default that is not a literal.
