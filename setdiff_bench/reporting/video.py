@@ -25,6 +25,7 @@ import numpy as np
 import pandas as pd
 
 from setdiff_bench.errors import SetDiffBenchError
+from setdiff_bench.evaluation.run_settings import SEQUENCE_PROTOCOLS
 from setdiff_bench.io.atomic import atomic_path
 from setdiff_bench.loaders.common import natural_key
 from setdiff_bench.reporting.grids import compose
@@ -32,8 +33,6 @@ from setdiff_bench.reporting.targets import TargetImages, TargetKey
 
 VIDEO_SUFFIX = ".webm"
 FOURCC = "VP90"
-#: Protocols whose camera sequences span groups (ordered by time); as :mod:`setdiff_bench.evaluation.run`.
-TIME_ORDERED_PROTOCOLS = frozenset({"nuscenes"})
 
 
 class VideoError(SetDiffBenchError):
@@ -79,7 +78,7 @@ def target_sequences(rows: pd.DataFrame) -> list[TargetSequence]:
     if rows.empty:
         return []
     frame = rows.drop_duplicates(["packet_id", "view"]).copy()
-    frame["_group"] = np.where(frame["protocol"].isin(TIME_ORDERED_PROTOCOLS), "", frame["group"])
+    frame["_group"] = np.where(frame["protocol"].isin(SEQUENCE_PROTOCOLS), "", frame["group"])
     sequences = []
     for (dataset, scene, group, sensor), members in frame.groupby(
         ["dataset", "scene", "_group", "sensor"], sort=False, dropna=False
