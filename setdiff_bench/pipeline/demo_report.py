@@ -12,6 +12,21 @@ from setdiff_bench.pipeline.demo_summary import VERDICT_METRICS
 from setdiff_bench.pipeline.presets import get_benchmark
 
 
+def threads_line(summary: dict[str, Any], provenance: dict[str, Any]) -> str:
+    """``"2 torch threads"``, or, where stages ran side by side with a share of them,
+    ``"2 torch threads (1 each for the 4 stages run side by side)"``: the counts the stages computed with
+    (``demo.json``'s per-stage ``threads``; summaries written before they were recorded give the first)."""
+    total = provenance["torch_threads"]
+    shared = sorted(
+        {int(s["threads"]) for s in summary.get("stages", []) if s.get("threads") not in (None, total)}
+    )
+    if not shared:
+        return f"{total} torch threads"
+    count = sum(1 for s in summary["stages"] if s.get("threads") not in (None, total))
+    each = " or ".join(str(n) for n in shared)
+    return f"{total} torch threads ({each} each for the {count} stages run side by side)"
+
+
 def report_markdown(summary: dict[str, Any], paths: DemoPaths) -> str:
     """``<out>/README.md``: what ran, how long, the leaderboard, the verdict and the files."""
     benchmark = get_benchmark(summary["preset"].get("benchmark", "driving"))
@@ -26,8 +41,8 @@ def report_markdown(summary: dict[str, Any], paths: DemoPaths) -> str:
         git = provenance["git"]
         revision = (git["revision"] or "unknown")[:12] + (" with uncommitted changes" if git["dirty"] else "")
         lines += [
-            f"Code revision {revision}; seed {provenance['seed']}; {provenance['torch_threads']} torch "
-            f"threads on {provenance['machine']['cpu']} (set `SETDIFF_THREADS` to repeat it elsewhere).",
+            f"Code revision {revision}; seed {provenance['seed']}; {threads_line(summary, provenance)} on "
+            f"{provenance['machine']['cpu']} (set `SETDIFF_THREADS` to repeat it elsewhere).",
             "",
         ]
     models = summary.get("models") or {}

@@ -97,6 +97,7 @@ def summarize(
                 "rerun_seconds": None if r.rerun_seconds is None else round(r.rerun_seconds, 1),
                 "concurrent_group": r.group,
                 "lane": r.lane,
+                "threads": r.threads,
             }
             for r in pipeline.records
         ],

@@ -58,6 +58,8 @@ class StageRecord:
             checks its outputs).
         group, lane: for a stage of :meth:`Pipeline.run_concurrently`, which concurrent group (0, 1,
             ...) and which lane of it ran the stage; ``None`` for a stage run on its own.
+        threads: the torch thread count the stage's process computed with (``SETDIFF_THREADS`` as the
+            pipeline set it for a lane, else the machine's :func:`compute_threads`).
     """
 
     name: str
@@ -67,6 +69,7 @@ class StageRecord:
     rerun_seconds: float | None = None
     group: int | None = None
     lane: int | None = None
+    threads: int | None = None
 
     def timing(self) -> str:
         """``"472 s"`` or ``"472 s, resumed (this run 2 s)"``."""
@@ -175,6 +178,7 @@ class Pipeline:
         else:
             record = StageRecord(name, command, seconds)
             self._note(command, earlier, seconds, complete=True)
+        record.threads = int(env[THREADS_ENV]) if env.get(THREADS_ENV) else compute_threads()
         print(
             f"[{name}] done in {seconds:.1f} s"
             + (f" (work recorded: {record.timing()})" if record.resumed else ""),

@@ -18,6 +18,7 @@ from setdiff_bench.cli.main import main
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.atomic import sha256_file
 from setdiff_bench.pipeline.demo import SUMMARY_FILE
+from setdiff_bench.pipeline.demo_report import threads_line
 from setdiff_bench.pipeline.stages import LEDGER_FILE, Pipeline, StageFailed, StageRecord
 from setdiff_bench.reporting.publish import PROVENANCE_FILE, publish
 
@@ -166,6 +167,7 @@ def test_concurrent_lanes_run_at_once_with_split_threads_and_keep_lane_order(
         [[("a", ["run", "first"]), ("b", ["run", "second"])], [("c", ["run", "slow"])]]
     )
     assert [(r.name, r.group, r.lane) for r in records] == [("a", 0, 0), ("b", 0, 0), ("c", 0, 1)]
+    assert [r.threads for r in records] == [2, 2, 2]  # the count each lane's process computed with
     assert [r.name for r in pipeline.records] == ["a", "b", "c"]
     assert sorted(seen) == [
         ("run first --no-progress", "2"),
@@ -176,6 +178,7 @@ def test_concurrent_lanes_run_at_once_with_split_threads_and_keep_lane_order(
     with pytest.raises(StageFailed, match="'d'"):
         pipeline.run_concurrently([[("d", ["run", "broken"])], [("e", ["run", "fine"])]])
     assert [r.name for r in pipeline.records] == ["a", "b", "c", "e"]
+    assert pipeline.run("f", ["run", "alone"]).threads == 4  # a stage on its own has every thread
 
 
 def test_elapsed_time_counts_a_concurrent_group_as_its_longest_lane() -> None:
@@ -190,3 +193,14 @@ def test_elapsed_time_counts_a_concurrent_group_as_its_longest_lane() -> None:
     )
     assert pipeline.elapsed_seconds() == 100.0 + max(20.0 + 30.0, 45.0) + 5.0
     assert pipeline.elapsed_seconds(this_run=True) == 100.0 + max(20.0 + 1.0, 45.0) + 5.0
+
+
+def test_report_states_the_threads_the_stages_ran_with() -> None:
+    """The demo README's provenance line names the stages' own thread counts when lanes shared the cores."""
+    provenance = {"torch_threads": 2}
+    alone = {"stages": [{"threads": 2}, {"threads": 2}]}
+    lanes = {"stages": [{"threads": 2}, {"threads": 1}, {"threads": 1}, {"threads": 1}, {"threads": 2}]}
+    older = {"stages": [{"name": "synth"}]}  # demo.json written before stages recorded their threads
+    assert threads_line(alone, provenance) == "2 torch threads"
+    assert threads_line(lanes, provenance) == "2 torch threads (1 each for the 3 stages run side by side)"
+    assert threads_line(older, provenance) == "2 torch threads"
