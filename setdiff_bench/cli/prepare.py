@@ -18,9 +18,11 @@ one line before anything is written.
 ``--pairs RECIPES`` writes training packets from the capture alone, instead of the protocol's groups:
 ``sparse:N`` (fit on every N-th recorded frame, targets the frames between), ``underfit:F`` (the fit stopped
 at F = 0.25..0.75 of its iterations, targets the recorded frames), ``cross-camera[:CAMERA]`` (fit on one
-camera, targets the others).  Targets keep their ground truth; references are recorded frames the degraded
-fit saw, chosen by Eq. 2; the group is the recipe (``sparse4``).  With ``--fit`` the degraded fits are made
-here (``<out>/fits/<scene>/<fit_key>@<recipe>.ply``).  Example::
+camera, targets the others), ``cycle[:S]`` (a second fit on the scene fit's renders at the recorded cameras
+shifted S = 1..6 m sideways, negative: left; targets the recorded frames).  Targets keep their ground truth;
+references are recorded frames chosen by Eq. 2 (those the degraded fit saw; for ``underfit`` and ``cycle``
+all but the packet's own targets); the group is the recipe (``sparse4``, ``cycle2m``).  With ``--fit`` the
+degraded fits are made here (``<out>/fits/<scene>/<fit_key>@<recipe>.ply``).  Example::
 
     setdiff-bench prepare synthetic --root data/synthetic --fit --fit-iterations 2000 --out packets/pairs \\
         --split train --pairs sparse:4,underfit:0.5
@@ -135,8 +137,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="RECIPES",
         help="training-pair recipes, comma-separated: sparse[:N] (fit on every N-th recorded frame, N >= 2, "
         "default 4), underfit[:F] (stop the fit at F = 0.25..0.75 of its iterations, default 0.5), "
-        "cross-camera[:CAMERA] (fit on one camera); writes their packets (targets with ground truth, "
-        "group e.g. sparse4) instead of the protocol's groups",
+        "cross-camera[:CAMERA] (fit on one camera), cycle[:S] (fit on the scene fit's renders at the "
+        "cameras shifted S = 1..6 m sideways, negative: left, default 2); writes their packets (targets with "
+        "ground truth, group e.g. sparse4) instead of the protocol's groups",
     )
     parser.add_argument("--workers", type=int, default=1, metavar="K", help="render processes (default 1)")
     parser.add_argument(

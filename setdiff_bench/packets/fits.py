@@ -9,7 +9,8 @@ DL3DV ``n3``/``n6``/``n9``, synthetic ``lane0``.  The PLY must be in the loader'
 ``fit=True`` (``--fit``): fit each one with :func:`setdiff_bench.gaussians.fit.fit_gaussians` on the
 group's fit frames (loader resolution, dataset masks), writing ``<out>/fits/<scene>/<fit_key>.ply``
 (reused on a rerun; the fit itself checkpoints under ``<fit_key>.ckpt/`` and resumes).  A degraded
-training-pair fit (:mod:`setdiff_bench.packets.recipes`) is the fit key ``<fit_key>@<label>``.
+training-pair fit (:mod:`setdiff_bench.packets.recipes`) is the fit key ``<fit_key>@<label>``; the ``cycle``
+recipe's is fitted on renders of ``<fit_key>.ply`` (made first when missing; :mod:`setdiff_bench.packets.cycle`).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from setdiff_bench.gaussians.fit_config import FitConfig
 from setdiff_bench.gaussians.fit_data import load_fit_views
 from setdiff_bench.gaussians.ply import read_ply
 from setdiff_bench.io.atomic import sha256_file
+from setdiff_bench.packets.cycle import cycle_views
 from setdiff_bench.runtime.devices import resolve_device
 from setdiff_bench.types import Frame, Scene
 
@@ -68,28 +70,49 @@ class FitSource:
     def existing(self, scene: str, fit_key: str) -> Path | None:
         return next((p for p in self.candidates(scene, fit_key) if p.is_file()), None)
 
+    def config(self) -> FitConfig:
+        """The configuration of every fit made here: ``fit_config``, else the standard schedule compressed to
+        ``fit_iterations``."""
+        if self.fit_config is not None:
+            return self.fit_config
+        if self.fit_iterations == DEFAULT_FIT_ITERATIONS:
+            return FitConfig()
+        return FitConfig.schedule(
+            self.fit_iterations, densify_every=min(100, max(1, self.fit_iterations // 50))
+        )
+
     def ensure(
-        self, scene: Scene, fit_key: str, fit_frames: Sequence[Frame], *, stop_fraction: float | None = None
+        self,
+        scene: Scene,
+        fit_key: str,
+        fit_frames: Sequence[Frame],
+        *,
+        stop_fraction: float | None = None,
+        cycle: tuple[str, float] | None = None,
     ) -> None:
         """Train the fit if ``--fit`` and it does not exist yet.
 
         ``stop_fraction`` (the ``underfit`` recipe): run the schedule of the full fit but stop after
         ``max(1, round(stop_fraction × iterations))`` iterations.
+
+        ``cycle = (base_key, shift_m)`` (the ``cycle`` recipe): the fit ``base_key`` (A, on ``fit_frames``) is
+        made first when missing, then this fit is made on A's renders at the cameras of ``fit_frames``
+        shifted ``shift_m`` metres sideways (:func:`~setdiff_bench.packets.cycle.cycle_views`; full masks),
+        with the same configuration.
         """
         if not self.fit or self.existing(scene.name, fit_key) is not None:
             return
 
         target = self.candidates(scene.name, fit_key)[0]
-        if self.fit_config is not None:
-            config = self.fit_config
-        elif self.fit_iterations == DEFAULT_FIT_ITERATIONS:
-            config = FitConfig()
-        else:
-            config = FitConfig.schedule(
-                self.fit_iterations, densify_every=min(100, max(1, self.fit_iterations // 50))
-            )
+        config = self.config()
         device = resolve_device(self.fit_device)
+        if cycle is not None:
+            self.ensure(scene, cycle[0], fit_frames)  # A first: the scene's own fit
         views = load_fit_views(scene, [f.name for f in fit_frames], downscale=self.downscale)
+        if cycle is not None:
+            base = read_ply(self(scene.name, cycle[0])[0])
+            label = fit_key.rpartition("@")[2]
+            views = cycle_views(base, views, cycle[1], config, label=label, device=device)
         stop = None if stop_fraction is None else max(1, round(stop_fraction * config.iterations))
         options = {} if stop is None else {"stop_after": stop}  # only then: full fits are called as before
         fit_views_to_ply(

@@ -35,9 +35,11 @@ def plan_recipe_pairs(
     frames with their ground truth and mask, cut into packets as the scene's split cuts protocol targets
     (``packets.<split>_views`` minus the references), and each chunk gets the protocol's ``N`` references
     chosen by Eq. 2 (:func:`~setdiff_bench.packets.packing.reference_views`, the scene's ``d_max``) among
-    the recorded frames the degraded fit saw.  For ``underfit`` the fit saw every target: a chunk's own targets are left out of its candidates
-    (the clean capture of a target is never its reference), ``N`` is at most the fit frames minus one and a
-    chunk holds at most ``fit frames − N`` targets.
+    the recorded frames the degraded fit saw.  For ``underfit`` the fit saw every target, and for ``cycle``
+    it saw none of the recorded frames (renders at their shifted cameras), so every recorded frame is a
+    candidate: in both, a chunk's own targets are left out of its candidates (the clean capture of a target
+    is never its reference), ``N`` is at most the recorded frames minus one and a chunk holds at most
+    ``recorded frames − N`` targets.
 
     Args:
         protocol: the protocol.

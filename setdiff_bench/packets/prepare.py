@@ -288,8 +288,14 @@ def _prepare(
         if pairs:
             for _, frames in recipe_plan[(scene_name, fit_key)]:
                 if source.fit:
+                    # cycle: fitted on renders of the scene's own fit, which is made first if missing
+                    shift = frames.cycle_shift
                     source.ensure(
-                        scene, f"{fit_key}{frames.fit_suffix}", frames.fit, stop_fraction=frames.stop_fraction
+                        scene,
+                        f"{fit_key}{frames.fit_suffix}",
+                        frames.fit,
+                        stop_fraction=frames.stop_fraction,
+                        cycle=None if shift is None else (fit_key, shift),
                     )
             plans = plan_recipe_pairs(
                 spec,

@@ -13,6 +13,9 @@ recipe             fit frames (what the degraded 3DGS sees)          targets (re
                    ``round(F × iterations)`` of its schedule         references exclude its own targets)
 ``cross-camera:C`` the recorded frames of camera C (default: the     the other cameras' recorded frames
                    camera with most frames, ties by name)
+``cycle:S``        renders of the scene's fit at the recorded        the recorded frames (each packet's
+                   cameras shifted S metres sideways (none of the    references exclude its own targets)
+                   recorded frames)
 =================  ================================================  ==========================================
 
 *Recorded frames* are the frames the protocol fits on (each group's ``fit`` selection, in scene order): a
@@ -21,14 +24,19 @@ are chosen by Eq. 2 among the recorded frames the degraded fit saw, exactly as p
 (:func:`setdiff_bench.packets.plan.plan_recipe_pairs`).
 
 Parameters and their ranges: ``N`` an integer ≥ 2 (default 4); ``F`` a fraction with 0.25 ≤ F ≤ 0.75 (the
-25–75 % of Difix3D+; default 0.5); ``C`` a camera (sensor) name of the capture.  The group of a recipe's
-packets is its label (``sparse4``, ``underfit50``, ``cross-camera`` / ``cross-camera-front``), and its fit
-key ``<protocol fit key>@<label>`` (``lane0@sparse4``; for the default camera ``lane0@cross-camera-front``).
+25–75 % of Difix3D+; default 0.5); ``C`` a camera (sensor) name of the capture; ``S`` a shift in metres
+(scene units) with 1 ≤ |S| ≤ 6 (Difix3D+'s 1–6 m; default 2), along each camera's own right axis (OpenCV
++x: lateral for a forward-facing camera), negative to the left.  The group of a recipe's packets is its
+label (``sparse4``, ``underfit50``, ``cross-camera`` / ``cross-camera-front``, ``cycle2m`` / ``cycle-1.5m``),
+and its fit key ``<protocol fit key>@<label>`` (``lane0@sparse4``; for the default camera
+``lane0@cross-camera-front``).
 
-Cycle reconstruction (Difix3D+: fit on the recorded trajectory, render it shifted sideways by 1–6 m, fit a
-second 3DGS on those renders, render it back at the recorded cameras) is not offered: it needs a fit on
-rendered images, and the fitting here reads the capture's image files
-(:func:`setdiff_bench.gaussians.fit_data.load_fit_views`).
+Cycle reconstruction (Difix3D+): the scene's own fit A (``<fit key>.ply``, made with ``--fit`` as the
+protocol makes it when missing, else reused) is rendered at the recorded cameras shifted sideways, a second 3DGS B is fitted on those renders
+alone (full masks; :mod:`setdiff_bench.packets.cycle`), and B rendered back at the recorded cameras gives
+the targets' renders.  B saw none of the recorded frames, so every recorded frame but a packet's own
+targets is a reference candidate, as in ``underfit``.  With ``--fits DIR``, B is looked up as
+``<fit key>@cycle<S>m.ply`` like every recipe fit, and A is not needed.
 """
 
 from __future__ import annotations
@@ -43,14 +51,17 @@ from typing import Literal
 from setdiff_bench.errors import UsageError
 from setdiff_bench.types import Frame
 
-RecipeKind = Literal["sparse", "underfit", "cross-camera"]
+RecipeKind = Literal["sparse", "underfit", "cross-camera", "cycle"]
 #: The recipes ``--pairs`` knows, in the order of the module docstring.
-RECIPES: tuple[RecipeKind, ...] = ("sparse", "underfit", "cross-camera")
-#: Defaults: every 4th frame; half the iterations.
+RECIPES: tuple[RecipeKind, ...] = ("sparse", "underfit", "cross-camera", "cycle")
+#: Defaults: every 4th frame; half the iterations; a 2 m shift to the right.
 DEFAULT_EVERY = 4
 DEFAULT_FRACTION = 0.5
+DEFAULT_SHIFT_M = 2.0
 #: The range of ``underfit``'s fraction (Difix3D+ stops at 25–75 % of the iterations).
 FRACTION_RANGE = (0.25, 0.75)
+#: The range of ``cycle``'s shift magnitude |S| in metres (Difix3D+ shifts by 1–6 m).
+SHIFT_RANGE_M = (1.0, 6.0)
 OPTION = "--pairs"
 
 
@@ -59,25 +70,32 @@ class PairRecipe:
     """One parsed recipe of ``--pairs``.
 
     Attributes:
-        kind: ``sparse``, ``underfit`` or ``cross-camera``.
+        kind: ``sparse``, ``underfit``, ``cross-camera`` or ``cycle``.
         every: ``sparse``: fit on every ``every``-th recorded frame.
         fraction: ``underfit``: the share of the fit's iterations run (0.25–0.75).
         camera: ``cross-camera``: the camera fitted on; ``None``: the camera with most recorded frames.
+        shift: ``cycle``: the sideways shift in metres (scene units) along each camera's right axis
+            (OpenCV +x), 1 ≤ |shift| ≤ 6; negative: to the left.
     """
 
     kind: RecipeKind
     every: int | None = None
     fraction: float | None = None
     camera: str | None = None
+    shift: float | None = None
 
     @property
     def label(self) -> str:
-        """The group name of its packets: ``sparse4``, ``underfit50``, ``cross-camera[-<camera>]``."""
+        """The group name of its packets: ``sparse4``, ``underfit50``, ``cross-camera[-<camera>]``,
+        ``cycle2m`` (``cycle-1.5m`` to the left)."""
         if self.kind == "sparse":
             return f"sparse{self.every}"
         if self.kind == "underfit":
             assert self.fraction is not None
             return f"underfit{self.fraction * 100:g}"
+        if self.kind == "cycle":
+            assert self.shift is not None
+            return f"cycle{self.shift:g}m"
         return "cross-camera" if self.camera is None else f"cross-camera-{self.camera}"
 
 
@@ -85,8 +103,9 @@ def parse_pairs(texts: Sequence[str]) -> tuple[PairRecipe, ...]:
     """Parse ``--pairs`` values: comma-separated ``name[:parameter]`` (the option may also be repeated).
 
     Raises:
-        UsageError: an unknown recipe, a parameter that does not parse or is out of range, ``cycle``, or
-            the same recipe twice (``sparse:4`` and ``sparse:4``; ``sparse`` and ``sparse:4``).
+        UsageError: an unknown recipe, a parameter that does not parse or is out of range, or the same
+            recipe twice (``sparse:4`` and ``sparse:4``; ``sparse`` and ``sparse:4``; ``cycle`` and
+            ``cycle:2.0``).
     """
     recipes = [parse_recipe(part.strip()) for text in texts for part in text.split(",") if part.strip()]
     if texts and not recipes:
@@ -101,12 +120,6 @@ def parse_pairs(texts: Sequence[str]) -> tuple[PairRecipe, ...]:
 def parse_recipe(text: str) -> PairRecipe:
     """One ``name[:parameter]`` (module docstring); ``UsageError`` naming ``--pairs`` otherwise."""
     name, _, parameter = text.partition(":")
-    if name == "cycle":
-        raise UsageError(
-            "cycle reconstruction is not offered: it fits a second 3DGS on rendered images, and fits here "
-            "read captured image files; recipes: " + ", ".join(RECIPES),
-            OPTION,
-        )
     if name not in RECIPES:
         raise UsageError(f"unknown recipe {name!r}; recipes: {', '.join(RECIPES)}", OPTION)
     if name == "sparse":
@@ -129,9 +142,29 @@ def parse_recipe(text: str) -> PairRecipe:
                 OPTION,
             )
         return PairRecipe("underfit", fraction=fraction)
+    if name == "cycle":
+        return PairRecipe("cycle", shift=_shift(parameter))
     if parameter and not re.fullmatch(r"[A-Za-z0-9_.+-]+", parameter):
         raise UsageError(f"cross-camera:{parameter}: not a camera name", OPTION)
     return PairRecipe("cross-camera", camera=parameter or None)
+
+
+def _shift(parameter: str) -> float:
+    """``cycle``'s shift in metres: ``parameter`` (1 ≤ |S| ≤ 6) or the default; ``UsageError`` otherwise."""
+    if not parameter:
+        return DEFAULT_SHIFT_M
+    try:
+        shift = float(parameter)
+    except ValueError:
+        shift = math.nan
+    low, high = SHIFT_RANGE_M
+    if not low <= abs(shift) <= high:  # NaN and infinities fail too
+        raise UsageError(
+            f"cycle:{parameter}: the sideways shift must be a number of metres from {low:g} to {high:g} "
+            "(negative: to the left)",
+            OPTION,
+        )
+    return shift
 
 
 @dataclass(frozen=True)
@@ -139,12 +172,14 @@ class RecipeFrames:
     """What a recipe makes of one scene's recorded frames.
 
     Attributes:
-        fit: the frames the degraded 3DGS is fitted on (recorded order).
+        fit: the frames the degraded 3DGS is fitted on (recorded order); for ``cycle`` the recorded frames
+            whose shifted cameras it is fitted at (renders of the scene's fit, never these captures).
         targets: the recorded frames rendered from it (recorded order).
         fit_suffix: ``@<label>`` with the camera resolved for ``cross-camera`` (the fit key's suffix).
         stop_fraction: ``underfit``'s share of the iterations; ``None`` for a full fit.
-        disjoint: whether fit frames and targets are disjoint (``False`` for ``underfit``: each packet's
-            references then exclude its own targets).
+        disjoint: whether fit frames and targets are disjoint (``False`` for ``underfit`` and ``cycle``:
+            each packet's references then exclude its own targets).
+        cycle_shift: ``cycle``'s sideways shift in metres; ``None`` for the other recipes.
     """
 
     fit: tuple[Frame, ...]
@@ -152,6 +187,7 @@ class RecipeFrames:
     fit_suffix: str
     stop_fraction: float | None
     disjoint: bool
+    cycle_shift: float | None = None
 
 
 def recipe_frames(recipe: PairRecipe, recorded: Sequence[Frame], where: str) -> RecipeFrames:
@@ -180,6 +216,8 @@ def recipe_frames(recipe: PairRecipe, recorded: Sequence[Frame], where: str) -> 
         )
     if recipe.kind == "underfit":
         return RecipeFrames(frames, frames, f"@{recipe.label}", recipe.fraction, False)
+    if recipe.kind == "cycle":
+        return RecipeFrames(frames, frames, f"@{recipe.label}", None, False, cycle_shift=recipe.shift)
     counts = Counter(f.sensor for f in frames)
     if len(counts) < 2:
         only = next(iter(counts)) or "unnamed"

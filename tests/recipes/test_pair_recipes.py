@@ -22,11 +22,7 @@ from setdiff_bench.cli.main import main
 from setdiff_bench.packets.prepare import prepare
 from setdiff_bench.packets.store import PacketStore
 from setdiff_bench.runtime.threads import torch_threads
-from tests.packets.packet_fixtures import write_scene
-
-ITERATIONS = 20
-F = "lane0_front_{:03d}.png"
-RECORDED = [F.format(i) for i in (0, 1, 3, 4)]
+from tests.recipes.pairs_common import ITERATIONS, RECORDED, F, packets_of, prepare_pairs
 
 #: A protocol whose recorded frames are lane 0's three cameras (the synthetic protocol's settings otherwise).
 MULTI_CAMERA = """
@@ -65,15 +61,6 @@ targets = { lane_offset = 1, sensor = "front" }
 """
 
 
-@pytest.fixture(scope="module")
-def capture(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The dataset root holding ``street_00`` (a single scene: its split is train)."""
-    root = tmp_path_factory.mktemp("capture")
-    with torch_threads(1):
-        write_scene(root / "street_00", 11)
-    return root
-
-
 @pytest.fixture
 def fit_calls(monkeypatch: pytest.MonkeyPatch) -> list[dict[str, Any]]:
     """Each degraded fit's frame names, iterations and ``stop_after`` (the real fit still runs)."""
@@ -95,35 +82,11 @@ def fit_calls(monkeypatch: pytest.MonkeyPatch) -> list[dict[str, Any]]:
     return calls
 
 
-def _prepare(root: Path, out: Path, pairs: str, **kwargs: Any) -> Any:
-    with torch_threads(1):
-        return prepare(
-            "synthetic",
-            root,
-            out,
-            fit=True,
-            fit_iterations=ITERATIONS,
-            progress=False,
-            pairs=[pairs],
-            **kwargs,
-        )
-
-
-def _packets(out: Path) -> dict[str, tuple[list[str], set[str]]]:
-    """packet id → (target frames in order, reference frames)."""
-    index = pd.read_parquet(out / "index.parquet")
-    result = {}
-    for pid, rows in index.groupby("packet_id"):
-        targets = rows[rows["role"] == "target"].sort_values("view")["frame"].tolist()
-        result[str(pid)] = (targets, set(rows[rows["role"] == "ref"]["frame"]))
-    return result
-
-
 def test_sparse_fits_every_second_frame_and_targets_the_frames_between(
     capture: Path, tmp_path: Path, fit_calls: list[dict[str, Any]]
 ) -> None:
     out = tmp_path / "store"
-    summary = _prepare(capture, out, "sparse:2")
+    summary = prepare_pairs(capture, out, "sparse:2")
     # recorded 000, 001, 003, 004: positions 0 and 2 are fitted, 1 and 3 are the targets
     assert fit_calls == [
         {
@@ -134,7 +97,7 @@ def test_sparse_fits_every_second_frame_and_targets_the_frames_between(
         }
     ]
     # two references at most (the fit saw two frames): both; 2 targets fit in one train packet of 12 views
-    assert _packets(out) == {
+    assert packets_of(out) == {
         "synthetic__street-00__sparse2__0000": ([F.format(1), F.format(4)], {F.format(0), F.format(3)})
     }
     index = pd.read_parquet(out / "index.parquet")
@@ -152,7 +115,7 @@ def test_sparse_fits_every_second_frame_and_targets_the_frames_between(
     )
     # a rerun skips everything, writes nothing and fits nothing
     before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
-    again = _prepare(capture, out, "sparse:2")
+    again = prepare_pairs(capture, out, "sparse:2")
     assert (again.written, again.skipped, again.fits_trained) == (0, 1, 0)
     assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
 
@@ -161,13 +124,13 @@ def test_underfit_stops_the_fit_and_never_uses_a_target_as_its_reference(
     capture: Path, tmp_path: Path, fit_calls: list[dict[str, Any]]
 ) -> None:
     out = tmp_path / "store"
-    _prepare(capture, out, "underfit:0.25")
+    prepare_pairs(capture, out, "underfit:0.25")
     # every recorded frame is fitted; the full run's schedule (20 iterations) stopped after round(0.25 x 20) = 5
     assert fit_calls == [
         {"frames": RECORDED, "iterations": ITERATIONS, "stop_after": 5, "ply": "lane0@underfit25.ply"}
     ]
     # 4 fit frames: 3 references (one less than the frames), so 4 - 3 = 1 target per packet
-    assert _packets(out) == {
+    assert packets_of(out) == {
         f"synthetic__street-00__underfit25__{i:04d}": ([frame], set(RECORDED) - {frame})
         for i, frame in enumerate(RECORDED)
     }
@@ -182,19 +145,19 @@ def test_cross_camera_fits_one_camera_and_targets_the_others(
     left = [f"lane0_front_left_{i:03d}.png" for i in range(5)]
     right = [f"lane0_front_right_{i:03d}.png" for i in range(5)]
     out = tmp_path / "store"
-    _prepare(capture, out, "cross-camera", protocol=str(protocol))
+    prepare_pairs(capture, out, "cross-camera", protocol=str(protocol))
     # 5 frames per camera: the tie goes to the first name, front
     assert fit_calls[0]["frames"] == front and fit_calls[0]["ply"] == "lane0@cross-camera-front.ply"
     # 5 references (the protocol's 6, capped by the 5 front frames); 12 - 5 = 7 targets per packet at most:
     # the 10 side-camera frames in recorded order, cut 5 + 5
-    assert _packets(out) == {
+    assert packets_of(out) == {
         "lane0-cameras__street-00__cross-camera__0000": (left, set(front)),
         "lane0-cameras__street-00__cross-camera__0001": (right, set(front)),
     }
     named = tmp_path / "named"
-    _prepare(capture, named, "cross-camera:front_right", protocol=str(protocol))
+    prepare_pairs(capture, named, "cross-camera:front_right", protocol=str(protocol))
     assert fit_calls[1]["frames"] == right
-    packets = _packets(named)
+    packets = packets_of(named)
     assert sorted(t for targets, _ in packets.values() for t in targets) == sorted(front + left)
     assert all(refs == set(right) for _, refs in packets.values())
 
@@ -207,12 +170,12 @@ def test_recipe_packets_beside_protocol_packets_leave_them_byte_identical(
         prepare("synthetic", capture, out, fits=capture, progress=False)
     protocol_rows = pd.read_parquet(out / "index.parquet")
     files = {p: p.read_bytes() for p in (out / "packets").rglob("*") if p.is_file()}
-    _prepare(capture, out, "sparse:3")
+    prepare_pairs(capture, out, "sparse:3")
     index = pd.read_parquet(out / "index.parquet")
     assert index[index["group"] != "sparse3"].reset_index(drop=True).equals(protocol_rows)
     assert all(path.read_bytes() == data for path, data in files.items())
     # sparse:3 of 000, 001, 003, 004: positions 0 and 3 fitted (000, 004); targets 001, 003
-    assert _packets(out)["synthetic__street-00__sparse3__0000"] == (
+    assert packets_of(out)["synthetic__street-00__sparse3__0000"] == (
         [F.format(1), F.format(3)],
         {F.format(0), F.format(4)},
     )
@@ -221,7 +184,7 @@ def test_recipe_packets_beside_protocol_packets_leave_them_byte_identical(
 @pytest.mark.parametrize(
     ("pairs", "message"),
     [
-        ("blur", "--pairs: unknown recipe 'blur'; recipes: sparse, underfit, cross-camera"),
+        ("blur", "--pairs: unknown recipe 'blur'; recipes: sparse, underfit, cross-camera, cycle"),
         ("sparse:1", "--pairs: sparse:1: the frame step must be an integer >= 2"),
         ("sparse:x", "--pairs: sparse:x: the frame step must be an integer >= 2"),
         (
@@ -233,7 +196,15 @@ def test_recipe_packets_beside_protocol_packets_leave_them_byte_identical(
             "--pairs: underfit:nan: the share of the fit's iterations must be a number from 0.25 to 0.75",
         ),
         ("sparse,sparse:4", "--pairs: recipe sparse4 given twice"),
-        ("cycle", "--pairs: cycle reconstruction is not offered"),
+        (
+            "cycle:0.5",
+            "--pairs: cycle:0.5: the sideways shift must be a number of metres from 1 to 6 (negative: to the left)",
+        ),
+        ("cycle:-7", "--pairs: cycle:-7: the sideways shift must be a number of metres from 1 to 6"),
+        ("cycle:inf", "--pairs: cycle:inf: the sideways shift must be a number of metres from 1 to 6"),
+        ("cycle:2m", "--pairs: cycle:2m: the sideways shift must be a number of metres from 1 to 6"),
+        ("cycle,cycle:2.0", "--pairs: recipe cycle2m given twice"),
+        ("sparse,cycle:-3,cycle:-3", "--pairs: recipe cycle-3m given twice"),
         (
             "cross-camera",
             "--pairs: recipe cross-camera needs recorded frames of several cameras; scene 'street_00' (fit 'lane0') has one (front)",
