@@ -19,6 +19,7 @@ from setdiff_bench.errors import MemoryNeedError, SetDiffBenchError
 if TYPE_CHECKING:
     from setdiff_bench.serve.servicer import EnhancerService
 
+#: The service's logger (every serve module logs through this one).
 LOG = logging.getLogger("setdiff_bench.serve")
 
 Request = TypeVar("Request")

@@ -27,7 +27,6 @@ bearer-token gate) and this module (binding, starting, stopping).
 
 from __future__ import annotations
 
-import logging
 import os
 import signal
 import threading
@@ -45,7 +44,7 @@ from setdiff_bench.errors import SetDiffBenchError
 from setdiff_bench.serve import enhancer_pb2 as pb
 from setdiff_bench.serve import enhancer_pb2_grpc as pb_grpc
 from setdiff_bench.serve.auth import UNAUTHENTICATED_PREFIX, TokenInterceptor
-from setdiff_bench.serve.rpc_errors import Refusal, rpc
+from setdiff_bench.serve.rpc_errors import LOG, Refusal, rpc
 from setdiff_bench.serve.security import check_bind
 from setdiff_bench.serve.servicer import MAX_ID_CHARS, EnhancerService
 from setdiff_bench.serve.sessions import EXPIRED_MEMORY, FairLock, Session, release_freed_memory
@@ -75,8 +74,6 @@ __all__ = [
 SERVICE_NAME = pb.DESCRIPTOR.services_by_name["Enhancer"].full_name
 #: Largest message either way (bytes): a 3-camera 576×1024 tick with float32 C-maps is ≈ 23 MB.
 MAX_MESSAGE_BYTES = 256 * 1024 * 1024
-
-LOG = logging.getLogger("setdiff_bench.serve")
 
 
 @dataclass

@@ -5,7 +5,6 @@ memory, camera count) and the model calls, serialised by a FIFO lock."""
 from __future__ import annotations
 
 import collections
-import logging
 import threading
 import time
 import uuid
@@ -19,7 +18,7 @@ import grpc
 from setdiff_bench.evaluation.stream import StreamInputError, StreamSession
 from setdiff_bench.serve import enhancer_pb2 as pb
 from setdiff_bench.serve import enhancer_pb2_grpc as pb_grpc
-from setdiff_bench.serve.rpc_errors import Refusal, rpc
+from setdiff_bench.serve.rpc_errors import LOG, Refusal, rpc
 from setdiff_bench.serve.sessions import (
     EXPIRED_MEMORY,
     FairLock,
@@ -33,8 +32,6 @@ from setdiff_bench.version import __version__
 
 #: Longest session id or PLY name a request may carry (characters; ours are 36-character UUIDs).
 MAX_ID_CHARS = 64
-
-LOG = logging.getLogger("setdiff_bench.serve")
 
 
 class EnhancerService(pb_grpc.EnhancerServicer):

@@ -36,8 +36,9 @@ Table shapes follow the paper: EUVS Settings 1–3 (Table 1), Para-Lane single/d
 
 Modules, leaves first: :mod:`.columns` (layout, blocks, each metric's header/decimals/direction, the error),
 :mod:`.inputs` (finding and reading runs, the reported numbers), :mod:`.table` (the table model),
-:mod:`.selection` (which rows a table averages), :mod:`.aggregate` (:func:`build_leaderboard`) and
-:mod:`.render` (Parquet, LaTeX, Markdown).  Every public name is importable from this package.
+:mod:`.selection` (which rows a table averages), :mod:`.cells` (measured, reported, cost and paired-difference
+cells), :mod:`.distribution` (FID / KID rows and captions), :mod:`.aggregate` (:func:`build_leaderboard`)
+and :mod:`.render` (Parquet, LaTeX, Markdown).  Every public name is importable from this package.
 """
 
 from setdiff_bench.protocols import Block, Layout
