@@ -10,7 +10,7 @@ from typing import Any
 import pandas as pd
 
 from setdiff_bench.errors import UsageError
-from setdiff_bench.evaluation.run_settings import RunSettings, warp_enabled
+from setdiff_bench.evaluation.run_settings import RunSettings
 from setdiff_bench.io.run_layout import METRICS_FILE
 from setdiff_bench.metrics.registry import MetricSpec
 from setdiff_bench.packets.store import PacketStore, target_has_ground_truth
@@ -21,7 +21,9 @@ class SkippedMetrics:
     """Metrics a run could not compute for some targets because they have no ground truth.
 
     Attributes:
-        metrics: metric names skipped (the run's image metrics, then ``warp`` when warp error is on).
+        metrics: metric names skipped: the run's image metrics.  Never ``warp``: with warp error on, the
+            targets without ground truth get it from their renders' flow
+            (:mod:`setdiff_bench.evaluation.sequences`, ``flow_source = "render"``).
         targets: how many selected targets have no ground truth.
         groups: the groups those targets are in, sorted.
     """
@@ -51,17 +53,19 @@ class SkippedMetrics:
 def skipped_metrics(
     store: PacketStore, selection: Sequence[str], settings: RunSettings, specs: Sequence[MetricSpec]
 ) -> SkippedMetrics | None:
-    """What a run over ``selection`` skips for lack of ground truth (``None`` when every target has it)."""
+    """What a run over ``selection`` skips for lack of ground truth (``None`` when every target has it).
+
+    ``settings`` does not change the answer any more (warp error is never skipped for lack of ground
+    truth); it stays in the signature for the callers.
+    """
     rows = pd.DataFrame(target_rows(store, selection))
     if rows.empty:
         return None
     without = rows[~target_has_ground_truth(rows)]
     if without.empty:
         return None
-    metrics = [spec.name for spec in specs]
-    if warp_enabled(settings, sorted(rows["protocol"].unique())):
-        metrics.append("warp")
-    return SkippedMetrics(tuple(metrics), len(without), tuple(sorted(without["group"].unique())))
+    metrics = tuple(spec.name for spec in specs)  # warp error is computed for them, from the renders' flow
+    return SkippedMetrics(metrics, len(without), tuple(sorted(without["group"].unique())))
 
 
 @dataclass

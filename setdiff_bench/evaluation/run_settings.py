@@ -16,7 +16,10 @@ import numpy as np
 from setdiff_bench.metrics.registry import PRESETS
 
 RUN_FORMAT = "setdiff-run/1"
-#: Protocols whose targets are time-ordered camera sequences: warp error with ``warp="auto"``.
+#: Protocols whose targets are time-ordered camera sequences: warp error with ``warp="auto"``.  A
+#: novel-trajectory packet (``prepare --trajectory shift:N | yaw:D``) keeps its protocol and the timestamps
+#: of the fit frames it moves, so the trajectories of these protocols get warp error under ``auto`` too
+#: (flow from the renders); other protocols' trajectories need ``warp="on"``.
 SEQUENCE_PROTOCOLS = frozenset({"nuscenes"})
 #: Columns that are measurements of time, not results: excluded from byte-identity comparisons.
 
@@ -32,12 +35,15 @@ class RunSettings:
         options: factory options given by the user (``checkpoint``, ``source`` for ``--from``, plugin options).
         split: ``"train"``/``"test"`` or ``None`` for every packet.
         metrics: image metric names (default: the ``standard`` preset: PSNR, SSIM, LPIPS-alex).
-        warp: warp error per sequence: ``auto`` (on for :data:`SEQUENCE_PROTOCOLS`), ``on`` or ``off``.
+        warp: warp error per sequence: ``auto`` (on for :data:`SEQUENCE_PROTOCOLS`, their novel-trajectory
+            packets included), ``on`` or ``off``.  Targets with ground truth take the flow from it; targets
+            without (novel trajectories) from their 3DGS renders (:mod:`setdiff_bench.evaluation.sequences`).
         flow_method: optical flow for warp error (``deepflow`` or ``dis``).
         device: where the enhancer (if it takes ``device``) and the metrics run.
         batch_size: images per metric call (bounds LPIPS memory); does not change results.
-        warp_cache: folder caching the ground truth's flow per sequence (shared by every method; keyed
-            by the ground-truth files' SHA-256 and the flow method); ``"auto"`` = the user cache
+        warp_cache: folder caching the flow per sequence (shared by every method; keyed by the SHA-256 of
+            the ground-truth files, or of the render files under a key of their own, and the flow method);
+            ``"auto"`` = the user cache
             (:func:`setdiff_bench.evaluation.scoring.default_warp_cache`), ``None`` = no cache.  Does not change results.
     """
 

@@ -7,8 +7,9 @@ nerfbaselines convention of evaluating saved 8-bit predictions (docs/metrics.md,
 
 Image metrics come from :mod:`setdiff_bench.metrics` specs and see the protocol's masks
 (True = evaluate).  Warp error (Lai et al. 2018) is a sequence metric: one value per time-ordered
-sequence of one camera's targets (flow and occlusion from the ground truth, see
-:mod:`setdiff_bench.metrics.warp`).
+sequence of one camera's targets (flow and occlusion from the ground truth, or, for targets without
+ground truth, from the packet's 3DGS renders; see :mod:`setdiff_bench.metrics.warp` and
+:mod:`setdiff_bench.evaluation.sequences`).
 """
 
 from __future__ import annotations
@@ -120,23 +121,30 @@ def sequence_warp_error(
     flow_method: str = "deepflow",
     cache: Path | None = None,
     gt_key: str | None = None,
+    flow_source: str = "ground_truth",
 ) -> float:
     """Warp error of one time-ordered sequence (paper units: MSE on the 0–255 scale).
 
     Args:
-        frames: ``(T, 3, H, W)`` the method's (quantised) outputs, ``T ≥ 2``, time order.
-        ground_truth: ``(T, 3, H, W)`` the matching ground truth (flow and occlusion come from it).
-        masks: ``(T, 1, H, W)`` evaluation masks or ``None``.
+        frames: ``(T, 3, H, W)`` the method's (quantised) outputs in [0, 1], ``T ≥ 2``, time order.
+        ground_truth: ``(T, 3, H, W)`` in [0, 1], the sequence the flow and occlusion come from: the
+            matching ground truth, or (``flow_source="render"``, targets without ground truth) the
+            packet's 3DGS renders of the same targets.
+        masks: ``(T, 1, H, W)`` bool evaluation masks (True = evaluate) or ``None``.
         flow_method: OpenCV optical flow (``deepflow`` default, ``dis`` fast).
-        cache: folder for the ground truth's flow and occlusion (:class:`WarpReference` files), shared by
-            every method scored on the same sequence; ``None`` computes it every time.
-        gt_key: content key of the ground-truth sequence (e.g. the joined SHA-256 of its files);
-            required with ``cache``.
+        cache: folder for the flow and occlusion (:class:`WarpReference` files), shared by every method
+            scored on the same sequence; ``None`` computes it every time.
+        gt_key: content key of the flow sequence (e.g. the joined SHA-256 of its files); required with
+            ``cache``.
+        flow_source: what ``ground_truth`` holds, ``"ground_truth"`` (the default; cache keys as before)
+            or ``"render"``, which is part of the cache key, so render flow never reads a
+            ground-truth entry or the reverse.
     """
     reference = None
     path = None
     if cache is not None and gt_key:
-        digest = hashlib.sha256(f"{gt_key}|{flow_method}".encode()).hexdigest()
+        key = gt_key if flow_source == "ground_truth" else f"{flow_source}:{gt_key}"
+        digest = hashlib.sha256(f"{key}|{flow_method}".encode()).hexdigest()
         path = Path(cache) / f"{digest}.safetensors"
         if path.is_file():
             with contextlib.suppress(ImageError):

@@ -1,13 +1,29 @@
 """Warp error per time-ordered sequence: the rows of ``sequences.parquet``.
 
-A sequence is one (protocol, scene, sensor) of targets sorted by timestamp across groups; its warp error
-(MSE on the 0-255 scale) compares the written 8-bit images, shape (N, 3, H, W) in [0, 1], with the
-ground truth's flow and occlusion mask, cached by the ground-truth files' SHA-256.
+Two kinds of sequence, told apart by the ``flow_source`` column:
+
+- ``ground_truth``: the targets with ground truth of one (protocol, scene, sensor), sorted by timestamp
+  across groups (a nuScenes camera's 10–15 s targets form one sequence).  The flow and occlusion mask come
+  from the ground truth, with the protocol's evaluation masks; cached by the ground-truth files' SHA-256.
+  ``group`` is null (the sequence spans groups).
+- ``render``: the targets without ground truth (novel trajectories, ``prepare --trajectory``) of one
+  (protocol, scene, sensor, group), sorted by timestamp.  A trajectory group never mixes with another
+  (``shift+3m`` and ``shift+6m`` of one camera are two sequences).  The flow and occlusion mask come from
+  the packet's own target images, the 3DGS renders, which a static model draws consistently from frame to
+  frame, so the value measures the flicker an enhancer adds on top of the render's own motion.  No
+  evaluation mask (such targets have none); cached by the render files' SHA-256 under a key of its own.
+
+Either way the warp error (MSE on the 0–255 scale) compares the written 8-bit images, shape
+``(T, 3, H, W)`` in [0, 1], frame t warped back onto frame t−1 by the flow, occluded pixels left out.
+A sequence needs at least 2 targets, all time-stamped: without timestamps it is skipped under
+``warp="auto"`` and refused under ``warp="on"``.  Rows: ground-truth sequences first, then render
+sequences, each sorted by their grouping keys.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -20,6 +36,11 @@ from setdiff_bench.evaluation.scoring import default_warp_cache, sequence_warp_e
 from setdiff_bench.io.images import read_rgb, to_tensor_chw
 from setdiff_bench.packets.store import PacketStore, target_has_ground_truth
 
+#: ``flow_source`` of a sequence whose flow comes from the ground truth (targets with ground truth).
+FLOW_FROM_GROUND_TRUTH = "ground_truth"
+#: ``flow_source`` of a sequence whose flow comes from the 3DGS renders (targets without ground truth).
+FLOW_FROM_RENDER = "render"
+
 SEQUENCE_SCHEMA = pa.schema(
     [
         ("dataset", pa.string()),
@@ -31,69 +52,140 @@ SEQUENCE_SCHEMA = pa.schema(
         ("first_frame", pa.string()),
         ("last_frame", pa.string()),
         ("warp", pa.float64()),
+        ("flow_source", pa.string()),
+        ("group", pa.string()),
     ]
 )
 
 
 def sequence_table(store: PacketStore, out: Path, frame: pd.DataFrame, settings: RunSettings) -> pa.Table:
-    """Warp error of every (protocol, scene, sensor) sequence with ≥ 2 time-stamped targets."""
-    records = []
+    """Warp error of every sequence with ≥ 2 time-stamped targets (:data:`SEQUENCE_SCHEMA` rows).
+
+    Args:
+        store: the packet store the run read.
+        out: the run folder (``frame["image"]`` is relative to it).
+        frame: the run's merged per-target rows (``metrics.parquet``).
+        settings: the run's settings (``warp``, ``flow_method``, ``warp_cache``, ``method``).
+
+    Raises:
+        PacketError: with ``warp="on"``, a sequence with a target that has no timestamp.
+    """
     cache = None
     if settings.warp_cache is not None:
         cache = default_warp_cache() if settings.warp_cache == "auto" else Path(settings.warp_cache)
     index = store.index
     targets = index[index["role"] == "target"]
-    without = targets[~target_has_ground_truth(targets)]
-    if len(without):  # novel-trajectory targets: no ground truth to take flow from (named as skipped)
-        unscored = set(zip(without["packet_id"], without["view"].astype(int), strict=True))
-        keep = [(p, int(v)) not in unscored for p, v in zip(frame["packet_id"], frame["view"], strict=True)]
-        frame = frame[np.asarray(keep, dtype=bool)]
-    gt_hashes = (
-        dict(zip(zip(targets["packet_id"], targets["view"].astype(int)), targets["gt_sha256"]))
-        if "gt_sha256" in targets.columns
-        else {}
+    rows_of = {
+        (row["packet_id"], int(row["view"])): row for row in targets.to_dict("records")
+    }  # index row of each target
+    has_gt = dict(zip(rows_of, target_has_ground_truth(targets), strict=True))
+    with_gt = np.array(
+        [has_gt.get((p, int(v)), True) for p, v in zip(frame["packet_id"], frame["view"], strict=True)],
+        dtype=bool,
     )
-    for (protocol, scene, sensor), rows in frame.groupby(
-        ["protocol", "scene", "sensor"], sort=True, dropna=False
+    records = []
+    keys = ["protocol", "scene", "sensor"]
+    for (protocol, scene, sensor), rows in frame[with_gt].groupby(keys, sort=True, dropna=False):
+        ordered = _ordered(rows, settings, store, f"scene {scene!r} sensor {sensor!r}")
+        if ordered is None:
+            continue
+        value = _ground_truth_warp(store, out, ordered, rows_of, settings, cache)
+        records.append(_record(ordered, protocol, scene, sensor, None, value, settings))
+    for (protocol, scene, sensor, group), rows in frame[~with_gt].groupby(
+        [*keys, "group"], sort=True, dropna=False
     ):
-        if rows["timestamp_us"].isna().any():
-            if settings.warp == "on":
-                raise PacketError(
-                    f"warp error needs timestamps; scene {scene!r} sensor {sensor!r} has targets without one",
-                    store.root,
-                )
+        ordered = _ordered(rows, settings, store, f"scene {scene!r} sensor {sensor!r} group {group!r}")
+        if ordered is None:
             continue
-        rows = rows.sort_values(["timestamp_us", "frame", "packet_id"])
-        if len(rows) < 2:
-            continue
-        frames, gts, masks, hashes = [], [], [], []
-        for row in rows.itertuples():
-            gt, mask = store.load_ground_truth(row.packet_id, targets=[int(row.view)])
-            digest = gt_hashes.get((row.packet_id, int(row.view)))
-            hashes.append(digest if isinstance(digest, str) else "")
-            size = tuple(gt.shape[-2:])
-            frames.append(to_tensor_chw(read_rgb(out / row.image, size)))
-            gts.append(gt[0])
-            masks.append(mask[0])
-        value = sequence_warp_error(
-            torch.stack(frames),
-            torch.stack(gts),
-            torch.stack(masks),
-            flow_method=settings.flow_method,
-            cache=cache,
-            gt_key=",".join(hashes) if all(hashes) else None,
-        )
-        records.append(
-            {
-                "dataset": rows["dataset"].iloc[0],
-                "protocol": protocol,
-                "scene": scene,
-                "sensor": sensor,
-                "method": settings.method,
-                "frames": len(rows),
-                "first_frame": rows["frame"].iloc[0],
-                "last_frame": rows["frame"].iloc[-1],
-                "warp": value,
-            }
-        )
+        value = _render_warp(store, out, ordered, rows_of, settings, cache)
+        records.append(_record(ordered, protocol, scene, sensor, group, value, settings))
     return pa.Table.from_pylist(records, schema=SEQUENCE_SCHEMA)
+
+
+def _ordered(rows: pd.DataFrame, settings: RunSettings, store: PacketStore, what: str) -> pd.DataFrame | None:
+    """The sequence's rows by timestamp, then frame and packet; ``None`` when it is not a sequence."""
+    if rows["timestamp_us"].isna().any():
+        if settings.warp == "on":
+            raise PacketError(f"warp error needs timestamps; {what} has targets without one", store.root)
+        return None
+    if len(rows) < 2:
+        return None
+    return rows.sort_values(["timestamp_us", "frame", "packet_id"])
+
+
+def _ground_truth_warp(
+    store: PacketStore,
+    out: Path,
+    rows: pd.DataFrame,
+    rows_of: dict[tuple[str, int], dict[str, Any]],
+    settings: RunSettings,
+    cache: Path | None,
+) -> float:
+    """Warp error of the written images with the ground truth's flow, occlusion and evaluation masks."""
+    frames, gts, masks, hashes = [], [], [], []
+    for row in rows.itertuples():
+        gt, mask = store.load_ground_truth(row.packet_id, targets=[int(row.view)])
+        digest = rows_of[(row.packet_id, int(row.view))].get("gt_sha256")
+        hashes.append(digest if isinstance(digest, str) else "")
+        frames.append(to_tensor_chw(read_rgb(out / row.image, tuple(gt.shape[-2:]))))
+        gts.append(gt[0])
+        masks.append(mask[0])
+    return sequence_warp_error(
+        torch.stack(frames),
+        torch.stack(gts),
+        torch.stack(masks),
+        flow_method=settings.flow_method,
+        cache=cache,
+        gt_key=",".join(hashes) if all(hashes) else None,
+    )
+
+
+def _render_warp(
+    store: PacketStore,
+    out: Path,
+    rows: pd.DataFrame,
+    rows_of: dict[tuple[str, int], dict[str, Any]],
+    settings: RunSettings,
+    cache: Path | None,
+) -> float:
+    """Warp error of the written images with the flow and occlusion of the packet's renders (no mask)."""
+    frames, renders, hashes = [], [], []
+    for row in rows.itertuples():
+        target = pd.Series(rows_of[(row.packet_id, int(row.view))])
+        size = (int(target["height"]), int(target["width"]))
+        renders.append(to_tensor_chw(read_rgb(store.file_path(target, "image"), size)))
+        hashes.append(str(target["image_sha256"]))
+        frames.append(to_tensor_chw(read_rgb(out / row.image, size)))
+    return sequence_warp_error(
+        torch.stack(frames),
+        torch.stack(renders),
+        None,
+        flow_method=settings.flow_method,
+        cache=cache,
+        gt_key=",".join(hashes),
+        flow_source=FLOW_FROM_RENDER,
+    )
+
+
+def _record(
+    rows: pd.DataFrame,
+    protocol: str,
+    scene: str,
+    sensor: str,
+    group: str | None,
+    value: float,
+    settings: RunSettings,
+) -> dict[str, Any]:
+    return {
+        "dataset": rows["dataset"].iloc[0],
+        "protocol": protocol,
+        "scene": scene,
+        "sensor": sensor,
+        "method": settings.method,
+        "frames": len(rows),
+        "first_frame": rows["frame"].iloc[0],
+        "last_frame": rows["frame"].iloc[-1],
+        "warp": value,
+        "flow_source": FLOW_FROM_GROUND_TRUTH if group is None else FLOW_FROM_RENDER,
+        "group": group,
+    }

@@ -6,7 +6,9 @@ For consecutive frames ``(t−1, t)`` of a method's output ``V``:
 reference code (phoenix104104/fast_blind_video_consistency ``evaluate_WarpError.py``):
 
 - the flow ``F`` and the non-occlusion mask ``M`` are computed **once on the ground-truth sequence**
-  (:func:`warp_reference`), so every method is scored with the same flow and mask;
+  (:func:`warp_reference`), so every method is scored with the same flow and mask.  A sequence without
+  ground truth (a novel trajectory) takes them from its 3DGS renders instead, which every method also
+  shares (:mod:`setdiff_bench.evaluation.sequences`, ``flow_source = "render"``);
 - ``warp`` samples frame t at ``x + F(x)`` bilinearly with border clamping (their ``Resample2d``);
 - ``M = 1`` except where forward–backward consistency fails,
   ``|F_fw + F_bw(x + F_fw)|² > 0.01 (|F_fw|² + |F_bw(x + F_fw)|²) + 0.5``, or on motion boundaries,
@@ -201,7 +203,8 @@ def warp_reference(
     """Flow and non-occlusion mask of a ground-truth sequence (compute once, score many methods).
 
     Args:
-        ground_truth: ``(T, 3, H, W)`` RGB in [0, 1], consecutive frames of one camera, ``T ≥ 2``.
+        ground_truth: ``(T, 3, H, W)`` RGB in [0, 1], consecutive frames of one camera, ``T ≥ 2``: the
+            ground truth, or, for a novel trajectory that has none, the 3DGS renders of its targets.
         method: optical flow estimator (``"deepflow"`` default, ``"dis"`` fast).
         thresholds: occlusion thresholds.
 

@@ -172,13 +172,17 @@ def test_score_packet_names_what_it_skipped(shifted_store: Path) -> None:
     assert tuple(result.enhanced.shape) == (4, 3, 32, 48)
 
 
-def test_warp_error_is_skipped_without_ground_truth(shifted_store: Path, tmp_path: Path) -> None:
-    settings = RunSettings("identity", metrics=("psnr",), warp="on", warp_cache=None)
+def test_warp_error_takes_the_render_flow_without_ground_truth(shifted_store: Path, tmp_path: Path) -> None:
+    """``--warp on`` scores each shift's time-ordered targets as a sequence of its own, with the flow of
+    their renders (tests/run/test_render_flow_warp.py checks the values); only PSNR is named as skipped."""
+    settings = RunSettings("identity", metrics=("psnr",), warp="on", flow_method="dis", warp_cache=None)
     with torch_threads(1):
         result = run_method(shifted_store, tmp_path / "run", settings, progress=False)
     assert result.merged and result.skipped_metrics is not None
-    assert result.skipped_metrics.metrics == ("psnr", "warp") and result.skipped_metrics.targets == 8
-    assert len(pd.read_parquet(tmp_path / "run" / "sequences.parquet")) == 0
+    assert result.skipped_metrics.metrics == ("psnr",) and result.skipped_metrics.targets == 8
+    sequences = pd.read_parquet(tmp_path / "run" / "sequences.parquet")
+    assert sorted(sequences["group"]) == sorted(GROUPS) and set(sequences["flow_source"]) == {"render"}
+    assert (sequences["frames"] == 4).all() and sequences["warp"].notna().all()
 
 
 def test_a_mixed_store_scores_its_ground_truth_as_before(

@@ -111,27 +111,47 @@ def measured_row(
     seq_names: Sequence[str],
     *,
     scene_mean: bool = False,
+    group_sequences: bool = False,
 ) -> Row:
+    """One measured method's cells: image metric means per block, and sequence metric means (warp error).
+
+    The pooled block's sequence cells average the method's ground-truth-flow sequences (every sequence of a
+    ``sequences.parquet`` without a ``flow_source`` column, as written before render flow existed).  With
+    ``group_sequences``, a group block gets the mean of that group's render-flow sequences (novel
+    trajectories, whose image metrics are not in ``frame``) where it has any; the caller must then give such
+    blocks the sequence metrics' columns.
+    """
     row = Row(label=method, method=method, source="measured", section="measured")
     own = frame[frame["method"] == method]
+    mine = seq[seq["method"] == method] if seq is not None else None
     for block in blocks:
         rows = _block_rows(own, block)
-        if not len(rows):
+        if len(rows):
+            for metric in metric_names:
+                values = rows[metric].to_numpy(dtype=np.float64)
+                mean = rows.groupby("scene")[metric].mean().mean() if scene_mean else values.mean()
+                row.values[(block.key, metric)] = float(mean)
+                row.decimals[(block.key, metric)] = metric_decimals(metric)
+                row.counts[(block.key, metric)] = len(values)
+        if mine is None or (block.key == ALL and not len(rows)) or (block.key != ALL and not group_sequences):
             continue
-        for metric in metric_names:
-            values = rows[metric].to_numpy(dtype=np.float64)
-            mean = rows.groupby("scene")[metric].mean().mean() if scene_mean else values.mean()
-            row.values[(block.key, metric)] = float(mean)
-            row.decimals[(block.key, metric)] = metric_decimals(metric)
-            row.counts[(block.key, metric)] = len(values)
-        if block.key == ALL and seq is not None:
-            mine = seq[seq["method"] == method]
-            for metric in seq_names:
-                if metric in mine.columns and len(mine):
-                    row.values[(ALL, metric)] = float(mine[metric].to_numpy(dtype=np.float64).mean())
-                    row.decimals[(ALL, metric)] = metric_decimals(metric)
-                    row.counts[(ALL, metric)] = len(mine)
+        sequences = _block_sequences(mine, block)
+        for metric in seq_names:
+            if metric in sequences.columns and len(sequences):
+                row.values[(block.key, metric)] = float(sequences[metric].to_numpy(dtype=np.float64).mean())
+                row.decimals[(block.key, metric)] = metric_decimals(metric)
+                row.counts[(block.key, metric)] = len(sequences)
     return row
+
+
+def _block_sequences(seq: pd.DataFrame, block: Block) -> pd.DataFrame:
+    """The sequence rows a block's sequence cells average: ground-truth flow for the pooled block, the
+    group's render-flow sequences for a group block (none in files without ``flow_source``)."""
+    if "flow_source" not in seq.columns:
+        return seq if block.key == ALL else seq.iloc[:0]
+    if block.key == ALL:
+        return seq[seq["flow_source"] != "render"]
+    return seq[(seq["flow_source"] == "render") & (seq["group"] == block.key)]
 
 
 def _paired_cells(
