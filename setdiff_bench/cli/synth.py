@@ -23,14 +23,11 @@ from typing import Any
 
 from setdiff_bench.cli import add_device_argument, add_progress_argument
 from setdiff_bench.cli.declared import registry_names
+from setdiff_bench.synthetic.kinds import SCENE_KINDS, scene_kind_of
 
 VERB = "synth"
 HELP = "generate synthetic multi-lane street scenes (EUVS layout) and fit their 3DGS"
 DESCRIPTION = __doc__.split("\n\n", 1)[1] if __doc__ else HELP
-FIT_NAME = "lane0"
-#: Names of the sparse-view presets and scenes start with this (``synthetic.sparse``: ``sparse_tiny`` ...,
-#: ``sparse_0000_01``); every other preset is a driving one.
-SPARSE_PREFIX = "sparse"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -38,8 +35,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--preset",
         default="default",
-        choices=registry_names("setdiff_bench.synthetic.presets", "PRESETS")
-        + registry_names("setdiff_bench.synthetic.sparse", "SPARSE_PRESETS"),
+        # every scene kind's presets, read from the registries' sources: --help imports no torch
+        choices=[name for kind in SCENE_KINDS.values() for name in registry_names(*kind.presets.split(":"))],
         help="tiny: seconds, for tests; default: ~10 min on 2 CPU cores; large: for a GPU; sparse*: "
         "handheld walks in DL3DV's layout with n3/n6/n9 fits (docs/synthetic_format.md)",
     )
@@ -63,11 +60,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "1 on CUDA); the CPU rasteriser's many small ops scale better across processes",
     )
     add_progress_argument(parser)
-
-
-def fit_path(scene_dir: Path) -> Path:
-    """Where ``synth`` writes a scene's fit: ``<scene>/fits/lane0.ply``."""
-    return scene_dir / "fits" / f"{FIT_NAME}.ply"
 
 
 class ProgressEvents:
@@ -156,79 +148,36 @@ def make_scene(
     ``report(kind, index, done, total)`` receives render and fit progress (:class:`ProgressEvents`).
     """
     # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
-    import shutil
     import time
 
     import torch
 
-    from setdiff_bench.gaussians.fit import fit_scene
-    from setdiff_bench.synthetic.generate import generate_scene
-    from setdiff_bench.synthetic.presets import get_preset
-
     if threads is not None:
         torch.set_num_threads(threads)
-    sparse = preset_name.startswith(SPARSE_PREFIX)  # the sparse-view kind: DL3DV layout, fits n3/n6/n9
+    kind = scene_kind_of(preset_name)  # driving (EUVS layout, fits/lane0.ply) or sparse (DL3DV, n3/n6/n9)
+    preset = kind.get_preset(preset_name)
     t0 = time.perf_counter()
 
     def rendered(done: int, total: int) -> None:
         if report is not None:
             report("render", index, done, total)
 
-    if sparse:
-        from setdiff_bench.synthetic.sparse import fit_sparse_scene, generate_sparse_scene, get_sparse_preset
+    scene_dir = kind.load_generator().make(
+        out, preset, seed, index, overwrite=overwrite, progress=rendered, device=device
+    )
+    message = f"{scene_dir.name}: generated in {time.perf_counter() - t0:.1f} s"
+    if not fit:
+        return message
+    fitter = kind.load_fitter()
+    keys = fitter.keys(preset)
 
-        sparse_preset = get_sparse_preset(preset_name)
-        scene_dir = generate_sparse_scene(
-            out, sparse_preset, seed, index, overwrite=overwrite, progress=rendered, device=device
-        )
-    else:
-        preset = get_preset(preset_name)
-        scene_dir = generate_scene(
-            out, preset, seed, index, overwrite=overwrite, progress=rendered, device=device
-        )
-    t1 = time.perf_counter()
-    message = f"{scene_dir.name}: generated in {t1 - t0:.1f} s"
-    if fit and sparse:
-        keys = [f"n{k}" for k in sparse_preset.views]
+    def fitted(key: str, iteration: int, total: int) -> None:
+        # the scene's fits one after the other on one bar
+        if report is not None:
+            report("fit", index, keys.index(key) * total + iteration, len(keys) * total)
 
-        def fitted_view(key: str, iteration: int, total: int) -> None:
-            if report is not None:
-                report("fit", index, keys.index(key) * total + iteration, len(keys) * total)
-
-        lines = fit_sparse_scene(
-            scene_dir, sparse_preset, device=device, overwrite=overwrite, report=fitted_view
-        )
-        return f"{message}, {', '.join(lines)}"
-
-    if fit:
-        ply = fit_path(scene_dir)
-        if overwrite or not ply.is_file():
-            checkpoint = ply.with_suffix(".checkpoint")
-            if overwrite:
-                shutil.rmtree(checkpoint, ignore_errors=True)
-            iterations = preset.fit.iterations
-            every = max(1, iterations // 100)
-
-            def fitted(iteration: int, loss: float) -> None:
-                del loss
-                if report is not None and (iteration % every == 0 or iteration == iterations):
-                    report("fit", index, iteration, iterations)
-
-            result = fit_scene(
-                scene_dir,
-                ply,
-                preset.fit,
-                device=device,
-                checkpoint_dir=checkpoint,
-                checkpoint_every=max(1, iterations // 5),
-                progress=False,
-                on_iteration=fitted,
-            )
-            shutil.rmtree(checkpoint, ignore_errors=True)
-            message += f", fitted {len(result.model)} Gaussians in {time.perf_counter() - t1:.1f} s"
-        else:
-            message += ", fit already present"
-    return message
+    lines = fitter.fit(scene_dir, preset, device=device, overwrite=overwrite, report=fitted)
+    return f"{message}, {', '.join(lines)}"
 
 
 def parse_indices(text: str) -> list[int]:
@@ -258,10 +207,9 @@ def run(args: argparse.Namespace) -> int:
     from setdiff_bench.errors import UsageError
     from setdiff_bench.runtime.devices import resolve_device
     from setdiff_bench.runtime.threads import compute_threads
-    from setdiff_bench.synthetic.presets import get_preset
-    from setdiff_bench.synthetic.sparse import SPARSE_PRESETS
 
-    preset = SPARSE_PRESETS.get(args.preset) or get_preset(args.preset)
+    kind = scene_kind_of(args.preset)
+    preset = kind.get_preset(args.preset)
     count = preset.num_scenes if args.scenes is None else args.scenes
     if count < 1:
         raise UsageError(f"--scenes must be ≥ 1, got {count}", "--scenes")
@@ -275,9 +223,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--jobs must be ≥ 1, got {jobs}", "--jobs")
     start = time.perf_counter()
     options = {"fit": not args.no_fit, "device": device, "overwrite": args.overwrite}
-    # the scenes' names, as synthetic.generate.scene_name (sparse.sparse_scene_name) writes them
-    prefix = SPARSE_PREFIX if args.preset.startswith(SPARSE_PREFIX) else "scene"
-    names = {index: f"{prefix}_{args.seed:04d}_{index:02d}" for index in indices}
+    names = {index: kind.scene_name(args.seed, index) for index in indices}  # as the generator names them
     bars = not args.no_progress and sys.stderr.isatty()  # no bars in a log: lines instead
     progress = SceneProgress(names, bars=bars)
     try:

@@ -10,7 +10,6 @@ vehicles, sparse points), so the same ``(preset, seed, index)`` gives byte-ident
 from __future__ import annotations
 
 import json
-import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,10 +19,11 @@ import torch
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.gaussians.model import GaussianModel
-from setdiff_bench.io.atomic import staged_folder, write_text_atomic
+from setdiff_bench.io.atomic import write_text_atomic
 from setdiff_bench.io.images import write_png
 from setdiff_bench.synthetic.capture import CapturedFrame, capture_drive
 from setdiff_bench.synthetic.colmap_writer import ColmapImage, write_colmap_model
+from setdiff_bench.synthetic.kinds import SCENE_KINDS
 from setdiff_bench.synthetic.layout import (
     EGO_LANES,
     MovingVehicle,
@@ -42,6 +42,7 @@ from setdiff_bench.synthetic.rig import (
 )
 from setdiff_bench.synthetic.sfm import sample_sparse_points
 from setdiff_bench.synthetic.soup import GaussianSoup
+from setdiff_bench.synthetic.staging import SceneRecipe
 from setdiff_bench.synthetic.world import SFM_CATEGORIES, Detail, World, build_static, car_soup
 
 FORMAT = "setdiff-synthetic/1"
@@ -64,8 +65,8 @@ class SceneBuild:
 
 
 def scene_name(seed: int, index: int) -> str:
-    """``scene_{seed:04d}_{index:02d}``."""
-    return f"scene_{seed:04d}_{index:02d}"
+    """``scene_{seed:04d}_{index:02d}`` (the driving kind's names, :data:`.kinds.SCENE_KINDS`)."""
+    return SCENE_KINDS["driving"].scene_name(seed, index)
 
 
 def is_training_frame(traversal: str, sensor: str, index: int, holdout_every: int) -> bool:
@@ -214,39 +215,10 @@ def write_scene(build: SceneBuild, frames: list[CapturedFrame], destination: Pat
     write_text_atomic(destination / "scene.json", json.dumps(description, indent=1, sort_keys=True) + "\n")
 
 
-def generate_scene(
-    out_root: str | os.PathLike[str],
-    preset: Preset,
-    seed: int,
-    index: int,
-    *,
-    overwrite: bool = False,
-    progress: Callable[[int, int], None] | None = None,
-    device: str | torch.device = "cpu",
-) -> Path:
-    """Generate scene ``index`` of ``seed`` under ``out_root``; returns its folder.
+#: How a driving scene is made (:class:`~setdiff_bench.synthetic.staging.SceneRecipe`).
+RECIPE = SceneRecipe(scene_name, build_scene, render_frames, write_scene)
 
-    A complete existing scene (its ``scene.json`` present) is kept unless ``overwrite``.  ``device`` runs
-    the ground-truth rasteriser (pure PyTorch) on a GPU for the large preset; files are byte-identical
-    for the same device type, torch build and thread count.
-    """
-    root = Path(out_root)
-    final = root / scene_name(seed, index)
-    if (final / "scene.json").is_file() and not overwrite:
-        try:
-            existing = json.loads((final / "scene.json").read_text(encoding="utf-8")).get("preset")
-        except (OSError, json.JSONDecodeError, AttributeError):
-            existing = None
-        if existing != preset.name:
-            raise UsageError(
-                f"scene exists with preset {existing!r}, not {preset.name!r}; pass --overwrite to "
-                "regenerate it",
-                final / "scene.json",
-            )
-        return final
-    root.mkdir(parents=True, exist_ok=True)
-    build = build_scene(preset, seed, index)
-    frames = render_frames(build, progress, device)
-    with staged_folder(final) as staging:
-        write_scene(build, frames, staging)
-    return final
+#: ``generate_scene(out_root, preset, seed, index, *, overwrite, progress, device) -> scene folder``: scene
+#: ``index`` of ``seed`` under ``out_root``, a complete scene (its ``scene.json`` present) kept unless
+#: ``overwrite`` (:meth:`~setdiff_bench.synthetic.staging.SceneRecipe.make`).
+generate_scene = RECIPE.make

@@ -4,6 +4,9 @@
 ``default``  6 scenes, 144×256, 16 timesteps (192 frames per scene), 250-iteration fits: generates and fits
              everything in under 10 minutes on 2 CPU cores with ``--jobs 2`` (benchmarks/results/fit_quality.md).
 ``large``    8 scenes, 288×512, 40 timesteps, 7000-iteration fits: for a GPU (``--device cuda``).
+
+What a tier shares with the sparse-view kind's presets (world detail, fit schedule) is declared once in
+:mod:`.preset_tiers`; the driving kind itself is declared in :mod:`.kinds`.
 """
 
 from __future__ import annotations
@@ -12,6 +15,7 @@ from dataclasses import dataclass, field
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.gaussians.fit import FitConfig
+from setdiff_bench.synthetic.preset_tiers import CPU_FIT, LARGE_DETAIL, LARGE_FIT, TINY_DETAIL
 
 
 @dataclass(frozen=True)
@@ -63,11 +67,7 @@ PRESETS: dict[str, Preset] = {
         step_m=1.5,
         holdout_every=4,
         view_ahead_m=30.0,
-        pixels_per_gaussian=5.0,
-        min_spacing=0.7,
-        max_spacing=4.0,
-        foliage_count=12,
-        points3d=1500,
+        **TINY_DETAIL,
         moving_vehicles=True,
         tile_size=8,
         fit=FitConfig.schedule(
@@ -90,14 +90,7 @@ PRESETS: dict[str, Preset] = {
         points3d=6000,
         moving_vehicles=True,
         tile_size=8,
-        fit=FitConfig.schedule(
-            iterations=250,
-            densify_every=20,
-            opacity_reset_every=10_000,
-            max_gaussians=16_000,
-            background_points=3000,
-            tile_size=8,
-        ),
+        fit=CPU_FIT,
     ),
     "large": Preset(
         name="large",
@@ -108,14 +101,10 @@ PRESETS: dict[str, Preset] = {
         step_m=1.0,
         holdout_every=4,
         view_ahead_m=70.0,
-        pixels_per_gaussian=3.0,
-        min_spacing=0.12,
-        max_spacing=3.0,
-        foliage_count=200,
-        points3d=30000,
+        **LARGE_DETAIL,
         moving_vehicles=True,
         tile_size=16,
-        fit=FitConfig.schedule(iterations=7000, densify_every=100, background_points=10_000, tile_size=16),
+        fit=LARGE_FIT,
     ),
 }
 

@@ -30,7 +30,9 @@ trailing 37 keeps these streams apart from a driving scene of the same ``(seed, 
 The scene kind by concept: :mod:`.sparse_preset` (generation parameters), :mod:`.sparse_names` (the layout's
 names), :mod:`.sparse_walk` (the path and cameras), :mod:`.sparse_plaza` (the plaza's objects),
 :mod:`.sparse_build` (a scene in memory and its rendering), :mod:`.sparse_writer` (the DL3DV layout on disk)
-and :mod:`.sparse_fit` (the sparse fits).  This module holds the named presets and rebuilds a scene's world.
+and :mod:`.sparse_fit` (the sparse fits); :mod:`.kinds` declares the kind beside the driving one.  This module
+holds the named presets (what a tier shares with the driving presets is in :mod:`.preset_tiers`) and rebuilds a
+scene's world.
 """
 
 from __future__ import annotations
@@ -41,6 +43,7 @@ from pathlib import Path
 from setdiff_bench.errors import UsageError
 from setdiff_bench.gaussians.fit import FitConfig
 from setdiff_bench.gaussians.model import GaussianModel
+from setdiff_bench.synthetic.preset_tiers import CPU_FIT, LARGE_DETAIL, LARGE_FIT, TINY_DETAIL
 from setdiff_bench.synthetic.sparse_build import (
     OBJECT_CATEGORY,
     STREAM_TAG,
@@ -105,11 +108,7 @@ SPARSE_PRESETS: dict[str, SparsePreset] = {
         arc_deg=150.0,
         sweep_period=20.0,
         plaza_objects=3,
-        pixels_per_gaussian=5.0,
-        min_spacing=0.7,
-        max_spacing=4.0,
-        foliage_count=12,
-        points3d=1500,
+        **TINY_DETAIL,
         tile_size=8,
         fit=FitConfig.schedule(
             iterations=40, densify_every=10, opacity_reset_every=10_000, background_points=300, tile_size=8
@@ -132,14 +131,7 @@ SPARSE_PRESETS: dict[str, SparsePreset] = {
         foliage_count=60,
         points3d=6000,
         tile_size=8,
-        fit=FitConfig.schedule(
-            iterations=250,
-            densify_every=20,
-            opacity_reset_every=10_000,
-            max_gaussians=16_000,
-            background_points=3000,
-            tile_size=8,
-        ),
+        fit=CPU_FIT,
     ),
     "sparse_large": SparsePreset(
         name="sparse_large",
@@ -152,13 +144,9 @@ SPARSE_PRESETS: dict[str, SparsePreset] = {
         arc_deg=300.0,
         sweep_period=100.0,
         plaza_objects=18,
-        pixels_per_gaussian=3.0,
-        min_spacing=0.12,
-        max_spacing=3.0,
-        foliage_count=200,
-        points3d=30000,
+        **LARGE_DETAIL,
         tile_size=16,
-        fit=FitConfig.schedule(iterations=7000, densify_every=100, background_points=10_000, tile_size=16),
+        fit=LARGE_FIT,
     ),
 }
 

@@ -1,63 +1,43 @@
 """Fitting a sparse-view scene's 3DGS models: ``fits/n{k}.ply`` on the views the 3DGS-Enhancer rule picks
-for each of the preset's view counts (:func:`fit_sparse_scene`).
+for each of the preset's view counts, the scene read through the DL3DV loader with pinhole cameras as the
+protocol says (:data:`FITTING`, :func:`fit_sparse_scene`).
 """
 
 from __future__ import annotations
 
-import shutil
-import time
-from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
+from setdiff_bench.synthetic.fits import FitRecipe
+from setdiff_bench.synthetic.kinds import SCENE_KINDS
 from setdiff_bench.synthetic.sparse_names import fit_views
 from setdiff_bench.synthetic.sparse_preset import SparsePreset
 
 
-def fit_sparse_scene(
-    scene_dir: Path,
-    preset: SparsePreset,
-    *,
-    device: str = "cpu",
-    overwrite: bool = False,
-    report: Callable[[str, int, int], None] | None = None,
-) -> list[str]:
-    """Fit ``fits/n{k}.ply`` for every ``k`` of ``preset.views`` on the 3DGS-Enhancer rule's views (the
-    scene read through the DL3DV loader, cameras pinhole as the protocol says); returns one summary
-    line per fit.  ``report(fit_key, iteration, iterations)`` receives progress."""
-    from setdiff_bench.gaussians.fit import fit_scene
+def sparse_fit_keys(preset: SparsePreset) -> tuple[str, ...]:
+    """The fits of a sparse-view scene: ``n{k}`` for each ``k`` of ``preset.views``."""
+    return tuple(f"n{k}" for k in preset.views)
 
-    lines = []
-    iterations = preset.fit.iterations
-    every = max(1, iterations // 100)
-    for key, names in fit_views(preset).items():
-        ply = scene_dir / "fits" / f"{key}.ply"
-        if ply.is_file() and not overwrite:
-            lines.append(f"{key} already present")
-            continue
-        checkpoint = ply.with_suffix(".checkpoint")
-        if overwrite:
-            shutil.rmtree(checkpoint, ignore_errors=True)
 
-        def fitted(iteration: int, loss: float, key: str = key) -> None:
-            del loss
-            if report is not None and (iteration % every == 0 or iteration == iterations):
-                report(key, iteration, iterations)
+def sparse_fit_source(scene_dir: Path, preset: SparsePreset, key: str) -> dict[str, Any]:
+    """What ``fits/<key>.ply`` is fitted on: the 3DGS-Enhancer rule's views of the scene (:func:`fit_views`)."""
+    return {
+        "scene_dir": scene_dir.parent,
+        "frames": fit_views(preset)[key],
+        "dataset": SCENE_KINDS["sparse"].dataset,
+        "scene_name": scene_dir.name,
+        "loader_options": {"distortion": "ignore"},
+    }
 
-        t0 = time.perf_counter()
-        result = fit_scene(
-            scene_dir.parent,
-            ply,
-            preset.fit,
-            frames=names,
-            device=device,
-            checkpoint_dir=checkpoint,
-            checkpoint_every=max(1, iterations // 5),
-            progress=False,
-            dataset="dl3dv",
-            scene_name=scene_dir.name,
-            loader_options={"distortion": "ignore"},
-            on_iteration=fitted,
-        )
-        shutil.rmtree(checkpoint, ignore_errors=True)
-        lines.append(f"{key}: {len(result.model)} Gaussians in {time.perf_counter() - t0:.1f} s")
-    return lines
+
+#: The sparse kind's fits (``sparse_<seed>_<index>: generated in … s, n3: N Gaussians in … s, …``).
+FITTING = FitRecipe(
+    sparse_fit_keys,
+    sparse_fit_source,
+    present="{key} already present",
+    fitted="{key}: {gaussians} Gaussians in {seconds:.1f} s",
+)
+
+#: ``fit_sparse_scene(scene_dir, preset, *, device, overwrite, report) -> [summary line per fit]``
+#: (:meth:`~setdiff_bench.synthetic.fits.FitRecipe.fit`).
+fit_sparse_scene = FITTING.fit

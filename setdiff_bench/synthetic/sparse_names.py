@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 from setdiff_bench.protocols.rules import sparse_view_indices
+from setdiff_bench.synthetic.kinds import SCENE_KINDS
 from setdiff_bench.synthetic.sparse_preset import SparsePreset
 
 FORMAT = "setdiff-synthetic-sparse/1"
@@ -17,7 +18,7 @@ full-resolution frames and ``images_4`` holds them downscaled 4×; the loader re
 
 def sparse_scene_name(seed: int, index: int) -> str:
     """``sparse_{seed:04d}_{index:02d}`` (DL3DV names scenes by a hash; the loader takes any folder name)."""
-    return f"sparse_{seed:04d}_{index:02d}"
+    return SCENE_KINDS["sparse"].scene_name(seed, index)
 
 
 def frame_file(index: int) -> str:

@@ -7,15 +7,13 @@ renders and writes a scene through a staging folder.
 from __future__ import annotations
 
 import json
-import os
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from setdiff_bench.errors import UsageError
-from setdiff_bench.io.atomic import staged_folder, write_text_atomic
+from setdiff_bench.io.atomic import write_text_atomic
 from setdiff_bench.io.images import write_png
 from setdiff_bench.synthetic.capture import CapturedFrame
 from setdiff_bench.synthetic.colmap_writer import ColmapImage, write_colmap_model
@@ -23,7 +21,7 @@ from setdiff_bench.synthetic.rig import intrinsics
 from setdiff_bench.synthetic.sfm import sample_sparse_points
 from setdiff_bench.synthetic.sparse_build import SparseBuild, build_sparse_scene, render_sparse_frames
 from setdiff_bench.synthetic.sparse_names import FORMAT, FULL_SCALE, IMAGES_DIR, fit_views, sparse_scene_name
-from setdiff_bench.synthetic.sparse_preset import SparsePreset
+from setdiff_bench.synthetic.staging import SceneRecipe
 from setdiff_bench.synthetic.world import SFM_CATEGORIES
 
 
@@ -77,37 +75,10 @@ def write_sparse_scene(build: SparseBuild, frames: Sequence[CapturedFrame], dest
     write_text_atomic(destination / "scene.json", json.dumps(description, indent=1, sort_keys=True) + "\n")
 
 
-def generate_sparse_scene(
-    out_root: str | os.PathLike[str],
-    preset: SparsePreset,
-    seed: int,
-    index: int,
-    *,
-    overwrite: bool = False,
-    progress: Callable[[int, int], None] | None = None,
-    device: str | torch.device = "cpu",
-) -> Path:
-    """Generate sparse-view scene ``index`` of ``seed`` under ``out_root``; returns its folder.
+#: How a sparse-view scene is made (:class:`~setdiff_bench.synthetic.staging.SceneRecipe`).
+RECIPE = SceneRecipe(sparse_scene_name, build_sparse_scene, render_sparse_frames, write_sparse_scene)
 
-    A complete existing scene (its ``scene.json`` present, same preset) is kept unless ``overwrite``;
-    the scene is written in a staging folder and renamed into place when complete.
-    """
-    root = Path(out_root)
-    final = root / sparse_scene_name(seed, index)
-    if (final / "scene.json").is_file() and not overwrite:
-        try:
-            existing = json.loads((final / "scene.json").read_text(encoding="utf-8")).get("preset")
-        except (OSError, json.JSONDecodeError, AttributeError):
-            existing = None
-        if existing != preset.name:
-            raise UsageError(
-                f"scene exists with preset {existing!r}, not {preset.name!r}; pass --overwrite to regenerate it",
-                final / "scene.json",
-            )
-        return final
-    root.mkdir(parents=True, exist_ok=True)
-    build = build_sparse_scene(preset, seed, index)
-    frames = render_sparse_frames(build, progress, device)
-    with staged_folder(final) as staging:
-        write_sparse_scene(build, frames, staging)
-    return final
+#: ``generate_sparse_scene(out_root, preset, seed, index, *, overwrite, progress, device) -> scene folder``:
+#: sparse-view scene ``index`` of ``seed`` under ``out_root``, a complete scene (its ``scene.json`` present,
+#: same preset) kept unless ``overwrite`` (:meth:`~setdiff_bench.synthetic.staging.SceneRecipe.make`).
+generate_sparse_scene = RECIPE.make
