@@ -48,12 +48,13 @@ def better(metric: str, value: float, other: float) -> bool:
     return value > other if get_metric(metric).higher_is_better else value < other
 
 
-def lane_shift_verdict(metrics: pd.DataFrame, group: str = "lane+2") -> dict[str, Any]:
+def lane_shift_verdict(metrics: pd.DataFrame, group: str) -> dict[str, Any]:
     """SetDiff against ``identity`` and ``difix`` on one group (the benchmark's verdict group: +2 lanes,
     3 views): means and who wins each metric.
 
     Args:
         metrics: per-target rows of the four runs (``metrics.parquet`` concatenated).
+        group: the benchmark's ``verdict_group`` (:data:`setdiff_bench.pipeline.presets.DEMO_BENCHMARKS`).
     """
     rows = metrics[metrics["group"] == group]
     means = rows.groupby("method")[list(VERDICT_METRICS)].mean()
