@@ -89,3 +89,38 @@ def dataset_names() -> tuple[str, ...]:
     from setdiff_bench.loaders import DATASETS
 
     return tuple(DATASETS)
+
+
+def declared_field_default(module: str, cls: str, name: str) -> Any:
+    """The literal default of field ``name`` of the class ``cls`` defined in ``module`` (or in the module that
+    ``module`` imports it from), read from the sources without importing them: ``--help`` may not load torch,
+    which importing :mod:`setdiff_bench.gaussians.fit_config` does through its package
+    (module docstring).
+
+    Raises:
+        LookupError: no such class or field, or a default that is not a literal.
+    """
+    source = module_source(module)
+    tree = ast.parse(source.read_text(encoding="utf-8"))
+    package = module if source.name == "__init__.py" else module.rpartition(".")[0]
+    for node in tree.body:
+        if isinstance(node, ast.ClassDef) and node.name == cls:
+            for item in node.body:
+                if (
+                    isinstance(item, ast.AnnAssign)
+                    and isinstance(item.target, ast.Name)
+                    and item.target.id == name
+                    and item.value is not None
+                ):
+                    try:
+                        return ast.literal_eval(item.value)
+                    except ValueError:
+                        raise LookupError(f"{module}.{cls}.{name}'s default is not a literal") from None
+            raise LookupError(f"{module}.{cls} declares no field {name} with a default")
+        if isinstance(node, ast.ImportFrom) and any(
+            alias.name == cls and alias.asname in (None, cls) for alias in node.names
+        ):  # a re-export: follow it (``from .fit_config import FitConfig`` too)
+            base = package.rsplit(".", node.level - 1)[0] if node.level else ""  # level 1: this package
+            origin = ".".join(part for part in (base, node.module or "") if part)
+            return declared_field_default(origin, cls, name)
+    raise LookupError(f"{module} defines no class {cls}")

@@ -35,12 +35,10 @@ fit keys per protocol: see ``setdiff_bench.packets.prepare`` (EUVS ``level1..3``
 from __future__ import annotations
 
 import argparse
-import ast
 from pathlib import Path
-from typing import Any
 
 from setdiff_bench.cli import add_device_argument, add_progress_argument
-from setdiff_bench.cli.declared import dataset_names, module_source, registry_names
+from setdiff_bench.cli.declared import dataset_names, declared_field_default, registry_names
 from setdiff_bench.cli.list import add_loader_option_argument, loader_options
 
 VERB = "prepare"
@@ -48,41 +46,6 @@ HELP = "turn a dataset and 3DGS fits into render/ground-truth packets for a prot
 DESCRIPTION = __doc__
 #: Where the 3DGS fit configuration is declared: ``--fit-iterations``' default is its ``iterations`` field.
 FIT_CONFIG = ("setdiff_bench.gaussians.fit_config", "FitConfig")
-
-
-def declared_field_default(module: str, cls: str, name: str) -> Any:
-    """The literal default of field ``name`` of the class ``cls`` defined in ``module`` (or in the module that
-    ``module`` imports it from), read from the sources without importing them: ``--help`` may not load torch,
-    which importing :mod:`setdiff_bench.gaussians.fit_config` does through its package
-    (:mod:`setdiff_bench.cli.declared`).
-
-    Raises:
-        LookupError: no such class or field, or a default that is not a literal.
-    """
-    source = module_source(module)
-    tree = ast.parse(source.read_text(encoding="utf-8"))
-    package = module if source.name == "__init__.py" else module.rpartition(".")[0]
-    for node in tree.body:
-        if isinstance(node, ast.ClassDef) and node.name == cls:
-            for item in node.body:
-                if (
-                    isinstance(item, ast.AnnAssign)
-                    and isinstance(item.target, ast.Name)
-                    and item.target.id == name
-                    and item.value is not None
-                ):
-                    try:
-                        return ast.literal_eval(item.value)
-                    except ValueError:
-                        raise LookupError(f"{module}.{cls}.{name}'s default is not a literal") from None
-            raise LookupError(f"{module}.{cls} declares no field {name} with a default")
-        if isinstance(node, ast.ImportFrom) and any(
-            alias.name == cls and alias.asname in (None, cls) for alias in node.names
-        ):  # a re-export: follow it (``from .fit_config import FitConfig`` too)
-            base = package.rsplit(".", node.level - 1)[0] if node.level else ""  # level 1: this package
-            origin = ".".join(part for part in (base, node.module or "") if part)
-            return declared_field_default(origin, cls, name)
-    raise LookupError(f"{module} defines no class {cls}")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
