@@ -9,34 +9,23 @@ from setdiff_bench.errors import UsageError
 from setdiff_bench.models.setdiff.packaged import packaged_models
 from setdiff_bench.pipeline.presets import DemoPreset, get_benchmark
 from setdiff_bench.protocols import load_protocol
+from setdiff_bench.synthetic.kinds import scene_kind_of
 
 #: The learned methods and the shipped models the driving demo evaluates unless ``--train``.
 SHIPPED_MODELS = get_benchmark("driving").shipped
 
 
 def scene_namer(preset: DemoPreset) -> Any:
-    """``(seed, index) → scene name`` as ``synth`` names the preset's scenes."""
-    # lazy: the CLI imports this module at startup (demo presets); the generator pulls in the 3DGS fitting code
-    if get_benchmark(preset.benchmark).dataset == "synthetic":
-        from setdiff_bench.synthetic.generate import scene_name
-
-        return scene_name
-    from setdiff_bench.synthetic.sparse import sparse_scene_name
-
-    return sparse_scene_name
+    """``(seed, index) → scene name`` as ``synth`` names the preset's scenes (its scene kind's names)."""
+    return scene_kind_of(preset.synth_preset).scene_name
 
 
 def scene_count(preset: DemoPreset) -> int:
     """How many scenes (indices ``0 … count - 1``) the preset's benchmark holds."""
     if preset.scenes:
         return preset.scenes
-    if get_benchmark(preset.benchmark).dataset == "synthetic":
-        from setdiff_bench.synthetic.presets import get_preset
-
-        return get_preset(preset.synth_preset).num_scenes
-    from setdiff_bench.synthetic.sparse import get_sparse_preset
-
-    return get_sparse_preset(preset.synth_preset).num_scenes
+    kind = scene_kind_of(preset.synth_preset)
+    return kind.get_preset(preset.synth_preset).num_scenes
 
 
 def evaluation_scene_indices(preset: DemoPreset, seed: int) -> list[int]:
