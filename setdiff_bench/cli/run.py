@@ -14,8 +14,9 @@ Examples::
 ``--inception FILE`` adds FID and KID of the enhanced targets against the recorded frames of the same
 scenes (``<out>/distribution.parquet``; docs/any_capture.md), from a local Inception-v3 FID weights file.
 Targets without ground truth (``prepare --trajectory``) are enhanced and written; the paired metrics they
-cannot have (PSNR, SSIM, LPIPS, warp error) are named in one line (``skipped psnr, ssim, lpips for N
-target(s) without ground truth ...``) and in the manifest, and their columns are null.
+cannot have (PSNR, SSIM, LPIPS) are named in one line (``skipped psnr, ssim, lpips for N target(s) without
+ground truth ...``) and in the manifest, and their columns are null; warp error takes its flow from their
+3DGS renders instead.
 
 Shards (``--shard i/n``) may run at the same time on any machines into one folder on a shared
 filesystem; no file lock is used.  The shard that finds every fragment present merges them; on a
@@ -76,8 +77,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--warp-cache",
         default="auto",
         metavar="DIR",
-        help="cache of ground-truth flows for warp error, shared by methods (auto: the user cache; "
-        "none: off)",
+        help="cache of the optical flows warp error compares against (the ground truth's; the renders' for "
+        "targets without), shared by methods (auto: the user cache; none: off)",
     )
     parser.add_argument(
         "--merge",

@@ -35,7 +35,8 @@ timing columns.  Everything written is deterministic except timing and memory â€
 byte in ``images/`` and in every other column (compare with :func:`comparable_metrics`).
 
 Targets without ground truth (novel trajectories, ``prepare --trajectory``) are enhanced and written like
-any other; their paired metrics (the image metrics, and warp error) are null in ``metrics.parquet``, named
+any other; their image metrics are null in ``metrics.parquet`` (warp error is computed on them with the flow
+of their 3DGS renders, :mod:`.sequences`), named
 in :attr:`RunResult.skipped_metrics` (``run`` prints them in one line) and in the manifest's ``skipped`` entry
 (present only when something was skipped, so runs on packets with ground truth are unchanged).  FID / KID
 (``--inception``) score them without ground truth.

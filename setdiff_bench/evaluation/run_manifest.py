@@ -80,7 +80,13 @@ def run_manifest(
                 "sequences": sequences.num_rows,
                 "flow_method": settings.flow_method,
                 "scale": "MSE on the 0-255 scale (setdiff_bench.metrics.warp.PAPER_SCALE)",
-                "grouping": "(protocol, scene, sensor), targets sorted by timestamp across groups",
+                "grouping": "(protocol, scene, sensor), targets sorted by timestamp across groups"
+                + (
+                    "; targets without ground truth: (protocol, scene, sensor, group), flow from their 3DGS renders"
+                    if "flow_source" in sequences.column_names
+                    and "render" in set(sequences.column("flow_source").to_pylist())
+                    else ""
+                ),
             },
         },
         "device": {**device_description(settings.device), "requested": settings.device},

@@ -266,3 +266,27 @@ def test_leaderboard_cells_keep_render_sequences_out_of_the_pooled_block(identit
     # without group_sequences (today's build_leaderboard) no group block gets a warp cell
     plain = measured_row("identity", images, sequences, blocks, ["psnr"], ["warp"])
     assert plain.values[(ALL, "warp")] == float(truth.mean()) and ("shift+3m", "warp") not in plain.values
+
+
+def test_leaderboard_shows_each_trajectory_blocks_render_warp(
+    identity: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``leaderboard`` end to end: a trajectory block gets a Warp column holding its own render sequences'
+    mean (1 decimal, the metric's display), the pooled block the ground-truth sequences' mean, and the caption
+    says where a trajectory block's flow came from."""
+    from setdiff_bench.cli.main import main
+
+    runs = tmp_path / "runs"
+    shutil.copytree(identity, runs / "identity")
+    dataset = str(pd.read_parquet(identity / METRICS_FILE)["dataset"].iloc[0])
+    out = tmp_path / "board"
+    argv = ["leaderboard", "--dataset", dataset, "--runs", str(runs), "--split", "all", "--format", "md"]
+    argv += ["--metrics", "psnr"]
+    assert main([*argv, "--out", str(out)]) == 0
+    capsys.readouterr()
+    text = "\n".join(p.read_text() for p in sorted(out.glob("*.md")))
+    sequences = pd.read_parquet(identity / SEQUENCES_FILE)
+    for group in ("shift+3m", "shift+6m"):
+        expected = sequences[sequences["group"] == group]["warp"].mean()
+        assert f"{expected:.1f}" in text, (group, expected, text)
+    assert "flow and occlusion from the 3DGS renders" in text

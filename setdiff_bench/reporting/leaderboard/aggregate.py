@@ -115,11 +115,17 @@ def build_leaderboard(
         if (seq is not None and m in seq.columns and len(seq))
         or (reported is not None and len(reported) and m in set(reported["metric"]))
     )
+    # trajectory groups with render-flow warp error (sequences.parquet's flow_source) show it in their block
+    render_groups = (
+        set(seq.loc[seq["flow_source"] == "render", "group"])
+        if seq is not None and "flow_source" in seq.columns
+        else set()
+    )
     columns = [
         (
             b,
             metric_names
-            + (seq_names if b.key == ALL else ())
+            + (seq_names if b.key == ALL or b.key in render_groups else ())
             + (DISTRIBUTION_METRICS if b.key != ALL and b.key in dist_groups else ()),
         )
         for b in blocks
@@ -140,6 +146,7 @@ def build_leaderboard(
                 metric_names,
                 seq_names,
                 scene_mean=spec.aggregation == "scene_mean",
+                group_sequences=True,
             )
         )
         if dist is not None:
@@ -223,6 +230,11 @@ def _notes(board: Leaderboard, frame: pd.DataFrame, seq: pd.DataFrame | None) ->
         )
     if seq is not None and len(seq):
         notes.append("Warp error: mean over per-camera sequences (MSE on the 0-255 scale).")
+        if "flow_source" in seq.columns and (seq["flow_source"] == "render").any():
+            notes.append(
+                "Warp error of a trajectory block (no ground truth): flow and occlusion from the 3DGS renders of "
+                "its targets, one sequence per camera and group; compare it within the block only."
+            )
     if any(row.source == "reported" for row in board.rows):
         notes.append(
             "Rows marked (paper) / † are the numbers reported in the SetDiff paper, not measured here."

@@ -114,7 +114,7 @@ def distribution_notes(board: Leaderboard, dist: pd.DataFrame | None, blind: fro
         names = shown_blind
         notes.append(
             f"–: not computed. The targets of {', '.join(names)} have no ground truth (novel trajectories), "
-            "so their image metrics are null and those blocks are scored by FID / KID only"
+            "so their image metrics are null and those blocks are scored by FID / KID (and warp error, where computed)"
             + (
                 ""
                 if not any(b.key == ALL for b, _ in board.columns)
