@@ -13,6 +13,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from setdiff_bench.io.jsonable import jsonable
 from setdiff_bench.metrics.registry import PRESETS
 
 RUN_FORMAT = "setdiff-run/1"
@@ -88,11 +89,14 @@ def warp_enabled(settings: RunSettings, protocols: Sequence[str]) -> bool:
 
 
 def jsonable_options(value: Any) -> Any:
-    """Options as JSON values (paths and other objects become strings)."""
-    if isinstance(value, Mapping):
-        return {str(k): jsonable_options(v) for k, v in sorted(value.items(), key=lambda kv: str(kv[0]))}
-    if isinstance(value, list | tuple):
-        return [jsonable_options(v) for v in value]
+    """Options as JSON values: :func:`setdiff_bench.io.jsonable.jsonable` with leaves made JSON-safe (a
+    non-finite float and any object that is not a bool, int, str or ``None`` become strings, e.g. paths;
+    dataclasses are expanded)."""
+    return jsonable(value, _option_leaf)
+
+
+def _option_leaf(value: Any) -> Any:
+    """One leaf of :func:`jsonable_options`."""
     if isinstance(value, bool | int | str) or value is None:
         return value
     if isinstance(value, float):
