@@ -31,20 +31,28 @@ dependency here).  ``v1.0-trainval``'s ``sample_data.json`` is large: loading it
 
 from __future__ import annotations
 
-import math
 import os
-import warnings
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from setdiff_bench.cameras import Camera, numeric_array, rigid_from_quaternion
-from setdiff_bench.errors import DatasetError, DatasetWarning, ImageError
+from setdiff_bench.errors import DatasetError, ImageError
 from setdiff_bench.io.paths import resolve_inside
 from setdiff_bench.types import Frame, Scene
 
-from .common import dataset_root, frames_by_key, image_size, natural_key, read_json, select_scenes
+from .common import dataset_root, frames_by_key, image_size, natural_key, select_scenes
+from .nuscenes_tables import FIELD_TYPES, MICROSECOND_FIELDS, Table, check_field_types, load_table
+
+__all__ = [
+    "FIELD_TYPES",
+    "MICROSECOND_FIELDS",
+    "check_field_types",
+    "list_scenes",
+    "load_scenes",
+    "load_table",
+    "locate",
+]
 
 VERSIONS = ("v1.0-mini", "v1.0-trainval", "v1.0-test")
 REQUIRED_TABLES = ("scene", "sample", "sample_data", "calibrated_sensor", "sensor", "ego_pose")
@@ -92,130 +100,6 @@ def _is_table_folder(folder: Path) -> bool:
     return (folder / "scene.json").is_file() and (named or (folder / "sample.json").is_file())
 
 
-def load_table(tables: Path, name: str) -> list[dict[str, Any]]:
-    """One table as a list of records.
-
-    Raises:
-        DatasetError: missing file, invalid JSON, not a list of objects with a ``token``.
-    """
-    path = tables / f"{name}.json"
-    if not path.is_file():
-        raise DatasetError(f"missing nuScenes table {name}.json", path)
-    records = read_json(path, "table")
-    if not isinstance(records, list) or not all(
-        isinstance(r, dict) and isinstance(r.get("token"), str) for r in records
-    ):
-        raise DatasetError("expected a JSON list of records with a string 'token' field", path)
-    return records
-
-
-_TOKEN = (str,)
-_LIST = (list,)
-#: Types of the fields this loader reads, per table (checked when present; ``bool`` is not an ``int`` here).
-FIELD_TYPES: dict[str, dict[str, tuple[type, ...]]] = {
-    "scene": {"name": (str,), "first_sample_token": _TOKEN, "log_token": _TOKEN, "description": (str,)},
-    "sample": {"scene_token": _TOKEN, "next": _TOKEN, "prev": _TOKEN},
-    "sample_data": {
-        "sample_token": _TOKEN,
-        "ego_pose_token": _TOKEN,
-        "calibrated_sensor_token": _TOKEN,
-        "timestamp": (int,),
-        "is_key_frame": (bool,),
-        "filename": (str,),
-        "width": (int,),
-        "height": (int,),
-        "prev": _TOKEN,
-        "next": _TOKEN,
-    },
-    "calibrated_sensor": {
-        "sensor_token": _TOKEN,
-        "rotation": _LIST,
-        "translation": _LIST,
-        "camera_intrinsic": _LIST,
-    },
-    "sensor": {"channel": (str,), "modality": (str,)},
-    "ego_pose": {"rotation": _LIST, "translation": _LIST},
-    "log": {"location": (str,), "logfile": (str,)},
-}
-
-
-#: Fields stored in integer microseconds that may be written as fractional floats; rounded on load.
-MICROSECOND_FIELDS: dict[str, tuple[str, ...]] = {"sample_data": ("timestamp",)}
-
-
-def check_field_types(record: dict[str, Any], table: str, path: Path) -> int:
-    """Raise ``DatasetError`` when a field the loader reads has another JSON type than the schema's.
-
-    An integral float where the schema has an int (``1556675185850000.0``: nuScenes-format tables
-    written by other tools, e.g. Lyft tables trimmed by mmdetection3d) is accepted and stored as the int.
-    A finite non-integral float in a microsecond field (:data:`MICROSECOND_FIELDS`,
-    ``1556675185903083.2``) is rounded to the nearest microsecond and stored as the int; NaN and
-    infinities stay refused.
-
-    Returns:
-        how many fields of ``record`` were rounded (the caller warns once per table with the total).
-    """
-    rounded = 0
-    for field, kinds in FIELD_TYPES.get(table, {}).items():
-        if field not in record:
-            continue
-        value = record[field]
-        if int in kinds and isinstance(value, float) and value.is_integer():
-            record[field] = value = int(value)
-        elif field in MICROSECOND_FIELDS.get(table, ()) and isinstance(value, float) and math.isfinite(value):
-            record[field] = value = round(value)
-            rounded += 1
-        if not isinstance(value, kinds) or (isinstance(value, bool) and bool not in kinds):
-            expected = " or ".join("list" if k is list else k.__name__ for k in kinds)
-            raise DatasetError(
-                f"{table} {record['token']!r} field {field!r} must be a JSON {expected}, got {value!r:.60}",
-                path,
-            )
-    return rounded
-
-
-@dataclass
-class _Table:
-    """Records of one table by token, with its file for error messages."""
-
-    name: str
-    path: Path
-    rows: dict[str, dict[str, Any]]
-
-    @classmethod
-    def load(cls, tables: Path, name: str) -> _Table:
-        rows: dict[str, dict[str, Any]] = {}
-        path = tables / f"{name}.json"
-        rounded = 0
-        for record in load_table(tables, name):
-            if record["token"] in rows:
-                raise DatasetError(f"duplicate token {record['token']!r}", path)
-            rounded += check_field_types(record, name, path)
-            rows[record["token"]] = record
-        if rounded:
-            fields = " / ".join(MICROSECOND_FIELDS[name])
-            warnings.warn(
-                f"{path}: {rounded} {name} {fields} values are fractional microseconds; "
-                "rounded to the nearest microsecond",
-                DatasetWarning,
-                stacklevel=2,
-            )
-        return cls(name, path, rows)
-
-    def get(self, token: Any, referrer: _Table, referrer_token: str, field: str) -> dict[str, Any]:
-        """The record ``token`` names; a dangling token is a ``DatasetError`` naming the referring file."""
-        record = self.rows.get(token) if isinstance(token, str) else None
-        if record is None and field not in referrer.rows.get(referrer_token, {}):
-            raise DatasetError(f"{referrer.name} {referrer_token!r}: missing field {field!r}", referrer.path)
-        if record is None:
-            raise DatasetError(
-                f"{referrer.name} {referrer_token!r} field {field!r} refers to token {token!r}, "
-                f"which is not in {self.name}.json",
-                referrer.path,
-            )
-        return record
-
-
 def list_scenes(root: str | os.PathLike[str], *, version: str | None = None) -> list[str]:
     """Scene names (``scene-0061`` ...) of the version, in natural order; reads only ``scene.json``."""
     _, tables = locate(root, version)
@@ -246,8 +130,8 @@ def load_scenes(
         check_images: read each image header and require it to exist with ``sample_data`` width × height.
     """
     dataroot, tables = locate(root, version)
-    t = {name: _Table.load(tables, name) for name in REQUIRED_TABLES}
-    logs = _Table.load(tables, "log") if (tables / "log.json").is_file() else None
+    t = {name: Table.load(tables, name) for name in REQUIRED_TABLES}
+    logs = Table.load(tables, "log") if (tables / "log.json").is_file() else None
     by_name = {str(r.get("name")): r for r in t["scene"].rows.values()}
     chosen = select_scenes(sorted(by_name, key=natural_key), scenes, tables, "nuscenes")
 
@@ -304,7 +188,7 @@ def load_scenes(
     return out
 
 
-def _camera_records(t: Mapping[str, _Table]) -> dict[str, tuple[dict[str, Any], str]]:
+def _camera_records(t: Mapping[str, Table]) -> dict[str, tuple[dict[str, Any], str]]:
     """Camera ``sample_data`` token → (record, channel)."""
     out = {}
     for token, record in t["sample_data"].rows.items():
@@ -319,7 +203,7 @@ def _camera_records(t: Mapping[str, _Table]) -> dict[str, tuple[dict[str, Any], 
     return out
 
 
-def _sample_chain(scene: Record, t: Mapping[str, _Table]) -> list[str]:
+def _sample_chain(scene: Record, t: Mapping[str, Table]) -> list[str]:
     """Sample tokens of a scene from ``first_sample_token`` through ``next``."""
     tokens: list[str] = []
     token = scene.get("first_sample_token")
@@ -346,7 +230,7 @@ def _sample_chain(scene: Record, t: Mapping[str, _Table]) -> list[str]:
 
 def _channel_chain(
     tokens: list[str],
-    t: Mapping[str, _Table],
+    t: Mapping[str, Table],
     camera_records: Mapping[str, tuple],
     scene_name: str,
     channel: str,
@@ -379,9 +263,7 @@ def _channel_chain(
     return chain
 
 
-def _frame(
-    record: Record, channel: str, t: Mapping[str, _Table], dataroot: Path, check_images: bool
-) -> Frame:
+def _frame(record: Record, channel: str, t: Mapping[str, Table], dataroot: Path, check_images: bool) -> Frame:
     token = record["token"]
     calib = t["calibrated_sensor"].rows[record["calibrated_sensor_token"]]
     ego = t["ego_pose"].get(record.get("ego_pose_token"), t["sample_data"], token, "ego_pose_token")
