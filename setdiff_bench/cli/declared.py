@@ -63,6 +63,26 @@ def declared_value(module: str, name: str) -> Any:
         raise LookupError(f"{module}.{name} is not a literal") from None
 
 
+def declared_literal(module: str, name: str) -> tuple[str, ...]:
+    """The choices of the ``Literal`` type alias assigned to ``name`` at the top of ``module`` (e.g.
+    ``WarpMode = Literal["auto", "on", "off"]`` in :mod:`setdiff_bench.evaluation.run_settings`), in order,
+    read from its source; ``typing.get_args`` of the imported alias gives the same.
+
+    Raises:
+        LookupError: no such assignment, or not ``Literal[...]`` of string literals.
+    """
+    value = _assigned(module, name)
+    if not (
+        isinstance(value, ast.Subscript) and isinstance(value.value, ast.Name) and value.value.id == "Literal"
+    ):
+        raise LookupError(f"{module}.{name} is not a Literal[...] alias")
+    items = value.slice.elts if isinstance(value.slice, ast.Tuple) else [value.slice]
+    choices = [item.value if isinstance(item, ast.Constant) else None for item in items]
+    if not all(isinstance(choice, str) for choice in choices):
+        raise LookupError(f"{module}.{name} holds other values than string literals")
+    return tuple(choices)  # type: ignore[arg-type]
+
+
 def registry_names(module: str, name: str) -> tuple[str, ...]:
     """The keys, in order, of the dict literal assigned to ``name`` at the top of ``module`` (a registry such as
     ``setdiff_bench.synthetic.presets.PRESETS``), read from its source.

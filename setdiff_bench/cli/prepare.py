@@ -38,7 +38,13 @@ import argparse
 from pathlib import Path
 
 from setdiff_bench.cli import add_device_argument, add_progress_argument
-from setdiff_bench.cli.declared import dataset_names, declared_field_default, registry_names
+from setdiff_bench.cli.declared import (
+    dataset_names,
+    declared_field_default,
+    declared_literal,
+    declared_value,
+    registry_names,
+)
 from setdiff_bench.cli.list import add_loader_option_argument, loader_options
 
 VERB = "prepare"
@@ -46,6 +52,7 @@ HELP = "turn a dataset and 3DGS fits into render/ground-truth packets for a prot
 DESCRIPTION = __doc__
 #: Where the 3DGS fit configuration is declared: ``--fit-iterations``' default is its ``iterations`` field.
 FIT_CONFIG = ("setdiff_bench.gaussians.fit_config", "FitConfig")
+PREPARE_SETTINGS = ("setdiff_bench.packets.prepare_settings", "PrepareSettings")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -63,8 +70,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, type=Path, help="packet store folder")
     parser.add_argument(
         "--split",
-        choices=("train", "test", "all"),
-        default="all",
+        choices=declared_value(PREPARE_SETTINGS[0], "SPLIT_CHOICES"),
+        default=declared_field_default(*PREPARE_SETTINGS, "split"),
         help="which scenes of the protocol's scene split (default: all)",
     )
     parser.add_argument(
@@ -119,8 +126,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_loader_option_argument(parser, 'overrides the protocol\'s; e.g. -o level=1, -o version="v1.0-mini"')
     parser.add_argument(
         "--cmap-precision",
-        choices=("float32", "half"),
-        default="float32",
+        choices=declared_literal(PREPARE_SETTINGS[0], "CmapPrecision"),
+        default=declared_field_default(*PREPARE_SETTINGS, "cmap_precision"),
         help="C-map EXR precision (float32: exact geometry; half: ~3.5x smaller files)",
     )
     parser.add_argument(

@@ -30,6 +30,11 @@ import sys
 from pathlib import Path
 
 from setdiff_bench.cli import add_device_argument, add_option_argument, add_progress_argument
+from setdiff_bench.cli.declared import declared_field_default, declared_literal
+
+#: Where the run's settings are declared (read from source: ``--help`` imports no torch).
+RUN_SETTINGS_MODULE = "setdiff_bench.evaluation.run_settings"
+RUN_SETTINGS = (RUN_SETTINGS_MODULE, "RunSettings")
 
 VERB = "run"
 HELP = "enhance every packet of a store with one method and score it (PSNR, SSIM, LPIPS; warp error)"
@@ -51,7 +56,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--shard", default="0/1", help="i/n: enhance packets i, i+n, ... (0 <= i < n); default 0/1"
     )
     add_device_argument(parser, "where the method and the metrics run")
-    parser.add_argument("--batch-size", type=int, default=8, help="images per metric call (memory bound)")
+    parser.add_argument(
+        "--batch-size",
+        type=int,
+        default=declared_field_default(*RUN_SETTINGS, "batch_size"),
+        help="images per metric call (memory bound)",
+    )
     parser.add_argument(
         "--checkpoint", default=None, help="trained model for learned methods (setdiff, difix)"
     )
@@ -66,12 +76,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--warp",
-        choices=("auto", "on", "off"),
-        default="auto",
+        choices=declared_literal(RUN_SETTINGS_MODULE, "WarpMode"),
+        default=declared_field_default(*RUN_SETTINGS, "warp"),
         help="warp error per camera sequence (auto: on for nuScenes)",
     )
     parser.add_argument(
-        "--flow", choices=("deepflow", "dis"), default="deepflow", help="optical flow for warp error"
+        "--flow",
+        choices=declared_literal("setdiff_bench.metrics.optical_flow", "FlowMethod"),
+        default=declared_field_default(*RUN_SETTINGS, "flow_method"),
+        help="optical flow for warp error",
     )
     parser.add_argument(
         "--warp-cache",

@@ -23,7 +23,7 @@ occlusion test does not flag those pixels, and they add to the error of every me
 from __future__ import annotations
 
 import itertools
-from typing import Literal, NamedTuple
+from typing import Literal, NamedTuple, get_args
 
 import cv2
 import numpy as np
@@ -32,7 +32,7 @@ import torch
 from setdiff_bench.errors import ImageError, UsageError
 
 FlowMethod = Literal["deepflow", "dis"]
-FLOW_METHODS: tuple[str, ...] = ("deepflow", "dis")
+FLOW_METHODS: tuple[str, ...] = get_args(FlowMethod)
 DEFAULT_FLOW_METHOD: FlowMethod = "deepflow"
 
 

@@ -50,7 +50,7 @@ import time
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, get_args
 
 from setdiff_bench.errors import ProtocolError, UsageError
 from setdiff_bench.loaders import dataset_spec, list_scenes, load_scenes
@@ -66,7 +66,7 @@ from setdiff_bench.packets.plan import (
     plan_scene,
     plan_trajectories,
 )
-from setdiff_bench.packets.prepare_settings import SPLIT_CHOICES, PrepareSettings
+from setdiff_bench.packets.prepare_settings import SPLIT_CHOICES, CmapPrecision, PrepareSettings
 from setdiff_bench.packets.recipes import PairRecipe, RecipeFrames, parse_pairs, recipe_frames
 from setdiff_bench.packets.shards import Shard  # the type of PrepareSettings.shard, for callers
 from setdiff_bench.packets.trajectory import TrajectorySpec, parse_trajectory
@@ -185,9 +185,10 @@ def prepare(
         raise UsageError("give --pairs or --trajectory, not both (run prepare once for each)", "--pairs")
     if settings.threads < 1:
         raise UsageError(f"threads must be >= 1, got {settings.threads}", "--threads")
-    if settings.cmap_precision not in ("float32", "half"):
+    if settings.cmap_precision not in get_args(CmapPrecision):
         raise UsageError(
-            f"cmap precision must be float32 or half, got {settings.cmap_precision!r}", "--cmap-precision"
+            f"cmap precision must be {' or '.join(get_args(CmapPrecision))}, got {settings.cmap_precision!r}",
+            "--cmap-precision",
         )
     with torch_threads(settings.threads):
         return _prepare(dataset, root, out, settings, trajectories=specs, pairs=recipes)

@@ -62,3 +62,28 @@ def test_cli_choices_come_from_the_library() -> None:
     assert option(leaderboard, "--format").default == ",".join(FORMATS)
     assert option(leaderboard, "--profile").default == DEFAULT_PROFILE
     assert choices(weights, "--net", "lpips") == (*NETS, "all")
+
+
+def test_run_and_prepare_choices_and_defaults_are_the_settings_dataclasses() -> None:
+    """``run --warp/--flow/--batch-size`` and ``prepare --split/--cmap-precision`` show what RunSettings and
+    PrepareSettings declare (read from their sources, so ``--help`` imports no torch)."""
+    from setdiff_bench.cli import prepare, run
+    from setdiff_bench.cli.declared import declared_literal
+    from setdiff_bench.evaluation.run_settings import RunSettings, WarpMode
+    from setdiff_bench.metrics.optical_flow import FLOW_METHODS, FlowMethod
+    from setdiff_bench.packets.prepare_settings import SPLIT_CHOICES, CmapPrecision, PrepareSettings
+
+    settings = RunSettings(method="identity")
+    assert choices(run, "--warp") == get_args(WarpMode) == ("auto", "on", "off")
+    assert option(run, "--warp").default == settings.warp
+    assert choices(run, "--flow") == get_args(FlowMethod) == FLOW_METHODS == ("deepflow", "dis")
+    assert option(run, "--flow").default == settings.flow_method
+    assert option(run, "--batch-size").default == settings.batch_size == 8
+    defaults = PrepareSettings()
+    assert (
+        choices(prepare, "--split") == SPLIT_CHOICES and option(prepare, "--split").default == defaults.split
+    )
+    assert choices(prepare, "--cmap-precision") == get_args(CmapPrecision) == ("float32", "half")
+    assert option(prepare, "--cmap-precision").default == defaults.cmap_precision
+    with pytest.raises(LookupError, match="not a Literal"):
+        declared_literal("setdiff_bench.packets.prepare_settings", "SPLIT_CHOICES")
