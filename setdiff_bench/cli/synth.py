@@ -150,10 +150,10 @@ def make_scene(
     # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     import time
 
-    import torch
+    from setdiff_bench.runtime.threads import set_process_threads
 
     if threads is not None:
-        torch.set_num_threads(threads)
+        set_process_threads(threads)
     kind = scene_kind_of(preset_name)  # driving (EUVS layout, fits/lane0.ply) or sparse (DL3DV, n3/n6/n9)
     preset = kind.get_preset(preset_name)
     t0 = time.perf_counter()

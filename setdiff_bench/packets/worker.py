@@ -32,6 +32,7 @@ from setdiff_bench.io.images import read_mask, read_rgb, to_numpy_hwc
 from setdiff_bench.packets.jobs import PacketJob
 from setdiff_bench.packets.working_view import Crop, ViewJob
 from setdiff_bench.packets.writer import PacketHeader, ViewContent, write_packet
+from setdiff_bench.runtime.threads import set_process_threads
 from setdiff_bench.types import key_fields
 from setdiff_bench.undistort import is_distorted, undistort_image, undistortion_maps
 
@@ -198,7 +199,7 @@ def build_packet(job: PacketJob, root: Path, backend: str, device: str) -> JobSt
 
 def init_worker(threads: int) -> None:
     """A spawned worker's initialiser: ``threads`` torch intra-op threads."""
-    torch.set_num_threads(threads)
+    set_process_threads(threads)
 
 
 def build_many(jobs: Sequence[PacketJob], root: Path, backend: str, device: str) -> list[JobStats]:

@@ -78,6 +78,14 @@ def verb_threads() -> Iterator[int]:
             os.environ["OMP_NUM_THREADS"] = previous
 
 
+def set_process_threads(count: int) -> None:
+    """Set this process's torch intra-op thread count for the rest of its life: the initialiser of a worker
+    process (``prepare --workers``, ``synth --jobs``), which does all its work with ``count`` threads."""
+    import torch
+
+    torch.set_num_threads(count)
+
+
 @contextlib.contextmanager
 def torch_threads(count: int) -> Iterator[None]:
     """Run the block with ``torch.set_num_threads(count)``; restore the previous count on exit."""
