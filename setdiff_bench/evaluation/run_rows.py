@@ -17,6 +17,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from setdiff_bench.io.atomic import atomic_path
+from setdiff_bench.packets.index import key_columns
 
 #: Columns that are measurements of time, not results: excluded from byte-identity comparisons.
 TIMING_COLUMNS = ("ms_per_frame", "peak_memory_mb")
@@ -26,16 +27,18 @@ def row_schema(metric_names: Sequence[str]) -> pa.Schema:
     """Arrow schema of ``metrics.parquet`` and of fragments."""
     return pa.schema(
         [
-            ("dataset", pa.string()),
-            ("protocol", pa.string()),
-            ("group", pa.string()),
-            ("split", pa.string()),
-            ("scene", pa.string()),
-            ("frame", pa.string()),
-            ("sensor", pa.string()),
-            ("timestamp_us", pa.int64()),
-            ("packet_id", pa.string()),
-            ("view", pa.int32()),
+            *key_columns(
+                "dataset",
+                "protocol",
+                "group",
+                "split",
+                "scene",
+                "frame",
+                "sensor",
+                "timestamp_us",
+                "packet_id",
+                "view",
+            ),
             ("method", pa.string()),
             *[(name, pa.float64()) for name in metric_names],
             ("ms_per_frame", pa.float64()),

@@ -34,6 +34,7 @@ from setdiff_bench.errors import PacketError
 from setdiff_bench.evaluation.run_settings import RunSettings
 from setdiff_bench.evaluation.scoring import default_warp_cache, sequence_warp_error
 from setdiff_bench.io.images import read_rgb, to_tensor_chw
+from setdiff_bench.packets.index import key_columns
 from setdiff_bench.packets.store import PacketStore, target_has_ground_truth
 
 #: ``flow_source`` of a sequence whose flow comes from the ground truth (targets with ground truth).
@@ -43,17 +44,14 @@ FLOW_FROM_RENDER = "render"
 
 SEQUENCE_SCHEMA = pa.schema(
     [
-        ("dataset", pa.string()),
-        ("protocol", pa.string()),
-        ("scene", pa.string()),
-        ("sensor", pa.string()),
+        *key_columns("dataset", "protocol", "scene", "sensor"),
         ("method", pa.string()),
         ("frames", pa.int32()),
         ("first_frame", pa.string()),
         ("last_frame", pa.string()),
         ("warp", pa.float64()),
         ("flow_source", pa.string()),
-        ("group", pa.string()),
+        *key_columns("group"),
     ]
 )
 

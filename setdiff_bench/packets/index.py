@@ -54,21 +54,33 @@ class NoGroundTruthError(PacketError):
     view, ``prepare --trajectory``)."""
 
 
+#: Arrow types of the columns that say which packet, view and frame a row is about: declared once, for the index
+#: (in this order) and the run tables that carry some of them (:func:`key_columns`).
+KEY_COLUMN_TYPES: dict[str, pa.DataType] = {
+    "packet_id": pa.string(),
+    "role": pa.string(),
+    "view": pa.int32(),
+    "dataset": pa.string(),
+    "protocol": pa.string(),
+    "group": pa.string(),
+    "split": pa.string(),
+    "scene": pa.string(),
+    "fit_key": pa.string(),
+    "frame": pa.string(),
+    "sensor": pa.string(),
+    "traversal": pa.string(),
+    "timestamp_us": pa.int64(),
+}
+
+
+def key_columns(*names: str) -> list[tuple[str, pa.DataType]]:
+    """``(name, type)`` of the key columns ``names``, in that order (:data:`KEY_COLUMN_TYPES`)."""
+    return [(name, KEY_COLUMN_TYPES[name]) for name in names]
+
+
 SCHEMA = pa.schema(
     [
-        ("packet_id", pa.string()),
-        ("role", pa.string()),
-        ("view", pa.int32()),
-        ("dataset", pa.string()),
-        ("protocol", pa.string()),
-        ("group", pa.string()),
-        ("split", pa.string()),
-        ("scene", pa.string()),
-        ("fit_key", pa.string()),
-        ("frame", pa.string()),
-        ("sensor", pa.string()),
-        ("traversal", pa.string()),
-        ("timestamp_us", pa.int64()),
+        *KEY_COLUMN_TYPES.items(),
         ("width", pa.int32()),
         ("height", pa.int32()),
         ("K", pa.list_(pa.float64(), 9)),
