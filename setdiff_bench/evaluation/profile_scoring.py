@@ -52,6 +52,7 @@ from setdiff_bench.io.run_layout import (
     PROFILE_FILE,
     PROFILES_DIR,
     SCENES_FILE,
+    TARGET_COLUMNS,
 )
 from setdiff_bench.loaders import load_scenes
 from setdiff_bench.metrics.dinov2 import final_score, masked_cosine
@@ -167,7 +168,7 @@ def score_run(
     metrics_path = run / METRICS_FILE
     if not metrics_path.is_file():
         raise UsageError("not a finished run (no metrics.parquet)", run)
-    rows = pd.read_parquet(metrics_path).drop_duplicates(["method", "group", "scene", "frame"], keep="first")
+    rows = pd.read_parquet(metrics_path).drop_duplicates(["method", *TARGET_COLUMNS], keep="first")
     if (
         profile.scenes == "split"
     ):  # the protocol's test scenes only (a --split all run holds train scenes too)

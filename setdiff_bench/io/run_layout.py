@@ -44,6 +44,11 @@ KEY_COLUMNS: tuple[str, ...] = (
 )
 
 
+#: The columns that name one target within a dataset, as its written image is named (:func:`image_relative`):
+#: a run's rows are unique on them per method.
+TARGET_COLUMNS: tuple[str, ...] = ("protocol", "group", "scene", "frame")
+
+
 def image_relative(ref: TargetRef) -> str:
     """``images/<protocol>/<group>/<scene>/<frame stem>.png``, POSIX, relative to the run folder."""
     parts = [IMAGES_DIR, safe_component(ref.protocol), safe_component(ref.group), safe_component(ref.scene)]

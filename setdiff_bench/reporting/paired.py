@@ -30,11 +30,9 @@ import numpy as np
 import pandas as pd
 
 from setdiff_bench.errors import SetDiffBenchError
+from setdiff_bench.io.run_layout import TARGET_COLUMNS
 from setdiff_bench.metrics.registry import get_metric
 from setdiff_bench.reporting.bootstrap import BootstrapSettings
-
-#: The columns that name one target within a dataset (a run's rows are unique on them per method).
-TARGET_COLUMNS: tuple[str, ...] = ("protocol", "group", "scene", "frame")
 
 
 class PairingError(SetDiffBenchError):

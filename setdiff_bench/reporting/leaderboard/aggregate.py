@@ -16,6 +16,7 @@ import pandas as pd
 
 from setdiff_bench.evaluation.profiles import DEFAULT_PROFILE, get_profile
 from setdiff_bench.io.images import image_size
+from setdiff_bench.io.run_layout import TARGET_COLUMNS
 from setdiff_bench.loaders.common import natural_key
 from setdiff_bench.protocols import Block, Layout
 from setdiff_bench.reporting.bootstrap import BootstrapSettings
@@ -221,7 +222,7 @@ def _notes(board: Leaderboard, frame: pd.DataFrame, seq: pd.DataFrame | None) ->
         "(ties share it, compared as displayed)."
     ]
     if len(frame):
-        targets = frame.drop_duplicates(["protocol", "group", "scene", "frame"])
+        targets = frame.drop_duplicates(list(TARGET_COLUMNS))
         counts = targets.groupby("group")["frame"].count()
         notes.append(
             "Targets per block: "
