@@ -18,7 +18,7 @@ import argparse
 from pathlib import Path
 
 from setdiff_bench.cli import add_device_argument, add_progress_argument
-from setdiff_bench.cli.declared import registry_names
+from setdiff_bench.cli.declared import declared_literal, registry_names
 from setdiff_bench.cli.list import add_loader_option_argument, loader_options
 
 VERB = "fit"
@@ -46,7 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--init",
         default="auto",
-        choices=("auto", "sparse", "triangulate", "random"),
+        choices=declared_literal("setdiff_bench.gaussians.triangulate", "InitMode"),
         help="initial Gaussians: auto = the scene's sparse points, else points triangulated from "
         "the known poses (pycolmap), else random points sized to the scene",
     )

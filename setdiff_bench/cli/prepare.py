@@ -118,7 +118,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--threads", type=int, default=1, help="torch threads per render process (default 1)")
     parser.add_argument(
         "--backend",
-        choices=("auto", "torch", "gsplat"),
+        choices=("auto", *declared_literal("setdiff_bench.gaussians.render", "Backend")),
         default="auto",
         help="renderer (auto: gsplat on CUDA when installed, else torch)",
     )

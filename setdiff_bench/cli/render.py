@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from setdiff_bench.cli import add_device_argument, add_progress_argument
+from setdiff_bench.cli.declared import declared_literal
 
 VERB = "render"
 HELP = "render a 3DGS PLY at COLMAP cameras: RGB, C-map, depth and alpha per view"
@@ -59,7 +60,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--backend",
-        choices=("torch", "gsplat"),
+        choices=declared_literal("setdiff_bench.gaussians.render", "Backend"),
         default="torch",
         help="torch: the built-in rasterizer, any device (default); gsplat: the CUDA rasterizer of the "
         "gsplat package (needs a GPU and pip install setdiff-bench[gpu])",

@@ -18,7 +18,7 @@ import tempfile
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Literal
+from typing import Literal, get_args
 
 import cv2
 import numpy as np
@@ -29,7 +29,7 @@ from setdiff_bench.gaussians.fit_data import FitView
 from setdiff_bench.types import Scene
 
 InitMode = Literal["auto", "sparse", "triangulate", "random"]
-INIT_MODES: tuple[str, ...] = ("auto", "sparse", "triangulate", "random")
+INIT_MODES: tuple[str, ...] = get_args(InitMode)
 #: Fewer triangulated points than this is treated as a failed triangulation (random start instead).
 MIN_TRIANGULATED = 100
 

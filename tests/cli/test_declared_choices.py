@@ -87,3 +87,18 @@ def test_run_and_prepare_choices_and_defaults_are_the_settings_dataclasses() -> 
     assert option(prepare, "--cmap-precision").default == defaults.cmap_precision
     with pytest.raises(LookupError, match="not a Literal"):
         declared_literal("setdiff_bench.packets.prepare_settings", "SPLIT_CHOICES")
+
+
+def test_fit_init_and_render_backend_choices_are_the_library_literals() -> None:
+    from setdiff_bench.cli import fit, prepare, render
+    from setdiff_bench.gaussians.render import Backend
+    from setdiff_bench.gaussians.triangulate import INIT_MODES, InitMode
+
+    assert (
+        choices(fit, "--init")
+        == get_args(InitMode)
+        == INIT_MODES
+        == ("auto", "sparse", "triangulate", "random")
+    )
+    assert choices(render, "--backend") == get_args(Backend) == ("torch", "gsplat")
+    assert choices(prepare, "--backend") == ("auto", *get_args(Backend))
