@@ -87,7 +87,7 @@ def sequence_table(store: PacketStore, out: Path, frame: pd.DataFrame, settings:
         ordered = _ordered(rows, settings, store, f"scene {scene!r} sensor {sensor!r}")
         if ordered is None:
             continue
-        value = _ground_truth_warp(store, out, ordered, rows_of, settings, cache)
+        value = _sequence_warp(store, out, ordered, rows_of, settings, cache, FLOW_FROM_GROUND_TRUTH)
         records.append(_record(ordered, protocol, scene, sensor, None, value, settings))
     for (protocol, scene, sensor, group), rows in frame[~with_gt].groupby(
         [*keys, "group"], sort=True, dropna=False
@@ -95,7 +95,7 @@ def sequence_table(store: PacketStore, out: Path, frame: pd.DataFrame, settings:
         ordered = _ordered(rows, settings, store, f"scene {scene!r} sensor {sensor!r} group {group!r}")
         if ordered is None:
             continue
-        value = _render_warp(store, out, ordered, rows_of, settings, cache)
+        value = _sequence_warp(store, out, ordered, rows_of, settings, cache, FLOW_FROM_RENDER)
         records.append(_record(ordered, protocol, scene, sensor, group, value, settings))
     return pa.Table.from_pylist(records, schema=SEQUENCE_SCHEMA)
 
@@ -111,57 +111,40 @@ def _ordered(rows: pd.DataFrame, settings: RunSettings, store: PacketStore, what
     return rows.sort_values(["timestamp_us", "frame", "packet_id"])
 
 
-def _ground_truth_warp(
+def _sequence_warp(
     store: PacketStore,
     out: Path,
     rows: pd.DataFrame,
     rows_of: dict[tuple[str, int], dict[str, Any]],
     settings: RunSettings,
     cache: Path | None,
+    flow_source: str,
 ) -> float:
-    """Warp error of the written images with the ground truth's flow, occlusion and evaluation masks."""
-    frames, gts, masks, hashes = [], [], [], []
+    """Warp error of the written images, ``(T, 3, H, W)`` in [0, 1], with the flow and occlusion of the ground
+    truth and its evaluation masks (:data:`FLOW_FROM_GROUND_TRUTH`), or of the packet's 3DGS renders and no mask
+    (:data:`FLOW_FROM_RENDER`); the flow cache is keyed by those files' SHA-256."""
+    frames, sources, masks, hashes = [], [], [], []
     for row in rows.itertuples():
-        gt, mask = store.load_ground_truth(row.packet_id, targets=[int(row.view)])
-        digest = rows_of[(row.packet_id, int(row.view))].get("gt_sha256")
+        target = rows_of[(row.packet_id, int(row.view))]
+        if flow_source == FLOW_FROM_GROUND_TRUTH:
+            gt, mask = store.load_ground_truth(row.packet_id, targets=[int(row.view)])
+            digest = target.get("gt_sha256")
+            sources.append(gt[0])
+            masks.append(mask[0])
+        else:
+            size = (int(target["height"]), int(target["width"]))
+            sources.append(to_tensor_chw(read_rgb(store.file_path(pd.Series(target), "image"), size)))
+            digest = target["image_sha256"]
         hashes.append(digest if isinstance(digest, str) else "")
-        frames.append(to_tensor_chw(read_rgb(out / row.image, tuple(gt.shape[-2:]))))
-        gts.append(gt[0])
-        masks.append(mask[0])
+        frames.append(to_tensor_chw(read_rgb(out / row.image, tuple(sources[-1].shape[-2:]))))
     return sequence_warp_error(
         torch.stack(frames),
-        torch.stack(gts),
-        torch.stack(masks),
+        torch.stack(sources),
+        torch.stack(masks) if masks else None,
         flow_method=settings.flow_method,
         cache=cache,
         gt_key=",".join(hashes) if all(hashes) else None,
-    )
-
-
-def _render_warp(
-    store: PacketStore,
-    out: Path,
-    rows: pd.DataFrame,
-    rows_of: dict[tuple[str, int], dict[str, Any]],
-    settings: RunSettings,
-    cache: Path | None,
-) -> float:
-    """Warp error of the written images with the flow and occlusion of the packet's renders (no mask)."""
-    frames, renders, hashes = [], [], []
-    for row in rows.itertuples():
-        target = pd.Series(rows_of[(row.packet_id, int(row.view))])
-        size = (int(target["height"]), int(target["width"]))
-        renders.append(to_tensor_chw(read_rgb(store.file_path(target, "image"), size)))
-        hashes.append(str(target["image_sha256"]))
-        frames.append(to_tensor_chw(read_rgb(out / row.image, size)))
-    return sequence_warp_error(
-        torch.stack(frames),
-        torch.stack(renders),
-        None,
-        flow_method=settings.flow_method,
-        cache=cache,
-        gt_key=",".join(hashes),
-        flow_source=FLOW_FROM_RENDER,
+        flow_source=flow_source,
     )
 
 
