@@ -42,7 +42,7 @@ from setdiff_bench.synthetic.rig import (
 )
 from setdiff_bench.synthetic.sfm import sample_sparse_points
 from setdiff_bench.synthetic.soup import GaussianSoup
-from setdiff_bench.synthetic.staging import SceneRecipe
+from setdiff_bench.synthetic.staging import SceneRecipe, scene_header
 from setdiff_bench.synthetic.world import SFM_CATEGORIES, Detail, World, build_static, car_soup
 
 FORMAT = "setdiff-synthetic/1"
@@ -149,11 +149,7 @@ def scene_description(build: SceneBuild, frames: list[CapturedFrame], num_points
     fx, fy, cx, cy = intrinsics(p.width, p.height)
     layout: StreetLayout = build.world.layout
     return {
-        "format": FORMAT,
-        "scene": build.name,
-        "seed": build.seed,
-        "index": build.index,
-        "preset": p.name,
+        **scene_header(FORMAT, build.name, build.seed, build.index, p.name),
         "width": p.width,
         "height": p.height,
         "units": "metres",

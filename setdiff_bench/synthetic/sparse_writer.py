@@ -21,7 +21,7 @@ from setdiff_bench.synthetic.rig import intrinsics
 from setdiff_bench.synthetic.sfm import sample_sparse_points
 from setdiff_bench.synthetic.sparse_build import SparseBuild, build_sparse_scene, render_sparse_frames
 from setdiff_bench.synthetic.sparse_names import FORMAT, FULL_SCALE, IMAGES_DIR, fit_views, sparse_scene_name
-from setdiff_bench.synthetic.staging import SceneRecipe
+from setdiff_bench.synthetic.staging import SceneRecipe, scene_header
 from setdiff_bench.synthetic.world import SFM_CATEGORIES
 
 
@@ -30,11 +30,7 @@ def sparse_description(build: SparseBuild, num_points: int) -> dict[str, object]
     p = build.preset
     fx, fy, cx, cy = intrinsics(p.width, p.height, p.hfov_deg)
     return {
-        "format": FORMAT,
-        "scene": build.name,
-        "seed": build.seed,
-        "index": build.index,
-        "preset": p.name,
+        **scene_header(FORMAT, build.name, build.seed, build.index, p.name),
         "kind": "walk",
         "width": p.width,
         "height": p.height,

@@ -28,6 +28,12 @@ class NamedPreset(Protocol):
     def name(self) -> str: ...
 
 
+def scene_header(format_tag: str, name: str, seed: int, index: int, preset_name: str) -> dict[str, object]:
+    """The keys every kind's ``scene.json`` opens with: its format tag, the scene's name, ``(seed, index)`` and
+    preset (docs/synthetic_format.md); a kind adds its own keys."""
+    return {"format": format_tag, "scene": name, "seed": seed, "index": index, "preset": preset_name}
+
+
 def complete_scene(final: Path, preset_name: str) -> bool:
     """Whether ``final`` holds a complete scene (its ``scene.json`` written last).
 
