@@ -7,7 +7,9 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
+import pytest
 
+import setdiff_bench.packets.fits as fits_module
 from setdiff_bench.packets.prepare import PrepareSummary, prepare
 from setdiff_bench.runtime.threads import torch_threads
 
@@ -34,3 +36,33 @@ def packets_of(out: Path) -> dict[str, tuple[list[str], set[str]]]:
         targets = rows[rows["role"] == "target"].sort_values("view")["frame"].tolist()
         result[str(pid)] = (targets, set(rows[rows["role"] == "ref"]["frame"]))
     return result
+
+
+def spy_fits(monkeypatch: pytest.MonkeyPatch, *, views: bool = False) -> list[dict[str, Any]]:
+    """Record each fit that ``prepare`` makes (the real fit still runs): the frames loaded for it, its PLY,
+    iterations and ``stop_after``; with ``views``, also the views it was given (names, camera centres ``(3,)``
+    and rotations ``(3, 3)``, whether masked, images ``(3, H, W)``)."""
+    calls: list[dict[str, Any]] = []
+    load, fit = fits_module.load_fit_views, fits_module.fit_views_to_ply
+
+    def load_spy(scene: Any, names: list[str], **kwargs: Any) -> Any:
+        calls.append({"frames": list(names)})
+        return load(scene, names, **kwargs)
+
+    def fit_spy(scene: Any, given: Any, config: Any, out: Path, **kwargs: Any) -> Any:
+        calls[-1].update(
+            iterations=config.iterations, stop_after=kwargs.get("stop_after"), ply=Path(out).name
+        )
+        if views:
+            calls[-1].update(
+                names=[v.name for v in given],
+                centres=[v.camera.center.copy() for v in given],
+                rotations=[v.camera.R.copy() for v in given],
+                masked=[v.mask is not None for v in given],
+                images=[v.image.clone() for v in given],
+            )
+        return fit(scene, given, config, out, **kwargs)
+
+    monkeypatch.setattr(fits_module, "load_fit_views", load_spy)
+    monkeypatch.setattr(fits_module, "fit_views_to_ply", fit_spy)
+    return calls

@@ -18,43 +18,19 @@ import pandas as pd
 import pytest
 import torch
 
-import setdiff_bench.packets.fits as fits_module
 from setdiff_bench.cameras import Camera
 from setdiff_bench.gaussians.ply import read_ply
 from setdiff_bench.gaussians.render import render
 from setdiff_bench.packets.recipes import parse_pairs
-from tests.recipes.pairs_common import ITERATIONS, RECORDED, packets_of, prepare_pairs
+from tests.recipes.pairs_common import ITERATIONS, RECORDED, packets_of, prepare_pairs, spy_fits
 
 STEPS = (0, 1, 3, 4)  # the recorded timesteps
 
 
 @pytest.fixture
 def fits(monkeypatch: pytest.MonkeyPatch) -> list[dict[str, Any]]:
-    """Each fit made: the frames loaded for it, its PLY, iterations, ``stop_after`` and the views it was given
-    (names, camera centres ``(3,)`` and rotations ``(3, 3)``, whether masked, images ``(3, H, W)``)."""
-    calls: list[dict[str, Any]] = []
-    load, fit = fits_module.load_fit_views, fits_module.fit_views_to_ply
-
-    def load_spy(scene: Any, names: list[str], **kwargs: Any) -> Any:
-        calls.append({"frames": list(names)})
-        return load(scene, names, **kwargs)
-
-    def fit_spy(scene: Any, views: Any, config: Any, out: Path, **kwargs: Any) -> Any:
-        calls[-1].update(
-            ply=Path(out).name,
-            iterations=config.iterations,
-            stop_after=kwargs.get("stop_after"),
-            names=[v.name for v in views],
-            centres=[v.camera.center.copy() for v in views],
-            rotations=[v.camera.R.copy() for v in views],
-            masked=[v.mask is not None for v in views],
-            images=[v.image.clone() for v in views],
-        )
-        return fit(scene, views, config, out, **kwargs)
-
-    monkeypatch.setattr(fits_module, "load_fit_views", load_spy)
-    monkeypatch.setattr(fits_module, "fit_views_to_ply", fit_spy)
-    return calls
+    """Each fit made, with the views it was given (:func:`tests.recipes.pairs_common.spy_fits`)."""
+    return spy_fits(monkeypatch, views=True)
 
 
 def test_cycle_fits_a_second_3dgs_on_renders_at_shifted_cameras(

@@ -17,12 +17,11 @@ from typing import Any
 import pandas as pd
 import pytest
 
-import setdiff_bench.packets.fits as fits_module
 from setdiff_bench.cli.main import main
 from setdiff_bench.packets.prepare import prepare
 from setdiff_bench.packets.store import PacketStore
 from setdiff_bench.runtime.threads import torch_threads
-from tests.recipes.pairs_common import ITERATIONS, RECORDED, F, packets_of, prepare_pairs
+from tests.recipes.pairs_common import ITERATIONS, RECORDED, F, packets_of, prepare_pairs, spy_fits
 
 #: A protocol whose recorded frames are lane 0's three cameras (the synthetic protocol's settings otherwise).
 MULTI_CAMERA = """
@@ -64,22 +63,7 @@ targets = { lane_offset = 1, sensor = "front" }
 @pytest.fixture
 def fit_calls(monkeypatch: pytest.MonkeyPatch) -> list[dict[str, Any]]:
     """Each degraded fit's frame names, iterations and ``stop_after`` (the real fit still runs)."""
-    calls: list[dict[str, Any]] = []
-    load, fit = fits_module.load_fit_views, fits_module.fit_views_to_ply
-
-    def load_spy(scene: Any, names: list[str], **kwargs: Any) -> Any:
-        calls.append({"frames": list(names)})
-        return load(scene, names, **kwargs)
-
-    def fit_spy(scene: Any, views: Any, config: Any, out: Path, **kwargs: Any) -> Any:
-        calls[-1].update(
-            iterations=config.iterations, stop_after=kwargs.get("stop_after"), ply=Path(out).name
-        )
-        return fit(scene, views, config, out, **kwargs)
-
-    monkeypatch.setattr(fits_module, "load_fit_views", load_spy)
-    monkeypatch.setattr(fits_module, "fit_views_to_ply", fit_spy)
-    return calls
+    return spy_fits(monkeypatch)
 
 
 def test_sparse_fits_every_second_frame_and_targets_the_frames_between(
