@@ -15,13 +15,17 @@ and which references each packet gets (the rules every plan of :mod:`setdiff_ben
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import ProtocolError
 from setdiff_bench.geometry import max_pairwise_distance, overlap_score_matrix, select_references
+from setdiff_bench.packets.index import packet_id
+from setdiff_bench.packets.jobs import PacketJob, with_recipe
 from setdiff_bench.packets.working_view import ViewJob, view_job
 from setdiff_bench.protocols import GroupSpec, Protocol
 from setdiff_bench.types import Frame, Scene
@@ -90,3 +94,60 @@ def reference_views(
     return tuple(
         view_job(protocol, fit[i], resolution, target=False, score=float(aggregated[i])) for i in chosen
     )
+
+
+def group_jobs(
+    protocol: Protocol,
+    scene: Scene,
+    *,
+    group: str,
+    split: str,
+    fit_key: str,
+    fit_file: tuple[Path, str],
+    targets: Sequence[tuple[ViewJob, Camera]],
+    candidates: Callable[[Sequence[tuple[ViewJob, Camera]]], Sequence[Frame]],
+    n_ref: int,
+    per_packet: int,
+    resolution: tuple[int, int],
+    extent: tuple[float, tuple[float, float, float], float | None],
+    cmap_half: bool,
+    backend: str,
+    **extra: Any,
+) -> tuple[PacketJob, ...]:
+    """The packets of one group: ``targets`` cut into consecutive chunks of at most ``per_packet``
+    (:func:`chunk_sizes`), each with its ``n_ref`` references chosen by Eq. 2 among ``candidates(chunk)``
+    (:func:`reference_views`, from the targets' cameras at native resolution) and its recipe hash.
+
+    Args:
+        targets: ``(view job, native camera)`` of each target, in packet order.
+        fit_file: ``(PLY path, its SHA-256)`` of the fit the group renders.
+        extent: ``(d_max, C-map clip centre, C-map clip bound)`` of the scene (:func:`scene_extent`).
+        extra: further :class:`PacketJob` fields (``trajectory``, ``pairs``).
+    """
+    d_max, center, bound = extent
+    fit_path, fit_sha = fit_file
+    jobs, start = [], 0
+    for index, size in enumerate(chunk_sizes(len(targets), per_packet)):
+        chunk = targets[start : start + size]
+        start += size
+        job = PacketJob(
+            packet_id=packet_id(protocol.name, scene.name, group, index),
+            dataset=scene.dataset,
+            protocol=protocol.name,
+            group=group,
+            split=split,
+            scene=scene.name,
+            fit_key=fit_key,
+            fit_path=fit_path,
+            references=reference_views(
+                protocol, [camera for _, camera in chunk], candidates(chunk), n_ref, d_max, resolution
+            ),
+            targets=tuple(view for view, _ in chunk),
+            resolution=resolution,
+            cmap_bound=bound,
+            cmap_center=center,
+            cmap_half=cmap_half,
+            **extra,
+        )
+        jobs.append(with_recipe(job, protocol, fit_sha, backend))
+    return tuple(jobs)

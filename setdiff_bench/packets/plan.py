@@ -20,12 +20,11 @@ from __future__ import annotations
 from typing import Any
 
 from setdiff_bench.errors import ProtocolError
-from setdiff_bench.packets.index import packet_id
-from setdiff_bench.packets.jobs import PACKET_FORMAT, GroupPlan, PacketJob, flatten, with_recipe
+from setdiff_bench.packets.jobs import PACKET_FORMAT, GroupPlan, PacketJob, flatten
 from setdiff_bench.packets.packing import (
     applicable_groups,
     chunk_sizes,
-    reference_views,
+    group_jobs,
     scene_extent,
 )
 from setdiff_bench.packets.plan_pairs import plan_recipe_pairs
@@ -142,32 +141,23 @@ def _plan_group(
         raise ProtocolError(
             f"{where}: frame {sorted(overlap)[0]!r} is both a fit frame and a target", protocol.path
         )
-    fit_path, fit_sha = fit_path_for(scene.name, group.fit_key)
     n_ref = min(protocol.references_for(split), len(frames.fit))
-    per_packet = protocol.views_for(split) - n_ref
-    jobs, start = [], 0
-    for index, size in enumerate(chunk_sizes(len(frames.targets), per_packet)):
-        targets = frames.targets[start : start + size]
-        start += size
-        job = PacketJob(
-            packet_id=packet_id(protocol.name, scene.name, group.name, index),
-            dataset=scene.dataset,
-            protocol=protocol.name,
-            group=group.name,
-            split=split,
-            scene=scene.name,
-            fit_key=group.fit_key,
-            fit_path=fit_path,
-            references=reference_views(
-                protocol, [f.camera for f in targets], frames.fit, n_ref, d_max, resolution
-            ),
-            targets=tuple(view_job(protocol, f, resolution, target=True) for f in targets),
-            resolution=resolution,
-            cmap_bound=bound,
-            cmap_center=center,
-            cmap_half=cmap_half,
-        )
-        jobs.append(with_recipe(job, protocol, fit_sha, backend))
+    jobs = group_jobs(
+        protocol,
+        scene,
+        group=group.name,
+        split=split,
+        fit_key=group.fit_key,
+        fit_file=fit_path_for(scene.name, group.fit_key),
+        targets=[(view_job(protocol, f, resolution, target=True), f.camera) for f in frames.targets],
+        candidates=lambda chunk: frames.fit,
+        n_ref=n_ref,
+        per_packet=protocol.views_for(split) - n_ref,
+        resolution=resolution,
+        extent=(d_max, center, bound),
+        cmap_half=cmap_half,
+        backend=backend,
+    )
     return GroupPlan(
-        scene=scene.name, group=group.name, fit_key=group.fit_key, fit_frames=frames.fit, jobs=tuple(jobs)
+        scene=scene.name, group=group.name, fit_key=group.fit_key, fit_frames=frames.fit, jobs=jobs
     )

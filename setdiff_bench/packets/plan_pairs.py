@@ -4,16 +4,17 @@ from a 3DGS degraded as a recipe says (:mod:`setdiff_bench.packets.recipes`)."""
 from __future__ import annotations
 
 from collections.abc import Sequence
+from functools import partial
 from typing import Any
 
-from setdiff_bench.packets.index import packet_id
-from setdiff_bench.packets.jobs import GroupPlan, PacketJob, with_recipe
-from setdiff_bench.packets.packing import chunk_sizes, reference_views, scene_extent
+from setdiff_bench.cameras import Camera
+from setdiff_bench.packets.jobs import GroupPlan
+from setdiff_bench.packets.packing import group_jobs, scene_extent
 from setdiff_bench.packets.plan_trajectories import trajectory_group_name
 from setdiff_bench.packets.recipes import PairRecipe, RecipeFrames
-from setdiff_bench.packets.working_view import scene_resolution, view_job
+from setdiff_bench.packets.working_view import ViewJob, scene_resolution, view_job
 from setdiff_bench.protocols import Protocol
-from setdiff_bench.types import Scene
+from setdiff_bench.types import Frame, Scene
 
 
 def plan_recipe_pairs(
@@ -64,31 +65,29 @@ def plan_recipe_pairs(
         else:
             n_ref = min(protocol.references_for(split), len(frames.fit) - 1)
             per_packet = min(protocol.views_for(split) - n_ref, len(frames.fit) - n_ref)
-        jobs, start = [], 0
-        for index, size in enumerate(chunk_sizes(len(frames.targets), per_packet)):
-            chunk = frames.targets[start : start + size]
-            start += size
-            chosen = {f.name for f in chunk}
-            candidates = [f for f in frames.fit if frames.disjoint or f.name not in chosen]
-            job = PacketJob(
-                packet_id=packet_id(protocol.name, scene.name, name, index),
-                dataset=scene.dataset,
-                protocol=protocol.name,
-                group=name,
-                split=split,
-                scene=scene.name,
-                fit_key=degraded_key,
-                fit_path=fit_path,
-                references=reference_views(
-                    protocol, [f.camera for f in chunk], candidates, n_ref, d_max, resolution
-                ),
-                targets=tuple(view_job(protocol, f, resolution, target=True) for f in chunk),
-                resolution=resolution,
-                cmap_bound=bound,
-                cmap_center=center,
-                cmap_half=cmap_half,
-                pairs=recipe.label,
-            )
-            jobs.append(with_recipe(job, protocol, fit_sha, backend))
-        plans.append(GroupPlan(scene.name, name, degraded_key, frames.fit, tuple(jobs)))
+        jobs = group_jobs(
+            protocol,
+            scene,
+            group=name,
+            split=split,
+            fit_key=degraded_key,
+            fit_file=(fit_path, fit_sha),
+            targets=[(view_job(protocol, f, resolution, target=True), f.camera) for f in frames.targets],
+            candidates=partial(_candidates, frames),
+            n_ref=n_ref,
+            per_packet=per_packet,
+            resolution=resolution,
+            extent=(d_max, center, bound),
+            cmap_half=cmap_half,
+            backend=backend,
+            pairs=recipe.label,
+        )
+        plans.append(GroupPlan(scene.name, name, degraded_key, frames.fit, jobs))
     return plans
+
+
+def _candidates(frames: RecipeFrames, chunk: Sequence[tuple[ViewJob, Camera]]) -> list[Frame]:
+    """The recorded frames a chunk's references are chosen from: those the degraded fit saw, less the chunk's own
+    targets where the fit saw them too (a target's clean capture is never its reference)."""
+    chosen = {view.frame for view, _ in chunk}
+    return [f for f in frames.fit if frames.disjoint or f.name not in chosen]

@@ -8,9 +8,8 @@ from typing import Any
 
 from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import ProtocolError, UsageError
-from setdiff_bench.packets.index import packet_id
-from setdiff_bench.packets.jobs import GroupPlan, PacketJob, with_recipe
-from setdiff_bench.packets.packing import applicable_groups, chunk_sizes, reference_views, scene_extent
+from setdiff_bench.packets.jobs import GroupPlan
+from setdiff_bench.packets.packing import applicable_groups, group_jobs, scene_extent
 from setdiff_bench.packets.trajectory import TrajectorySpec, check_within_bounds, novel_cameras, scene_bounds
 from setdiff_bench.packets.working_view import ViewJob, crop_window, scene_resolution, working_camera
 from setdiff_bench.protocols import Protocol
@@ -92,31 +91,24 @@ def plan_trajectories(
             what = f"--trajectory {spec.label} (scene {scene.name!r})"
             check_within_bounds([(v.frame, v.camera) for v, _ in targets], bounds, what)
             name = trajectory_group_name(spec.label, fit_key, fit_keys)
-            jobs, start = [], 0
-            for index, size in enumerate(chunk_sizes(len(targets), per_packet)):
-                chunk = targets[start : start + size]
-                start += size
-                job = PacketJob(
-                    packet_id=packet_id(protocol.name, scene.name, name, index),
-                    dataset=scene.dataset,
-                    protocol=protocol.name,
-                    group=name,
-                    split=TRAJECTORY_SPLIT,
-                    scene=scene.name,
-                    fit_key=fit_key,
-                    fit_path=fit_path,
-                    references=reference_views(
-                        protocol, [native for _, native in chunk], fit, n_ref, d_max, resolution
-                    ),
-                    targets=tuple(v for v, _ in chunk),
-                    resolution=resolution,
-                    cmap_bound=bound,
-                    cmap_center=center,
-                    cmap_half=cmap_half,
-                    trajectory=spec.label,
-                )
-                jobs.append(with_recipe(job, protocol, fit_sha, backend))
-            plans.append(GroupPlan(scene.name, name, fit_key, fit, tuple(jobs)))
+            jobs = group_jobs(
+                protocol,
+                scene,
+                group=name,
+                split=TRAJECTORY_SPLIT,
+                fit_key=fit_key,
+                fit_file=(fit_path, fit_sha),
+                targets=targets,
+                candidates=lambda chunk, fit=fit: fit,
+                n_ref=n_ref,
+                per_packet=per_packet,
+                resolution=resolution,
+                extent=(d_max, center, bound),
+                cmap_half=cmap_half,
+                backend=backend,
+                trajectory=spec.label,
+            )
+            plans.append(GroupPlan(scene.name, name, fit_key, fit, jobs))
     return plans
 
 
