@@ -169,9 +169,8 @@ class PacketKey:
     """Which packet: the one declaration of a packet's identity.
 
     Everything that names a packet extends it — the plan's ``PacketJob``, the store's ``PacketHeader``,
-    one target view's :class:`TargetRef` — and its fields are the key columns of the packet index and of a run's
-    ``metrics.parquet`` (:data:`setdiff_bench.io.run_layout.KEY_COLUMNS`).  :class:`Packet` is mutable
-    (trainers and tests swap its views), so it carries the same fields and gives its key as :attr:`Packet.key`.
+    one target view's :class:`TargetRef`, a :class:`Packet` with its views — and its fields are the key columns of
+    the packet index and of a run's ``metrics.parquet`` (:data:`setdiff_bench.io.run_layout.KEY_COLUMNS`).
 
     Attributes:
         packet_id: unique id in its store.
@@ -213,35 +212,24 @@ class TargetRef(PacketKey):
     frame: str
 
 
-@dataclass
-class Packet:
+@dataclass(frozen=True)
+class Packet(PacketKey):
     """N clean references + M rendered targets of one scene, normalised into the first target's frame.
 
-    Ground truth and masks are not here: they stay with the runner and never reach an enhancer.
+    Ground truth and masks are not here: they stay with the runner and never reach an enhancer.  A packet is
+    its :class:`PacketKey` (the first six fields, :attr:`key`) extended by its views; it is frozen like the key,
+    so a packet with other views is ``dataclasses.replace(packet, references=..., targets=...)``.
 
     Attributes:
-        packet_id, dataset, protocol, group, split, scene: the packet's :class:`PacketKey` (same fields,
-            same order; a ``Packet`` is mutable, a key is not, so it cannot extend it).
         references: the N reference views (clean images).
         targets: the M target views (3DGS renders).
         scale: the factor world units were multiplied by during normalisation.
     """
 
-    packet_id: str
-    dataset: str
-    protocol: str
-    group: str
-    split: str
-    scene: str
     references: ViewSet
     targets: ViewSet
     scale: float = 1.0
     metadata: Mapping[str, Any] = field(default_factory=dict)
-
-    @property
-    def key(self) -> PacketKey:
-        """The packet's identity."""
-        return PacketKey(**key_fields(self))
 
     @classmethod
     def from_key(

@@ -5,6 +5,7 @@ masks ``(M, 1, H, W)``) drawn with a variable set size and random order within r
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -74,10 +75,11 @@ class PacketTrainingDataset(torch.utils.data.Dataset):
         packet = self.store.load_packet(packet_id, ref_ids, tgt_ids)
         gt, masks = self.store.load_ground_truth(packet_id, tgt_ids)
         packet = renormalize(packet)
-        packet.metadata = {
+        metadata = {
             **packet.metadata,
             "reference_positions": tuple(ref_ids),
             "target_positions": tuple(tgt_ids),
             "epoch": self.epoch,
         }
+        packet = replace(packet, metadata=metadata)
         return TrainingSample(packet=packet, target_gt=gt, target_masks=masks)

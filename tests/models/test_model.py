@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -97,9 +98,11 @@ def test_permuting_views_permutes_outputs(model: SetDiffModel) -> None:
     packet = make_packet(3, 4)
     reference = enhance_packet(model, packet)
     ref_order, target_order = [2, 0, 1], [3, 1, 0, 2]
-    permuted = make_packet(3, 4)
-    permuted.references = packet.references.subset(ref_order)
-    permuted.targets = packet.targets.subset(target_order)
+    permuted = replace(
+        make_packet(3, 4),
+        references=packet.references.subset(ref_order),
+        targets=packet.targets.subset(target_order),
+    )
     output = enhance_packet(model, permuted)
     assert output.shape == (4, 3, 32, 32)
     torch.testing.assert_close(output, reference[target_order], atol=1e-5, rtol=0)
@@ -108,7 +111,7 @@ def test_permuting_views_permutes_outputs(model: SetDiffModel) -> None:
 def test_references_change_the_targets(model: SetDiffModel) -> None:
     """The set mixer really mixes: other references give other target outputs."""
     a, b = make_packet(2, 2, seed=0), make_packet(2, 2, seed=0)
-    b.references = make_packet(2, 2, seed=1).references
+    b = replace(b, references=make_packet(2, 2, seed=1).references)
     assert (enhance_packet(model, a) - enhance_packet(model, b)).abs().max() > 1e-4
 
 
@@ -178,9 +181,11 @@ def test_difix_pairs_first_reference_with_each_target() -> None:
     packet = make_packet(3, 3)
     output = enhance_packet(model, packet)
     for target in range(3):
-        single = make_packet(3, 3)
-        single.references = packet.references.subset([0])
-        single.targets = packet.targets.subset([target])
+        single = replace(
+            make_packet(3, 3),
+            references=packet.references.subset([0]),
+            targets=packet.targets.subset([target]),
+        )
         torch.testing.assert_close(output[target], enhance_packet(model, single)[0], atol=1e-5, rtol=0)
     torch.testing.assert_close(enhance_packet(model, packet, sets_per_call=1), output, atol=1e-5, rtol=0)
 
@@ -221,9 +226,9 @@ def test_inference_set_size_overrides_equal_explicit_subsets(model: SetDiffModel
     packet = make_packet(3, 4)
     limited = enhance_packet(model, packet, max_references=1, targets_per_set=2)
     for chunk in ([0, 1], [2, 3]):
-        explicit = make_packet(3, 4)
-        explicit.references = packet.references.subset([0])
-        explicit.targets = packet.targets.subset(chunk)
+        explicit = replace(
+            make_packet(3, 4), references=packet.references.subset([0]), targets=packet.targets.subset(chunk)
+        )
         torch.testing.assert_close(
             limited[chunk], enhance_packet(model, renormalize(explicit)), atol=1e-5, rtol=0
         )
