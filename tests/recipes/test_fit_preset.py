@@ -21,20 +21,15 @@ def world(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return root
 
 
+def prepare_tiny_fit(world: Path, out: Path) -> list[str]:
+    """``prepare synthetic`` of ``world`` into ``out``, fitting each 3DGS with the tiny preset's configuration."""
+    return ["prepare", "synthetic", "--root", str(world), "--fit", "--fit-preset", "tiny", "--out", str(out)]
+
+
 def test_the_protocol_fit_made_by_prepare_is_the_generators_own(world: Path, tmp_path: Path) -> None:
     out = tmp_path / "store"
     with torch_threads(1):
-        argv = [
-            "prepare",
-            "synthetic",
-            "--root",
-            str(world),
-            "--fit",
-            "--fit-preset",
-            "tiny",
-            "--out",
-            str(out),
-        ]
+        argv = prepare_tiny_fit(world, out)
         assert main([*argv, "--no-progress"]) == 0
     made = (out / "fits" / SCENE / "lane0.ply").read_bytes()
     assert made == (world / SCENE / "fits" / "lane0.ply").read_bytes()
@@ -56,17 +51,7 @@ def test_underfit_with_a_preset_stops_its_schedule(
     monkeypatch.setattr(fits_module, "fit_views_to_ply", spy)
     out = tmp_path / "store"
     with torch_threads(1):
-        argv = [
-            "prepare",
-            "synthetic",
-            "--root",
-            str(world),
-            "--fit",
-            "--fit-preset",
-            "tiny",
-            "--out",
-            str(out),
-        ]
+        argv = prepare_tiny_fit(world, out)
         assert main([*argv, "--pairs", "underfit:0.5", "--no-progress"]) == 0
     preset = get_preset("tiny").fit
     # the preset's whole configuration (60 iterations, its densification and background points), stopped at 30

@@ -118,25 +118,18 @@ def _pixels(path: Path) -> torch.Tensor:
     return torch.from_numpy(array).permute(2, 0, 1)
 
 
+def run_with_inception(store: Path, out: Path, inception: Path) -> list[str]:
+    """``run --method identity`` of ``store`` into ``out``, scoring FID / KID with the weights ``inception``."""
+    words = ["run", "--method", "identity", "--packets", str(store), "--out", str(out), "--no-progress"]
+    return [*words, "--inception", str(inception)]
+
+
 def test_run_with_inception_writes_the_distribution_table(
     store: Path, inception_file: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "identity"
     with torch_threads(1):
-        code = main(
-            [
-                "run",
-                "--method",
-                "identity",
-                "--packets",
-                str(store),
-                "--out",
-                str(out),
-                "--no-progress",
-                "--inception",
-                str(inception_file),
-            ]
-        )
+        code = main(run_with_inception(store, out, inception_file))
     assert code == 0
     printed = capsys.readouterr().out
     assert f"distribution: {out / DISTRIBUTION_FILE}" in printed
@@ -165,20 +158,7 @@ def test_missing_inception_file_is_one_line_and_nothing_is_written(
     store: Path, identity_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "never"
-    code = main(
-        [
-            "run",
-            "--method",
-            "identity",
-            "--packets",
-            str(store),
-            "--out",
-            str(out),
-            "--no-progress",
-            "--inception",
-            str(tmp_path / "absent.pth"),
-        ]
-    )
+    code = main(run_with_inception(store, out, tmp_path / "absent.pth"))
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and not out.exists()
     assert err[0].startswith(
