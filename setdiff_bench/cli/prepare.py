@@ -24,7 +24,7 @@ references are recorded frames chosen by Eq. 2 (those the degraded fit saw; for 
 all but the packet's own targets); the group is the recipe (``sparse4``, ``cycle2m``).  With ``--fit`` the
 degraded fits are made here (``<out>/fits/<scene>/<fit_key>@<recipe>.ply``).  Example::
 
-    setdiff-bench prepare synthetic --root data/synthetic --fit --fit-iterations 2000 --out packets/pairs \\
+    setdiff-bench prepare synthetic --root runs/demo/work/scenes --fit --fit-iterations 2000 --out runs/pairs \\
         --split train --pairs sparse:4,underfit:0.5
 
 Fits are looked up as ``<fits>/<scene>/<fit_key>.ply`` (then ``<fits>/<scene>/fits/<fit_key>.ply``);
