@@ -12,7 +12,7 @@ import pandas as pd
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.atomic import sha256_file
-from setdiff_bench.io.run_layout import RUN_FILE
+from setdiff_bench.io.run_layout import PROFILES_DIR, RUN_FILE
 from setdiff_bench.packets.index import INDEX_FILE
 from setdiff_bench.packets.store import PacketStore
 from setdiff_bench.reporting.leaderboard import find_runs
@@ -21,6 +21,8 @@ from setdiff_bench.reporting.leaderboard import find_runs
 def run_folders(paths: Sequence[str | Path]) -> dict[str, Path]:
     """Method label → run folder of every finished run under ``paths`` (each a run folder or a folder of
     runs).  The label is the run's method; a method found twice is labelled ``method (folder name)``.
+    Evaluation profiles' tables (``<run>/profiles/<profile>/metrics.parquet``, written by ``evaluate``) are
+    not runs here: they hold scores, not images.
 
     Raises:
         UsageError: a path that is not a folder, or no finished run at all.
@@ -28,6 +30,8 @@ def run_folders(paths: Sequence[str | Path]) -> dict[str, Path]:
     folders: list[Path] = []
     for path in paths:
         for folder in find_runs(path):
+            if folder.parent.name == PROFILES_DIR:  # an evaluation profile's table inside a run: no images
+                continue
             if folder not in folders:
                 folders.append(folder)
     if not folders:

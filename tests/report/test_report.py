@@ -178,3 +178,23 @@ def test_site_in_headless_chromium(site: Path, tmp_path: Path) -> None:
         )
         assert played[0] > 0 and played[1] > 0 and played[2], played
         assert browser.errors == [], browser.errors
+
+
+def test_a_run_evaluated_under_a_profile_is_reported_once(runs: Path, tmp_path: Path) -> None:
+    """``evaluate`` writes ``<run>/profiles/<profile>/metrics.parquet`` (scores without images); ``report``
+    takes the run, not the profile's table as another run (it crashed reading an ``image`` column there)."""
+    import shutil
+
+    import pandas as pd
+
+    from setdiff_bench.reporting.site_runs import run_folders
+
+    copied = tmp_path / "runs"
+    shutil.copytree(runs, copied)
+    before = run_folders([copied])
+    first = next(iter(before.values()))
+    profile = first / "profiles" / "paper"
+    profile.mkdir(parents=True)
+    scores = pd.read_parquet(first / "metrics.parquet").drop(columns=["image", "image_sha256"])
+    scores.assign(profile="paper").to_parquet(profile / "metrics.parquet")
+    assert run_folders([copied]) == before
