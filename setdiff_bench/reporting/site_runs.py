@@ -12,7 +12,7 @@ import pandas as pd
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.atomic import sha256_file
-from setdiff_bench.io.run_layout import PROFILES_DIR, RUN_FILE
+from setdiff_bench.io.run_layout import RUN_FILE
 from setdiff_bench.packets.index import INDEX_FILE
 from setdiff_bench.packets.store import PacketStore
 from setdiff_bench.reporting.leaderboard import find_runs
@@ -29,9 +29,7 @@ def run_folders(paths: Sequence[str | Path]) -> dict[str, Path]:
     """
     folders: list[Path] = []
     for path in paths:
-        for folder in find_runs(path):
-            if folder.parent.name == PROFILES_DIR:  # an evaluation profile's table inside a run: no images
-                continue
+        for folder in find_runs(path, profiles=False):
             if folder not in folders:
                 folders.append(folder)
     if not folders:

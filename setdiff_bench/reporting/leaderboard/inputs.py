@@ -16,7 +16,7 @@ import pyarrow as pa
 from setdiff_bench.errors import UsageError
 from setdiff_bench.evaluation.distribution_scoring import COLUMNS as DISTRIBUTION_COLUMNS
 from setdiff_bench.evaluation.distribution_scoring import DISTRIBUTION_FILE, DISTRIBUTION_INFO_FILE
-from setdiff_bench.io.run_layout import MANIFEST_FILE, METRICS_FILE, RUN_FILE, SEQUENCES_FILE
+from setdiff_bench.io.run_layout import MANIFEST_FILE, METRICS_FILE, PROFILES_DIR, RUN_FILE, SEQUENCES_FILE
 from setdiff_bench.protocols import Layout
 from setdiff_bench.reporting.leaderboard.columns import LeaderboardError, dataset_layout
 
@@ -75,8 +75,9 @@ def _claimed_method(run_file: Path) -> str | None:
     return method if isinstance(method, str) else None
 
 
-def find_runs(runs: str | Path) -> list[Path]:
-    """Every finished run folder (holding ``metrics.parquet``) under ``runs``, sorted.
+def find_runs(runs: str | Path, *, profiles: bool = True) -> list[Path]:
+    """Every finished run folder (holding ``metrics.parquet``) under ``runs``, sorted; with ``profiles=False``
+    without the evaluation profiles' tables inside runs (``<run>/profiles/<profile>/``: scores, no images).
 
     Unfinished runs (:func:`survey_runs`) are left out, each with an :class:`UnfinishedRunWarning` naming it.
 
@@ -87,7 +88,7 @@ def find_runs(runs: str | Path) -> list[Path]:
     finished, unfinished = survey_runs(runs)
     require_finished(finished, unfinished)
     warn_unfinished(unfinished)
-    return finished
+    return finished if profiles else [f for f in finished if f.parent.name != PROFILES_DIR]
 
 
 def require_finished(finished: Sequence[Path], unfinished: Sequence[UnfinishedRun]) -> None:
