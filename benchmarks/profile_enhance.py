@@ -258,6 +258,20 @@ def _nothing() -> Iterator[None]:
     yield
 
 
+@contextmanager
+def all_views_per_call() -> Iterator[None]:
+    """Within the block, ``enhance`` runs the VAE and Ψ on all views in one call: the view chunks that bound
+    the CPU's peak memory (``model.INFERENCE_CHUNK_PIXELS``) are lifted."""
+    from setdiff_bench.models.setdiff import model as model_module
+
+    saved = model_module.INFERENCE_CHUNK_PIXELS
+    model_module.INFERENCE_CHUNK_PIXELS = 1 << 40
+    try:
+        yield
+    finally:
+        model_module.INFERENCE_CHUNK_PIXELS = saved
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
@@ -270,6 +284,12 @@ def main() -> None:
     parser.add_argument("--guidance", type=float, default=2.0)
     parser.add_argument("--repeats", type=int)
     parser.add_argument("--parts", default=",".join(PARTS), help=f"comma list of {', '.join(PARTS)}")
+    parser.add_argument(
+        "--compiled-cases",
+        default="paper,paper_unchunked,combined",
+        help="compiled SetDiff cases, in this order: paper, paper_unchunked, combined",
+    )
+    parser.add_argument("--no-difix", action="store_true", help="compiled part: leave DiFix out")
     parser.add_argument("--out", default="enhance_profile", help="results/<out>.json")
     args = parser.parse_args()
     device = torch.device(args.device)
@@ -323,12 +343,15 @@ def main() -> None:
         print("compiled (inductor, default mode):", flush=True)
         apply_step(model, "+torch_compile", device)
         compiled: dict[str, Any] = {}
-        for label, scale, keep, cached in (
-            ("paper", args.guidance, None, False),
-            ("combined", 1.0, {f"L{levels - 2}", "mid"}, True),
-        ):
+        cases = {
+            "paper": (args.guidance, None, False, False),
+            "paper_unchunked": (args.guidance, None, False, True),
+            "combined": (1.0, {f"L{levels - 2}", "mid"}, True, True),
+        }
+        for label in [c.strip() for c in args.compiled_cases.split(",") if c.strip()]:
+            scale, keep, cached, unchunked = cases[label]
             context = set_attention_only_at(model, keep) if keep is not None else _nothing()
-            with context:
+            with context, all_views_per_call() if unchunked else _nothing():
                 torch.cuda.reset_peak_memory_stats()
                 row = total_per_frame(
                     model, batch, scale, cuda=cuda, repeats=repeats, warmup=3, cached_references=cached
@@ -341,15 +364,19 @@ def main() -> None:
         del model, batch
         gc.collect()
         torch.cuda.empty_cache()
+        if args.no_difix:
+            save()
+            return
         difix = build("sd_turbo_difix", device, dtype)
         pairs = inputs(targets, 2, 1, height, width, False, device, dtype)
         for label in ("eager", "compiled"):
             if label == "compiled":
                 apply_step(difix, "+torch_compile", device)
             torch.cuda.reset_peak_memory_stats()
-            timing = time_call(
-                lambda: difix.enhance(pairs, guidance_scale=1.0), repeats=repeats, warmup=3, cuda=True
-            )
+            with all_views_per_call():  # as SetDiff's unchunked cases
+                timing = time_call(
+                    lambda: difix.enhance(pairs, guidance_scale=1.0), repeats=repeats, warmup=3, cuda=True
+                )
             compiled[f"difix {label}"] = {
                 "total_ms_per_frame": timing["median_ms"] / targets,
                 "frames_per_second": 1000.0 * targets / timing["median_ms"],
