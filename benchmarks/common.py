@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import platform
@@ -37,6 +38,22 @@ def time_call(
         "mean_ms": statistics.fmean(samples),
         "repeats": repeats,
     }
+
+
+def add_device_and_size(parser: argparse.ArgumentParser, *, views: bool = True) -> None:
+    """The options every GPU benchmark shares: ``--device`` (CUDA when available), ``--height`` and ``--width``
+    (each script's own default when left out), and with ``views`` the set size ``--refs`` / ``--targets``
+    with the CFG scale ``--guidance`` and ``--repeats``."""
+    parser.add_argument(
+        "--device", choices=("cuda", "cpu"), default="cuda" if torch.cuda.is_available() else "cpu"
+    )
+    parser.add_argument("--height", type=int)
+    parser.add_argument("--width", type=int)
+    if views:
+        parser.add_argument("--refs", type=int)
+        parser.add_argument("--targets", type=int)
+        parser.add_argument("--guidance", type=float, default=2.0)
+        parser.add_argument("--repeats", type=int)
 
 
 def machine() -> dict[str, Any]:

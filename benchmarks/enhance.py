@@ -37,7 +37,7 @@ from typing import Any
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from benchmarks.common import machine, time_call, write_result
+from benchmarks.common import add_device_and_size, machine, time_call, write_result
 from setdiff_bench.models.setdiff.config_io import load_config
 from setdiff_bench.models.setdiff.inputs import SetBatch
 from setdiff_bench.models.setdiff.model import SetDiffModel
@@ -189,15 +189,7 @@ def run_ladder(
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--device", choices=("cuda", "cpu"), default="cuda" if torch.cuda.is_available() else "cpu"
-    )
-    parser.add_argument("--height", type=int)
-    parser.add_argument("--width", type=int)
-    parser.add_argument("--refs", type=int)
-    parser.add_argument("--targets", type=int)
-    parser.add_argument("--guidance", type=float, default=2.0)
-    parser.add_argument("--repeats", type=int)
+    add_device_and_size(parser)
     parser.add_argument("--steps", default=",".join(LADDER), help="comma-separated subset of the ladder")
     parser.add_argument("--threads", type=int, help="torch intra-op threads (CPU runs)")
     parser.add_argument("--no-difix", action="store_true")

@@ -43,7 +43,7 @@ from typing import Any
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from benchmarks.common import machine, time_call, write_result
+from benchmarks.common import add_device_and_size, machine, time_call, write_result
 from benchmarks.enhance import apply_step, build, inputs, stage_times
 from setdiff_bench.models.setdiff.model import SetDiffModel
 from setdiff_bench.models.setdiff.set_mixer import mixer_level, per_view_processor_class
@@ -274,15 +274,7 @@ def all_views_per_call() -> Iterator[None]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--device", choices=("cuda", "cpu"), default="cuda" if torch.cuda.is_available() else "cpu"
-    )
-    parser.add_argument("--height", type=int)
-    parser.add_argument("--width", type=int)
-    parser.add_argument("--refs", type=int)
-    parser.add_argument("--targets", type=int)
-    parser.add_argument("--guidance", type=float, default=2.0)
-    parser.add_argument("--repeats", type=int)
+    add_device_and_size(parser)
     parser.add_argument("--parts", default=",".join(PARTS), help=f"comma list of {', '.join(PARTS)}")
     parser.add_argument(
         "--compiled-cases",

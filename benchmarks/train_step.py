@@ -33,7 +33,7 @@ import torch
 import torch.nn.functional as F
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from benchmarks.common import machine, write_result
+from benchmarks.common import add_device_and_size, machine, write_result
 from setdiff_bench.cameras import Camera
 from setdiff_bench.models.setdiff.config_io import load_config
 from setdiff_bench.types import Packet, TrainingSample, ViewSet
@@ -126,11 +126,7 @@ def measure(config: Any, dataset: list[TrainingSample], steps: int, device: str)
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--device", choices=("cuda", "cpu"), default="cuda" if torch.cuda.is_available() else "cpu"
-    )
-    parser.add_argument("--height", type=int)
-    parser.add_argument("--width", type=int)
+    add_device_and_size(parser, views=False)
     parser.add_argument("--views", type=int, default=8, help="views per training packet (half references)")
     parser.add_argument("--steps", type=int, default=5, help="timed steps after two warm-up steps")
     parser.add_argument("--checkpointing", default="on,off", help="gradient checkpointing settings to run")
