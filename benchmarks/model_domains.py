@@ -31,6 +31,11 @@ from setdiff_bench.reporting.bootstrap import BootstrapSettings
 from setdiff_bench.reporting.paired import pair_targets, paired_differences
 
 METRICS = ("psnr", "ssim", "lpips")
+#: What the 2×2 table of issue 37 answers (the default ``--question``).
+DOMAINS_QUESTION = (
+    "which shipped model to run on which embedded benchmark: each model's scores on each "
+    "benchmark's test targets against the raw render"
+)
 #: The group each benchmark's verdict is taken on, as the demo declares it.
 VERDICT_GROUPS = {name: benchmark.verdict_group for name, benchmark in DEMO_BENCHMARKS.items()}
 
@@ -64,6 +69,10 @@ def main() -> None:
     parser.add_argument("--run", action="append", required=True, metavar="BENCHMARK:MODEL=RUN")
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--resamples", type=int, default=10_000)
+    parser.add_argument("--issue", type=int, default=37, help="the issue the table answers (recorded)")
+    parser.add_argument(
+        "--question", default=DOMAINS_QUESTION, help="the question the table answers (recorded)"
+    )
     args = parser.parse_args()
     settings = BootstrapSettings(resamples=args.resamples, seed=0)
     renders = {name: read_run(Path(path)) for name, path in (b.split("=", 1) for b in args.benchmark)}
@@ -80,9 +89,8 @@ def main() -> None:
         }
     payload = {
         "benchmark": "model_domains",
-        "issue": 37,
-        "question": "which shipped model to run on which embedded benchmark: each model's scores on each "
-        "benchmark's test targets against the raw render",
+        "issue": args.issue,
+        "question": args.question,
         "verdict_groups": VERDICT_GROUPS,
         "bootstrap": {"resamples": args.resamples, "seed": 0, "unit": "scene", "level": 0.95},
         "models": table,

@@ -73,4 +73,5 @@ for seed in 0 1; do
     done
 done
 python3 "$(dirname "$0")/model_domains.py" --benchmark driving="$work/runs/identity" "${models[@]}" \
-    --out "${OUT_JSON:-benchmarks/results/recipe_pairs.json}"
+    --out "${OUT_JSON:-benchmarks/results/recipe_pairs.json}" --issue 41 \
+    --question "can an enhancer for lane shifts be trained without multi-lane data? models trained on lane-0 recipe pairs (sparse:4, underfit:0.5) against the shipped models (lane-shift pairs), on the same test targets, each against the raw render"
