@@ -36,7 +36,7 @@ import sys
 import time
 from collections import defaultdict
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from pathlib import Path
 from typing import Any
 
@@ -190,7 +190,12 @@ def total_per_frame(
     cached_references: bool = False,
 ) -> dict[str, float]:
     """ms per target frame of one enhancement: ``enhance`` itself, or with ``cached_references`` the same
-    stages with only the targets encoded (the reference latents come from a cache)."""
+    stages with only the targets encoded and the reference latents taken from a tensor encoded beforehand.
+
+    That is the ceiling of reference caching, what a cache keyed by camera or session would give.  The
+    toolkit's own cache (:class:`setdiff_bench.evaluation.stream.ReferenceLatentCache`, the stream API's and
+    the service's) keys each view by a hash of its bytes on the host, a copy per view per call on a GPU that
+    this measurement does not include."""
     sets, views, refs = batch.num_sets, batch.num_views, batch.num_references
     frames = sets * (views - refs)
     images = batch.images.reshape(sets * views, *batch.images.shape[2:])
@@ -239,7 +244,7 @@ def options(
     }
     results: dict[str, Any] = {}
     for label, (scale, keep, cached) in cases.items():
-        context = set_attention_only_at(model, keep) if keep is not None else _nothing()
+        context = set_attention_only_at(model, keep) if keep is not None else nullcontext()
         with context:
             if cuda:
                 torch.cuda.reset_peak_memory_stats()
@@ -251,11 +256,6 @@ def options(
         results[label] = row
         print(f"  {label:<60} {row['total_ms_per_frame']:8.1f} ms/frame", flush=True)
     return results
-
-
-@contextmanager
-def _nothing() -> Iterator[None]:
-    yield
 
 
 @contextmanager
@@ -311,8 +311,8 @@ def main() -> None:
     payload["tokens_per_view"] = tokens_per_level(height, width, model.config.latent_factor, levels)
     payload["tokens_per_set"] = {k: v * (refs + targets) for k, v in payload["tokens_per_view"].items()}
 
-    def save() -> None:
-        write_result(args.out, payload)
+    def save() -> Path:  # after each part, so that a run stopped at its time limit keeps what it measured
+        return write_result(args.out, payload)
 
     if "profile" in parts:
         print("profile (eager):", flush=True)
@@ -342,8 +342,8 @@ def main() -> None:
         }
         for label in [c.strip() for c in args.compiled_cases.split(",") if c.strip()]:
             scale, keep, cached, unchunked = cases[label]
-            context = set_attention_only_at(model, keep) if keep is not None else _nothing()
-            with context, all_views_per_call() if unchunked else _nothing():
+            context = set_attention_only_at(model, keep) if keep is not None else nullcontext()
+            with context, all_views_per_call() if unchunked else nullcontext():
                 torch.cuda.reset_peak_memory_stats()
                 row = total_per_frame(
                     model, batch, scale, cuda=cuda, repeats=repeats, warmup=3, cached_references=cached
@@ -357,7 +357,7 @@ def main() -> None:
         gc.collect()
         torch.cuda.empty_cache()
         if args.no_difix:
-            save()
+            print(f"wrote {save()}")
             return
         difix = build("sd_turbo_difix", device, dtype)
         pairs = inputs(targets, 2, 1, height, width, False, device, dtype)
@@ -383,8 +383,7 @@ def main() -> None:
         payload["compiled"] = {
             "skipped": "CPU run: torch.compile of the SD UNet takes many minutes on 2 cores"
         }
-    save()
-    print(f"wrote benchmarks/results/{args.out}.json")
+    print(f"wrote {save()}")
 
 
 if __name__ == "__main__":

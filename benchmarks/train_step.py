@@ -3,8 +3,8 @@
 One process trains ``sd_turbo_setdiff`` (the SD-Turbo architecture with random weights: memory and speed do
 not depend on the weights) through the toolkit's own training step (``models.setdiff.train``: accelerate,
 bf16 mixed precision on CUDA, AdamW, gradient clipping, latent + L2 + SSIM + LPIPS-VGG losses on the
-decoded targets, geometry dropout) on synthetic 8-view packets (4 references + 4 targets) at 576×1024.
-It reports the median seconds per optimiser step after warm-up and the peak GPU memory, with gradient
+decoded targets, geometry dropout) on one synthetic 8-view packet at 576×1024 (4 references + 4 targets;
+the packet of ``benchmarks/memory.py``).  It reports the median seconds per optimiser step after warm-up and the peak GPU memory, with gradient
 checkpointing on (the packaged config) and off.
 
 Without the converted LPIPS weights (``setdiff-bench weights lpips``), ``--random-lpips`` builds the loss
@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import gc
-import math
 import os
 import statistics
 import sys
@@ -28,55 +27,21 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
-import torch.nn.functional as F
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.common import add_device_and_size, machine, write_result
-from setdiff_bench.cameras import Camera
+from benchmarks.memory import plane_packet
 from setdiff_bench.models.setdiff.config_io import load_config
-from setdiff_bench.types import Packet, TrainingSample, ViewSet
+from setdiff_bench.types import TrainingSample
 
 
-def camera(index: int, height: int, width: int) -> Camera:
-    """A pinhole camera stepping along x and turning 4° per view (distinct poses for Plücker rays)."""
-    yaw = math.radians(4.0 * index)
-    rotation = np.array([[math.cos(yaw), 0, -math.sin(yaw)], [0, 1, 0], [math.sin(yaw), 0, math.cos(yaw)]])
-    w2c = np.eye(4)
-    w2c[:3, :3] = rotation
-    w2c[:3, 3] = -rotation @ np.array([0.3 * index, 0.0, 0.0])
-    focal = 0.8 * width
-    K = np.array([[focal, 0, width / 2], [0, focal, height / 2], [0, 0, 1.0]])
-    return Camera(K=K, w2c=w2c, width=width, height=height)
-
-
-def views(prefix: str, first: int, count: int, height: int, width: int, g: torch.Generator) -> ViewSet:
-    coarse = torch.rand(count, 3, height // 16, width // 16, generator=g)
-    return ViewSet(
-        names=tuple(f"{prefix}{i}" for i in range(count)),
-        images=F.interpolate(coarse, size=(height, width), mode="bilinear", align_corners=False),
-        cmaps=torch.randn(count, 3, height, width, generator=g)
-        + torch.tensor([0.0, 0.0, 5.0]).view(1, 3, 1, 1),
-        alphas=torch.ones(count, 1, height, width),
-        cameras=tuple(camera(first + i, height, width) for i in range(count)),
-    )
-
-
-def sample(seed: int, refs: int, targets: int, height: int, width: int) -> TrainingSample:
-    """A packet of smooth random images and C-maps; the targets' ground truth is another smooth image."""
-    g = torch.Generator().manual_seed(seed)
-    packet = Packet(
-        packet_id=f"bench{seed}",
-        dataset="bench",
-        protocol="bench",
-        group="g",
-        split="train",
-        scene="s",
-        references=views("ref", 0, refs, height, width, g),
-        targets=views("tgt", refs, targets, height, width, g),
-    )
-    gt = views("gt", refs, targets, height, width, g).images
+def sample(refs: int, targets: int, height: int, width: int) -> TrainingSample:
+    """The memory benchmark's packet (:func:`benchmarks.memory.plane_packet`: smooth random images, C-maps of
+    a textured plane, cameras along a line) as a training sample; the targets' ground truth is their images
+    mirrored (any image does: speed and memory do not depend on it)."""
+    packet = plane_packet(refs, targets, height, width)
+    gt = packet.targets.images.flip(-1)
     return TrainingSample(packet, gt, torch.ones(targets, 1, height, width, dtype=torch.bool))
 
 
@@ -163,7 +128,7 @@ def main() -> None:
             random_lpips_weights(Path(scratch))
             payload["lpips_weights"] = "random (same shapes; speed and memory only)"
         refs = args.views // 2
-        dataset = [sample(seed, refs, args.views - refs, height, width) for seed in range(2)]
+        dataset = [sample(refs, args.views - refs, height, width)]
         for setting in [s.strip() for s in args.checkpointing.split(",") if s.strip()]:
             config = dataclasses.replace(
                 base, train=dataclasses.replace(train, gradient_checkpointing=setting == "on")
@@ -177,8 +142,8 @@ def main() -> None:
                 torch.cuda.empty_cache()
             payload["runs"][label] = row
             print(f"{label}: {row}", flush=True)
-            write_result(args.out, payload)
-    print(f"wrote benchmarks/results/{args.out}.json")
+            path = write_result(args.out, payload)  # after each setting: a stopped run keeps what it measured
+            print(f"wrote {path}")
 
 
 if __name__ == "__main__":
