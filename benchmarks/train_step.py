@@ -4,8 +4,8 @@ One process trains ``sd_turbo_setdiff`` (the SD-Turbo architecture with random w
 not depend on the weights) through the toolkit's own training step (``models.setdiff.train``: accelerate,
 bf16 mixed precision on CUDA, AdamW, gradient clipping, latent + L2 + SSIM + LPIPS-VGG losses on the
 decoded targets, geometry dropout) on one synthetic 8-view packet at 576×1024 (4 references + 4 targets;
-the packet of ``benchmarks/memory.py``).  It reports the median seconds per optimiser step after warm-up and the peak GPU memory, with gradient
-checkpointing on (the packaged config) and off.
+the packet of ``benchmarks/memory.py``).  It reports the median seconds per optimiser step after warm-up
+and the peak GPU memory, with gradient checkpointing on (the packaged config) and off.
 
 Without the converted LPIPS weights (``setdiff-bench weights lpips``), ``--random-lpips`` builds the loss
 network with random weights of the same shapes (speed and memory only; refused otherwise, as training is).
