@@ -7,6 +7,8 @@ Examples::
     setdiff-bench run --method identity --packets runs/demo/work/packets --out runs/identity
     setdiff-bench run --method reproject --packets runs/demo/work/packets --out runs/reproject -o tolerance=0.05
     setdiff-bench run --method precomputed --from runs/identity/images --packets runs/demo/work/packets --out runs/mine
+    setdiff-bench run --method precomputed --from my_outputs --name mymethod --packets runs/demo/work/packets \
+        --out runs/demo/work/runs/mymethod
     setdiff-bench run --method setdiff --checkpoint tiny_setdiff --packets runs/demo/work/packets --out runs/sd --shard 0/2
     setdiff-bench run --method setdiff --checkpoint tiny_setdiff --packets runs/demo/work/packets --out runs/sd --shard 1/2
     setdiff-bench run --method setdiff --checkpoint tiny_setdiff --packets runs/demo/work/packets --out runs/sd --merge
@@ -67,6 +69,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--from", dest="source", default=None, help="folder of images for --method precomputed"
+    )
+    parser.add_argument(
+        "--name",
+        default=None,
+        help="the run's display name (default: the method's name): recorded in the manifest, shown by "
+        "leaderboard, compare and report instead of the method, so that several precomputed methods share "
+        "one table; letters, digits, _ . + -",
     )
     add_option_argument(parser, "method option, value parsed as JSON when valid (e.g. -o tolerance=0.05)")
     parser.add_argument(
@@ -149,8 +158,9 @@ def run(args: argparse.Namespace) -> int:
         device=device,
         batch_size=args.batch_size,
         warp_cache=None if args.warp_cache == "none" else args.warp_cache,
+        name=args.name,
     )
-    out = args.out or Path("results") / "runs" / Path(args.packets).resolve().name / args.method
+    out = args.out or Path("results") / "runs" / Path(args.packets).resolve().name / settings.label
     inception = None
     if args.inception is not None:  # loaded first: a missing or wrong file stops the run before it writes
         from setdiff_bench.metrics.inception import load_inception
@@ -167,7 +177,7 @@ def run(args: argparse.Namespace) -> int:
     )
     if not args.merge:
         print(
-            f"{args.method} [{shard}]: enhanced {result.enhanced} packets, {result.skipped} already done → {out}"
+            f"{settings.label} [{shard}]: enhanced {result.enhanced} packets, {result.skipped} already done → {out}"
         )
     if result.skipped_metrics is not None:  # novel-trajectory targets: one line naming what was not scored
         print(result.skipped_metrics.line(distribution=inception is not None and result.merged))

@@ -72,6 +72,7 @@ from setdiff_bench.evaluation.preflight import check_packets_fit, warn_out_of_di
 from setdiff_bench.evaluation.run_folder import (
     check_folder,
     claim_folder,
+    claimed_label,
     fragment_path,
     record_enhancer,
 )
@@ -84,6 +85,7 @@ from setdiff_bench.evaluation.run_settings import (
     SEQUENCE_PROTOCOLS,
     RunSettings,
     WarpMode,
+    check_run_name,
     warp_enabled,
 )
 from setdiff_bench.evaluation.scoring import resolve_metrics
@@ -104,6 +106,7 @@ __all__ = [
     "Shard",
     "SkippedMetrics",
     "WarpMode",
+    "claimed_label",
     "comparable_metrics",
     "fragment_path",
     "merge_run",
@@ -164,6 +167,7 @@ def run_method(
             f"unknown method {settings.method!r}; available: {', '.join(sorted(available_methods()))}",
             parameter="method",
         )
+    check_run_name(settings, available_methods())
     index_sha256 = sha256_file(Path(store.root) / INDEX_FILE)
     spec = available_methods().get(settings.method)
     model_files = spec.model_files(settings.options) if spec is not None else {}
@@ -216,7 +220,7 @@ def run_method(
 
         bar = tqdm(
             todo,
-            desc=f"{settings.method} [{shard}]",
+            desc=f"{settings.label} [{shard}]",
             unit="packet",
             disable=None if progress is None else not progress,
         )

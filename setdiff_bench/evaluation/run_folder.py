@@ -76,6 +76,17 @@ def _compare_settings(out: Path, identity: dict[str, Any]) -> None:
         )
 
 
+def claimed_label(run_file: Path) -> str | None:
+    """The name a claimed run's rows carry (``run.json``'s ``name`` when the run was given one, else its
+    ``method``), or ``None`` when the file cannot be read (being written, damaged) or names neither."""
+    try:
+        identity = json.loads(run_file.read_text(encoding="utf-8"))
+        label = identity.get("name", identity.get("method"))
+    except (OSError, ValueError, AttributeError):
+        return None
+    return label if isinstance(label, str) else None
+
+
 def _has_visible_files(folder: Path) -> bool:
     """Anything but hidden entries (the lock file, temporary files of killed writes)."""
     return any(not entry.name.startswith(".") for entry in folder.iterdir())

@@ -47,7 +47,9 @@ def run_manifest(
     return {
         "format": RUN_FORMAT,
         "method": {
-            "name": settings.method,
+            # the name every table shows (``run --name``, else the registry name) and the registry name
+            "name": settings.label,
+            "id": settings.method,
             "factory": spec.factory if spec else None,
             "source": spec.source if spec else None,
             "options": jsonable_options(dict(settings.options)),

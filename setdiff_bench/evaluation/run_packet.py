@@ -53,7 +53,7 @@ def run_packet(
         records.append(
             {
                 **{key: row[key] for key in KEY_COLUMNS if key in row},
-                "method": settings.method,
+                "method": settings.label,
                 "timestamp_us": timestamp_or_none(row.get("timestamp_us")),
                 "sensor": str(row.get("sensor") or ""),
                 "image": relative,

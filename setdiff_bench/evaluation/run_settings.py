@@ -7,12 +7,14 @@ A resumed run, or another shard of the same run, must have the same :meth:`RunSe
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import re
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any, Literal
 
 import numpy as np
 
+from setdiff_bench.errors import UsageError
 from setdiff_bench.io.jsonable import jsonable
 from setdiff_bench.metrics.registry import PRESETS
 
@@ -25,6 +27,9 @@ SEQUENCE_PROTOCOLS = frozenset({"nuscenes"})
 #: Columns that are measurements of time, not results: excluded from byte-identity comparisons.
 
 WarpMode = Literal["auto", "on", "off"]
+#: What a run's display name (:attr:`RunSettings.name`) may be: a letter or digit, then letters, digits and
+#: ``_ . + -``, at most 64 characters (it names the default run folder and every table row).
+RUN_NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.+-]{0,63}")
 
 
 @dataclass(frozen=True)
@@ -46,6 +51,11 @@ class RunSettings:
             the ground-truth files, or of the render files under a key of their own, and the flow method);
             ``"auto"`` = the user cache
             (:func:`setdiff_bench.evaluation.scoring.default_warp_cache`), ``None`` = no cache.  Does not change results.
+        name: the run's display name (``run --name``), or ``None`` for the method's registry name.  It is what
+            the ``method`` column of ``metrics.parquet`` / ``sequences.parquet`` holds, so the leaderboard,
+            ``compare`` and the report show it; two runs of one method (e.g. two ``precomputed`` folders of two
+            external methods) with different names share one table.  Recorded in ``run.json`` (when given)
+            and in the manifest beside the registry name; :data:`RUN_NAME_PATTERN`.
     """
 
     method: str
@@ -57,6 +67,12 @@ class RunSettings:
     device: str = "cpu"
     batch_size: int = 8
     warp_cache: str | None = "auto"
+    name: str | None = None
+
+    @property
+    def label(self) -> str:
+        """The name the run's rows carry: :attr:`name` when given, else :attr:`method`."""
+        return self.name if self.name is not None else self.method
 
     def identity(self, index_sha256: str, model_files: Mapping[str, str] | None = None) -> dict[str, Any]:
         """The ``run.json`` content: what must not change between a run and its resumption.
@@ -76,9 +92,36 @@ class RunSettings:
             "device": self.device,
             "index_sha256": index_sha256,
         }
+        if self.name is not None:  # absent when not given: runs made before names existed still resume
+            identity["name"] = self.name
         if model_files:
             identity["model_files"] = dict(sorted(model_files.items()))
         return identity
+
+
+def check_run_name(settings: RunSettings, registered: Collection[str]) -> None:
+    """Refuse a display name that is not :data:`RUN_NAME_PATTERN`, or that is another registered method's name
+    (a ``precomputed`` run called ``setdiff`` would pass for the real one in every table).
+
+    Raises:
+        UsageError: naming the ``name`` parameter (the CLI's ``--name``).
+    """
+    name = settings.name
+    if name is None:
+        return
+    if not RUN_NAME_PATTERN.fullmatch(name):
+        raise UsageError(
+            "a run's name is a letter or digit followed by letters, digits, '_', '.', '+' or '-' "
+            "(at most 64 characters)",
+            name,
+            parameter="name",
+        )
+    if name != settings.method and name in registered:
+        raise UsageError(
+            f"{name!r} is the name of another method; choose a name no registered method has",
+            name,
+            parameter="name",
+        )
 
 
 def warp_enabled(settings: RunSettings, protocols: Sequence[str]) -> bool:

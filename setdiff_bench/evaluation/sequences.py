@@ -162,7 +162,7 @@ def _record(
         "protocol": protocol,
         "scene": scene,
         "sensor": sensor,
-        "method": settings.method,
+        "method": settings.label,
         "frames": len(rows),
         "first_frame": rows["frame"].iloc[0],
         "last_frame": rows["frame"].iloc[-1],

@@ -16,6 +16,7 @@ import pyarrow as pa
 from setdiff_bench.errors import UsageError
 from setdiff_bench.evaluation.distribution_scoring import COLUMNS as DISTRIBUTION_COLUMNS
 from setdiff_bench.evaluation.distribution_scoring import DISTRIBUTION_FILE, DISTRIBUTION_INFO_FILE
+from setdiff_bench.evaluation.run import claimed_label
 from setdiff_bench.io.run_layout import MANIFEST_FILE, METRICS_FILE, PROFILES_DIR, RUN_FILE, SEQUENCES_FILE
 from setdiff_bench.protocols import Layout
 from setdiff_bench.reporting.leaderboard.columns import LeaderboardError, dataset_layout
@@ -31,7 +32,7 @@ class UnfinishedRun:
     going, was killed, or its shards are unfinished or not merged (``merge_run`` writes the manifest last)."""
 
     folder: Path
-    method: str | None  # from run.json; None when it cannot be read
+    method: str | None  # the name its rows will carry (run.json's name, else method); None when unreadable
 
     def problem(self) -> str:
         """What is wrong and what to do (the folder is named beside it)."""
@@ -60,19 +61,10 @@ def survey_runs(runs: str | Path) -> tuple[list[Path], list[UnfinishedRun]]:
     for claimed in sorted(root.rglob(RUN_FILE)):
         folder = claimed.parent
         if not (folder / MANIFEST_FILE).is_file() or not (folder / METRICS_FILE).is_file():
-            unfinished.append(UnfinishedRun(folder, _claimed_method(claimed)))
+            unfinished.append(UnfinishedRun(folder, claimed_label(claimed)))
     skipped = {run.folder for run in unfinished}  # with the profile tables inside them
     finished = sorted(p.parent for p in root.rglob(METRICS_FILE) if skipped.isdisjoint(p.parents))
     return finished, unfinished
-
-
-def _claimed_method(run_file: Path) -> str | None:
-    """The method ``run.json`` names, or ``None`` when it cannot be read (being written, damaged)."""
-    try:
-        method = json.loads(run_file.read_text(encoding="utf-8")).get("method")
-    except (OSError, ValueError, AttributeError):
-        return None
-    return method if isinstance(method, str) else None
 
 
 def find_runs(runs: str | Path, *, profiles: bool = True) -> list[Path]:
