@@ -35,6 +35,8 @@ from setdiff_bench.cli.declared import declared_value
 from setdiff_bench.reporting.bootstrap import BootstrapSettings
 
 VERB = "leaderboard"
+#: Where ``--runs`` looks when it is not given (``run``'s default ``--out`` is under it).
+DEFAULT_RUNS = Path("results/runs")
 HELP = "tabulate finished runs per method and group: Parquet, LaTeX (booktabs), Markdown; plots and grids"
 DESCRIPTION = __doc__
 
@@ -43,7 +45,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--dataset", required=True, help="dataset key (euvs, paralane, nuscenes, dl3dv, synthetic, ...)"
     )
-    parser.add_argument("--runs", type=Path, default=Path("results/runs"), help="folder searched for runs")
+    add_runs_argument(
+        parser,
+        f"folders searched for runs (several: --runs A B or --runs A --runs B; default {DEFAULT_RUNS})",
+    )
     formats = declared_value("setdiff_bench.reporting.leaderboard.render", "FORMATS")
     parser.add_argument("--format", default=",".join(formats), help=f"comma list of {', '.join(formats)}")
     parser.add_argument("--out", type=Path, default=Path("results/leaderboards"), help="output folder")
@@ -89,6 +94,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="add a Cost block: each method's ms per frame (median) and peak memory, as `run` recorded them",
     )
+
+
+def add_runs_argument(parser: argparse.ArgumentParser, help: str) -> None:
+    """``--runs FOLDER...``, repeatable: ``--runs A B`` and ``--runs A --runs B`` both give ``[A, B]`` (as
+    ``report --runs``); not given: ``None`` (the verb picks its default, :func:`runs_folders`)."""
+    parser.add_argument(
+        "--runs", type=Path, nargs="+", action="extend", default=None, metavar="FOLDER", help=help
+    )
+
+
+def runs_folders(args: argparse.Namespace) -> list[Path]:
+    """The folders ``--runs`` named, in order and each once, or ``[DEFAULT_RUNS]``."""
+    return list(dict.fromkeys(args.runs)) if args.runs else [DEFAULT_RUNS]
 
 
 def add_bootstrap_arguments(parser: argparse.ArgumentParser) -> None:
@@ -148,7 +166,7 @@ def _command(args: argparse.Namespace) -> str:
         "--dataset",
         args.dataset,
         "--runs",
-        str(args.runs),
+        *map(str, runs_folders(args)),
         "--format",
         args.format,
         "--out",
@@ -197,7 +215,8 @@ def run(args: argparse.Namespace) -> int:
     split = None if args.split == "all" else args.split
     methods = [m.strip() for m in args.methods.split(",")] if args.methods else None
     metrics = [m.strip() for m in args.metrics.split(",")] if args.metrics else None
-    finished, unfinished = survey_runs(args.runs)
+    folders = runs_folders(args)
+    finished, unfinished = survey_runs(folders)
     require_finished(finished, unfinished)
     images, sequences = load_runs(finished)
     measured = set(images["method"]) if len(images) else set()
@@ -231,7 +250,7 @@ def run(args: argparse.Namespace) -> int:
     if args.with_reported and not any(row.source == "measured" for row in board.rows):
         found = sorted(set(images["dataset"])) if len(images) else []
         print(
-            f"note: no measured {args.dataset} runs under {args.runs}"
+            f"note: no measured {args.dataset} runs under {', '.join(map(str, folders))}"
             + (f" (runs found for: {', '.join(found)})" if found else "")
             + "; the table holds the paper's rows only",
             file=sys.stderr,

@@ -103,7 +103,8 @@ def test_compare_refuses_in_one_line(tmp_path: Path, capsys: pytest.CaptureFixtu
     out = tmp_path / "cmp"
     for argv, fragment in (
         ([str(run_a), str(run_b)], "share no targets (they share 0; setdiff has 24, difix has 24)"),
-        ([str(run_a), str(tmp_path / "none")], "not a finished run (no metrics.parquet)"),
+        ([str(run_a), str(tmp_path / "none")], "no such run folder"),
+        ([str(run_a), str(tmp_path)], "not a finished run (no metrics.parquet)"),
         ([str(run_a), str(run_a), "--format", "pdf"], "unknown format(s) pdf"),
         ([str(run_a), str(run_a), "--metrics", "psnr,sharpness"], "unknown metric(s) sharpness"),
         ([str(run_a), str(run_a), "--resamples", "0"], "needs at least 1 resample"),

@@ -64,6 +64,7 @@ from setdiff_bench.reporting.leaderboard.inputs import (
     load_runs,
     reported_for,
     require_finished,
+    run_names,
     survey_runs,
     warn_unfinished,
 )
@@ -115,6 +116,7 @@ __all__ = [
     "render_markdown",
     "reported_for",
     "require_finished",
+    "run_names",
     "scored_size",
     "survey_runs",
     "to_frame",

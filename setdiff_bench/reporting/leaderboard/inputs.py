@@ -43,8 +43,10 @@ class UnfinishedRun:
         )
 
 
-def survey_runs(runs: str | Path) -> tuple[list[Path], list[UnfinishedRun]]:
-    """The finished run folders under ``runs`` and the unfinished ones, each sorted.
+def survey_runs(runs: str | Path | Sequence[str | Path]) -> tuple[list[Path], list[UnfinishedRun]]:
+    """The finished run folders under ``runs`` (one folder, or several searched in turn) and the unfinished
+    ones, each sorted and listed once (a run under two of the folders given, e.g. ``runs`` and ``runs/mine``,
+    counts once).
 
     A folder with ``metrics.parquet`` is a finished run unless ``run`` claimed it (``run.json``) and has not
     written its ``manifest.json`` (the last file a run writes, atomically); a claimed folder without the
@@ -52,23 +54,45 @@ def survey_runs(runs: str | Path) -> tuple[list[Path], list[UnfinishedRun]]:
     ``run.json`` and count when their ``metrics.parquet`` exists.
 
     Raises:
-        UsageError: ``runs`` is not a folder.
+        UsageError: a folder of ``runs`` does not exist or is not a folder (named).
     """
-    root = Path(runs)
-    if not root.is_dir():
-        raise UsageError("runs folder not found", root)
-    unfinished = []
-    for claimed in sorted(root.rglob(RUN_FILE)):
-        folder = claimed.parent
-        if not (folder / MANIFEST_FILE).is_file() or not (folder / METRICS_FILE).is_file():
-            unfinished.append(UnfinishedRun(folder, claimed_label(claimed)))
-    skipped = {run.folder for run in unfinished}  # with the profile tables inside them
-    finished = sorted(p.parent for p in root.rglob(METRICS_FILE) if skipped.isdisjoint(p.parents))
-    return finished, unfinished
+    roots = [Path(runs)] if isinstance(runs, str | Path) else [Path(p) for p in runs]
+    if not roots:
+        raise UsageError("no runs folder given", parameter="runs")
+    finished: set[Path] = set()
+    unfinished: dict[Path, UnfinishedRun] = {}
+    for root in roots:
+        if not root.is_dir():
+            raise UsageError("runs folder not found", root)
+        mine = {}
+        for claimed in sorted(root.rglob(RUN_FILE)):
+            folder = claimed.parent
+            if not (folder / MANIFEST_FILE).is_file() or not (folder / METRICS_FILE).is_file():
+                mine[folder.resolve()] = UnfinishedRun(folder, claimed_label(claimed))
+        skipped = {run.folder for run in mine.values()}  # with the profile tables inside them
+        for path in root.rglob(METRICS_FILE):
+            if skipped.isdisjoint(path.parents):
+                finished.add(path.parent)
+        for key, run in mine.items():
+            unfinished.setdefault(key, run)
+    return _once(sorted(finished)), sorted(unfinished.values(), key=lambda run: run.folder)
 
 
-def find_runs(runs: str | Path, *, profiles: bool = True) -> list[Path]:
-    """Every finished run folder (holding ``metrics.parquet``) under ``runs``, sorted; with ``profiles=False``
+def _once(folders: Sequence[Path]) -> list[Path]:
+    """``folders`` without a second spelling of one folder (``runs/x`` and ``./runs/x``), first kept."""
+    seen: set[Path] = set()
+    kept = []
+    for folder in folders:
+        key = folder.resolve()
+        if key not in seen:
+            seen.add(key)
+            kept.append(folder)
+    return kept
+
+
+def find_runs(runs: str | Path | Sequence[str | Path], *, profiles: bool = True) -> list[Path]:
+    """Every finished run folder (holding ``metrics.parquet``) under ``runs`` (one folder or several), sorted,
+    each once; with ``profiles=False``
     without the evaluation profiles' tables inside runs (``<run>/profiles/<profile>/``: scores, no images).
 
     Unfinished runs (:func:`survey_runs`) are left out, each with an :class:`UnfinishedRunWarning` naming it.
@@ -118,6 +142,23 @@ def load_runs(runs: str | Path | Sequence[Path]) -> tuple[pd.DataFrame, pd.DataF
     image_frame = pd.concat(images, ignore_index=True) if images else pd.DataFrame()
     sequence_frame = pd.concat(sequences, ignore_index=True) if sequences else pd.DataFrame()
     return image_frame, sequence_frame
+
+
+def run_names(folders: Sequence[Path]) -> dict[Path, set[str]]:
+    """Each finished run folder → the names its rows carry (``metrics.parquet``'s ``method`` column: the
+    method, or the name ``run --name`` gave it).
+
+    Raises:
+        LeaderboardError: a ``metrics.parquet`` that cannot be read.
+    """
+    names = {}
+    for folder in folders:
+        try:
+            column = pd.read_parquet(Path(folder) / METRICS_FILE, columns=["method"])["method"]
+        except (OSError, KeyError, pa.ArrowException) as error:
+            raise LeaderboardError(f"unreadable run results ({type(error).__name__})", folder) from None
+        names[Path(folder)] = {str(name) for name in column.unique()}
+    return names
 
 
 def load_distribution(folders: Sequence[Path]) -> pd.DataFrame:
