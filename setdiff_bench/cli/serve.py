@@ -13,11 +13,14 @@ from typing import get_args
 
 from setdiff_bench.cli import add_device_argument
 from setdiff_bench.models.setdiff.methods import Method
+from setdiff_bench.serve.sensorsim.settings import ROLES, SensorsimSettings
 from setdiff_bench.serve.settings import DEFAULT_HOST, SESSION_BYTES_PER_PIXEL, ServeSettings
 
 VERB = "serve"
 HELP = "serve a SetDiff/DiFix checkpoint over gRPC (start_session / enhance / close_session, health)"
 _DEFAULTS = ServeSettings()
+_SENSORSIM = SensorsimSettings()
+PROTOCOLS = ("setdiff", "sensorsim")
 DESCRIPTION = (
     "Serve a trained enhancer over gRPC for closed-loop simulation: a client opens a session with a "
     "scene's recorded references, then sends each tick's rendered frames and gets them enhanced. "
@@ -30,6 +33,10 @@ DESCRIPTION = (
     f"({_DEFAULTS.max_sessions} x {_DEFAULTS.max_session_mib:g} MiB = "
     f"{_DEFAULTS.worst_case_mib() / 1024:g} GiB at the defaults), plus the model and up to --max-queue "
     "requests in flight (at most 256 MiB each).\n\n"
+    "With --protocol sensorsim it speaks AlpaSim's renderer protocol (NuRec's SensorsimService) instead: "
+    "--role renderer renders the fitted scenes of --scenes DIR (enhanced in place with --checkpoint), "
+    "--role proxy --upstream HOST:PORT forwards every call to another sensorsim renderer and enhances the "
+    "images it returns with each scene's recorded frames (docs/serve.md, 'AlpaSim drop-in').\n\n"
     "Deployment (certificate, token, host): docs/serve.md.\n\n"
     "Examples:\n\n"
     "    setdiff-bench serve --checkpoint tiny_setdiff --port 50051\n"
@@ -48,7 +55,55 @@ LIMITS: dict[str, str] = {
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     defaults = _DEFAULTS
-    parser.add_argument("--checkpoint", required=True, help="checkpoint folder (or training output folder)")
+    parser.add_argument(
+        "--checkpoint",
+        default=None,
+        help="checkpoint folder (or training output folder); required but by the sensorsim renderer, "
+        "which renders plain 3DGS without one",
+    )
+    parser.add_argument(
+        "--protocol",
+        default="setdiff",
+        choices=PROTOCOLS,
+        help="setdiff: this toolkit's enhancer protocol; sensorsim: AlpaSim's renderer protocol (default %(default)s)",
+    )
+    parser.add_argument(
+        "--role",
+        default=_SENSORSIM.role,
+        choices=ROLES,
+        help="sensorsim only: renderer (render --scenes) or proxy (forward to --upstream and enhance; default %(default)s)",
+    )
+    parser.add_argument(
+        "--scenes",
+        type=Path,
+        default=None,
+        help="sensorsim only: folder of fitted scenes, <scenes>/<scene_id>/ with scene.ply (or fits/lane0.ply) and "
+        "its recorded frames in a layout the loaders read",
+    )
+    parser.add_argument(
+        "--upstream",
+        default=None,
+        help="sensorsim proxy only: HOST:PORT of the sensorsim renderer to forward to",
+    )
+    parser.add_argument(
+        "--upstream-timeout",
+        type=float,
+        default=_SENSORSIM.upstream_timeout,
+        help="sensorsim proxy only: seconds to wait for the upstream renderer per call; past it the call's cameras "
+        "fail (default %(default)s)",
+    )
+    parser.add_argument(
+        "--upstream-same-format",
+        action="store_true",
+        help="sensorsim proxy only: forward the client's image format and quality instead of asking the upstream "
+        "renderer for lossless PNG",
+    )
+    parser.add_argument(
+        "--max-loaded-scenes",
+        type=int,
+        default=_SENSORSIM.max_loaded_scenes,
+        help="sensorsim only: scenes kept loaded at once (default %(default)s)",
+    )
     parser.add_argument(
         "--method",
         default="setdiff",
@@ -174,8 +229,72 @@ def settings_from_arguments(args: argparse.Namespace) -> ServeSettings:
     )
 
 
+def sensorsim_settings_from_arguments(args: argparse.Namespace) -> SensorsimSettings:
+    """The ``--protocol sensorsim`` options (plus the common ones) validated into settings.
+
+    Raises:
+        UsageError: no or a missing ``--scenes`` folder, a proxy without ``--upstream HOST:PORT`` or without
+            ``--checkpoint``, a bad timeout or scene count, or any refusal of :func:`settings_from_arguments`.
+    """
+    from setdiff_bench.errors import UsageError
+
+    serve = settings_from_arguments(args)
+    if args.scenes is None or not args.scenes.is_dir():
+        raise UsageError(
+            "--protocol sensorsim needs a folder of fitted scenes" if args.scenes is None else "not a folder",
+            args.scenes or "--scenes",
+        )
+    if args.role == "proxy":
+        host, _, port = (args.upstream or "").rpartition(":")
+        if not host or not port.isdigit() or not 0 < int(port) <= 65535:
+            raise UsageError(f"give the upstream renderer as HOST:PORT, got {args.upstream!r}", "--upstream")
+        if args.checkpoint is None:
+            raise UsageError("the proxy enhances: give the enhancer's checkpoint", "--checkpoint")
+    if not math.isfinite(args.upstream_timeout) or args.upstream_timeout <= 0:
+        raise UsageError(f"must be a finite number > 0, got {args.upstream_timeout}", "--upstream-timeout")
+    if args.max_loaded_scenes < 1:
+        raise UsageError(f"must be >= 1, got {args.max_loaded_scenes}", "--max-loaded-scenes")
+    return SensorsimSettings(
+        serve=serve,
+        role=args.role,
+        scenes=args.scenes,
+        upstream=args.upstream if args.role == "proxy" else None,
+        upstream_timeout=args.upstream_timeout,
+        upstream_png=not args.upstream_same_format,
+        max_loaded_scenes=args.max_loaded_scenes,
+    )
+
+
+def run_sensorsim(args: argparse.Namespace) -> int:
+    """``serve --protocol sensorsim``: start the role, print the serving line, stop on SIGTERM / SIGINT."""
+    settings = sensorsim_settings_from_arguments(args)  # before the model loads: a refusal costs nothing
+    from setdiff_bench.runtime.devices import resolve_device
+    from setdiff_bench.serve.sensorsim.server import sensorsim_pid_line, start_sensorsim
+    from setdiff_bench.serve.server import serve_until_signalled
+
+    enhancer = None
+    if args.checkpoint is not None:
+        from setdiff_bench.enhancers.setdiff import load_enhancer
+
+        enhancer = load_enhancer(
+            args.method, args.checkpoint, device=resolve_device(args.device), dtype=args.dtype
+        )
+    running = start_sensorsim(settings, enhancer)
+    serve_until_signalled(
+        running, args.grace, ready=lambda: print(sensorsim_pid_line(running, args.host), flush=True)
+    )
+    print("stopped", flush=True)
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
+    if args.protocol == "sensorsim":
+        return run_sensorsim(args)
+    if args.checkpoint is None:
+        from setdiff_bench.errors import UsageError
+
+        raise UsageError("the enhancer service needs a checkpoint", "--checkpoint")
     settings = settings_from_arguments(args)  # before the model loads: a refusal costs nothing
     from setdiff_bench.enhancers.setdiff import load_enhancer
     from setdiff_bench.runtime.devices import resolve_device

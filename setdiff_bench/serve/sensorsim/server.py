@@ -1,0 +1,121 @@
+"""Bind and start the sensorsim service (either role) with the enhancer server's gates: the bind rule (a
+non-loopback host needs TLS and a token, or ``insecure``), TLS / mutual TLS, the bearer token, ``max_queue``,
+``grpc.health.v1``, the session reaper, 64 MiB messages and a graceful stop."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from concurrent import futures
+from dataclasses import dataclass, field
+from typing import Any
+
+import grpc
+from grpc_health.v1 import health, health_pb2, health_pb2_grpc
+
+from setdiff_bench.errors import SetDiffBenchError
+from setdiff_bench.serve.auth import TokenInterceptor
+from setdiff_bench.serve.security import check_bind
+from setdiff_bench.serve.sensorsim import sensorsim_pb2 as pb
+from setdiff_bench.serve.sensorsim import sensorsim_pb2_grpc as pb_grpc
+from setdiff_bench.serve.sensorsim.service import ProxyService, RendererService, SensorsimBase
+from setdiff_bench.serve.sensorsim.settings import MAX_MESSAGE_BYTES, SensorsimSettings
+from setdiff_bench.serve.server import _quiet_stderr, _reap
+
+#: The fully qualified service name (AlpaSim's and NuRec's).
+SERVICE_NAME = pb.DESCRIPTOR.services_by_name["SensorsimService"].full_name
+
+
+@dataclass
+class RunningSensorsim:
+    """A started sensorsim server: ``port`` is the bound port, ``service`` the role's servicer."""
+
+    server: grpc.Server
+    port: int
+    service: SensorsimBase
+    health: health.HealthServicer
+    reaper_stop: threading.Event = field(default_factory=threading.Event)
+
+    def stop(self, grace: float | None) -> None:
+        """Refuse new RPCs, let in-flight ones finish for up to ``grace`` seconds, close the upstream channel."""
+        self.reaper_stop.set()
+        self.health.enter_graceful_shutdown()
+        self.server.stop(grace).wait()
+        if isinstance(self.service, ProxyService):
+            self.service.close()
+        if self.service.enhancement is not None:
+            self.service.enhancement.close_all()
+
+
+def start_sensorsim(
+    settings: SensorsimSettings, enhancer: Any | None = None, *, clock: Callable[[], float] = time.monotonic
+) -> RunningSensorsim:
+    """Start the role ``settings.role`` on ``settings.serve.host:port`` (plus ``grpc.health.v1``).
+
+    Args:
+        enhancer: a loaded SetDiff / DiFix enhancer; required by the proxy, optional for the renderer
+            (``None``: plain 3DGS renders).
+
+    Raises:
+        UsageError: a non-loopback host without TLS and a token (and not ``insecure``), no scenes folder,
+            a proxy without upstream or enhancer.
+        SetDiffBenchError: the address cannot be bound.
+    """
+    serve = settings.serve
+    check_bind(serve.host, serve.tls, serve.token, serve.insecure)
+    if settings.role == "proxy":
+        if enhancer is None:
+            raise SetDiffBenchError("the proxy enhances: give it a checkpoint", "--checkpoint")
+        service: SensorsimBase = ProxyService(settings, enhancer, clock)
+    else:
+        service = RendererService(settings, enhancer, clock)
+    server = grpc.server(
+        futures.ThreadPoolExecutor(max_workers=serve.workers, thread_name_prefix="sensorsim"),
+        interceptors=[TokenInterceptor(serve.token)] if serve.token is not None else None,
+        maximum_concurrent_rpcs=serve.max_queue,
+        options=[
+            ("grpc.max_receive_message_length", MAX_MESSAGE_BYTES),
+            ("grpc.max_send_message_length", MAX_MESSAGE_BYTES),
+            ("grpc.so_reuseport", 0),
+        ],
+    )
+    pb_grpc.add_SensorsimServiceServicer_to_server(service, server)
+    health_servicer = health.HealthServicer()
+    health_pb2_grpc.add_HealthServicer_to_server(health_servicer, server)
+    address = f"{serve.host}:{serve.port}"
+    try:
+        with _quiet_stderr():
+            if serve.tls is None:
+                port = server.add_insecure_port(address)
+            else:
+                credentials = grpc.ssl_server_credentials(
+                    [(serve.tls.private_key, serve.tls.cert_chain)],
+                    root_certificates=serve.tls.client_ca,
+                    require_client_auth=serve.tls.client_ca is not None,
+                )
+                port = server.add_secure_port(address, credentials)
+    except RuntimeError:
+        port = 0
+    if port == 0:
+        if isinstance(service, ProxyService):
+            service.close()
+        raise SetDiffBenchError("cannot bind (address in use or not available)", address)
+    server.start()
+    for name in ("", SERVICE_NAME):
+        health_servicer.set(name, health_pb2.HealthCheckResponse.SERVING)
+    running = RunningSensorsim(server, port, service, health_servicer)
+    threading.Thread(
+        target=_reap, args=(service, running.reaper_stop), name="sensorsim-reaper", daemon=True
+    ).start()
+    return running
+
+
+def sensorsim_pid_line(running: RunningSensorsim, host: str) -> str:
+    """The line ``serve --protocol sensorsim`` prints once it listens (tests read the port from it)."""
+    import os
+
+    serve = running.service.settings.serve
+    mode = "plaintext" if serve.tls is None else ("mutual TLS" if serve.tls.client_ca is not None else "TLS")
+    token = "token" if serve.token is not None else "no token"
+    return f"serving on {host}:{running.port} (pid {os.getpid()}; sensorsim {running.service.role}; {mode}, {token})"
