@@ -134,6 +134,8 @@ def test_the_architecture_is_the_fields_marked_so() -> None:
         "output_mode",
         "attention_bias",
         "attention_bias_layers",
+        "set_attention",
+        "set_attention_neighbours",
     }
     knobs = ModelConfig(
         guidance_scale=1.0, cfg_batched=False, max_references=2, targets_per_set=1, preset="tiny"

@@ -30,7 +30,8 @@ from setdiff_bench.models.setdiff.presets import (
 Prediction = Literal["v_prediction", "epsilon"]
 DecoderTraining = Literal["lora", "full", "frozen"]
 OutputMode = Literal["direct", "residual"]
-AttentionBias = Literal["none", "cmap_distance"]
+AttentionBias = Literal["none", "cmap_distance", "cmap_relative"]
+SetAttention = Literal["full", "view", "knn"]
 AttentionBiasLayers = Literal["all", "lowest"]
 MixedPrecision = Literal["auto", "no", "bf16", "fp16"]
 LpipsNet = Literal["vgg", "alex"]
@@ -88,9 +89,17 @@ class ModelConfig:
         attention_bias: ``none`` (the paper's set mixer) or ``cmap_distance`` (beyond the paper): each
             set-mixer logit gets ``−s·min(‖p_q − p_k‖², cap)`` from the tokens' C-map surface points
             (learnable s ≥ 0 per layer), steering attention to geometrically corresponding tokens.
+            ``cmap_relative`` (beyond the paper, scale-free): the same form on ray-snapped points with the
+            distance divided by the query token's footprint (its depth × the token's angular size) and
+            low-alpha tokens weighted by their surface coverage (:func:`.set_mixer.relative_distance_bias`).
         attention_bias_layers: which set-mixing layers get the bias: ``all``, or ``lowest`` (only those
             at the UNet's lowest resolution, whose few tokens keep the bias cheap; the others keep
             torch's fused attention kernel).
+        set_attention: what the set-mixing layers of each resolution level attend to, level 0 (the full
+            latent grid) first, levels past the end ``full``: ``full`` (the whole set, the paper), ``view``
+            (the own view only) or ``knn`` (the own view, the ``set_attention_neighbours`` reference tokens
+            nearest in 3D and a learned "no match" key; beyond the paper, :mod:`.set_mixer`).
+        set_attention_neighbours: k of the ``knn`` levels.
     """
 
     method: Method = field(default="setdiff", metadata=ARCHITECTURE)
@@ -127,9 +136,25 @@ class ModelConfig:
     output_mode: OutputMode = field(default="direct", metadata=ARCHITECTURE)
     attention_bias: AttentionBias = field(default="none", metadata=ARCHITECTURE)
     attention_bias_layers: AttentionBiasLayers = field(default="all", metadata=ARCHITECTURE)
+    set_attention: tuple[str, ...] = field(default=(), metadata=ARCHITECTURE)
+    set_attention_neighbours: int = field(default=16, metadata=ARCHITECTURE)
 
     def __post_init__(self) -> None:
         where = "[model]"
+        object.__setattr__(self, "set_attention", tuple(self.set_attention))
+        for level in self.set_attention:
+            check_choice(level, SetAttention, "set_attention entries", where)
+        levels = len(self.unet.get("down_block_types", ()))
+        if len(self.set_attention) > levels:
+            raise UsageError(
+                f"set_attention lists {len(self.set_attention)} levels but the UNet has {levels}", where
+            )
+        if "knn" in self.set_attention and not self.use_geometry:
+            raise UsageError("set_attention 'knn' needs C-maps: set use_geometry = true", where)
+        if self.set_attention_neighbours < 1:
+            raise UsageError(
+                f"set_attention_neighbours must be >= 1, got {self.set_attention_neighbours}", where
+            )
         check_choice(self.output_mode, OutputMode, "output_mode", where)
         check_choice(self.attention_bias, AttentionBias, "attention_bias", where)
         check_choice(self.attention_bias_layers, AttentionBiasLayers, "attention_bias_layers", where)
@@ -195,6 +220,16 @@ class ModelConfig:
     def alpha_bar(self) -> float:
         """ᾱ at :attr:`timestep` (0.7552384 for SD-Turbo at t = 199), float64 arithmetic."""
         return float(alphas_cumprod(**self.scheduler)[self.timestep])
+
+    @property
+    def needs_points(self) -> bool:
+        """The set mixer needs the tokens' C-map surface points (an attention bias or a ``knn`` level)."""
+        return self.attention_bias != "none" or "knn" in self.set_attention
+
+    @property
+    def snapped_points(self) -> bool:
+        """The surface points are ray-snapped and carry footprints (the relative bias)."""
+        return self.attention_bias == "cmap_relative"
 
     @property
     def uses_cfg(self) -> bool:

@@ -117,8 +117,8 @@ def enhance_packet(
             num_refs = tensors[0][2]
             geometry = None if tensors[0][1] is None else stacked([g for _, g, _ in tensors])
             points = (
-                stacked([surface_points(subset) for subset, _ in part])
-                if config.attention_bias != "none"
+                stacked([surface_points(subset, snapped=config.snapped_points) for subset, _ in part])
+                if config.needs_points
                 else None
             )
             batch = SetBatch(stacked([images for images, _, _ in tensors]), geometry, num_refs, points)

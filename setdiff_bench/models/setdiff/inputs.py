@@ -7,6 +7,7 @@ the same layout stack on a leading batch axis, ``(B, V, ...)`` with V = N + M, f
 
 from __future__ import annotations
 
+import math
 import random
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -14,8 +15,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 import torch
 
+from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import PacketError
-from setdiff_bench.geometry import max_pairwise_distance, overlap_score_matrix, renormalize
+from setdiff_bench.geometry import max_pairwise_distance, overlap_score_matrix, ray_directions, renormalize
 from setdiff_bench.models.setdiff.geometry_encoder import GEOMETRY_INPUTS, geometry_input
 from setdiff_bench.types import Packet, TrainingSample, ViewSet
 
@@ -109,14 +111,52 @@ def view_tensors(
 SURFACE_ALPHA = 0.5
 
 
-def surface_points(packet: Packet) -> torch.Tensor:
+def surface_points(packet: Packet, *, snapped: bool = False) -> torch.Tensor:
     """Per pixel of every view (references first): the surface point ``C-map / alpha`` times its
-    validity (alpha > :data:`SURFACE_ALPHA`), and the validity — ``(V, 4, H, W)`` float32, packet units."""
+    validity (alpha > :data:`SURFACE_ALPHA`), and the validity — ``(V, 4, H, W)`` float32, packet units.
+
+    With ``snapped`` the point is moved onto the pixel's ray at its camera depth (:func:`ray_snapped_points`,
+    the convention of ``--method reproject``'s ``surface="ray"``), a point at depth ≤ 0 is invalid, and a
+    fifth channel holds the pixel's footprint × validity (depth / focal length: the side of one pixel at
+    the surface, packet units) — ``(V, 5, H, W)``, for the relative attention bias."""
     views = [v for v in (packet.references, packet.targets) if len(v)]
     cmaps = torch.cat([v.cmaps.float() for v in views])
     alphas = torch.cat([v.alphas.float() for v in views])
     valid = (alphas > SURFACE_ALPHA).float()
-    return torch.cat([cmaps / alphas.clamp_min(SURFACE_ALPHA) * valid, valid], dim=1)
+    points = cmaps / alphas.clamp_min(SURFACE_ALPHA) * valid
+    if not snapped:
+        return torch.cat([points, valid], dim=1)
+    cameras = [camera for v in views for camera in v.cameras]
+    on_rays, footprint = ray_snapped_points(points, cameras)
+    valid = valid * (footprint > 0).float()
+    return torch.cat([on_rays * valid, valid, footprint.clamp_min(0.0) * valid], dim=1)
+
+
+def ray_snapped_points(points: torch.Tensor, cameras: Sequence[Camera]) -> tuple[torch.Tensor, torch.Tensor]:
+    """Each pixel's point moved onto the pixel's ray, keeping its camera-frame depth ``z``:
+    ``X' = o + d·z/(d·ẑ)`` (``o`` the camera centre, ``d`` the unit ray through the pixel centre,
+    :func:`~setdiff_bench.geometry.ray_directions`; ``ẑ`` the camera's optical axis), and the pixel's
+    footprint ``z / √(f_x f_y)`` (focal lengths at the image size).
+
+    Args:
+        points: ``(V, 3, H, W)`` packet-frame points.
+        cameras: the V cameras.
+
+    Returns:
+        ``(V, 3, H, W)`` snapped points and ``(V, 1, H, W)`` footprints (negative where ``z`` ≤ 0), float32.
+    """
+    height, width = int(points.shape[-2]), int(points.shape[-1])
+    snapped, footprints = [], []
+    for view, camera in enumerate(cameras):
+        rays = torch.from_numpy(ray_directions(camera, height, width)).permute(2, 0, 1)  # (3, H, W) float64
+        origin = torch.tensor(camera.center, dtype=torch.float64).view(3, 1, 1)
+        axis = torch.tensor(camera.R[2], dtype=torch.float64).view(3, 1, 1)
+        depth = ((points[view].double() - origin) * axis).sum(0, keepdim=True)
+        along = depth / (rays * axis).sum(0, keepdim=True)
+        snapped.append((origin + rays * along).float())
+        focal = math.sqrt(camera.K[0, 0] * width / camera.width * camera.K[1, 1] * height / camera.height)
+        footprints.append((depth / focal).float())
+    return torch.stack(snapped).to(points.device), torch.stack(footprints).to(points.device)
 
 
 @dataclass
@@ -185,6 +225,7 @@ def training_set(
     pairs: bool = False,
     geometry_inputs: Sequence[str] = GEOMETRY_INPUTS,
     with_points: bool = False,
+    snapped_points: bool = False,
     identity_probability: float = 0.0,
     masked_copy_probability: float = 0.0,
 ) -> TrainingSet:
@@ -198,6 +239,7 @@ def training_set(
         pairs: DiFix mode: one random target and its best reference by Eq. 2 (the training data may
             be permuted, so the packet's first reference need not be the best one).
         with_points: also build the surface points of the attention bias (:func:`surface_points`).
+        snapped_points: those points ray-snapped with footprints (the relative bias).
         identity_probability: with this probability the set is an *identity sample*: every target's
             input is its own ground truth, so the model learns to leave a clean view unchanged.
         masked_copy_probability: with this probability (drawn only when the set is not an identity
@@ -237,7 +279,7 @@ def training_set(
         images = torch.cat([images[:n], gt[0]])
     elif masked_copy_probability > 0 and rng.random() < masked_copy_probability:
         images = torch.cat([images[:n], cut_holes(images[n:], subset.targets.alphas.float(), rng)])
-    points = surface_points(subset)[None] if with_points else None
+    points = surface_points(subset, snapped=snapped_points)[None] if with_points else None
     batch = SetBatch(images[None], None if geometry is None else geometry[None], n, points)
     return TrainingSet(batch=batch, target_gt=gt, target_masks=masks)
 

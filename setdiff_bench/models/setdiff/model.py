@@ -41,6 +41,8 @@ from setdiff_bench.models.setdiff.geometry_encoder import GeometryEncoder
 from setdiff_bench.models.setdiff.inputs import SetBatch, check_image_size
 from setdiff_bench.models.setdiff.networks import build_networks
 from setdiff_bench.models.setdiff.set_mixer import (
+    BIAS_INITIAL_SCALE,
+    RELATIVE_BIAS_INITIAL_SCALE,
     add_bias_parameters,
     biased_layers,
     install_set_mixer,
@@ -93,11 +95,20 @@ class SetDiffModel(nn.Module):
         super().__init__()
         networks = build_networks(config, load_pretrained=load_pretrained)
         self.unet = networks.unet
-        self.mixed_attention = install_set_mixer(self.unet)
-        if config.attention_bias == "cmap_distance":
+        self.mixed_attention = install_set_mixer(
+            self.unet,
+            config.set_attention,
+            neighbours=config.set_attention_neighbours,
+            relative_bias=config.attention_bias == "cmap_relative",
+        )
+        if config.attention_bias != "none":
             levels = len(self.unet.down_blocks)
             add_bias_parameters(
-                self.unet, biased_layers(self.mixed_attention, levels, config.attention_bias_layers)
+                self.unet,
+                biased_layers(self.mixed_attention, levels, config.attention_bias_layers),
+                RELATIVE_BIAS_INITIAL_SCALE
+                if config.attention_bias == "cmap_relative"
+                else BIAS_INITIAL_SCALE,
             )
         if config.output_mode == "residual":
             nn.init.zeros_(self.unet.conv_out.weight)
@@ -145,10 +156,15 @@ class SetDiffModel(nn.Module):
         return self.geometry_encoder(geometry)
 
     def unet_output(
-        self, unet_input: torch.Tensor, num_views: int, points: torch.Tensor | None = None
+        self,
+        unet_input: torch.Tensor,
+        num_views: int,
+        points: torch.Tensor | None = None,
+        num_references: int | None = None,
     ) -> torch.Tensor:
         """One UNet pass at the fixed timestep over ``(B·V, C, h, w)`` sets of ``num_views`` views
-        (``points``: ``(B·V, 4, h, w)`` latent-cell surface points for the attention bias, or ``None``)."""
+        (``points``: ``(B·V, 4 or 5, h, w)`` latent-cell surface points for the attention bias or ``knn``
+        levels, or ``None``; ``num_references``: N, needed by ``knn`` levels)."""
         text = self.text_embedding.to(unet_input.dtype).expand(unet_input.shape[0], -1, -1)
         timestep = torch.full(
             (unet_input.shape[0],), self.config.timestep, device=unet_input.device, dtype=torch.long
@@ -157,16 +173,20 @@ class SetDiffModel(nn.Module):
             unet_input,
             timestep,
             encoder_hidden_states=text,
-            cross_attention_kwargs=set_kwargs(num_views, points),
+            cross_attention_kwargs=set_kwargs(num_views, points, num_references),
         ).sample
 
     def latent_points(self, points: torch.Tensor | None) -> torch.Tensor | None:
-        """Pixel surface points ``(B·V, 4, H, W)`` → latent cells ``(B·V, 4, H/8, W/8)`` (area means),
-        or ``None`` when the model has no attention bias."""
-        if points is None or self.config.attention_bias == "none":
+        """Pixel surface points ``(B·V, 4 or 5, H, W)`` → latent cells ``(B·V, 4 or 5, H/8, W/8)`` (area means;
+        a pixel footprint channel becomes the cell's: × the latent factor), or ``None`` when the set mixer
+        uses no points."""
+        if points is None or not self.config.needs_points:
             return None
         factor = self.config.latent_factor
-        return torch.nn.functional.avg_pool2d(points.float(), factor) if factor > 1 else points.float()
+        cells = torch.nn.functional.avg_pool2d(points.float(), factor) if factor > 1 else points.float()
+        if cells.shape[1] > 4:
+            cells = torch.cat([cells[:, :4], cells[:, 4:] * factor], dim=1)
+        return cells
 
     def to_x0(self, latents: torch.Tensor, prediction: torch.Tensor) -> torch.Tensor:
         """Analytic one-step x̂0 from the image latent and the UNet output (v or ε; residual: a correction)."""
@@ -208,6 +228,7 @@ class SetDiffModel(nn.Module):
         geometry_keep: torch.Tensor | None = None,
         points: torch.Tensor | None = None,
         view_chunk: int | None = None,
+        num_references: int | None = None,
     ) -> torch.Tensor:
         """x̂0 for every view, ``(B·V, C, h, w)``.
 
@@ -220,9 +241,11 @@ class SetDiffModel(nn.Module):
             points: ``(B·V, 4, H, W)`` pixel surface points for the attention bias (or ``None``);
                 dropped with the geometry.
             view_chunk: run Ψ on this many views per call (``None`` = all at once).
+            num_references: N, the references at the start of each set (needed by ``knn`` levels).
         """
+        n = num_references
         if geometry is None or self.geometry_encoder is None:
-            return self.to_x0(latents, self.unet_output(latents, num_views))
+            return self.to_x0(latents, self.unet_output(latents, num_views, num_references=n))
         chunks = view_chunks(geometry.shape[0], view_chunk or geometry.shape[0])
         g = torch.cat([self.geometry_latents(geometry[chunk].to(latents.dtype)) for chunk in chunks])
         cells = self.latent_points(points)
@@ -232,14 +255,14 @@ class SetDiffModel(nn.Module):
             if cells is not None:
                 cells = cells * keep.view(-1, 1, 1, 1).to(cells.dtype)
         if guidance_scale == 1.0:
-            return self.to_x0(latents, self.unet_output(latents + g, num_views, cells))
+            return self.to_x0(latents, self.unet_output(latents + g, num_views, cells, n))
         if self.config.cfg_batched:
             both_cells = None if cells is None else torch.cat([cells, torch.zeros_like(cells)])
-            both = self.unet_output(torch.cat([latents + g, latents]), num_views, both_cells)
+            both = self.unet_output(torch.cat([latents + g, latents]), num_views, both_cells, n)
             conditional, unconditional = both.chunk(2)
         else:
-            conditional = self.unet_output(latents + g, num_views, cells)
-            unconditional = self.unet_output(latents, num_views)
+            conditional = self.unet_output(latents + g, num_views, cells, n)
+            unconditional = self.unet_output(latents, num_views, num_references=n)
         guided = unconditional + guidance_scale * (conditional - unconditional)
         return self.to_x0(latents, guided)
 
@@ -265,7 +288,9 @@ class SetDiffModel(nn.Module):
             offsets = torch.arange(sets, device=decode_index.device)[:, None] * views
             flat_decode = (offsets + n + decode_index[None, :].to(offsets.device)).reshape(-1)
         encoded = self.encode(images, flat_decode)
-        x0 = self.predict_x0(encoded.latents, geometry, views, geometry_keep=geometry_keep, points=points)
+        x0 = self.predict_x0(
+            encoded.latents, geometry, views, geometry_keep=geometry_keep, points=points, num_references=n
+        )
         x0 = x0.reshape(sets, views, *x0.shape[1:])
         target_x0 = x0[:, n:]
         decoded = None
@@ -294,7 +319,13 @@ class SetDiffModel(nn.Module):
         chunk = views_per_chunk(int(images.shape[-2]), int(images.shape[-1]))
         encoded = self._encode_in_chunks(images, targets.to(images.device), chunk)
         x0 = self.predict_x0(
-            encoded.latents, geometry, views, guidance_scale=scale, points=points, view_chunk=chunk
+            encoded.latents,
+            geometry,
+            views,
+            guidance_scale=scale,
+            points=points,
+            view_chunk=chunk,
+            num_references=n,
         )
         chosen = targets.to(x0.device)
         target_skips = encoded.skips

@@ -16,6 +16,15 @@ checkpointed blocks are recomputed during the backward pass, after such a contex
 whereas the kwargs are arguments of the checkpointed call and are replayed with it.  ``attn2`` gets a
 thin ``PerViewAttnProcessor`` that accepts the key (diffusers would otherwise warn on every call).
 
+Beyond the paper (``ModelConfig.set_attention``, per resolution level): ``view`` restricts a layer's
+self-attention to each view's own tokens (a plain UNet layer), and ``knn`` lets each token attend to its
+own view's tokens, the ``k`` reference tokens nearest to its C-map surface point in 3D (other views'
+references only; tokens without a surface point get none) and one learned "no match" key/value
+(``set_no_match_key`` / ``set_no_match_value``, zero-initialised), all under one softmax — T·(L + k + 1)
+pairs instead of T².  ``full`` (the default) is the paper's joint attention, computed exactly as before.
+The C-map bias comes in two forms: ``cmap_distance`` (−s·min(d², cap), d in packet units) and
+``cmap_relative`` (d divided by the query token's footprint, :func:`relative_distance_bias`).
+
 Written here because diffusers ships no processor for joint attention across batch items.
 """
 
@@ -23,7 +32,9 @@ from __future__ import annotations
 
 import functools
 import math
-from typing import Any
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, Literal
 
 import torch
 import torch.nn.functional as F
@@ -31,29 +42,51 @@ from torch import nn
 
 NUM_VIEWS_KEY = "num_views"
 POINTS_KEY = "token_points"
+NUM_REFERENCES_KEY = "num_references"
 BIAS_PARAMETER = "set_bias_log_scale"
 #: Initial strength s of the C-map distance bias (logits −s·d², d in packet units).
 BIAS_INITIAL_SCALE = 2.0
 #: Squared distances are capped here (packet units²): beyond it a token is simply "elsewhere".
 BIAS_DISTANCE_CAP = 4.0
+#: Initial strength s of the relative bias (logits −s·r², r = distance / the query token's footprint): the
+#: logit falls by 1 two footprints away.
+RELATIVE_BIAS_INITIAL_SCALE = 0.25
+#: Squared relative distances are capped here (footprints²): eight token footprints away is "elsewhere".
+RELATIVE_BIAS_CAP = 64.0
+#: The learned "no match" key and value of a ``knn`` layer (each ``(heads · head_dim,)``, zero-initialised).
+NO_MATCH_KEY = "set_no_match_key"
+NO_MATCH_VALUE = "set_no_match_value"
+#: What a set-mixing layer attends to: the whole set (the paper), its own view, or its own view plus the
+#: k nearest reference tokens in 3D and a learned "no match" key.
+SetAttention = Literal["full", "view", "knn"]
 #: Most elements (sets × queries × keys) of one block of the distance bias: 16 Mi float32 = 64 MiB (each set
 #: of the 256×144 driving demo is one block, as before blocking existed).  The bias is built and applied
 #: block by block over queries (:func:`biased_attention`), never as T × T.
 BIAS_BLOCK_ELEMENTS = 1 << 24
 
 
-def set_kwargs(num_views: int, points: torch.Tensor | None = None) -> dict[str, Any]:
+def set_kwargs(
+    num_views: int, points: torch.Tensor | None = None, num_references: int | None = None
+) -> dict[str, Any]:
     """The ``cross_attention_kwargs`` of a UNet call whose batch is ``(B·num_views)`` in "(b v)" order.
 
     Args:
         points: ``(B·V, 4, h, w)`` per latent cell: the C-map surface point × validity (3) and the
-            validity (1) — for the C-map distance attention bias; ``None`` = no bias.
+            validity (1) — for the C-map distance attention bias; ``(B·V, 5, h, w)`` adds the cell's
+            footprint × validity (packet units, :func:`pool_token_geometry`) for the relative bias;
+            ``None`` = no points.
+        num_references: N, the references at the start of each set (``knn`` layers fetch from them only);
+            ``None`` = not given (a ``knn`` layer then refuses to run).
     """
     if num_views < 1:
         raise ValueError(f"a set needs at least one view, got {num_views}")
     kwargs: dict[str, Any] = {NUM_VIEWS_KEY: int(num_views)}
     if points is not None:
         kwargs[POINTS_KEY] = points
+    if num_references is not None:
+        if not 0 <= num_references <= num_views:
+            raise ValueError(f"num_references must be in [0, {num_views}], got {num_references}")
+        kwargs[NUM_REFERENCES_KEY] = int(num_references)
     return kwargs
 
 
@@ -71,11 +104,77 @@ def token_grid(height: int, width: int, tokens: int) -> tuple[int, int]:
 def pool_token_points(points: torch.Tensor, tokens: int) -> tuple[torch.Tensor, torch.Tensor]:
     """Latent-cell points ``(B·V, 4, h, w)`` → per-token mean surface points ``(B·V, L, 3)`` and
     validity ``(B·V, L)`` bool (more than half the token's area has a surface point)."""
-    h, w = token_grid(int(points.shape[-2]), int(points.shape[-1]), tokens)
+    geometry = pool_token_geometry(points, tokens)
+    return geometry.points, geometry.valid
+
+
+@dataclass
+class TokenGeometry:
+    """The C-map geometry of the tokens of one UNet level.
+
+    Attributes:
+        points: ``(S, T, 3)`` mean surface point of each token's cells that have one (packet units).
+        valid: ``(S, T)`` bool, more than half the token's area has a surface point.
+        coverage: ``(S, T)`` float in [0, 1], the share of the token's area that has one.
+        footprint: ``(S, T)`` the token's side at its surface (depth × the token's angular size, packet
+            units), or ``None`` when the points came without it.
+    """
+
+    points: torch.Tensor
+    valid: torch.Tensor
+    coverage: torch.Tensor
+    footprint: torch.Tensor | None
+
+    def grouped(self, sets: int) -> TokenGeometry:
+        """Views merged into their sets: ``(S·V, L, ...)`` → ``(S, V·L, ...)``."""
+        footprint = None if self.footprint is None else self.footprint.reshape(sets, -1)
+        return TokenGeometry(
+            self.points.reshape(sets, -1, 3),
+            self.valid.reshape(sets, -1),
+            self.coverage.reshape(sets, -1),
+            footprint,
+        )
+
+
+def pool_token_geometry(points: torch.Tensor, tokens: int) -> TokenGeometry:
+    """Latent-cell points ``(B·V, 4 or 5, h, w)`` → the :class:`TokenGeometry` of a level with ``tokens``
+    tokens per view.  Channel 4, when present, is the cell's footprint × validity; a token's footprint
+    is its valid cells' mean footprint × the cells per token side (``h / token rows``)."""
+    cells_h = int(points.shape[-2])
+    h, w = token_grid(cells_h, int(points.shape[-1]), tokens)
     pooled = F.adaptive_avg_pool2d(points.float(), (h, w))
-    coverage = pooled[:, 3:]
-    xyz = pooled[:, :3] / coverage.clamp_min(1e-6)
-    return xyz.flatten(2).transpose(1, 2), (coverage > 0.5).flatten(1)
+    coverage = pooled[:, 3:4]
+    safe = coverage.clamp_min(1e-6)
+    xyz = (pooled[:, :3] / safe).flatten(2).transpose(1, 2)
+    footprint = None
+    if points.shape[1] > 4:
+        footprint = (pooled[:, 4] / safe[:, 0] * (cells_h / h)).flatten(1)
+    return TokenGeometry(xyz, (coverage > 0.5).flatten(1), coverage.flatten(1), footprint)
+
+
+def relative_distance_bias(
+    geometry: TokenGeometry, scale: torch.Tensor, rows: slice | None = None
+) -> torch.Tensor:
+    """Scale-free attention logits ``(S, 1, Q, T)``: ``−s·[c_q c_k·min(r², cap) + (1 − c_q c_k)·cap]`` with
+    ``r = ‖p_q − p_k‖ / f_q`` (``f_q`` the query token's footprint) and ``c`` the tokens' surface coverage.
+
+    Scaling the scene (points and camera translations) scales distances and footprints alike, so the bias
+    does not change.  Tokens with little surface (low render alpha) are handled by their coverage: a
+    query without any gets the constant row ``−s·cap`` (no effect: it attends by content alone), a key
+    without any counts as "elsewhere" (the cap), partial coverage interpolates linearly.
+
+    Args:
+        geometry: the tokens of S sets (``footprint`` required).
+        rows: the queries (``None`` = all T).
+    """
+    if geometry.footprint is None:
+        raise RuntimeError("the relative C-map bias needs token footprints (5-channel points)")
+    rows = slice(None) if rows is None else rows
+    points = geometry.points
+    footprint = geometry.footprint[:, rows, None].clamp_min(1e-12)
+    relative = (torch.cdist(points[:, rows], points) / footprint).square().clamp(max=RELATIVE_BIAS_CAP)
+    weight = geometry.coverage[:, rows, None] * geometry.coverage[:, None, :]
+    return (-scale * (weight * relative + (1.0 - weight) * RELATIVE_BIAS_CAP))[:, None]
 
 
 def distance_bias(
@@ -109,10 +208,7 @@ def biased_attention(
     valid: torch.Tensor,
     scale: torch.Tensor,
 ) -> torch.Tensor:
-    """``softmax(QKᵀ/√d + distance_bias)·V``, computed blockwise over queries so that no ``T × T`` tensor is
-    ever held: each block of queries gets its rows of :func:`distance_bias` as the additive mask of a
-    fused SDPA kernel (which never materialises the attention matrix), so peak memory grows linearly
-    with T.  Each query's softmax runs over all keys, so the result equals the unblocked one.
+    """``softmax(QKᵀ/√d + distance_bias)·V`` (:func:`row_biased_attention` with :func:`distance_bias`).
 
     Args:
         query, key, value: ``(B, heads, T, d)``.
@@ -121,10 +217,31 @@ def biased_attention(
     Returns:
         ``(B, heads, T, d)``.
     """
+    return row_biased_attention(query, key, value, functools.partial(distance_bias, points, valid, scale))
+
+
+def row_biased_attention(
+    query: torch.Tensor,
+    key: torch.Tensor,
+    value: torch.Tensor,
+    bias_rows: Callable[[slice | None], torch.Tensor],
+) -> torch.Tensor:
+    """``softmax(QKᵀ/√d + bias)·V``, computed blockwise over queries so that no ``T × T`` tensor is
+    ever held: each block of queries gets its rows of the bias (``bias_rows(rows)`` → ``(B, 1, Q, T)``;
+    ``None`` = all rows) as the additive mask of a fused SDPA kernel (which never materialises the
+    attention matrix), so peak memory grows linearly with T.  Each query's softmax runs over all keys,
+    so the result equals the unblocked one.
+
+    Args:
+        query, key, value: ``(B, heads, T, d)``.
+
+    Returns:
+        ``(B, heads, T, d)``.
+    """
     sets, _, total, _ = query.shape
     block = bias_block_rows(sets, total)
     if block >= total:
-        bias = distance_bias(points, valid, scale).to(query.dtype)
+        bias = bias_rows(None).to(query.dtype)
         return F.scaled_dot_product_attention(query, key, value, attn_mask=bias)
     # Written into one preallocated output: collecting per-block outputs between the large bias blocks
     # fragments the CPU heap (glibc kept 2 GB for a 16-view 576×1024 set).  Autograd tracks the
@@ -132,8 +249,143 @@ def biased_attention(
     output = query.new_empty(*query.shape[:3], value.shape[-1])
     for start in range(0, total, block):
         rows = slice(start, min(start + block, total))
-        bias = distance_bias(points, valid, scale, rows).to(query.dtype)
+        bias = bias_rows(rows).to(query.dtype)
         output[:, :, rows] = F.scaled_dot_product_attention(query[:, :, rows], key, value, attn_mask=bias)
+    return output
+
+
+def pair_bias(
+    geometry: TokenGeometry,
+    query_index: torch.Tensor,
+    key_index: torch.Tensor,
+    scale: torch.Tensor,
+    relative: bool,
+) -> torch.Tensor:
+    """The C-map bias of chosen token pairs, elementwise: query tokens ``query_index`` ``(S, Q, 1)`` against
+    key tokens ``key_index`` ``(S, Q, K)`` (indices into T) → ``(S, Q, K)``, the same values as
+    :func:`distance_bias` (``relative = False``) or :func:`relative_distance_bias` give those pairs."""
+
+    def gathered(x: torch.Tensor, index: torch.Tensor) -> torch.Tensor:  # (S, T, ...) at (S, Q, K)
+        flat = index.reshape(index.shape[0], -1)
+        if x.ndim == 3:
+            return torch.gather(x, 1, flat[..., None].expand(-1, -1, x.shape[-1])).reshape(*index.shape, -1)
+        return torch.gather(x, 1, flat).reshape(index.shape)
+
+    difference = gathered(geometry.points, query_index) - gathered(geometry.points, key_index)
+    squared = difference.square().sum(-1)
+    if relative:
+        if geometry.footprint is None:
+            raise RuntimeError("the relative C-map bias needs token footprints (5-channel points)")
+        footprint = gathered(geometry.footprint, query_index).clamp_min(1e-12)
+        ratio = (squared / footprint.square()).clamp(max=RELATIVE_BIAS_CAP)
+        weight = gathered(geometry.coverage, query_index) * gathered(geometry.coverage, key_index)
+        return -scale * (weight * ratio + (1.0 - weight) * RELATIVE_BIAS_CAP)
+    both = gathered(geometry.valid, query_index) & gathered(geometry.valid, key_index)
+    capped = squared.clamp(max=BIAS_DISTANCE_CAP)
+    return -scale * torch.where(both, capped, torch.full_like(capped, BIAS_DISTANCE_CAP))
+
+
+def nearest_reference_keys(
+    geometry: TokenGeometry, rows: slice, candidates: torch.Tensor, neighbours: int
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """For the query tokens ``rows`` of S sets, the ``neighbours`` candidate tokens nearest in 3D.
+
+    Args:
+        geometry: the sets' tokens (``(S, T, ...)``).
+        rows: the queries.
+        candidates: ``(C,)`` token indices the keys may come from (e.g. the other references' tokens).
+
+    Returns:
+        ``index`` ``(S, Q, k)`` (into T; k = min(neighbours, C)) and ``found`` ``(S, Q, k)`` bool: False
+        where the query or the candidate has no surface point (those slots are masked out).
+    """
+    count = min(neighbours, int(candidates.numel()))
+    sets = geometry.points.shape[0]
+    queries = geometry.points[:, rows]
+    if count == 0:
+        empty = torch.zeros((sets, queries.shape[1], 0), dtype=torch.long, device=queries.device)
+        return empty, empty.bool()
+    distance = torch.cdist(queries.float(), geometry.points[:, candidates].float())
+    usable = geometry.valid[:, rows, None] & geometry.valid[:, None, candidates]
+    distance = torch.where(usable, distance, torch.full_like(distance, math.inf))
+    nearest, order = distance.topk(count, dim=-1, largest=False)
+    return candidates[order], torch.isfinite(nearest)
+
+
+def nearest_reference_attention(
+    query: torch.Tensor,
+    key: torch.Tensor,
+    value: torch.Tensor,
+    geometry: TokenGeometry | None,
+    *,
+    num_views: int,
+    num_references: int,
+    neighbours: int,
+    no_match_key: torch.Tensor,
+    no_match_value: torch.Tensor,
+    bias_scale: torch.Tensor | None = None,
+    relative: bool = False,
+) -> torch.Tensor:
+    """Each token attends, under one softmax, to its own view's L tokens, the ``neighbours`` reference
+    tokens of the *other* views nearest to its surface point (:func:`nearest_reference_keys`) and a
+    learned "no match" key.  Computed per view in blocks of queries (as :func:`row_biased_attention`).
+
+    Args:
+        query, key, value: ``(S, heads, V·L, d)`` — S sets of V views of L tokens, references first.
+        geometry: the tokens' :class:`TokenGeometry` (grouped by set), or ``None`` (no geometry: no
+            neighbours, own view and "no match" only).
+        num_references: N; neighbours come from views ``[0, N)``.
+        no_match_key, no_match_value: ``(heads·d,)`` the learned extra key and value.
+        bias_scale: the C-map bias strength, added to the own-view and neighbour logits (``None`` = none).
+        relative: the bias is :func:`relative_distance_bias`'s, else :func:`distance_bias`'s.
+
+    Returns:
+        ``(S, heads, V·L, d)``.
+    """
+    sets, heads, total, head_dim = query.shape
+    tokens = total // num_views
+    device = query.device
+    factor = 1.0 / math.sqrt(head_dim)
+    spare_key = no_match_key.to(query.dtype).reshape(heads, head_dim)
+    spare_value = no_match_value.to(value.dtype).reshape(heads, head_dim)
+    all_index = torch.arange(total, device=device)
+    per_query = tokens + 2 * neighbours * head_dim + neighbours + 1
+    block = max(1, min(tokens, BIAS_BLOCK_ELEMENTS // max(1, sets * heads * per_query)))
+    output = query.new_empty(*query.shape[:3], value.shape[-1])
+    for view in range(num_views):
+        own = slice(view * tokens, (view + 1) * tokens)
+        own_keys, own_values = key[:, :, own], value[:, :, own]
+        is_candidate = all_index < num_references * tokens
+        is_candidate[own] = False
+        candidates = all_index[is_candidate]
+        for start in range(own.start, own.stop, block):
+            rows = slice(start, min(start + block, own.stop))
+            q = query[:, :, rows]
+            own_logits = q @ own_keys.transpose(-1, -2) * factor  # (S, h, Q, L)
+            if geometry is not None:
+                index, found = nearest_reference_keys(geometry, rows, candidates, neighbours)
+            else:
+                index = torch.zeros((sets, q.shape[2], 0), dtype=torch.long, device=device)
+                found = index.bool()
+            picked = index.reshape(sets, 1, -1, 1).expand(-1, heads, -1, head_dim)
+            near_keys = torch.gather(key, 2, picked).reshape(sets, heads, *index.shape[1:], head_dim)
+            near_values = torch.gather(value, 2, picked).reshape(sets, heads, *index.shape[1:], head_dim)
+            near_logits = (q[:, :, :, None] * near_keys).sum(-1) * factor  # (S, h, Q, k)
+            if bias_scale is not None and geometry is not None:
+                query_index = all_index[rows].expand(sets, -1)[..., None]
+                own_index = all_index[own].expand(sets, q.shape[2], -1)
+                own_logits = own_logits + pair_bias(geometry, query_index, own_index, bias_scale, relative)[
+                    :, None
+                ].to(own_logits.dtype)
+                near_logits = near_logits + pair_bias(geometry, query_index, index, bias_scale, relative)[
+                    :, None
+                ].to(near_logits.dtype)
+            near_logits = near_logits.masked_fill(~found[:, None], -math.inf)
+            spare_logits = (q * spare_key[None, :, None]).sum(-1, keepdim=True) * factor  # (S, h, Q, 1)
+            weights = torch.softmax(torch.cat([own_logits, near_logits, spare_logits], dim=-1), dim=-1)
+            own_w, near_w, spare_w = weights.split([tokens, index.shape[-1], 1], dim=-1)
+            mixed = own_w @ own_values + (near_w[..., None] * near_values).sum(-2)
+            output[:, :, rows] = mixed + spare_w * spare_value[None, :, None]
     return output
 
 
@@ -163,19 +415,45 @@ def biased_layers(names: list[str], levels: int, which: str) -> list[str]:
     return [name for name in names if mixer_level(name, levels) == deepest]
 
 
-def add_bias_parameters(unet: torch.nn.Module, names: list[str]) -> None:
-    """Give each set-mixing ``attn1`` a learnable log-strength of the distance bias (saved with the UNet)."""
+def add_bias_parameters(unet: torch.nn.Module, names: list[str], initial: float = BIAS_INITIAL_SCALE) -> None:
+    """Give each set-mixing ``attn1`` a learnable log-strength of the distance bias (saved with the UNet),
+    starting at ``log(initial)``."""
     modules = dict(unet.named_modules())
     for name in names:
         module = modules[name.removesuffix(".processor")]
         if not hasattr(module, BIAS_PARAMETER):
-            module.register_parameter(
-                BIAS_PARAMETER, nn.Parameter(torch.tensor(math.log(BIAS_INITIAL_SCALE)))
-            )
+            module.register_parameter(BIAS_PARAMETER, nn.Parameter(torch.tensor(math.log(initial))))
+
+
+def add_no_match_parameters(unet: torch.nn.Module, names: list[str]) -> None:
+    """Give each ``knn`` set-mixing ``attn1`` its learned "no match" key and value (zeros, saved with the UNet)."""
+    modules = dict(unet.named_modules())
+    for name in names:
+        module = modules[name.removesuffix(".processor")]
+        width = module.to_k.out_features
+        for parameter in (NO_MATCH_KEY, NO_MATCH_VALUE):
+            if not hasattr(module, parameter):
+                module.register_parameter(parameter, nn.Parameter(torch.zeros(width)))
 
 
 class SetSelfAttnProcessor:
-    """Joint self-attention over the union of all V views' tokens (replaces ``attn1`` processors)."""
+    """Joint self-attention over the union of all V views' tokens (replaces ``attn1`` processors).
+
+    Args:
+        attention: what each token attends to (:data:`SetAttention`): ``full`` (the paper), ``view`` or ``knn``.
+        neighbours: k, the nearest reference tokens a ``knn`` layer adds.
+        relative_bias: the layer's C-map bias (when it has one) is :func:`relative_distance_bias`, else
+            :func:`distance_bias`.
+    """
+
+    def __init__(
+        self, attention: SetAttention = "full", neighbours: int = 16, relative_bias: bool = False
+    ) -> None:
+        if attention not in ("full", "view", "knn"):
+            raise ValueError(f"set attention must be 'full', 'view' or 'knn', got {attention!r}")
+        if neighbours < 1:
+            raise ValueError(f"neighbours must be >= 1, got {neighbours}")
+        self.attention, self.neighbours, self.relative_bias = attention, int(neighbours), bool(relative_bias)
 
     def __call__(
         self,
@@ -186,12 +464,14 @@ class SetSelfAttnProcessor:
         temb: torch.Tensor | None = None,
         num_views: int | None = None,
         token_points: torch.Tensor | None = None,
+        num_references: int | None = None,
         **kwargs: Any,
     ) -> torch.Tensor:
-        """``hidden_states`` ``(B·V, L, C)`` → ``(B·V, L, C_out)``, attending across the V views of each set.
+        """``hidden_states`` ``(B·V, L, C)`` → ``(B·V, L, C_out)``, attending across the V views of each set
+        (or as :attr:`attention` restricts it).
 
         With ``token_points`` and a layer that has the bias parameter, the logits get the C-map
-        distance bias (:func:`distance_bias`)."""
+        distance bias (:func:`distance_bias` or :func:`relative_distance_bias`)."""
         if num_views is None:
             raise RuntimeError("set mixer called without cross_attention_kwargs={'num_views': V}")
         if encoder_hidden_states is not None or attention_mask is not None:
@@ -204,28 +484,48 @@ class SetSelfAttnProcessor:
         if batch_views % num_views:
             raise RuntimeError(f"UNet batch {batch_views} is not a multiple of the set size {num_views}")
         sets = batch_views // num_views
+        groups = batch_views if self.attention == "view" else sets
         heads = attn.heads
         query = attn.to_q(hidden_states)
         key = attn.to_k(hidden_states)
         value = attn.to_v(hidden_states)
         head_dim = query.shape[-1] // heads
 
-        def to_heads(
-            x: torch.Tensor,
-        ) -> torch.Tensor:  # (B·V, L, h·d) → (B, h, V·L, d); a view in "(b v)" order
-            return x.reshape(sets, num_views * tokens, heads, head_dim).transpose(1, 2)
+        def to_heads(x: torch.Tensor) -> torch.Tensor:
+            """(B·V, L, h·d) → (G, h, T, d): G sets of V·L tokens ("(b v)" order), or B·V views of L."""
+            return x.reshape(groups, -1, heads, head_dim).transpose(1, 2)
 
         query, key, value = to_heads(query), to_heads(key), to_heads(value)
         log_scale = getattr(attn, BIAS_PARAMETER, None)
-        if token_points is not None and log_scale is not None:
-            points, valid = pool_token_points(token_points, tokens)
-            mixed = biased_attention(
+        scale = None if token_points is None or log_scale is None else log_scale.exp()
+        if self.attention == "knn":
+            if num_references is None:
+                raise RuntimeError("a 'knn' set-mixing layer needs cross_attention_kwargs['num_references']")
+            geometry = (
+                None if token_points is None else pool_token_geometry(token_points, tokens).grouped(sets)
+            )
+            mixed = nearest_reference_attention(
                 query,
                 key,
                 value,
-                points.reshape(sets, num_views * tokens, 3),
-                valid.reshape(sets, -1),
-                log_scale.exp(),
+                geometry,
+                num_views=num_views,
+                num_references=num_references,
+                neighbours=self.neighbours,
+                no_match_key=getattr(attn, NO_MATCH_KEY),
+                no_match_value=getattr(attn, NO_MATCH_VALUE),
+                bias_scale=scale,
+                relative=self.relative_bias,
+            )
+        elif scale is not None and token_points is not None and self.relative_bias:
+            geometry = pool_token_geometry(token_points, tokens).grouped(groups)
+            mixed = row_biased_attention(
+                query, key, value, functools.partial(relative_distance_bias, geometry, scale)
+            )
+        elif scale is not None and token_points is not None:
+            points, valid = pool_token_points(token_points, tokens)
+            mixed = biased_attention(
+                query, key, value, points.reshape(groups, -1, 3), valid.reshape(groups, -1), scale
             )
         else:
             mixed = F.scaled_dot_product_attention(query, key, value)
@@ -252,6 +552,7 @@ def per_view_processor_class() -> type:
             temb: torch.Tensor | None = None,
             num_views: int | None = None,
             token_points: torch.Tensor | None = None,
+            num_references: int | None = None,
             **kwargs: Any,
         ) -> torch.Tensor:
             return super().__call__(
@@ -276,22 +577,46 @@ def check_self_attention(attn: Any, name: str) -> None:
         raise RuntimeError(f"{name}: set mixer does not support {', '.join(unsupported)}")
 
 
-def install_set_mixer(unet: torch.nn.Module) -> list[str]:
+def level_attention(attention: Sequence[str], level: int) -> str:
+    """The set attention of resolution ``level`` (0 = full latent grid) from a per-level list; levels
+    past its end are ``full``."""
+    return attention[level] if level < len(attention) else "full"
+
+
+def install_set_mixer(
+    unet: torch.nn.Module,
+    attention: Sequence[str] = (),
+    *,
+    neighbours: int = 16,
+    relative_bias: bool = False,
+) -> list[str]:
     """Give every ``attn1`` of ``unet`` a :class:`SetSelfAttnProcessor`, every other attention the per-view one.
+
+    Args:
+        attention: the :data:`SetAttention` of each resolution level, level 0 first (missing levels:
+            ``full``); ``knn`` layers get their "no match" parameters (:func:`add_no_match_parameters`).
+        neighbours: k of the ``knn`` layers.
+        relative_bias: biased layers use :func:`relative_distance_bias`.
 
     Returns:
         the processor names that now mix across views (16 for the SD-Turbo UNet).
     """
     modules = dict(unet.named_modules())
+    levels = len(unet.down_blocks)
     processors: dict[str, Any] = {}
     mixed: list[str] = []
+    nearest: list[str] = []
     for name in unet.attn_processors:
         module_name = name.removesuffix(".processor")
         if module_name.endswith("attn1"):
             check_self_attention(modules[module_name], module_name)
-            processors[name] = SetSelfAttnProcessor()
+            kind = level_attention(attention, mixer_level(name, levels))
+            processors[name] = SetSelfAttnProcessor(kind, neighbours, relative_bias)  # type: ignore[arg-type]
             mixed.append(name)
+            if kind == "knn":
+                nearest.append(name)
         else:
             processors[name] = per_view_processor_class()()
     unet.set_attn_processor(processors)
+    add_no_match_parameters(unet, nearest)
     return mixed

@@ -347,7 +347,8 @@ def _micro_step(
         cmap_clip=mc.cmap_clip,
         pairs=mc.method == "difix",
         geometry_inputs=mc.geometry_inputs,
-        with_points=mc.attention_bias != "none",
+        with_points=mc.needs_points,
+        snapped_points=mc.snapped_points,
         identity_probability=tc.identity_fraction,
         masked_copy_probability=tc.masked_copy_fraction,
     )
