@@ -58,6 +58,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 from tqdm import tqdm
@@ -68,41 +69,24 @@ from benchmarks.common import machine
 from benchmarks.reproject_geometry import (
     add_store_arguments,
     masked_psnr,
+    packet_and_world,
     with_true_geometry,
 )
 from setdiff_bench.cameras import Camera
 from setdiff_bench.enhancers.reproject import (
     ReprojectConfig,
     blend_weights,
+    cmap_points,
     project,
 )
-from setdiff_bench.gaussians.backends.common import RenderOutput
 from setdiff_bench.gaussians.model import GaussianModel
-from setdiff_bench.gaussians.render import render
 from setdiff_bench.geometry import pixel_centers
 from setdiff_bench.io.atomic import write_text_atomic
-from setdiff_bench.packets.store import PacketStore, row_camera
-from setdiff_bench.synthetic.sparse import static_world
+from setdiff_bench.packets.store import PacketStore
 from setdiff_bench.types import Packet
 
 #: Relative inverse-depth tolerance of the visibility test (module docstring).
 TOLERANCE = 0.03
-
-
-def packet_and_world(
-    store: PacketStore, packet_id: str, scenes: Path, cache: dict[str, GaussianModel]
-) -> tuple[Packet, torch.Tensor, torch.Tensor, list[Camera], RenderOutput]:
-    """A packet, its targets' ground truth ``(M, 3, H, W)`` and static masks ``(M, 1, H, W)``, its views'
-    world cameras (references first) and the true world (rebuilt from ``scenes/<scene>/scene.json``, a
-    street or a sparse-view walk) rendered from them with C-maps and depth."""
-    packet = store.load_packet(packet_id)
-    truth, masks = store.load_ground_truth(packet_id)
-    cameras = [row_camera(row, world=True) for _, row in store.rows(packet_id).iterrows()]
-    if packet.scene not in cache:
-        cache[packet.scene] = static_world(scenes / packet.scene)
-    with torch.no_grad():
-        world = render(cache[packet.scene], cameras, with_geometry=True, tile_size=8)
-    return packet, truth, masks, cameras, world
 
 
 def reference_samples(
@@ -163,25 +147,55 @@ def share(mask: torch.Tensor, static: torch.Tensor) -> float:
     return float((mask & static).float().sum() / static.float().sum().clamp_min(1))
 
 
-def target_measures(
-    store: PacketStore,
-    packet_id: str,
-    scenes: Path,
-    cache: dict[str, GaussianModel],
+def true_depths(world_depth: torch.Tensor, world_alpha: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Expected depth ``(V, 1, H, W)`` (composited depth / alpha, 0 where invalid) and validity (alpha above
+    the reproject threshold and depth > 0) of the true world rendered from the packet's views."""
+    alphas = world_alpha.float()
+    valid = alphas > ReprojectConfig().alpha_threshold
+    depths = torch.where(valid, world_depth.float() / alphas.clamp_min(1e-6), torch.zeros_like(alphas))
+    return depths, valid & (depths > 0)
+
+
+def cmap_depths(
+    cameras: list[Camera], cmaps: torch.Tensor, alphas: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """The same as :func:`true_depths` from C-maps ``(V, 3, H, W)`` and alphas in the frame of ``cameras``
+    (the fit's, moved to the world frame): the camera-frame depth of each pixel's point C-map / alpha."""
+    points, valid = cmap_points(cmaps.float(), alphas.float(), ReprojectConfig().alpha_threshold)
+    depths = torch.zeros_like(alphas, dtype=torch.float32)
+    for v, camera in enumerate(cameras):
+        row = torch.from_numpy(np.array(camera.R[2], dtype=np.float64))  # copies: camera arrays are read-only
+        flat = points[v].reshape(3, -1).double()
+        depths[v, 0] = ((row @ flat) + float(camera.t[2])).reshape(depths.shape[-2:]).float()
+    depths = torch.where(valid, depths, torch.zeros_like(depths))
+    return depths, valid & (depths > 0)
+
+
+def copy_measures(
+    packet: Packet,
+    truth: torch.Tensor,
+    masks: torch.Tensor,
+    cameras: list[Camera],
+    depths: torch.Tensor,
+    valid: torch.Tensor,
+    weights: torch.Tensor,
     sizes: list[int],
     tolerances: list[float],
     window: int = 1,
-) -> list[dict[str, Any]]:
-    """One record per target of the packet and visibility tolerance: ``identity``, ``surface`` (share
-    of static pixels with a surface) and, per K in ``sizes`` and for ``all`` the packet's references,
-    ``seen_K``, ``visible_truth_K`` and ``copy_K`` (module docstring)."""
-    packet, truth, masks, cameras, world = packet_and_world(store, packet_id, scenes, cache)
+) -> tuple[list[dict[str, Any]], list[torch.Tensor]]:
+    """The ceiling's records of one packet with the given per-view geometry (module docstring): the target
+    pixels' points on their rays at ``depths`` and the references' surfaces at theirs.
+
+    Args:
+        cameras: the packet's world cameras, references first.
+        depths, valid: ``(V, 1, H, W)`` per view (:func:`true_depths`, or :func:`cmap_depths` of the fit).
+        weights: ``(M, N)`` Eq. 2 weights (:func:`setdiff_bench.enhancers.reproject.blend_weights`).
+
+    Returns:
+        one record per target and tolerance, and per target the ``(N, H·W)`` relative inverse-depth mismatch
+        (:func:`reference_samples`; ``inf`` where the target pixel has no point).
+    """
     n, renders = len(packet.references), packet.targets.images.float()
-    alphas = world.alpha.float()
-    config = ReprojectConfig()
-    valid = alphas > config.alpha_threshold  # (V, 1, H, W): pixels with a surface
-    depths = torch.where(valid, world.depth.float() / alphas.clamp_min(1e-6), torch.zeros_like(alphas))
-    valid &= depths > 0
     inverse_depths = torch.cat(
         [
             torch.where(valid[:n], 1.0 / depths[:n].clamp_min(1e-6), torch.zeros_like(depths[:n])),
@@ -189,10 +203,8 @@ def target_measures(
         ],
         dim=1,
     )
-    true_packet = with_true_geometry(packet, cameras, world.cmap.float(), world.alpha.float())
-    weights = blend_weights(true_packet, config).float()  # (M, N)
     images = packet.references.images.float()
-    records = []
+    records, mismatches = [], []
     pixels = pixel_centers(packet.height, packet.width)
     for m in range(len(packet.targets)):
         target_depth = depths[n + m].reshape(-1).double().numpy()
@@ -201,8 +213,10 @@ def target_measures(
         static = masks[m].reshape(-1)
         flat_truth, flat_render = truth[m].reshape(3, -1), renders[m].reshape(3, -1)
         mismatch, colours = reference_samples(target_points, cameras[:n], inverse_depths, images, window)
+        mismatch = torch.where(target_valid[None], mismatch, torch.full_like(mismatch, float("inf")))
+        mismatches.append(mismatch)
         common = {
-            "packet_id": packet_id,
+            "packet_id": packet.packet_id,
             "group": packet.group,
             "target": m,
             "identity": masked_psnr(flat_render, flat_truth, static[None]),
@@ -210,7 +224,7 @@ def target_measures(
             "references": n,
         }
         for tolerance in tolerances:
-            seen_by = (mismatch <= tolerance) & target_valid[None]
+            seen_by = mismatch <= tolerance
             record: dict[str, Any] = {**common, "tolerance": tolerance}
             for size in [*sizes, "all"]:
                 k = n if size == "all" else min(int(size), n)
@@ -225,6 +239,28 @@ def target_measures(
                     torch.where(seen[None], copied, flat_render).clamp(0, 1), flat_truth, static[None]
                 )
             records.append(record)
+    return records, mismatches
+
+
+def target_measures(
+    store: PacketStore,
+    packet_id: str,
+    scenes: Path,
+    cache: dict[str, GaussianModel],
+    sizes: list[int],
+    tolerances: list[float],
+    window: int = 1,
+) -> list[dict[str, Any]]:
+    """One record per target of the packet and visibility tolerance: ``identity``, ``surface`` (share
+    of static pixels with a surface) and, per K in ``sizes`` and for ``all`` the packet's references,
+    ``seen_K``, ``visible_truth_K`` and ``copy_K`` (module docstring), with the true geometry."""
+    packet, truth, masks, cameras, world = packet_and_world(store, packet_id, scenes, cache)
+    depths, valid = true_depths(world.depth, world.alpha)
+    true_packet = with_true_geometry(packet, cameras, world.cmap.float(), world.alpha.float())
+    weights = blend_weights(true_packet, ReprojectConfig()).float()  # (M, N)
+    records, _ = copy_measures(
+        packet, truth, masks, cameras, depths, valid, weights, sizes, tolerances, window
+    )
     return records
 
 

@@ -19,6 +19,9 @@ Usage (the demo's packets and scenes)::
 
     python benchmarks/reproject_geometry.py --packets runs/demo/work/packets --scenes runs/demo/work/scenes \
         --group interp --group lane+1 --group lane+2 --per-group 2 --out benchmarks/results/reproject_geometry.json
+
+The sparse-view scenes work the same way (groups ``n3`` / ``n6`` / ``n9``); ``benchmarks/sparse_geometry_audit.py``
+runs this comparison with the rest of the sparse benchmark's geometry audit.
 """
 
 from __future__ import annotations
@@ -43,8 +46,7 @@ from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.gaussians.render import render
 from setdiff_bench.metrics.psnr import psnr
 from setdiff_bench.packets.store import PacketStore, row_camera
-from setdiff_bench.synthetic.generate import build_scene
-from setdiff_bench.synthetic.presets import get_preset
+from setdiff_bench.synthetic.sparse import static_world
 from setdiff_bench.types import Packet
 
 
@@ -57,13 +59,10 @@ def masked_psnr(image: torch.Tensor, truth: torch.Tensor, mask: torch.Tensor) ->
 
 
 def world_model(scenes: Path, scene: str, cache: dict[str, GaussianModel]) -> GaussianModel:
-    """The static world of a synthetic scene, rebuilt from its ``scene.json`` (preset, seed, index)."""
+    """The static world of a synthetic scene of either kind (a street or a sparse-view walk), rebuilt from its
+    ``scene.json`` (preset, seed, index; :func:`setdiff_bench.synthetic.sparse.static_world`)."""
     if scene not in cache:
-        description = json.loads((scenes / scene / "scene.json").read_text())
-        build = build_scene(
-            get_preset(description["preset"]), int(description["seed"]), int(description["index"])
-        )
-        cache[scene] = build.world.static
+        cache[scene] = static_world(scenes / scene)
     return cache[scene]
 
 
@@ -71,7 +70,8 @@ def packet_and_world(
     store: PacketStore, packet_id: str, scenes: Path, cache: dict[str, GaussianModel]
 ) -> tuple[Packet, torch.Tensor, torch.Tensor, list[Camera], RenderOutput]:
     """A packet, its targets' ground truth ``(M, 3, H, W)`` and static masks ``(M, 1, H, W)``, its views'
-    world cameras (references first) and the true world rendered from them with C-maps and depth."""
+    world cameras (references first) and the true world (a street or a sparse-view walk) rendered from them
+    with C-maps and depth."""
     packet = store.load_packet(packet_id)
     truth, masks = store.load_ground_truth(packet_id)
     cameras = [row_camera(row, world=True) for _, row in store.rows(packet_id).iterrows()]
