@@ -38,6 +38,7 @@ import torch
 from setdiff_bench.errors import FallbackWarning
 from setdiff_bench.gaussians.backends.torch_ref import quaternion_to_rotation
 from setdiff_bench.gaussians.optim import GaussianParameters
+from setdiff_bench.gaussians.portable import logistic, standard_normal, vector_norm
 
 SPLIT_SCALE_DIVISOR = 1.6  # Inria: scale / (0.8 · N) with N = 2
 SPLIT_COUNT = 2
@@ -81,7 +82,7 @@ class DensityStats:
         visible = meta["visible"].reshape(-1)
         grad = means2d.grad.detach().reshape(-1, 2)
         ndc = grad * torch.tensor([width / 2.0, height / 2.0], device=grad.device, dtype=grad.dtype)
-        norm = ndc.norm(dim=-1)
+        norm = vector_norm(ndc)
         self.grad_sum += torch.where(visible, norm, torch.zeros_like(norm))
         self.count += visible.to(self.count.dtype)
         radii = meta["radii"].reshape(len(visible), -1).to(self.max_radius.dtype).amax(dim=-1)
@@ -239,7 +240,7 @@ class DensificationStrategy:
             # split samples: x ~ N(mean, R diag(s²) Rᵀ)
             s = scales[split_rows]
             rotation = quaternion_to_rotation(p["quats"][split_rows])
-            noise = torch.randn(split_rows.numel(), 3, generator=state.generator, device="cpu").to(device) * s
+            noise = standard_normal(split_rows.numel(), 3, state.generator).to(device) * s
             split_means = p["means"][split_rows] + torch.einsum("nij,nj->ni", rotation, noise)
             split_log_scales = torch.log(s / SPLIT_SCALE_DIVISOR)
 
@@ -250,7 +251,7 @@ class DensificationStrategy:
             values["means"][start:] = split_means
             values["log_scales"][start:] = split_log_scales
 
-            opacity = torch.sigmoid(values["opacity_logits"])
+            opacity = logistic(values["opacity_logits"])
             prune = opacity < self.min_opacity
             prune[:n] |= split  # split originals are replaced by their samples
             if prune_large:

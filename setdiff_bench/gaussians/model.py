@@ -14,6 +14,7 @@ import numpy as np
 import torch
 
 from setdiff_bench.errors import PlyError
+from setdiff_bench.gaussians.portable import logistic, normalize
 from setdiff_bench.gaussians.sh import eval_sh, num_sh_bases, rgb_to_sh_dc
 
 
@@ -67,20 +68,20 @@ class GaussianModel:
 
     @property
     def opacities(self) -> torch.Tensor:
-        """``(N,)`` activated opacities in (0, 1)."""
-        return torch.sigmoid(self.opacity_logits)
+        """``(N,)`` activated opacities in (0, 1) (:func:`logistic` of the logits)."""
+        return logistic(self.opacity_logits)
 
     @property
     def unit_quats(self) -> torch.Tensor:
         """``(N, 4)`` normalised quaternions ``w, x, y, z``."""
-        return torch.nn.functional.normalize(self.quats, dim=-1)
+        return normalize(self.quats)
 
     def colors(self, camera_center: torch.Tensor, degree: int | None = None) -> torch.Tensor:
         """View-dependent colours ``(N, 3)``: ``max(SH(dir) + 0.5, 0)`` with ``dir = mean − camera centre``."""
         degree = self.sh_degree if degree is None else min(degree, self.sh_degree)
         if degree == 0:
             return torch.clamp_min(self.sh[:, 0, :] * 0.28209479177387814 + 0.5, 0.0)
-        dirs = torch.nn.functional.normalize(self.means - camera_center.to(self.means), dim=-1)
+        dirs = normalize(self.means - camera_center.to(self.means))
         return torch.clamp_min(eval_sh(degree, self.sh, dirs) + 0.5, 0.0)
 
     # ------------------------------------------------------------------ conversions

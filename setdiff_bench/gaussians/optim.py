@@ -1,8 +1,11 @@
 """Optimiser plumbing for 3DGS fitting: trainable parameter groups, the standard learning rates, the
 position learning-rate decay, and Adam-state surgery when Gaussians are added or removed.
 
-The optimiser is ``torch.optim.Adam`` (one parameter group per attribute, ``eps = 1e-15`` as in the
-Inria code).  Densification changes the number of rows; :meth:`GaussianParameters.remap` rebuilds every
+The optimiser is Adam (one parameter group per attribute, ``eps = 1e-15`` as in the Inria code), written
+out here (:class:`PortableAdam`) with torch's state layout and update formula: ``torch.optim.Adam``'s CPU
+kernels (``lerp_``, ``addcmul_``) use fused multiply-adds in their AVX2 / AVX-512 paths and plain multiplies
+and adds in the scalar one, so a fit's last bits, which thousands of steps amplify, depended on the CPU it
+ran on.  Densification changes the number of rows; :meth:`GaussianParameters.remap` rebuilds every
 parameter from a row map and carries each surviving row's Adam moments along (new rows start at zero),
 exactly what graphdeco-inria/gaussian-splatting does with ``cat_tensors_to_optimizer`` /
 ``_prune_optimizer``.
@@ -43,13 +46,56 @@ def exponential_lr(
     return delay_rate * math.exp(math.log(lr_init) * (1 - t) + math.log(lr_final) * t)
 
 
+class PortableAdam(torch.optim.Optimizer):
+    """Adam (Kingma & Ba) exactly as ``torch.optim.Adam(foreach=False)`` computes it, with the same bits on
+    every CPU: each update is separate element-wise multiplies, adds, a square root and a division, which
+    IEEE arithmetic rounds identically at every vector width (no fused multiply-add).
+
+    State per parameter, named as torch names it (so checkpoints and the row surgery below are shared):
+    ``step`` (0-d float32 tensor), ``exp_avg`` and ``exp_avg_sq`` (the parameter's shape).
+    """
+
+    def __init__(
+        self,
+        params: list[dict],
+        lr: float = 1e-3,
+        betas: tuple[float, float] = (0.9, 0.999),
+        eps: float = 1e-8,
+    ) -> None:
+        super().__init__(params, {"lr": lr, "betas": betas, "eps": eps})
+
+    @torch.no_grad()
+    def step(self, closure: None = None) -> None:  # type: ignore[override]
+        """One Adam update of every parameter that has a gradient."""
+        for group in self.param_groups:
+            beta1, beta2 = group["betas"]
+            for param in group["params"]:
+                if param.grad is None:
+                    continue
+                grad = param.grad
+                state = self.state[param]
+                if not state:
+                    state["step"] = torch.tensor(0.0)
+                    state["exp_avg"] = torch.zeros_like(param)
+                    state["exp_avg_sq"] = torch.zeros_like(param)
+                state["step"] += 1
+                step = float(state["step"])
+                exp_avg, exp_avg_sq = state["exp_avg"], state["exp_avg_sq"]
+                exp_avg.copy_(exp_avg + (grad - exp_avg) * (1.0 - beta1))  # torch's lerp_, unfused
+                exp_avg_sq.mul_(beta2).add_(grad * grad * (1.0 - beta2))
+                bias_correction1 = 1.0 - beta1**step
+                bias_correction2_sqrt = math.sqrt(1.0 - beta2**step)
+                denom = (exp_avg_sq.sqrt() / bias_correction2_sqrt).add_(group["eps"])
+                param.add_(exp_avg / denom * (-group["lr"] / bias_correction1))
+
+
 class GaussianParameters:
     """The trainable tensors of a :class:`GaussianModel` with their Adam optimiser.
 
     Attributes:
         params: name → leaf tensor (``requires_grad``): ``means (N, 3)``, ``sh_dc (N, 1, 3)``,
             ``sh_rest (N, K−1, 3)``, ``opacity_logits (N,)``, ``log_scales (N, 3)``, ``quats (N, 4)``.
-        optimizer: ``torch.optim.Adam`` with one group per name.
+        optimizer: :class:`PortableAdam` with one group per name.
     """
 
     def __init__(self, model: GaussianModel, learning_rates: Mapping[str, float]) -> None:
@@ -63,7 +109,7 @@ class GaussianParameters:
             "quats": m.quats,
         }
         self.params = {k: v.clone().contiguous().requires_grad_(True) for k, v in tensors.items()}
-        self.optimizer = torch.optim.Adam(
+        self.optimizer = PortableAdam(
             [{"params": [self.params[k]], "lr": float(learning_rates[k]), "name": k} for k in PARAM_NAMES],
             lr=0.0,
             eps=1e-15,

@@ -6,6 +6,14 @@ OpenCV's SIMD ``sepFilter2D`` does the same work ~10× faster; so inference on C
 everything that needs gradients, or runs on a GPU, uses ``torch.nn.functional.conv2d``.  Both paths
 compute the same correlation with the same kernel (they agree to float rounding, ~1e-7; tested).
 
+A third path, ``"exact"`` (:func:`blur_exact`), gives the same bits on every CPU: the correlation as
+``window_size`` shifted, scaled and added copies per axis, in a fixed order, with separate multiplies
+and adds.  ``conv2d`` (oneDNN) and OpenCV pick kernels by the CPU's instruction set (AVX2 / AVX-512
+fused multiply-adds, other blockings), so their last bits differ between CPUs, and a 3DGS fit, whose
+D-SSIM gradient goes through this filter thousands of times, amplifies those bits into visible
+differences (docs/reproducibility.md).  Element-wise IEEE multiplies and adds are rounded the same way
+by every vector width, so the exact path is what scene fits use.
+
 Borders: ``"valid"`` returns only the pixels whose window lies inside the image, ``(H-k+1) × (W-k+1)``
 (tf / dm_pix / skimage); ``"same"`` zero-pads so the output is ``H × W`` (3DGS); ``"reflect"`` mirrors the
 image without repeating the edge pixel (``numpy``/``torch`` "reflect", OpenCV ``BORDER_REFLECT_101``) and
@@ -26,7 +34,7 @@ from setdiff_bench.errors import UsageError
 
 Border = Literal["valid", "same", "reflect"]
 BORDERS: tuple[str, ...] = ("valid", "same", "reflect")
-Backend = Literal["auto", "torch", "opencv"]
+Backend = Literal["auto", "torch", "opencv", "exact"]
 
 
 @functools.lru_cache(maxsize=16)
@@ -47,7 +55,7 @@ def gaussian_window_1d(window_size: int = 11, sigma: float = 1.5) -> np.ndarray:
 
 def use_opencv(*tensors: torch.Tensor, backend: Backend = "auto") -> bool:
     """Whether the OpenCV path applies: CPU float32/float64 tensors that need no gradient (or forced)."""
-    if backend == "torch":
+    if backend in ("torch", "exact"):
         return False
     eligible = all(t.device.type == "cpu" and t.dtype in (torch.float32, torch.float64) for t in tensors)
     needs_grad = torch.is_grad_enabled() and any(t.requires_grad for t in tensors)
@@ -56,7 +64,9 @@ def use_opencv(*tensors: torch.Tensor, backend: Backend = "auto") -> bool:
             raise UsageError("backend='opencv' needs CPU float32/float64 tensors without gradients")
         return True
     if backend != "auto":
-        raise UsageError(f"unknown filter backend {backend!r}; expected 'auto', 'torch' or 'opencv'")
+        raise UsageError(
+            f"unknown filter backend {backend!r}; expected 'auto', 'torch', 'opencv' or 'exact'"
+        )
     return eligible and not needs_grad
 
 
@@ -79,6 +89,32 @@ def blur_torch(maps: torch.Tensor, window_size: int, sigma: float, border: Borde
     cols = taps.view(1, 1, window_size, 1).expand(channels, 1, window_size, 1)
     out = F.conv2d(maps, rows, padding=(0, pad), groups=channels)
     return F.conv2d(out, cols, padding=(pad, 0), groups=channels)
+
+
+def blur_exact(maps: torch.Tensor, window_size: int, sigma: float, border: Border) -> torch.Tensor:
+    """:func:`blur_torch`'s filter with the same bits on every CPU (differentiable, any device).
+
+    Each axis is ``Σₖ tapₖ · shiftₖ(maps)``, accumulated from ``k = 0`` upwards with one rounding per
+    multiply and per add (no fused multiply-add, no reduction whose order depends on the vector width);
+    autograd's backward is made of the same element-wise operations.
+
+    Args, returns: as :func:`blur_torch`.
+    """
+    taps = [float(t) for t in gaussian_window_1d(window_size, sigma)]  # rounded to the maps' dtype
+    half = window_size // 2
+    if border == "reflect":
+        maps = F.pad(maps, (half, half, half, half), mode="reflect")
+    elif border == "same":
+        maps = F.pad(maps, (half, half, half, half))
+    height = maps.shape[-2] - window_size + 1
+    width = maps.shape[-1] - window_size + 1
+    rows = maps[..., 0:width] * taps[0]
+    for k in range(1, window_size):
+        rows = rows + maps[..., k : k + width] * taps[k]
+    out = rows[..., 0:height, :] * taps[0]
+    for k in range(1, window_size):
+        out = out + rows[..., k : k + height, :] * taps[k]
+    return out
 
 
 def blur_opencv(

@@ -35,6 +35,7 @@ from setdiff_bench.metrics.gaussian_filter import (
     BORDERS,
     Backend,
     Border,
+    blur_exact,
     blur_opencv,
     blur_torch,
     use_opencv,
@@ -87,7 +88,8 @@ def ssim_map(
             → ``(V, C, H, W)``.
         window_size, sigma: Gaussian window taps and standard deviation (pixels).
         k1, k2, data_range: stability constants ``C1 = (k1·L)²``, ``C2 = (k2·L)²``.
-        backend: ``"auto"`` (OpenCV on CPU without gradients, else torch), ``"torch"`` or ``"opencv"``.
+        backend: ``"auto"`` (OpenCV on CPU without gradients, else torch), ``"torch"``, ``"opencv"`` or
+            ``"exact"`` (the same bits on every CPU; what scene fits use, see :mod:`.gaussian_filter`).
 
     Returns:
         ``(V, C, H', W')`` SSIM values (1 = identical); differentiable on the torch path.
@@ -106,7 +108,8 @@ def ssim_map(
         return _ssim_map_opencv(pred, target, border, window_size, sigma, c1, c2)
     channels = pred.shape[1]
     stacked = torch.cat([pred, target, pred * pred + target * target, pred * target], dim=1)
-    means = blur_torch(stacked, window_size, sigma, border).split(channels, dim=1)
+    blur = blur_exact if backend == "exact" else blur_torch
+    means = blur(stacked, window_size, sigma, border).split(channels, dim=1)
     return _combine(*means, c1, c2)
 
 

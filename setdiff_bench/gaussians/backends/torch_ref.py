@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import torch
 
 from setdiff_bench.errors import FallbackWarning
+from setdiff_bench.gaussians.portable import normalize
 
 ALPHA_MAX = 0.99
 ALPHA_MIN = 1.0 / 255.0
@@ -60,7 +61,7 @@ class Projection:
 
 def quaternion_to_rotation(quats: torch.Tensor) -> torch.Tensor:
     """``(N, 4)`` quaternions ``w, x, y, z`` (any norm) → ``(N, 3, 3)`` rotation matrices."""
-    q = torch.nn.functional.normalize(quats, dim=-1)
+    q = normalize(quats)
     w, x, y, z = q.unbind(-1)
     return torch.stack(
         [
