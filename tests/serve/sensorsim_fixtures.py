@@ -16,14 +16,18 @@ import numpy as np
 import torch
 
 from setdiff_bench.cameras import Camera
+from setdiff_bench.evaluation.stream import Views
 from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.gaussians.ply import write_ply
 from setdiff_bench.gaussians.render import render
-from setdiff_bench.io.images import write_png
+from setdiff_bench.geometry import normalize_packet
+from setdiff_bench.io.images import uint8_to_float, write_png
+from setdiff_bench.packets.index import packet_id
+from setdiff_bench.packets.store import PacketHeader, ViewContent, write_packet
 from setdiff_bench.serve.sensorsim import common_pb2 as common
 from setdiff_bench.serve.sensorsim import sensorsim_pb2 as pb
 from setdiff_bench.serve.sensorsim import sensorsim_pb2_grpc as pb_grpc
-from tests.stream.stream_fixtures import rig_camera
+from tests.stream.stream_fixtures import hwc, rig_camera
 
 SCENE_ID = "street"
 #: AlpaSim's two default cameras (``wizard/configs/cameras/2cam.yaml``) and the yaw we give them (degrees).
@@ -187,3 +191,48 @@ def decoded(reply: pb.BatchRGBRenderReturn, names: Sequence[str]) -> dict[str, n
         image = cv2.imdecode(np.frombuffer(item.result.image_bytes, np.uint8), cv2.IMREAD_COLOR)
         out[item.camera_name] = image[:, :, ::-1]
     return out
+
+
+# ---------------------------------------------------------------------------------------------- the batch runner
+def write_tick_packet(root: Path, tick: int, references: Views, frames: Views) -> None:
+    """A prepared-style packet of one tick (references + frames, with their C-maps *and alphas*, normalised as
+    ``prepare`` does) for ``run`` to enhance: what the sensorsim proxy enhanced, as the batch runner sees it."""
+    cameras = [*references.cameras, *frames.cameras]
+    alphas = torch.cat([references.alphas, frames.alphas])
+    normalised = normalize_packet(
+        cameras, torch.cat([references.cmaps, frames.cmaps]), len(references.cameras), alphas=alphas
+    )
+    images = uint8_to_float(torch.cat([references.images, frames.images]))
+    names = [*references.names, *frames.names]
+    count = len(references.cameras)
+    contents = []
+    for i, camera in enumerate(cameras):
+        target = i >= count
+        contents.append(
+            ViewContent(
+                frame=names[i],
+                sensor="cam",
+                traversal="lane",
+                timestamp_us=None,
+                camera=normalised.cameras[i],
+                camera_world=camera,
+                image=hwc(images[i]),
+                cmap=hwc(normalised.cmaps[i]),
+                alpha=alphas[i, 0].numpy(),
+                gt=hwc(images[i]) if target else None,
+                mask=np.ones(alphas.shape[-2:], bool) if target else None,
+                overlap_score=None if target else 1.0,
+            )
+        )
+    header = PacketHeader(
+        packet_id=packet_id("sensorsim", SCENE_ID, "tick", tick),
+        dataset="synthetic",
+        protocol="sensorsim",
+        group="tick",
+        split="test",
+        scene=SCENE_ID,
+        fit_key="lane0",
+        scale=normalised.scale,
+        recipe="sensorsim-test",
+    )
+    write_packet(root, header, contents[:count], contents[count:])

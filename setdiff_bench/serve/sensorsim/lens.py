@@ -5,8 +5,8 @@ distortion, OpenCV fisheye, or f-theta), the intrinsics' own resolution, the res
 pose at the start and the end of the exposure (``PosePair``, camera to world).  Conventions at this boundary:
 
 * **axes**: sensorsim camera frames are taken as OpenCV's (x right, y down, z forward), the project's;
-* **pose**: the exposure's middle (translations averaged, rotations interpolated linearly and renormalised);
-  a static 3DGS scene has no rolling shutter to model;
+* **pose**: the exposure's middle (translations averaged, rotations interpolated linearly and renormalised;
+  the start pose itself when the end pose equals it or is absent); the shutter type is not modelled;
 * **principal point**: OpenCV's (integer = pixel centre); the project's ``K`` puts pixel centres at +0.5;
 * **resolution**: intrinsics are scaled per axis from ``CameraSpec.resolution_h/w`` to the request's size.
 
@@ -102,7 +102,7 @@ def exposure_pose(pair: pb.PosePair, what: str) -> np.ndarray:
     if not pair.HasField("start_pose"):
         raise StreamInputError("sensor_pose has no start_pose", what)
     start = pose_matrix(pair.start_pose, f"{what} sensor_pose.start_pose")
-    if not pair.HasField("end_pose"):
+    if not pair.HasField("end_pose") or pair.end_pose == pair.start_pose:
         return start
     end = pose_matrix(pair.end_pose, f"{what} sensor_pose.end_pose")
     q0 = matrix_to_quaternion(start[:3, :3], order="wxyz")

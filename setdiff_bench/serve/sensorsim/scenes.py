@@ -35,8 +35,11 @@ SCENE_PLY_NAMES = ("scene.ply", "fits/lane0.ply")
 UNNAMED_SENSOR = "camera"
 #: Longest scene id accepted (characters).
 MAX_SCENE_ID_CHARS = 128
-#: OpenCV camera axes (x right, y down, z forward) → the rig's (x forward, y left, z up): rig = cam @ this.
-CAMERA_TO_FLU = np.array([[0.0, 0.0, 1.0, 0.0], [-1.0, 0.0, 0.0, 0.0], [0.0, -1.0, 0.0, 0.0], [0, 0, 0, 1.0]])
+#: The rig's axes (x forward, y left, z up) in OpenCV camera coordinates (x right, y down, z forward), as columns:
+#: ``rig_to_world = camera_to_world @ RIG_AXES_IN_CAMERA``.
+RIG_AXES_IN_CAMERA = np.array(
+    [[0.0, -1.0, 0.0, 0.0], [0.0, 0.0, -1.0, 0.0], [1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
+)
 
 
 @dataclass(frozen=True)
@@ -105,7 +108,7 @@ def _scene_cameras(frames: list[Any]) -> list[SceneCamera]:
         by_sensor[frame.sensor or UNNAMED_SENSOR].append(frame)
     first_sensor = next(iter(by_sensor))
     anchor = by_sensor[first_sensor][0]
-    rig_to_world = anchor.camera.c2w @ CAMERA_TO_FLU
+    rig_to_world = anchor.camera.c2w @ RIG_AXES_IN_CAMERA
     world_to_rig = np.linalg.inv(rig_to_world)
     cameras = []
     for sensor, sensor_frames in by_sensor.items():
