@@ -1,5 +1,6 @@
-"""``setdiff-bench compare``: two runs on the targets they share — paired differences per group and per scene,
-bootstrap intervals resampled by scene, and the scenes each run wins; Markdown and Parquet.
+"""``setdiff-bench compare``: two runs on the targets they share — paired gains of RUN_A over RUN_B per group and
+per scene (positive = RUN_A better in every column: ``A − B`` where higher is better, ``B − A`` where lower is,
+as the report shows), bootstrap intervals resampled by scene, and the scenes each run wins; Markdown and Parquet.
 
 A difference "holds" when its interval excludes 0.  Intervals of the pooled and per-group rows resample
 scenes (frames of one scene are not independent); per-scene rows resample the scene's frames.  Runs that share
@@ -35,7 +36,7 @@ if TYPE_CHECKING:
     import pandas as pd
 
 VERB = "compare"
-HELP = "paired differences of two runs on their shared targets: intervals (bootstrap by scene) and scene wins"
+HELP = "paired gains of one run over another on shared targets (positive = better): intervals, scene wins"
 DESCRIPTION = __doc__
 FORMATS = ("md", "parquet")
 #: Where the outputs go without ``--out`` (ignored by git, like every ``runs/`` folder).
@@ -115,6 +116,7 @@ def run(args: argparse.Namespace) -> int:
         )
     except PairingError as error:
         raise UsageError(error.problem, folders[1]) from None
+    print(comparison.header())  # which run is A, and the sign of the gains
     for line in comparison.verdicts():
         print(line)
     for fmt, path in write_comparison(comparison, args.out, formats, _command(args)).items():

@@ -11,8 +11,9 @@ Examples::
 
 See :mod:`setdiff_bench.reporting.leaderboard` for the aggregation rules (means of per-image values; a method
 missing rows in a block is refused) and how reported paper rows are marked.  ``--against METHOD`` writes
-``<dataset>.vs_<METHOD>.*`` beside the plain table: each cell also gets the paired difference to METHOD over
-the same targets, starred when its bootstrap interval (resampled by scene, :mod:`setdiff_bench.reporting.paired`)
+``<dataset>.vs_<METHOD>.*`` beside the plain table (both are written): each cell also gets the paired gain over
+METHOD on the same targets (positive = better in every column: row − METHOD where higher is better, METHOD − row
+where lower is, as the report shows), starred when its bootstrap interval (resampled by scene, :mod:`setdiff_bench.reporting.paired`)
 excludes 0, and the Markdown lists every interval and the scenes each method wins.  Every argument is checked
 before anything is written.  A run still being written under ``--runs`` (``run.json`` but no ``manifest.json``
 yet) is left out with one warning line naming its folder; it is refused when ``--methods`` names its method
@@ -26,6 +27,7 @@ only, their PSNR / SSIM / LPIPS "–" (not computed).  Tables of other runs are 
 from __future__ import annotations
 
 import argparse
+import functools
 import shlex
 import sys
 from collections.abc import Sequence
@@ -86,8 +88,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--against",
         default=None,
         metavar="METHOD",
-        help="add each cell's paired difference to METHOD (a method in the table), starred when its "
-        "interval excludes 0; writes <dataset>.vs_<METHOD>.* beside the plain table",
+        help="also write <dataset>.vs_<METHOD>.* beside the plain table: each cell with its paired gain over "
+        "METHOD (a method in the table; positive = better), starred when its interval excludes 0",
     )
     parser.add_argument(
         "--cost",
@@ -233,7 +235,8 @@ def run(args: argparse.Namespace) -> int:
         reported = reported_for(args.dataset)
         if reported.empty:
             print(f"note: the paper reports no numbers for dataset {args.dataset!r}", file=sys.stderr)
-    board = build_leaderboard(
+    build = functools.partial(
+        build_leaderboard,
         args.dataset,
         images,
         sequences,
@@ -242,11 +245,13 @@ def run(args: argparse.Namespace) -> int:
         metrics=metrics,
         methods=methods,
         profile=args.profile,
-        against=args.against,
         bootstrap=settings,
         cost=args.cost,
         distribution=load_distribution(finished),
     )
+    board = build()
+    # --against: the plain table and, beside it, the one with every cell's paired gain over METHOD
+    boards = [board, build(against=args.against)] if args.against else [board]
     if args.with_reported and not any(row.source == "measured" for row in board.rows):
         found = sorted(set(images["dataset"])) if len(images) else []
         print(
@@ -269,8 +274,9 @@ def run(args: argparse.Namespace) -> int:
         frames = pick_frames(store.index[store.index["dataset"] == args.dataset], args.grids, split=split)
         grid = (store, {m: folders[m] for m in order if m in folders}, frames)
     command = _command(args)
-    for fmt, path in write_leaderboard(board, args.out, formats, command).items():
-        print(f"{fmt}: {path}")
+    for written in boards:
+        for fmt, path in write_leaderboard(written, args.out, formats, command).items():
+            print(f"{fmt}: {path}")
     if args.plots and len(images):
         from setdiff_bench.reporting.plots import write_plots
 

@@ -10,10 +10,14 @@ Rows (:class:`Comparison`):
   interval resamples the scene's targets (frames), which treats correlated frames as independent and is
   narrower than a between-scene interval would be (the ``unit`` column says which).
 
-Differences are ``A − B`` in each metric's units; "better" and wins follow the metric's direction.  The
-Markdown states the bootstrap (resamples, level, seed) and the number of shared targets; the Parquet holds
-one row per (level, group, scene, metric) with every field of
-:class:`~setdiff_bench.reporting.paired.PairedDifference`.
+Every number is a **gain** of A over B (:mod:`setdiff_bench.reporting.gains`: ``A − B`` where higher is
+better, ``B − A`` where lower is, so positive means A is better in every column, as the report shows); wins
+follow the metric's direction.  Each output states the convention: the printed header line
+(:meth:`Comparison.header`), the Markdown caption and notes, and the Parquet's ``gain``, ``gain_low`` and
+``gain_high`` columns (beside ``mean_a`` / ``mean_b``, each run's own mean).  The Markdown states the
+bootstrap (resamples, level, seed) and the number of shared targets; the Parquet holds one row per (level,
+group, scene, metric) with every field of :class:`~setdiff_bench.reporting.paired.PairedDifference` but the
+raw difference, which the gain replaces.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ from setdiff_bench.io.atomic import atomic_path, write_text_atomic
 from setdiff_bench.loaders.common import natural_key
 from setdiff_bench.metrics.registry import get_metric
 from setdiff_bench.reporting.bootstrap import BootstrapSettings
+from setdiff_bench.reporting.gains import GAIN_CONVENTION, PairedGain
 from setdiff_bench.reporting.leaderboard import ALL, dataset_layout, md_escape, metric_arrow, metric_header
 from setdiff_bench.reporting.paired import (
     TARGET_COLUMNS,
@@ -86,19 +91,25 @@ class Comparison:
         """Output file stem: ``compare_<a>_vs_<b>``."""
         return f"compare_{_file_part(self.a)}_vs_{_file_part(self.b)}"
 
+    def header(self) -> str:
+        """The line that says what the numbers are: which run is A, which B, and the sign convention."""
+        return f"A = {self.a}, B = {self.b}; {GAIN_CONVENTION}"
+
     def verdicts(self) -> list[str]:
-        """One plain line per pooled / group row: each metric's difference, interval, verdict and wins."""
+        """One plain line per pooled / group row: each metric's gain of A over B, its interval, the verdict and
+        the scenes won."""
         lines = []
         for row in self.rows:
             if row.level == "scene":
                 continue
             first = next(iter(row.differences.values()))
             parts = [
-                f"{get_metric(m).label} {d.format()} {d.verdict(self.a, self.b)}, won {d.wins} of {d.scenes}"
+                f"{get_metric(m).label} {PairedGain.of(d).format()} {d.verdict(self.a, self.b)}, "
+                f"won {d.wins} of {d.scenes}"
                 for m, d in row.differences.items()
             ]
             lines.append(
-                f"{row.label} ({first.targets} targets, {first.scenes} scenes): {self.a} − {self.b}: "
+                f"{row.label} ({first.targets} targets, {first.scenes} scenes): gain of {self.a} over {self.b}: "
                 + "; ".join(parts)
             )
         return lines
@@ -173,18 +184,18 @@ def compare_frames(
 
 
 def to_frame(comparison: Comparison) -> pd.DataFrame:
-    """Long table: one row per (comparison row, metric) with every field of the paired difference."""
+    """Long table: one row per (comparison row, metric): the gain of A over B (``gain``, ``gain_low``,
+    ``gain_high``: positive = A better) and every other field of the paired difference."""
     records = []
     for order, row in enumerate(comparison.rows):
-        records += difference_records(
-            row.differences,
-            a=comparison.a,
-            b=comparison.b,
-            row_order=order,
-            level=row.level,
-            key=row.key,
-            label=row.label,
-        )
+        labels = {"a": comparison.a, "b": comparison.b, "row_order": order}
+        for record in difference_records(
+            row.differences, **labels, level=row.level, key=row.key, label=row.label
+        ):
+            paired = PairedGain.of(row.differences[str(record["metric"])])
+            for raw in ("difference", "low", "high"):
+                del record[raw]
+            records.append(record | {"gain": paired.value, "gain_low": paired.low, "gain_high": paired.high})
     return pd.DataFrame.from_records(records)
 
 
@@ -193,7 +204,7 @@ def render_markdown(comparison: Comparison, command: str | None = None) -> str:
     a, b = md_escape(comparison.a), md_escape(comparison.b)
     level = f"{comparison.settings.confidence * 100:g} %"
     lines = [
-        f"**{a} − {b}: paired differences on {comparison.shared} shared targets; "
+        f"**Gains of {a} over {b} (positive = {a} better) on {comparison.shared} shared targets; "
         f"{md_escape(comparison.settings.describe())}**",
         "",
     ]
@@ -204,7 +215,7 @@ def render_markdown(comparison: Comparison, command: str | None = None) -> str:
         rows = [row for row in comparison.rows if row.level in levels]
         header = ["", "Targets", *(metric_header(m) + metric_arrow(m, False) for m in comparison.metrics)]
         lines += [
-            f"{title}: {a} − {b} [{level} interval, resampled over {unit}], \\* when it excludes 0; "
+            f"{title}: gain of {a} over {b} [{level} interval, resampled over {unit}], \\* when it excludes 0; "
             "scenes won by " + a + " of scenes",
             "",
             "| " + " | ".join(header) + " |",
@@ -213,7 +224,7 @@ def render_markdown(comparison: Comparison, command: str | None = None) -> str:
         for row in rows:
             first = next(iter(row.differences.values()))
             cells = [
-                d.format() + (r" \*" if d.holds else "") + f", won {d.wins} of {d.scenes}"
+                PairedGain.of(d).format() + (r" \*" if d.holds else "") + f", won {d.wins} of {d.scenes}"
                 for d in (row.differences[m] for m in comparison.metrics)
             ]
             lines.append("| " + " | ".join([md_escape(row.label), str(first.targets), *cells]) + " |")
@@ -225,9 +236,9 @@ def render_markdown(comparison: Comparison, command: str | None = None) -> str:
     notes = [
         few_scenes_note(pooled.scenes) or "",
         f"Runs: {comparison.runs[0]} ({a}) and {comparison.runs[1]} ({b})." if any(comparison.runs) else "",
-        "Differences are means of per-target differences (A − B, in each metric's units); per-scene "
-        "intervals resample the scene's targets as if independent, so they are narrower than a "
-        "between-scene interval.",
+        f"A = {comparison.a}, B = {comparison.b}; {GAIN_CONVENTION}. Gains are means of per-target gains, in "
+        "each metric's units; per-scene intervals resample the scene's targets as if independent, so they are "
+        "narrower than a between-scene interval.",
         f"Targets only in {a}: {comparison.only_a}; only in {b}: {comparison.only_b} (left out)."
         if comparison.only_a or comparison.only_b
         else "",

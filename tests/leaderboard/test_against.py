@@ -1,6 +1,6 @@
-"""``leaderboard --against``: paired differences beside each cell; the plain table is unchanged; every argument
-is checked before anything is written (issue 45, defect 2); a --with-reported table without measured rows
-says so."""
+"""``leaderboard --against``: paired gains beside each cell (positive = better, LPIPS included: issue 57); the
+plain table is unchanged and written too; every argument is checked before anything is written (issue 45,
+defect 2); a --with-reported table without measured rows says so."""
 
 from __future__ import annotations
 
@@ -22,8 +22,10 @@ from setdiff_bench.reporting.leaderboard import (
 from tests.run.store_fixtures import leaderboard_argv
 
 
-def rows(method: str, psnr_by_scene: dict[str, list[float]], group: str = "lane+1") -> pd.DataFrame:
-    """Per-target rows of ``method``: PSNR values per scene (frames f0, f1, ...), SSIM 0.8, LPIPS 0.2."""
+def rows(
+    method: str, psnr_by_scene: dict[str, list[float]], group: str = "lane+1", lpips: float = 0.2
+) -> pd.DataFrame:
+    """Per-target rows of ``method``: PSNR values per scene (frames f0, f1, ...), SSIM 0.8, LPIPS ``lpips``."""
     return pd.DataFrame(
         [
             {
@@ -36,7 +38,7 @@ def rows(method: str, psnr_by_scene: dict[str, list[float]], group: str = "lane+
                 "method": method,
                 "psnr": value,
                 "ssim": 0.8,
-                "lpips": 0.2,
+                "lpips": lpips,
                 "run": f"r/{method}",
             }
             for scene, values in psnr_by_scene.items()
@@ -46,11 +48,12 @@ def rows(method: str, psnr_by_scene: dict[str, list[float]], group: str = "lane+
 
 
 def table() -> pd.DataFrame:
-    # setdiff − difix: +1 in both scenes (holds); identity − difix: +0.5 in s0, −0.5 in s1 (does not)
+    # setdiff − difix: +1 in both scenes (holds); identity − difix: +0.5 in s0, −0.5 in s1 (does not);
+    # LPIPS: setdiff 0.15 against difix's 0.2, a gain of +0.05 (lower is better)
     return pd.concat(
         [
             rows("difix", {"s0": [20.0, 21.0], "s1": [22.0, 23.0]}),
-            rows("setdiff", {"s0": [21.0, 22.0], "s1": [23.0, 24.0]}),
+            rows("setdiff", {"s0": [21.0, 22.0], "s1": [23.0, 24.0]}, lpips=0.15),
             rows("identity", {"s0": [20.5, 21.5], "s1": [21.5, 22.5]}),
         ],
         ignore_index=True,
@@ -65,24 +68,31 @@ def test_against_adds_starred_differences_and_keeps_the_plain_table(tmp_path: Pa
     assert board.stem == "synthetic.vs_difix" and plain.stem == "synthetic"
     md = render_markdown(board)
     assert (
-        "paired differences to difix: paired bootstrap over scenes, 95 % percentile interval, 1000 resamples"
-        in md
+        "paired gains over difix (positive = better): paired bootstrap over scenes, 95 % percentile interval, "
+        "1000 resamples" in md
     )
-    assert "| setdiff | **22.50** (+1.00\\*) | **0.800** (+0.000) | **0.200** (+0.000) |" in md
+    # LPIPS 0.150 against 0.200: shown as a gain of +0.050, not as the raw difference −0.050
+    assert "| setdiff | **22.50** (+1.00\\*) | **0.800** (+0.000) | **0.150** (+0.050\\*) |" in md
     assert "| identity | 21.50 (+0.00) |" in md  # +0.5 and −0.5 by scene: no star
-    assert "| difix | 21.50 | **0.800** | **0.200** |" in md  # the reference row has no difference
+    assert "| difix | 21.50 | **0.800** | 0.200 |" in md  # the reference row has no difference
     assert "| setdiff | Lane +1 | +1.000 [+1.000, +1.000] \\*, won 2 of 2 |" in md
+    assert "| +0.0500 [+0.0500, +0.0500] \\*, won 2 of 2 |" in md
     assert "| identity | Lane +1 | +0.000 [-0.500, +0.500], won 1 of 2 |" in md
+    assert (
+        "Paired gains over difix (positive = the row is better" in md and "positive = the row is better" in md
+    )
     assert "Only 2 scene(s)" in md
     assert r"\textbf{22.50} (+1.00$^\ast$)" in render_latex(board)
     frame = to_frame(board)
     cell = frame[(frame["method"] == "setdiff") & (frame["metric"] == "psnr")].iloc[0]
-    assert (cell["difference"], cell["low"], cell["high"], cell["wins"]) == (1.0, 1.0, 1.0, 2) and cell[
+    assert (cell["gain"], cell["gain_low"], cell["gain_high"], cell["wins"]) == (1.0, 1.0, 1.0, 2) and cell[
         "holds"
     ]
-    assert frame[frame["method"] == "difix"]["difference"].isna().all()
+    lpips = frame[(frame["method"] == "setdiff") & (frame["metric"] == "lpips")].iloc[0]
+    assert lpips[["gain", "gain_low", "gain_high"]].tolist() == pytest.approx([0.05, 0.05, 0.05])
+    assert frame[frame["method"] == "difix"]["gain"].isna().all()
     # the plain table: no difference anywhere, and the columns of before
-    assert "(+" not in render_markdown(plain) and "difference" not in to_frame(plain).columns
+    assert "(+" not in render_markdown(plain) and "gain" not in to_frame(plain).columns
     written = write_leaderboard(board, tmp_path, ["md", "parquet"])
     assert sorted(p.name for p in written.values()) == ["synthetic.vs_difix.md", "synthetic.vs_difix.parquet"]
 
@@ -99,11 +109,18 @@ def test_leaderboard_cli_against(lb_runs: Path, tmp_path: Path, capsys: pytest.C
     assert (
         main(leaderboard_argv("synthetic", lb_runs, out, "--against", "identity", "--resamples", "200")) == 0
     )
+    # the plain table its help promises, beside the one with gains; the same as without --against
     assert sorted(p.name for p in out.iterdir()) == [
+        "synthetic.md",
+        "synthetic.parquet",
+        "synthetic.tex",
         "synthetic.vs_identity.md",
         "synthetic.vs_identity.parquet",
         "synthetic.vs_identity.tex",
     ]
+    assert main(leaderboard_argv("synthetic", lb_runs, tmp_path / "plain")) == 0
+    # (the .tex and .md name the command, which differs)
+    assert (out / "synthetic.parquet").read_bytes() == (tmp_path / "plain" / "synthetic.parquet").read_bytes()
     md = (out / "synthetic.vs_identity.md").read_text()
     assert "--against identity --resamples 200 --bootstrap-seed 0" in md
     assert "[n/a]" in md  # the fixture store has one scene: no interval, rather than a certain-looking one

@@ -168,7 +168,7 @@ def build_leaderboard(
         )
     title = f"{layout.title or dataset}; {spec.caption(scored_size(frame))}"
     if against is not None:
-        title += f"; paired differences to {against}: {settings.describe()}"
+        title += f"; paired gains over {against} (positive = better): {settings.describe()}"
     board = Leaderboard(
         dataset,
         columns,
@@ -249,9 +249,10 @@ def _notes(board: Leaderboard, frame: pd.DataFrame, seq: pd.DataFrame | None) ->
         )
     if board.against is not None:
         notes.append(
-            f"(±x): paired difference to {board.against} (row − {board.against}) over the same targets; "
-            "a star marks one whose interval excludes 0. Scenes won: scenes whose mean difference favours the row "
-            "in the metric's direction. Warp error is per sequence and has no paired difference."
+            f"(±x): paired gain over {board.against} on the same targets, positive = the row is better (row − "
+            f"{board.against} where higher is better, {board.against} − row where lower is); a star marks one "
+            "whose interval excludes 0. Scenes won: scenes whose mean difference favours the row in the metric's "
+            "direction. Warp error is per sequence and has no paired difference."
         )
         scenes = [d.scenes for row in board.rows for d in row.differences.values()]
         caveat = few_scenes_note(min(scenes)) if scenes else None

@@ -15,6 +15,7 @@ import pyarrow.parquet as pq
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.atomic import atomic_path, write_text_atomic
 from setdiff_bench.reporting.bootstrap import BootstrapSettings
+from setdiff_bench.reporting.gains import PairedGain
 from setdiff_bench.reporting.leaderboard.columns import ALL, metric_arrow, metric_decimals, metric_header
 from setdiff_bench.reporting.leaderboard.table import Leaderboard, Row
 from setdiff_bench.reporting.paired import PairedDifference
@@ -77,10 +78,12 @@ def to_frame(board: Leaderboard) -> pd.DataFrame:
 
 
 def _difference_fields(difference: PairedDifference | None) -> dict[str, object]:
-    """The Parquet columns of a cell's paired difference (``None``: no difference there)."""
+    """The Parquet columns of a cell's paired gain over the ``against`` method (``gain``, ``gain_low``,
+    ``gain_high``: positive = the row is better, :mod:`setdiff_bench.reporting.gains`), whether its interval
+    excludes 0, the scenes won and the bootstrap (``None``: no difference there)."""
     if difference is None:
         nan = float("nan")
-        return dict.fromkeys(("difference", "low", "high"), nan) | {
+        return dict.fromkeys(("gain", "gain_low", "gain_high"), nan) | {
             "holds": False,
             "wins": None,
             "losses": None,
@@ -89,10 +92,11 @@ def _difference_fields(difference: PairedDifference | None) -> dict[str, object]
             "resamples": None,
             "bootstrap_seed": None,
         }
+    paired = PairedGain.of(difference)
     return {
-        "difference": difference.difference,
-        "low": difference.low,
-        "high": difference.high,
+        "gain": paired.value,
+        "gain_low": paired.low,
+        "gain_high": paired.high,
         "holds": difference.holds,
         "wins": difference.wins,
         "losses": difference.losses,
@@ -168,17 +172,19 @@ def render_latex(board: Leaderboard, command: str | None = None) -> str:
 
 
 def _difference_suffix(board: Leaderboard, row: Row, cell: tuple[str, str], mark: str) -> str:
-    """`` (+1.81*)``: the cell's paired difference at the cell's decimals, marked when its interval excludes
-    0; empty where the row has none (the ``against`` row, reported rows, warp error, tables without one)."""
+    """`` (+1.81*)``: the cell's paired gain over the ``against`` method (positive = better) at the cell's
+    decimals, marked when its interval excludes 0; empty where the row has none (the ``against`` row, reported
+    rows, warp error, tables without one)."""
     difference = row.differences.get(cell)
     if difference is None or math.isnan(difference.difference):
         return ""
     decimals = row.decimals.get(cell, metric_decimals(cell[1]))
-    return f" ({difference.difference:+.{decimals}f}{mark if difference.holds else ''})"
+    return f" ({PairedGain.of(difference).value:+.{decimals}f}{mark if difference.holds else ''})"
 
 
 def _interval_lines(board: Leaderboard) -> list[str]:
-    """One line per measured row and block: each metric's difference, interval and scenes won."""
+    """One line per measured row and block: each metric's gain over the ``against`` method (positive =
+    better), its interval and the scenes won."""
     if board.against is None:
         return []
     labels = {block.key: block.label for block, _ in board.columns}
@@ -186,12 +192,14 @@ def _interval_lines(board: Leaderboard) -> list[str]:
     for row in board.rows:
         for block, metrics in board.columns:
             parts = [
-                f"{metric_header(m)} {d.format()} won {d.wins} of {d.scenes}"
+                f"{metric_header(m)} {PairedGain.of(d).format()} won {d.wins} of {d.scenes}"
                 for m in metrics
                 if (d := row.differences.get((block.key, m))) is not None
             ]
             if parts:
-                lines.append(f"{row.label} vs {board.against}, {labels[block.key]}: {'; '.join(parts)}")
+                lines.append(
+                    f"{row.label} gain over {board.against}, {labels[block.key]}: {'; '.join(parts)}"
+                )
     return lines
 
 
@@ -235,8 +243,9 @@ def render_markdown(board: Leaderboard, command: str | None = None) -> str:
 
 
 def _interval_markdown(board: Leaderboard) -> list[str]:
-    """The paired differences of a table with ``against`` as a Markdown table: one row per measured method
-    and block, one column per metric holding ``difference [low, high]`` and the scenes it wins."""
+    """The paired gains of a table with ``against`` as a Markdown table: one row per measured method and
+    block, one column per metric holding ``gain [low, high]`` (positive = the row is better) and the scenes it
+    wins."""
     if board.against is None:
         return []
     metrics = list(dict.fromkeys(m for _, ms in board.columns for m in ms))
@@ -248,7 +257,9 @@ def _interval_markdown(board: Leaderboard) -> list[str]:
                 cells = [
                     "–"
                     if d is None
-                    else d.format() + (r" \*" if d.holds else "") + f", won {d.wins} of {d.scenes}"
+                    else PairedGain.of(d).format()
+                    + (r" \*" if d.holds else "")
+                    + f", won {d.wins} of {d.scenes}"
                     for d in found.values()
                 ]
                 records.append([md_escape(row.label), md_escape(block.label), *cells])
@@ -258,7 +269,8 @@ def _interval_markdown(board: Leaderboard) -> list[str]:
     header = [board.row_header, "Block", *(metric_header(m) + metric_arrow(m, False) for m in metrics)]
     lines = [
         "",
-        f"**Paired differences to {md_escape(board.against)}: row − {md_escape(board.against)} "
+        f"**Paired gains over {md_escape(board.against)} (positive = the row is better: row − "
+        f"{md_escape(board.against)} where higher is better, {md_escape(board.against)} − row where lower is) "
         f"[{confidence * 100:g} % interval], scenes won of scenes**",
         "",
         "| " + " | ".join(header) + " |",
