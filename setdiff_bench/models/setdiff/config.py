@@ -35,6 +35,7 @@ SetAttention = Literal["full", "view", "knn"]
 AttentionBiasLayers = Literal["all", "lowest"]
 MixedPrecision = Literal["auto", "no", "bf16", "fp16"]
 LpipsNet = Literal["vgg", "alex"]
+SetShape = Literal["proportional", "test"]
 
 #: Field metadata of the :class:`ModelConfig` fields that decide parameter names and shapes and the forward
 #: maths: :meth:`ModelConfig.architecture` (a checkpoint's identity) is made of these fields.
@@ -279,6 +280,25 @@ class TrainConfig:
         masked_copy_fraction: probability per set of a masked-copy sample (every target render loses
             a rectangle, its geometry kept, so the content must come from the references); drawn
             after, and exclusive of, the identity sample; 0 = off (the paper).
+        masked_copy_visible: a masked-copy hole blanks only pixels whose surface a reference of the set
+            sees (depth test on ray-snapped C-map points, :func:`.inputs.reference_visibility`), its
+            centre drawn among them; ``False`` = the whole rectangle around a surface pixel (as before).
+        set_shape: how a training set is drawn from a sample: ``proportional`` (a random subset of
+            ``min_views``–``max_views`` views in the packet's proportion, as before) or ``test`` (shaped like
+            a test packet: *all* the sample's references and ``test_targets`` targets).  With ``test``, set
+            ``min_views`` and ``max_views`` to at least the largest packet's view count, so that the packet
+            store hands over whole packets.
+        test_targets: ``(lo, hi)``: a ``test``-shaped set holds a uniform number of targets in this range
+            (capped by the sample's).
+        sparsest_share: the share of draws taken from the packets with the fewest references (the n3
+            packets of the sparse benchmark), the rest from the others, each group in its own seeded
+            shuffle (:class:`.sample_stream.SampleStream`); 0 = every packet once per epoch (as before).
+        distill_from: guidance distillation (a one-pass student, beyond the paper): the teacher, a
+            checkpoint or training folder or a packaged model name.  The student starts from the
+            teacher's weights and learns to give, in one conditional pass (``guidance_scale`` 1), the
+            teacher's geometry-CFG output; its targets replace the ground truth in every loss term.
+            ``None`` = ordinary training.
+        distill_guidance_scale: the teacher's CFG scale for the targets; ``None`` = the teacher config's.
     """
 
     steps: int = 40_000
@@ -307,9 +327,26 @@ class TrainConfig:
     gradient_checkpointing: bool = False
     identity_fraction: float = 0.0
     masked_copy_fraction: float = 0.0
+    masked_copy_visible: bool = False
+    set_shape: SetShape = "proportional"
+    test_targets: tuple[int, int] = (1, 4)
+    sparsest_share: float = 0.0
+    distill_from: str | None = None
+    distill_guidance_scale: float | None = None
 
     def __post_init__(self) -> None:
         where = "[train]"
+        check_choice(self.set_shape, SetShape, "set_shape", where)
+        targets = tuple(int(t) for t in self.test_targets)
+        if len(targets) != 2 or not 1 <= targets[0] <= targets[1]:
+            raise UsageError(
+                f"test_targets must be [lo, hi] with 1 <= lo <= hi, got {list(self.test_targets)}", where
+            )
+        object.__setattr__(self, "test_targets", targets)
+        if not 0.0 <= self.sparsest_share < 1.0:
+            raise UsageError(f"sparsest_share must be in [0, 1), got {self.sparsest_share}", where)
+        if self.distill_guidance_scale is not None:
+            check_guidance_scale(self.distill_guidance_scale, where)
         if not 0.0 <= self.identity_fraction < 1.0:
             raise UsageError(f"identity_fraction must be in [0, 1), got {self.identity_fraction}", where)
         if not 0.0 <= self.masked_copy_fraction < 1.0:

@@ -228,6 +228,9 @@ def training_set(
     snapped_points: bool = False,
     identity_probability: float = 0.0,
     masked_copy_probability: float = 0.0,
+    masked_copy_visible: bool = False,
+    set_shape: str = "proportional",
+    test_targets: tuple[int, int] = (1, 4),
 ) -> TrainingSet:
     """Draw the views of one training step from ``sample`` and build the tensors.
 
@@ -246,6 +249,10 @@ def training_set(
             sample) the set is a *masked-copy sample*: every target's render loses a rectangle
             (:func:`cut_holes`) while its C-map and rays stay, so the supervised content there can only
             come from the references that see the same surface.
+        masked_copy_visible: holes blank only pixels that a reference of the set sees
+            (:func:`reference_visibility`).
+        set_shape: ``proportional`` (above) or ``test``: all the sample's references and a uniform number of
+            targets in ``test_targets`` (capped by the sample's), both randomly permuted.
     """
     packet = sample.packet
     check_packet(packet, 1)
@@ -254,6 +261,10 @@ def training_set(
         target = rng.randrange(num_targets)
         reference_ids = [best_reference_per_target(packet)[target]] if num_refs else []
         target_ids = [target]
+    elif set_shape == "test":
+        count = min(rng.randint(*test_targets), num_targets)
+        reference_ids = rng.sample(range(num_refs), num_refs)
+        target_ids = rng.sample(range(num_targets), count)
     elif num_refs + num_targets > max_views:
         reference_ids, target_ids = choose_views(
             num_refs, num_targets, rng, min_views=min_views, max_views=max_views
@@ -278,7 +289,8 @@ def training_set(
     if identity_probability > 0 and rng.random() < identity_probability:
         images = torch.cat([images[:n], gt[0]])
     elif masked_copy_probability > 0 and rng.random() < masked_copy_probability:
-        images = torch.cat([images[:n], cut_holes(images[n:], subset.targets.alphas.float(), rng)])
+        visible = reference_visibility(subset) if masked_copy_visible else None
+        images = torch.cat([images[:n], cut_holes(images[n:], subset.targets.alphas.float(), rng, visible)])
     points = surface_points(subset, snapped=snapped_points)[None] if with_points else None
     batch = SetBatch(images[None], None if geometry is None else geometry[None], n, points)
     return TrainingSet(batch=batch, target_gt=gt, target_masks=masks)
@@ -291,17 +303,22 @@ HOLE_AREA = (0.08, 0.25)
 HOLE_ASPECT = (0.5, 2.0)
 
 
-def cut_holes(images: torch.Tensor, alphas: torch.Tensor, rng: random.Random) -> torch.Tensor:
+def cut_holes(
+    images: torch.Tensor, alphas: torch.Tensor, rng: random.Random, visible: torch.Tensor | None = None
+) -> torch.Tensor:
     """One rectangular hole per view, filled with :data:`HOLE_VALUE` (the masked-copy task).
 
     The hole's centre is a random pixel with a surface (alpha > :data:`SURFACE_ALPHA`; any pixel when
     the view has none), so the hole covers geometry that references can see; its area and aspect are
-    uniform in :data:`HOLE_AREA` and :data:`HOLE_ASPECT`, clipped at the image border.
+    uniform in :data:`HOLE_AREA` and :data:`HOLE_ASPECT`, clipped at the image border.  With ``visible``
+    the centre is drawn among the visible pixels and only the visible pixels of the rectangle are blanked
+    (a view with none keeps its render).
 
     Args:
         images: ``(M, 3, H, W)`` target renders in [0, 1].
         alphas: ``(M, 1, H, W)`` their accumulated opacity.
         rng: the training step's random source.
+        visible: ``(M, 1, H, W)`` bool, pixels a reference sees (:func:`reference_visibility`), or ``None``.
 
     Returns:
         A copy of ``images`` with the holes filled.
@@ -313,15 +330,57 @@ def cut_holes(images: torch.Tensor, alphas: torch.Tensor, rng: random.Random) ->
         aspect = rng.uniform(*HOLE_ASPECT)
         hole_h = max(1, min(height, round((area / aspect) ** 0.5)))
         hole_w = max(1, min(width, round((area * aspect) ** 0.5)))
-        surface = torch.nonzero(alphas[view, 0] > SURFACE_ALPHA)
+        allowed = alphas[view, 0] > SURFACE_ALPHA if visible is None else visible[view, 0]
+        surface = torch.nonzero(allowed)
         if len(surface):
             row, col = (int(v) for v in surface[rng.randrange(len(surface))])
+        elif visible is not None:
+            continue
         else:
             row, col = rng.randrange(height), rng.randrange(width)
         top = min(max(row - hole_h // 2, 0), height - hole_h)
         left = min(max(col - hole_w // 2, 0), width - hole_w)
-        out[view, :, top : top + hole_h, left : left + hole_w] = HOLE_VALUE
+        window = (slice(None), slice(top, top + hole_h), slice(left, left + hole_w))
+        if visible is None:
+            out[view][window] = HOLE_VALUE
+        else:
+            out[view][window] = torch.where(visible[view][window], HOLE_VALUE, out[view][window])
     return out
+
+
+#: A reference sees a target pixel when its own surface point at the projection lies within this share of
+#: the depth of the target's point (the default of ``--method reproject``).
+VISIBILITY_TOLERANCE = 0.03
+
+
+def reference_visibility(packet: Packet, tolerance: float = VISIBILITY_TOLERANCE) -> torch.Tensor:
+    """Which target pixels a reference of ``packet`` sees: ``(M, 1, H, W)`` bool.
+
+    Target and reference surface points are ray-snapped C-map points (:func:`surface_points` with
+    ``snapped``).  A target pixel's point ``X`` is projected into each reference (``Camera.project``); the
+    reference sees it when the projection lands in the image at positive depth ``z``, the reference has a
+    surface point ``Y`` at that (nearest) pixel and ``‖Y − X‖ ≤ tolerance · z`` (no occluder, same surface).
+    """
+    points = surface_points(packet, snapped=True)
+    n = len(packet.references)
+    height, width = packet.height, packet.width
+    seen = torch.zeros((len(packet.targets), 1, height, width), dtype=torch.bool)
+    for view in range(len(packet.targets)):
+        target = points[n + view]
+        valid = target[3] > 0
+        xyz = target[:3].permute(1, 2, 0)[valid].double()  # (P, 3)
+        hit = torch.zeros(xyz.shape[0], dtype=torch.bool)
+        for ref, camera in enumerate(packet.references.cameras):
+            uv, depth = camera.project(xyz.numpy())
+            uv_t, z = torch.from_numpy(np.nan_to_num(uv, nan=-1.0)), torch.from_numpy(depth)
+            col, row = uv_t[:, 0].floor().long(), uv_t[:, 1].floor().long()
+            inside = (z > 0) & (col >= 0) & (col < width) & (row >= 0) & (row < height)
+            col, row = col.clamp(0, width - 1), row.clamp(0, height - 1)
+            other = points[ref][:, row, col]  # (4, P)
+            close = (other[:3].T.double() - xyz).norm(dim=1) <= tolerance * z
+            hit |= inside & (other[3] > 0) & close
+        seen[view, 0][valid] = hit
+    return seen
 
 
 def _subset(views: ViewSet, indices: Sequence[int]) -> ViewSet:

@@ -25,6 +25,12 @@ class SampleStream:
 
     After each ``next()``, :attr:`last` holds ``(global position, dataset index)`` of the sample returned
     (``None`` as the index for iterables).
+
+    With ``sparsest_share`` p > 0 and the dataset's ``reference_counts``, an epoch is no longer a permutation:
+    each of its ``len(dataset)`` slots comes, with probability p, from the packets with the fewest
+    references (e.g. the n3 packets) and otherwise from the rest, each group visited in its own seeded
+    shuffle, cycled (:meth:`epoch_permutation`); still a function of ``seed`` and the epoch alone, so
+    resuming works as before.
     """
 
     def __init__(
@@ -36,9 +42,15 @@ class SampleStream:
         world: int = 1,
         start: int = 0,
         num_workers: int = 0,
+        sparsest_share: float = 0.0,
+        reference_counts: Sequence[int] | None = None,
     ) -> None:
         if not 0 <= rank < world:
             raise ValueError(f"rank {rank} outside a world of {world}")
+        if not 0.0 <= sparsest_share < 1.0:
+            raise ValueError(f"sparsest_share must be in [0, 1), got {sparsest_share}")
+        self.sparsest_share = float(sparsest_share)
+        self.reference_counts = None if reference_counts is None else [int(c) for c in reference_counts]
         self.dataset, self.seed, self.rank, self.world = dataset, seed, rank, world
         self.start, self.num_workers = start, num_workers
         self.last: tuple[int, int | None] | None = None
@@ -54,9 +66,32 @@ class SampleStream:
         return next(self._iterator)
 
     def epoch_permutation(self, epoch: int) -> list[int]:
-        """Dataset indices in the order the global sequence visits them during ``epoch``."""
+        """Dataset indices in the order the global sequence visits them during ``epoch`` (a permutation, or
+        with ``sparsest_share`` the weighted draw of the class doc)."""
         generator = torch.Generator().manual_seed(self.seed * 1_000_003 + epoch)
-        return torch.randperm(len(self.dataset), generator=generator).tolist()  # type: ignore[arg-type]
+        size = len(self.dataset)  # type: ignore[arg-type]
+        counts = self.reference_counts
+        if self.sparsest_share <= 0 or counts is None:
+            return torch.randperm(size, generator=generator).tolist()
+        if len(counts) != size:
+            raise ValueError(f"{len(counts)} reference counts for a dataset of {size}")
+        fewest = min(counts)
+        sparse = [i for i, c in enumerate(counts) if c == fewest]
+        rest = [i for i, c in enumerate(counts) if c != fewest]
+        if not rest:
+            return torch.randperm(size, generator=generator).tolist()
+        groups = [
+            [group[j] for j in torch.randperm(len(group), generator=generator).tolist()]
+            for group in (sparse, rest)
+        ]
+        picks = (torch.rand(size, generator=generator) < self.sparsest_share).tolist()
+        taken = [0, 0]
+        order = []
+        for pick_sparse in picks:
+            which = 0 if pick_sparse else 1
+            order.append(groups[which][taken[which] % len(groups[which])])
+            taken[which] += 1
+        return order
 
     def _map_style(self) -> Iterator[TrainingSample]:
         size = len(self.dataset)  # type: ignore[arg-type]
@@ -97,6 +132,21 @@ class SampleStream:
                     yield sample
             if empty:
                 raise UsageError("the training dataset yielded no samples for this process", "--packets")
+
+
+def dataset_reference_counts(dataset: Sequence[TrainingSample] | Iterable[TrainingSample]) -> list[int]:
+    """The number of references of every packet of a map-style dataset: read from the packet store's index
+    for a store dataset (``dataset.store`` and ``dataset.packet_ids``, nothing loaded), else from the samples.
+
+    Raises:
+        UsageError: the dataset is not map-style (an iterable has no index to weight).
+    """
+    store, ids = getattr(dataset, "store", None), getattr(dataset, "packet_ids", None)
+    if store is not None and ids is not None:
+        return [int((store.rows(pid)["role"] == "ref").sum()) for pid in ids]
+    if not (hasattr(dataset, "__len__") and hasattr(dataset, "__getitem__")):
+        raise UsageError("sparsest_share needs a map-style dataset (a packet store or a list)", "[train]")
+    return [len(dataset[i].packet.references) for i in range(len(dataset))]  # type: ignore[index,arg-type]
 
 
 def _identity(sample: Any) -> Any:

@@ -57,7 +57,7 @@ from setdiff_bench.models.setdiff.files import LATEST_FILE, LOG_FILE, SAMPLES_FI
 from setdiff_bench.models.setdiff.inputs import training_set
 from setdiff_bench.models.setdiff.losses import ReconstructionLoss, latent_loss
 from setdiff_bench.models.setdiff.model import SetDiffModel
-from setdiff_bench.models.setdiff.sample_stream import SampleStream
+from setdiff_bench.models.setdiff.sample_stream import SampleStream, dataset_reference_counts
 from setdiff_bench.models.setdiff.train_log import append_record, truncate_records
 from setdiff_bench.models.setdiff.validation import reduce_means, validation_totals
 from setdiff_bench.runtime.devices import resolve_device
@@ -248,7 +248,14 @@ def _setup(
     rank, world = accelerator.process_index, accelerator.num_processes
     per_step = tc.gradient_accumulation * world  # samples per optimiser step, all processes together
     stream = SampleStream(
-        dataset, seed=tc.seed, rank=rank, world=world, start=start * per_step, num_workers=tc.num_workers
+        dataset,
+        seed=tc.seed,
+        rank=rank,
+        world=world,
+        start=start * per_step,
+        num_workers=tc.num_workers,
+        sparsest_share=tc.sparsest_share,
+        reference_counts=dataset_reference_counts(dataset) if tc.sparsest_share > 0 else None,
     )
     if accelerator.is_main_process and start > 0:  # records of steps after the checkpoint are redone now
         for name in (LOG_FILE, VALIDATION_FILE, SAMPLES_FILE):
@@ -351,6 +358,9 @@ def _micro_step(
         snapped_points=mc.snapped_points,
         identity_probability=tc.identity_fraction,
         masked_copy_probability=tc.masked_copy_fraction,
+        masked_copy_visible=tc.masked_copy_visible,
+        set_shape=tc.set_shape,
+        test_targets=tc.test_targets,
     )
     batch = drawn.batch.to(device)
     keep = None
