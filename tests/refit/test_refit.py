@@ -1,0 +1,170 @@
+"""The refit end to end on a small street scene: output, ground truth kept out, resume, bad inputs."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import torch
+
+from setdiff_bench.cli.main import main
+from setdiff_bench.enhancers.base import BUILTIN_METHODS, MethodSpec
+from setdiff_bench.gaussians.ply import read_ply, write_ply
+from setdiff_bench.packets.store import PacketStore
+from setdiff_bench.refit import MANIFEST_FILE, RefitSettings, RefitTask, refit_scene
+from setdiff_bench.refit.loop import RefitLoop
+from setdiff_bench.runtime.threads import torch_threads
+from setdiff_bench.types import Packet
+
+SCENE = "street_00"
+#: 8 steps, updates before steps 1 and 5 (t = 0.5, then the targets), steps 4 and 8 on pseudo-views (r = 0.7)
+SETTINGS = RefitSettings.preset("progressive", steps=8, update_every=4, checkpoint_every=2)
+
+
+def task(root: Path, out: Path, method: str = "reproject", **fields: object) -> RefitTask:
+    return RefitTask("synthetic", root, SCENE, out, method, group="lane+2", fits=root, **fields)  # type: ignore[arg-type]
+
+
+@pytest.fixture(scope="module")
+def finished(street_root: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """An uninterrupted refit with :data:`SETTINGS` (its output folder)."""
+    out = tmp_path_factory.mktemp("refit") / "out"
+    with torch_threads(1):  # as every test (tests/conftest.py): the same bytes need the same thread count
+        refit_scene(task(street_root, out), SETTINGS, progress=False)
+    return out
+
+
+def test_refit_writes_a_ply_prepare_can_render_and_a_manifest(
+    finished: Path, street_root: Path, tmp_path: Path
+) -> None:
+    manifest = json.loads((finished / MANIFEST_FILE).read_text())
+    ply = finished / SCENE / "lane0.ply"
+    assert manifest["ply"]["path"] == f"{SCENE}/lane0.ply"
+    assert (manifest["group"], manifest["fit_key"], manifest["updates"]) == ("lane+2", "lane0", 2)
+    assert manifest["pseudo_views"] == manifest["targets"] == 5  # the lane+2 front camera's 5 timesteps
+    assert manifest["enhancer"]["method"] == "reproject" and manifest["schedule"]["steps"] == 8
+    assert manifest["time"]["steps_run"] == 8 and manifest["peak_memory_mb"] > 0
+    assert not (finished / "checkpoint").exists()
+    refit, fit = read_ply(ply), read_ply(street_root / SCENE / "fits" / "lane0.ply")
+    # Adam moves a parameter by at most about its rate per step: 8 steps x 1.6e-6 x extent (~25 m) < 1e-3
+    assert float((refit.means - fit.means).abs().max()) < 1e-3
+    assert not torch.equal(refit.sh, fit.sh)
+    # scoring X 3D: prepare renders the refit scene from OUT as it renders any fit folder
+    from setdiff_bench.packets.prepare import prepare
+
+    prepare("synthetic", street_root, tmp_path / "store", fits=finished, groups=["lane+2"], progress=False)
+    store = PacketStore(tmp_path / "store")
+    assert store.index["fit_key"].eq("lane0").all() and len(store) == 1
+
+
+def test_rerun_of_a_finished_refit_changes_nothing(finished: Path, street_root: Path) -> None:
+    before = (finished / MANIFEST_FILE).read_bytes()
+    result = refit_scene(task(street_root, finished), SETTINGS, progress=False)
+    assert result.already_done and (finished / MANIFEST_FILE).read_bytes() == before
+
+
+def test_ground_truth_of_the_targets_never_reaches_the_refit(
+    finished: Path, street_root: Path, tmp_path: Path
+) -> None:
+    poisoned = tmp_path / "poisoned"
+    shutil.copytree(street_root, poisoned)
+    train = set((poisoned / SCENE / "train_set.txt").read_text().split())
+    rng = np.random.default_rng(0)
+    for image in (poisoned / SCENE / "images").iterdir():
+        if image.name not in train:  # every recorded frame but the fit frames, the lane+2 targets included
+            noise = rng.integers(0, 256, cv2.imread(str(image)).shape, dtype=np.uint8)
+            assert cv2.imwrite(str(image), noise)
+    out = tmp_path / "out"
+    refit_scene(task(poisoned, out), SETTINGS, progress=False)
+    assert (out / SCENE / "lane0.ply").read_bytes() == (finished / SCENE / "lane0.ply").read_bytes()
+
+
+def test_interrupted_refit_resumes_to_the_same_bytes(
+    finished: Path, street_root: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    save = RefitLoop.save
+
+    def save_then_stop(loop: RefitLoop, folder: Path) -> None:
+        save(loop, folder)
+        if (
+            loop.step_count == 6
+        ):  # after the second update: pseudo-views and their order come from the checkpoint
+            raise KeyboardInterrupt
+
+    out = tmp_path / "out"
+    monkeypatch.setattr(RefitLoop, "save", save_then_stop)
+    with pytest.raises(KeyboardInterrupt):
+        refit_scene(task(street_root, out), SETTINGS, progress=False)
+    assert not (out / MANIFEST_FILE).exists() and not (out / SCENE).exists()
+    monkeypatch.setattr(RefitLoop, "save", save)
+    result = refit_scene(task(street_root, out), SETTINGS, progress=False)
+    assert result.resumed_at == 6
+    assert (out / SCENE / "lane0.ply").read_bytes() == (finished / SCENE / "lane0.ply").read_bytes()
+
+
+class WrongShape:
+    """An enhancer that drops a row of pixels."""
+
+    name = "wrong_shape"
+
+    def enhance(self, packet: Packet) -> torch.Tensor:
+        return packet.targets.images[:, :, 1:]
+
+
+def wrong_shape() -> WrongShape:
+    return WrongShape()
+
+
+def refit_cli(root: Path, out: Path, *extra: str) -> list[str]:
+    return [
+        "refit",
+        "synthetic",
+        "--root",
+        str(root),
+        "--scene",
+        SCENE,
+        "--out",
+        str(out),
+        "--steps",
+        "4",
+        "--no-progress",
+        *extra,
+    ]
+
+
+@pytest.mark.parametrize("case", ["wrong shape", "other scene's fit", "poses outside the scene"])
+def test_bad_inputs_get_one_line_exit_2_and_nothing_written(
+    case: str,
+    street_root: Path,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    monkeypatch.setitem(
+        BUILTIN_METHODS, "wrong_shape", MethodSpec("wrong_shape", "tests.refit.test_refit:wrong_shape", "x")
+    )
+    out = tmp_path / "out"
+    fits, method, targets = street_root, "identity", ["--group", "lane+2"]
+    if case == "wrong shape":
+        method = "wrong_shape"
+    elif case == "other scene's fit":
+        fit = read_ply(street_root / SCENE / "fits" / "lane0.ply")
+        fit.means = fit.means[:, [1, 0, 2]]  # the street along the other axis: another scene's layout
+        fits = tmp_path / "fits"
+        write_ply(fits / SCENE / "lane0.ply", fit)
+    else:
+        targets = ["--trajectory", "shift:1000"]
+    code = main(refit_cli(street_root, out, "--fits", str(fits), "--method", method, *targets))
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and err[0].startswith("setdiff-bench refit: error:")
+    expected = {
+        "wrong shape": "wrong_shape",
+        "other scene's fit": "another scene",
+        "poses outside the scene": "scene bounds",
+    }
+    assert expected[case] in err[0]
+    assert not (out / MANIFEST_FILE).exists() and not (out / SCENE).exists()
