@@ -168,3 +168,35 @@ def test_bad_inputs_get_one_line_exit_2_and_nothing_written(
     }
     assert expected[case] in err[0]
     assert not (out / MANIFEST_FILE).exists() and not (out / SCENE).exists()
+
+
+@pytest.mark.slow  # two CLI processes (torch start-up); test_interrupted_refit_resumes_to_the_same_bytes covers resume fast
+def test_sigkill_mid_refit_then_rerun_gives_the_same_bytes(street_root: Path, tmp_path: Path) -> None:
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    settings = RefitSettings.preset("progressive", steps=40, update_every=10, checkpoint_every=2)
+    reference = tmp_path / "reference"
+    refit_scene(task(street_root, reference), settings, progress=False)
+    out = tmp_path / "out"
+    command = [sys.executable, "-m", "setdiff_bench", *refit_cli(street_root, out)]
+    command[command.index("--steps") + 1] = "40"
+    command += ["--update-every", "10", "--checkpoint-every", "2", "--fits", str(street_root)]
+    command += ["--group", "lane+2", "--method", "reproject"]
+    env = {**os.environ, "SETDIFF_THREADS": "1"}
+    process = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    latest = out / "checkpoint" / "LATEST"
+    deadline = time.monotonic() + 120
+    while (
+        not (latest.is_file() and latest.read_text().strip() >= "step-000012") and time.monotonic() < deadline
+    ):
+        time.sleep(0.02)
+    os.kill(process.pid, signal.SIGKILL)
+    process.wait()
+    assert not (out / MANIFEST_FILE).exists(), "the refit finished before it could be killed"
+    rerun = subprocess.run(command, env=env, capture_output=True, text=True, check=True)
+    assert "resumed at step" in rerun.stdout
+    assert (out / SCENE / "lane0.ply").read_bytes() == (reference / SCENE / "lane0.ply").read_bytes()
