@@ -9,13 +9,15 @@ Examples::
         --video-only
 
 The site (``<out>/index.html``; open it in a browser) holds the leaderboard of each dataset and evaluation
-profile (the tables of ``setdiff-bench leaderboard``), each method's cost (ms per frame, peak memory), the
-dataset's plots, and every target: a table of each method's gain or loss against the render (the
-``--baseline`` run, ``identity``), sortable by any column so damage is easy to find, linking to a page per
-target with render | each method | ground truth, a before/after slider, error maps and metrics.
-``videos.html`` plays render | method | ground truth per camera sequence (WebM, VP9).  Pictures and
-videos need ``--packets``, the store the runs were made on (checked against the index hash the runs
-recorded).  ``--video-only`` writes ``<out>/videos/`` alone.  The site is built beside ``--out`` and
+profile (the tables of ``setdiff-bench leaderboard``, with the paper's reported rows, marked "(paper)",
+where the dataset's layout has them; ``--no-reported`` leaves them out), each method's cost (ms per frame,
+peak memory), the dataset's plots, each method's gain per scene with paired bootstrap intervals, and every
+target: a table of each method's gain or loss against the render (the ``--baseline`` run, ``identity``),
+sortable by any column so damage is easy to find, linking to a page per target with render | each method |
+ground truth, a before/after slider, error maps and metrics.  ``videos.html`` plays render | method | ground
+truth per camera sequence (WebM, VP9).  Pictures are JPEG (``--jpeg-quality``) unless ``--lossless``.
+Pictures and videos need ``--packets``, the store the runs were made on (checked against the index hash the
+runs recorded).  ``--video-only`` writes ``<out>/videos/`` alone.  The site is built beside ``--out`` and
 replaces it whole when complete; see docs/report.md.
 """
 
@@ -31,6 +33,11 @@ DESCRIPTION = __doc__
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    # the settings' defaults, read without importing the site's heavy modules at every CLI start
+    from setdiff_bench.reporting.bootstrap import BootstrapSettings
+    from setdiff_bench.reporting.site_pictures import DEFAULT_JPEG_QUALITY
+
+    bootstrap = BootstrapSettings()
     parser.add_argument(
         "--runs", required=True, nargs="+", type=Path, metavar="RUN", help="run folders, or folders of runs"
     )
@@ -56,6 +63,35 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=768,
         help="pictures and videos wider than this many pixels are scaled down (0: full size; default 768)",
     )
+    parser.add_argument(
+        "--lossless",
+        action="store_true",
+        help="pictures as lossless PNG (every pixel as scored; several times larger) instead of JPEG",
+    )
+    parser.add_argument(
+        "--jpeg-quality",
+        type=int,
+        default=DEFAULT_JPEG_QUALITY,
+        help="JPEG quality of the pictures, 1-100 (default %(default)s)",
+    )
+    parser.add_argument(
+        "--no-reported",
+        action="store_true",
+        help="leave the paper's reported rows out of the leaderboards (shown by default where the "
+        "dataset's layout has them, marked (paper))",
+    )
+    parser.add_argument(
+        "--bootstrap-resamples",
+        type=int,
+        default=bootstrap.resamples,
+        help="resamples of the per-scene paired bootstrap intervals (default %(default)s)",
+    )
+    parser.add_argument(
+        "--bootstrap-seed",
+        type=int,
+        default=bootstrap.seed,
+        help="seed of those resamples (default %(default)s)",
+    )
     videos = parser.add_mutually_exclusive_group()
     videos.add_argument("--no-videos", action="store_true", help="leave the videos out")
     videos.add_argument("--video-only", action="store_true", help="write only <out>/videos/*.webm")
@@ -64,12 +100,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     from setdiff_bench.errors import UsageError
+    from setdiff_bench.reporting.bootstrap import BootstrapSettings
     from setdiff_bench.reporting.site import SiteSettings, build_site
+    from setdiff_bench.reporting.site_pictures import PictureSettings
 
     if not args.fps > 0:
         raise UsageError(f"needs a positive frame rate, got {args.fps}", "--fps")
     if args.max_width < 0:
         raise UsageError(f"needs a width >= 0, got {args.max_width}", "--max-width")
+    if not 1 <= args.jpeg_quality <= 100:
+        raise UsageError(f"needs a quality of 1-100, got {args.jpeg_quality}", "--jpeg-quality")
+    if args.bootstrap_resamples < 1:
+        raise UsageError(
+            f"needs at least 1 resample, got {args.bootstrap_resamples}", "--bootstrap-resamples"
+        )
     command = "setdiff-bench " + shlex.join(
         ["report", "--runs", *map(str, args.runs), "--out", str(args.out)]
         + (["--packets", str(args.packets)] if args.packets else [])
@@ -81,6 +125,9 @@ def run(args: argparse.Namespace) -> int:
         max_width=args.max_width or None,
         videos=not args.no_videos,
         command=command,
+        pictures=PictureSettings(lossless=args.lossless, quality=args.jpeg_quality),
+        with_reported=not args.no_reported,
+        bootstrap=BootstrapSettings(resamples=args.bootstrap_resamples, seed=args.bootstrap_seed),
     )
     summary = build_site(
         args.runs, args.out, packets=args.packets, settings=settings, video_only=args.video_only

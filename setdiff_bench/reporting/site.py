@@ -2,14 +2,16 @@
 
 Pages (every stylesheet and script inline, every link relative)::
 
-    index.html                 leaderboards (one per dataset and evaluation profile, blocks = groups, and the
-                               cost block: ms per frame, peak memory), the dataset's plots, and every target in a
-                               table sortable by each method's gain or loss against the render
-    videos.html                render | method | ground truth per camera sequence (WebM, VP9)
+    index.html                 leaderboards (one per dataset and evaluation profile, blocks = groups, the
+                               cost block: ms per frame, peak memory, and the paper's reported rows where the
+                               dataset's layout has them), the dataset's plots, each method's gain per scene
+                               with paired bootstrap intervals, and every target in a table sortable by any
+                               column (opening sorted, and marked so, by the first method's loss)
+    videos.html                render | method | ground truth per camera sequence (WebM, VP9, with posters)
     targets/<target>.html      render | each method | ground truth, a before/after slider per method,
                                error maps |image − GT|, the target's metrics
-    images/<target>/*.png      the pictures those pages show
-    plots/*.png, videos/*.webm
+    images/<target>/*.jpg      the pictures those pages show (``*.png`` with ``lossless``) and thumb.jpg
+    plots/*.png, videos/*.webm, videos/*.jpg (the videos' posters)
 
 The tables come from :func:`setdiff_bench.reporting.leaderboard.build_leaderboard` (the same aggregation,
 refusals and bold-best as ``setdiff-bench leaderboard``), the plots from
@@ -22,8 +24,9 @@ the one the runs recorded); without one the site has the tables, plots and per-t
 site is built in a staging folder beside ``out`` and renamed into place when complete.
 
 Modules, along the data path: :mod:`.site_runs` (the runs and their packet store), :mod:`.site_targets`
-(per-target records and gains), :mod:`.site_html` (style, scripts, page frame, leaderboard tables, video
-players), :mod:`.site_target_pages` (a target's page and pictures), :mod:`.site_index` (``index.html``) and
+(per-target records and gains), :mod:`.site_pictures` (JPEG or PNG pictures, thumbnails), :mod:`.site_html`
+(style, scripts, page frame, units, leaderboard tables, video players), :mod:`.site_scenes` (the per-scene
+breakdown), :mod:`.site_target_pages` (a target's page and pictures), :mod:`.site_index` (``index.html``) and
 this module (:func:`build_site`, which writes them all).
 """
 
@@ -38,7 +41,15 @@ import pandas as pd
 from setdiff_bench.errors import UsageError
 from setdiff_bench.evaluation.profiles import DEFAULT_PROFILE, PROFILE_COLUMN
 from setdiff_bench.io.atomic import staged_folder
-from setdiff_bench.reporting.leaderboard import Leaderboard, build_leaderboard, load_runs, profile_rows
+from setdiff_bench.reporting.bootstrap import BootstrapSettings
+from setdiff_bench.reporting.leaderboard import (
+    Leaderboard,
+    build_leaderboard,
+    dataset_layout,
+    load_runs,
+    profile_rows,
+    reported_for,
+)
 from setdiff_bench.reporting.plots import write_plots
 from setdiff_bench.reporting.site_html import (
     SLIDER_SCRIPT,
@@ -49,9 +60,11 @@ from setdiff_bench.reporting.site_html import (
     video_players,
     videos_page,
 )
-from setdiff_bench.reporting.site_index import damage_html, index_body, targets_table_html
+from setdiff_bench.reporting.site_index import damage_html, index_body, plot_caption, targets_table_html
+from setdiff_bench.reporting.site_pictures import PictureSettings
 from setdiff_bench.reporting.site_runs import open_store, recorded_store, run_folders
-from setdiff_bench.reporting.site_target_pages import target_page, write_target_images
+from setdiff_bench.reporting.site_scenes import scene_table_html
+from setdiff_bench.reporting.site_target_pages import THUMBNAIL_FILE, target_page, write_target_images
 from setdiff_bench.reporting.site_targets import (
     TARGET_KEY,
     TargetRecord,
@@ -91,6 +104,8 @@ __all__ = [
 ]
 
 DEFAULT_BASELINE = "identity"
+#: The metrics the plots draw, one panel each.
+PLOT_METRICS = ("psnr", "ssim", "lpips")
 
 
 @dataclass(frozen=True)
@@ -104,6 +119,10 @@ class SiteSettings:
         max_width: pictures and videos wider than this are scaled down (``None``: full size).
         videos: write the sequence videos.
         command: the command that built the site, shown at the foot of each page.
+        pictures: JPEG (quality) or lossless PNG pictures.
+        with_reported: add the paper's reported rows, marked "(paper)", to the leaderboards of datasets whose
+            layout has them (the rows ``leaderboard --with-reported`` adds; never to other profiles' tables).
+        bootstrap: resamples, level and seed of the per-scene breakdown's paired intervals.
     """
 
     baseline: str = DEFAULT_BASELINE
@@ -112,6 +131,9 @@ class SiteSettings:
     max_width: int | None = 768
     videos: bool = True
     command: str | None = None
+    pictures: PictureSettings = field(default_factory=PictureSettings)
+    with_reported: bool = True
+    bootstrap: BootstrapSettings = field(default_factory=BootstrapSettings)
 
 
 @dataclass
@@ -198,7 +220,11 @@ def build_site(
         if pictures is not None:
             for i, record in enumerate(records):
                 write_target_images(
-                    pictures, record, [m for m in methods if m != baseline], staging / "images" / record.slug
+                    pictures,
+                    record,
+                    [m for m in methods if m != baseline],
+                    staging / "images" / record.slug,
+                    settings.pictures,
                 )
                 page_text = target_page(
                     record,
@@ -209,15 +235,35 @@ def build_site(
                     following=records[i + 1] if i + 1 < len(records) else None,
                     command=settings.command,
                     videos=by_target.get(record.key, []),
+                    suffix=settings.pictures.suffix,
                 )
                 (staging / "targets" / f"{record.slug}.html").write_text(page_text, encoding="utf-8")
             summary.pages += len(records)
         summary.targets = len(records)
-        plots = []
-        for dataset in sorted(set(plain["dataset"])):
-            plots += write_plots(dataset, plain, staging / "plots", split=settings.split)
+        plots = [
+            (path, plot_caption(dataset, PLOT_METRICS))
+            for dataset in sorted(set(plain["dataset"]))
+            for path in write_plots(
+                dataset, plain, staging / "plots", split=settings.split, metrics=PLOT_METRICS
+            )
+        ]
+        scenes = (
+            scene_table_html(plain, labels, methods, metrics, baseline, settings.bootstrap)
+            if baseline
+            else ""
+        )
         index = index_body(
-            boards, labels, plots, records, methods, metrics, baseline, pictures is not None, staging
+            boards,
+            labels,
+            plots,
+            records,
+            methods,
+            metrics,
+            baseline,
+            pictures is not None,
+            staging,
+            scenes=scenes,
+            thumbnail=THUMBNAIL_FILE,
         )
         if baseline is None:
             summary.notes.append(
@@ -235,7 +281,8 @@ def build_site(
 
 
 def _boards(images: pd.DataFrame, sequences: pd.DataFrame, settings: SiteSettings) -> list[Leaderboard]:
-    """A leaderboard per dataset and evaluation profile present in the runs."""
+    """A leaderboard per dataset and evaluation profile present in the runs; the default profile's with the
+    paper's reported rows where the dataset's layout has them and ``settings.with_reported``."""
     boards = []
     profiles = (
         sorted(set(images[PROFILE_COLUMN].fillna(DEFAULT_PROFILE)), key=lambda p: (p != DEFAULT_PROFILE, p))
@@ -250,7 +297,22 @@ def _boards(images: pd.DataFrame, sequences: pd.DataFrame, settings: SiteSetting
                 rows = rows[rows["split"] == settings.split]
             if rows.empty:
                 continue
+            reported = None
+            if (
+                settings.with_reported
+                and profile == DEFAULT_PROFILE
+                and dataset_layout(dataset).reported_tables
+            ):
+                reported = reported_for(dataset)
             boards.append(
-                build_leaderboard(dataset, rows, sequences, split=settings.split, profile=profile, cost=True)
+                build_leaderboard(
+                    dataset,
+                    rows,
+                    sequences,
+                    split=settings.split,
+                    profile=profile,
+                    cost=True,
+                    reported=reported,
+                )
             )
     return boards

@@ -8,6 +8,7 @@ import html
 import math
 from collections.abc import Sequence
 
+from setdiff_bench.metrics.registry import METRICS
 from setdiff_bench.reporting.leaderboard import Leaderboard, metric_arrow, metric_header
 from setdiff_bench.reporting.video import VideoRecord
 
@@ -19,10 +20,12 @@ table{border-collapse:collapse;margin:8px 0;font-size:13px;background:#fff}
 th,td{border:1px solid #d8dde6;padding:3px 7px;text-align:right;white-space:nowrap}
 th{background:#eef1f6}td.l,th.l{text-align:left}caption{text-align:left;font-weight:600;padding:4px 0}
 th.sortable{cursor:pointer}th.sortable:after{content:" \\2195";color:#889}
-th.asc:after{content:" \\2191"}th.desc:after{content:" \\2193"}
+th.asc:after{content:" \\25B2";color:#1d2330}th.desc:after{content:" \\25BC";color:#1d2330}
+th.asc,th.desc{background:#dfe6f2}
 .good{background:#e3f5e6}.bad{background:#fbe1e1}.note{color:#555;font-size:12px;max-width:1100px}
 .strip{display:flex;flex-wrap:wrap;gap:8px}figure{margin:0;background:#fff;border:1px solid #d8dde6;padding:4px}
-figcaption{font-size:12px;text-align:center}img.thumb{height:40px;vertical-align:middle}
+figcaption{font-size:12px;text-align:center}figcaption.long{text-align:left;max-width:640px}
+td small{color:#555}img.thumb{height:40px;vertical-align:middle}
 .cmp{position:relative;display:inline-block;line-height:0;border:1px solid #d8dde6}
 .cmp img{display:block;max-width:100%}.cmp .before{position:absolute;top:0;left:0}
 .cmp input{position:absolute;left:0;bottom:4px;width:100%;margin:0;line-height:normal}
@@ -32,17 +35,27 @@ footer{color:#777;font-size:12px;padding:12px 24px;border-top:1px solid #d8dde6}
 """
 
 SORT_SCRIPT = """
+function sortValue(cell, text) {
+  return text ? cell.dataset.v : parseFloat(cell.dataset.v);
+}
 document.querySelectorAll("table.sortable").forEach(function (table) {
-  table.querySelectorAll("th.sortable").forEach(function (th, unused) {
+  table.querySelectorAll("th.sortable").forEach(function (th) {
     th.addEventListener("click", function () {
       var column = Array.prototype.indexOf.call(th.parentNode.children, th);
       var down = !th.classList.contains("asc");
-      table.querySelectorAll("th.sortable").forEach(function (o) { o.classList.remove("asc", "desc"); });
+      var text = th.dataset.type === "text";
+      table.querySelectorAll("th.sortable").forEach(function (o) {
+        o.classList.remove("asc", "desc"); o.removeAttribute("aria-sort"); });
       th.classList.add(down ? "asc" : "desc");
+      th.setAttribute("aria-sort", down ? "ascending" : "descending");
       var body = table.tBodies[0];
       var rows = Array.prototype.slice.call(body.rows);
       rows.sort(function (a, b) {
-        var x = parseFloat(a.cells[column].dataset.v), y = parseFloat(b.cells[column].dataset.v);
+        var x = sortValue(a.cells[column], text), y = sortValue(b.cells[column], text);
+        if (text) {
+          var order = x.localeCompare(y, undefined, {numeric: true});
+          return down ? order : -order;
+        }
         if (isNaN(x) && isNaN(y)) { return 0; }
         if (isNaN(x)) { return 1; }
         if (isNaN(y)) { return -1; }
@@ -84,15 +97,29 @@ def page(title: str, body: str, *, root: str = "", script: str = "", command: st
     )
 
 
+def metric_unit(metric: str) -> str:
+    """The unit of ``metric``'s values (``MetricSpec.unit``: ``"dB"`` for PSNR), ``""`` for unitless ones."""
+    spec = METRICS.get(metric)
+    return spec.unit if spec is not None else ""
+
+
+def metric_label(metric: str, suffix: str = "", *, arrow: bool = True) -> str:
+    """A column header: ``"PSNR (dB)↑"``, ``"PSNR gain (dB)"`` with ``suffix=" gain", arrow=False``;
+    the unit only where the metric has one."""
+    unit = metric_unit(metric)
+    return (
+        metric_header(metric)
+        + suffix
+        + (f" ({unit})" if unit else "")
+        + (metric_arrow(metric, False) if arrow else "")
+    )
+
+
 def leaderboard_html(board: Leaderboard) -> str:
     """``board`` as an HTML table: blocks (groups) as column groups, best values bold, notes below."""
     multi = len(board.columns) > 1
     head = [f'<th class="l" rowspan="{2 if multi else 1}">{esc(board.row_header)}</th>']
-    metric_cells = [
-        f"<th>{esc(metric_header(m) + metric_arrow(m, False))}</th>"
-        for _, metrics in board.columns
-        for m in metrics
-    ]
+    metric_cells = [f"<th>{esc(metric_label(m))}</th>" for _, metrics in board.columns for m in metrics]
     if multi:
         blocks = "".join(f'<th colspan="{len(ms)}">{esc(block.label)}</th>' for block, ms in board.columns)
         header = f"<tr>{head[0]}{blocks}</tr><tr>{''.join(metric_cells)}</tr>"
@@ -136,11 +163,12 @@ def cell_class(value: float) -> str:
 
 
 def video_players(videos: Sequence[VideoRecord], folder: str) -> str:
-    """One player per video (files under the relative ``folder``), side by side."""
+    """One player per video (files under the relative ``folder``), side by side, each showing its poster (the
+    first frame) until it plays."""
     players = "".join(
-        f'<figure><video src="{folder}{esc(v.path.name)}" controls loop muted playsinline '
-        f'preload="metadata" title="{esc(v.method)}"></video><figcaption>render | {esc(v.method)} | '
-        f"ground truth — {v.frames} frames</figcaption></figure>"
+        f'<figure><video src="{folder}{esc(v.path.name)}" poster="{folder}{esc(v.poster.name)}" controls '
+        f'loop muted playsinline preload="metadata" title="{esc(v.method)}"></video><figcaption>render | '
+        f"{esc(v.method)} | ground truth — {v.frames} frames</figcaption></figure>"
         for v in videos
     )
     return f'<div class="videos">{players}</div>'

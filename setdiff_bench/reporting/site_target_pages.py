@@ -1,23 +1,26 @@
 """The report site's target pages (``targets/<target>.html``) and their pictures
-(``images/<target>/*.png``): render, each method and ground truth side by side, a before/after slider per
-method, error maps |image − GT| on one scale, the target's metrics and gains, and its sequence's videos."""
+(``images/<target>/*.jpg``, or ``*.png`` when lossless: :mod:`.site_pictures`): render, each method and ground
+truth side by side, a before/after slider per method, error maps |image − GT| on one scale, the target's
+metrics and gains, and its sequence's videos; plus the thumbnail the targets table shows."""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
 
-from setdiff_bench.io.images import write_png
-from setdiff_bench.reporting.leaderboard import metric_arrow, metric_decimals, metric_header
+from setdiff_bench.reporting.leaderboard import metric_decimals, metric_header
 from setdiff_bench.reporting.site_html import (
     SLIDER_SCRIPT,
     cell_class,
     esc,
+    metric_label,
+    metric_unit,
     number,
     page,
     signed,
     video_players,
 )
+from setdiff_bench.reporting.site_pictures import PictureSettings, write_picture, write_thumbnail
 from setdiff_bench.reporting.site_targets import TargetRecord, target_gain
 from setdiff_bench.reporting.targets import ERROR_MAP_FULL_SCALE, TargetImages, error_map
 from setdiff_bench.reporting.video import VideoRecord, slug
@@ -33,9 +36,10 @@ def target_page(
     following: TargetRecord | None,
     command: str | None,
     videos: Sequence[VideoRecord] = (),
+    suffix: str = ".jpg",
 ) -> str:
-    """The page of one target: pictures, sliders, error maps, metrics (images under ``../images``) and the
-    ``videos`` of its camera sequence (under ``../videos``)."""
+    """The page of one target: pictures, sliders, error maps, metrics (images under ``../images``, files
+    ending in ``suffix``) and the ``videos`` of its camera sequence (under ``../videos``)."""
     folder = f"../images/{record.slug}"
     shown = [m for m in methods if m != baseline]
     render_label = f"3DGS render (= {baseline})" if baseline in record.values else "3DGS render"
@@ -45,29 +49,32 @@ def target_page(
 
     def psnr_of(method: str) -> str:
         value = record.values.get(method, {}).get(metrics[0]) if metrics else None
-        return (
-            f" — {metric_header(metrics[0])} {value:.{metric_decimals(metrics[0])}f}"
-            if value is not None
-            else ""
+        if value is None:
+            return ""
+        unit = metric_unit(metrics[0])
+        return f" — {metric_header(metrics[0])} {value:.{metric_decimals(metrics[0])}f}" + (
+            f" {unit}" if unit else ""
         )
 
     pictures = (
-        figure("render.png", render_label + (psnr_of(baseline) if baseline else ""))
-        + "".join(figure(f"{slug(m)}.png", m + psnr_of(m)) for m in shown)
-        + figure("gt.png", "ground truth")
+        figure(f"render{suffix}", render_label + (psnr_of(baseline) if baseline else ""))
+        + "".join(figure(f"{slug(m)}{suffix}", m + psnr_of(m)) for m in shown)
+        + figure(f"gt{suffix}", "ground truth")
     )
-    errors = figure("render.err.png", "|render − GT|") + "".join(
-        figure(f"{slug(m)}.err.png", f"|{m} − GT|") for m in shown
+    errors = figure(f"render.err{suffix}", "|render − GT|") + "".join(
+        figure(f"{slug(m)}.err{suffix}", f"|{m} − GT|") for m in shown
     )
     sliders = "".join(
         f'<div class="cmpwrap"><div>render ◀ ▶ {esc(m)}</div><div class="cmp" data-method="{esc(m)}">'
-        f'<img class="after" src="{folder}/{slug(m)}.png" alt="{esc(m)}">'
-        f'<img class="before" src="{folder}/render.png" alt="render">'
+        f'<img class="after" src="{folder}/{slug(m)}{suffix}" alt="{esc(m)}">'
+        f'<img class="before" src="{folder}/render{suffix}" alt="render">'
         f'<input type="range" min="0" max="100" value="50" aria-label="render / {esc(m)}"></div></div>'
         for m in shown
     )
-    head = "".join(f"<th>{esc(metric_header(m))}{esc(metric_arrow(m, False))}</th>" for m in metrics)
-    gains = "".join(f"<th>{esc(metric_header(m))} gain</th>" for m in metrics) if baseline else ""
+    head = "".join(f"<th>{esc(metric_label(m))}</th>" for m in metrics)
+    gains = (
+        "".join(f"<th>{esc(metric_label(m, ' gain', arrow=False))}</th>" for m in metrics) if baseline else ""
+    )
     rows = []
     for method in [m for m in methods if m in record.values]:
         values = record.values[method]
@@ -106,16 +113,27 @@ def target_page(
     return page(title, body, root="../", script=SLIDER_SCRIPT, command=command)
 
 
+#: File name of a target's thumbnail in its picture folder (always JPEG: it is only a preview).
+THUMBNAIL_FILE = "thumb.jpg"
+
+
 def write_target_images(
-    images: TargetImages, record: TargetRecord, methods: Sequence[str], folder: Path
+    images: TargetImages,
+    record: TargetRecord,
+    methods: Sequence[str],
+    folder: Path,
+    settings: PictureSettings | None = None,
 ) -> None:
-    """The pictures of one target page: render, each method, ground truth, and their error maps."""
+    """The pictures of one target page (render, each method, ground truth, and their error maps, as
+    ``settings`` says, default JPEG) and the targets table's thumbnail of the render (:data:`THUMBNAIL_FILE`)."""
+    settings = settings or PictureSettings()
     folder.mkdir(parents=True, exist_ok=True)
     render, truth = images.render(record.key), images.ground_truth(record.key)
-    write_png(folder / "render.png", render, atomic=False)
-    write_png(folder / "gt.png", truth, atomic=False)
-    write_png(folder / "render.err.png", error_map(render, truth), atomic=False)
+    write_picture(folder / "render", render, settings)
+    write_picture(folder / "gt", truth, settings)
+    write_picture(folder / "render.err", error_map(render, truth), settings, error_map=True)
+    write_thumbnail(folder / THUMBNAIL_FILE, render)
     for method in methods:
         output = images.output(method, record.key)
-        write_png(folder / f"{slug(method)}.png", output, atomic=False)
-        write_png(folder / f"{slug(method)}.err.png", error_map(output, truth), atomic=False)
+        write_picture(folder / slug(method), output, settings)
+        write_picture(folder / f"{slug(method)}.err", error_map(output, truth), settings, error_map=True)

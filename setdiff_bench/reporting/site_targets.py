@@ -12,7 +12,7 @@ import pandas as pd
 
 from setdiff_bench.loaders.common import natural_key
 from setdiff_bench.metrics.registry import METRICS
-from setdiff_bench.reporting.leaderboard import higher_is_better
+from setdiff_bench.reporting.gains import gain
 from setdiff_bench.reporting.targets import TargetKey
 from setdiff_bench.reporting.video import slug
 
@@ -27,11 +27,6 @@ def image_metrics(frame: pd.DataFrame) -> list[str]:
         for name, spec in METRICS.items()
         if spec.scope in ("image", "profile") and name in frame.columns and frame[name].notna().any()
     ]
-
-
-def gain(metric: str, value: float, baseline: float) -> float:
-    """``value`` against ``baseline`` with the sign of "better": positive helps, negative damages."""
-    return value - baseline if higher_is_better(metric) else baseline - value
 
 
 @dataclass(frozen=True)

@@ -8,6 +8,9 @@ trajectory, by timestamp when every target has one, then by frame name.
 Format: WebM with VP9 (OpenCV's FFmpeg writer, fourcc ``VP90``), which Chromium, Firefox and Safari play
 without plug-ins; H.264 is not offered by the OpenCV wheels (no encoder), and the MPEG-4 Part 2 they
 write is not played by Chromium.  Frame sides are padded to even numbers (4:2:0 chroma).
+
+Each video has a poster, ``<video name>.jpg``: its first frame, which a page shows before the video plays
+(without one a browser that only loads the metadata paints the player black until it is played).
 """
 
 from __future__ import annotations
@@ -29,9 +32,11 @@ from setdiff_bench.evaluation.run_settings import SEQUENCE_PROTOCOLS
 from setdiff_bench.io.atomic import atomic_path
 from setdiff_bench.loaders.common import natural_key
 from setdiff_bench.reporting.grids import compose
+from setdiff_bench.reporting.site_pictures import write_jpeg
 from setdiff_bench.reporting.targets import TargetImages, TargetKey
 
 VIDEO_SUFFIX = ".webm"
+POSTER_SUFFIX = ".jpg"
 FOURCC = "VP90"
 
 
@@ -164,31 +169,39 @@ def side_by_side(
 
 @dataclass(frozen=True)
 class VideoRecord:
-    """A written video: its sequence, the method shown, the file and its frame count."""
+    """A written video: its sequence, the method shown, the file, its frame count and its poster (the first
+    frame as a JPEG beside the video)."""
 
     sequence: TargetSequence
     method: str
     path: Path
     frames: int
+    poster: Path
 
 
 def sequence_video(
     images: TargetImages, sequence: TargetSequence, method: str, path: str | Path, *, fps: float = 4.0
 ) -> VideoRecord:
-    """Write the render | ``method`` | ground truth video of ``sequence`` to ``path``."""
+    """Write the render | ``method`` | ground truth video of ``sequence`` to ``path``, and its poster (the
+    first frame) to ``path`` with the suffix ``.jpg``."""
+    path = Path(path)
+    poster = path.with_suffix(POSTER_SUFFIX)
 
     def frames() -> Iterator[np.ndarray]:
         for number, key in enumerate(sequence.targets):
-            yield side_by_side(
+            frame = side_by_side(
                 images.render(key),
                 images.output(method, key),
                 images.ground_truth(key),
                 method,
                 f"{number + 1}/{len(sequence.targets)}",
             )
+            if number == 0:
+                write_jpeg(poster, frame)
+            yield frame
 
     write_video(path, frames(), fps)
-    return VideoRecord(sequence, method, Path(path), len(sequence.targets))
+    return VideoRecord(sequence, method, path, len(sequence.targets), poster)
 
 
 def write_videos(
@@ -201,7 +214,7 @@ def write_videos(
     min_frames: int = 2,
 ) -> list[VideoRecord]:
     """One video per sequence (of at least ``min_frames`` targets) and method, named
-    ``<sequence slug>__<method>.webm`` in ``folder``."""
+    ``<sequence slug>__<method>.webm`` in ``folder``, each with its poster ``<same name>.jpg``."""
     records = []
     for sequence in sequences:
         if len(sequence.targets) < min_frames:

@@ -8,6 +8,7 @@ Python package in the ``test`` extra) and records every console error, uncaught 
 
 from __future__ import annotations
 
+import base64
 import json
 import re
 import shutil
@@ -142,6 +143,16 @@ class Browser:
             if time.monotonic() > deadline:
                 raise TimeoutError(f"{path} did not load in {timeout} s")
             self._record(json.loads(self.socket.recv()))
+
+    def screenshot(self, selector: str) -> bytes:
+        """A PNG of what the page shows of the first element matching the CSS ``selector``, as painted."""
+        box = self.evaluate(
+            f"(() => {{ const r = document.querySelector({json.dumps(selector)}).getBoundingClientRect();"
+            " return [r.left + window.scrollX, r.top + window.scrollY, r.width, r.height]; })()"
+        )
+        clip = {"x": box[0], "y": box[1], "width": box[2], "height": box[3], "scale": 1}
+        result = self.call("Page.captureScreenshot", format="png", clip=clip, captureBeyondViewport=True)
+        return base64.b64decode(result["data"])
 
     def evaluate(self, expression: str) -> Any:
         """The value of a JavaScript expression in the page (a promise is awaited)."""

@@ -1,5 +1,5 @@
-"""A tiny store with timestamped camera sequences, an identity run and a reproject run, and the report
-site built from them (once per package: ~2 s)."""
+"""A tiny store with timestamped camera sequences in two scenes, an identity run and a reproject run, and
+the report site built from them (once per package: ~5 s)."""
 
 from __future__ import annotations
 
@@ -11,8 +11,9 @@ from setdiff_bench.evaluation.run import RunSettings, run_method
 from setdiff_bench.runtime.threads import torch_threads
 from tests.run.store_fixtures import StoreSpec, build_store
 
-#: one scene, two groups of one packet with four targets each: two camera sequences of four frames
-SPEC = StoreSpec(scenes=("scene_a",), targets=4, timestamps=True)
+#: two scenes, two groups of one packet with four targets each: four camera sequences of four frames (two
+#: scenes, so the per-scene breakdown has an interval over scenes)
+SPEC = StoreSpec(scenes=("scene_a", "scene_b"), targets=4, timestamps=True)
 
 
 @pytest.fixture(scope="package")

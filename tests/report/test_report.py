@@ -15,6 +15,7 @@ import pandas as pd
 import pytest
 
 from setdiff_bench.cli.main import main
+from setdiff_bench.loaders.common import natural_key
 from setdiff_bench.reporting.targets import error_map
 from setdiff_bench.reporting.video import target_sequences, write_video
 from tests.report.browser import Browser, find_browser
@@ -23,25 +24,28 @@ from tests.report.conftest import SPEC
 
 def test_site_holds_every_page_picture_and_video(site: Path, runs: Path) -> None:
     pages = sorted((site / "targets").glob("*.html"))
-    assert len(pages) == len(SPEC.groups) * SPEC.targets
+    assert len(pages) == len(SPEC.scenes) * len(SPEC.groups) * SPEC.targets
     for folder in (site / "images").iterdir():
         names = {p.name for p in folder.iterdir()}
         assert names == {
-            "render.png",
-            "gt.png",
-            "render.err.png",
-            "reproject.png",
-            "reproject.err.png",
+            "render.jpg",
+            "gt.jpg",
+            "render.err.jpg",
+            "reproject.jpg",
+            "reproject.err.jpg",
+            "thumb.jpg",
         }
     videos = sorted((site / "videos").glob("*.webm"))
-    assert len(videos) == len(SPEC.groups)  # one camera sequence per group, one compared method
+    sequences = len(SPEC.scenes) * len(SPEC.groups)  # one camera sequence per scene and group
+    assert len(videos) == sequences  # one compared method
+    assert sorted(p.stem for p in (site / "videos").glob("*.jpg")) == [v.stem for v in videos]  # posters
     capture = cv2.VideoCapture(str(videos[0]))
     frames = 0
     while capture.read()[0]:
         frames += 1
     assert frames == SPEC.targets
     index = (site / "index.html").read_text(encoding="utf-8")
-    assert "reproject PSNR gain" in index and "identity" in index
+    assert "reproject PSNR gain (dB)" in index and "identity" in index
     # self-contained: no network address and no absolute link anywhere
     for page in [site / "index.html", site / "videos.html", *pages]:
         text = page.read_text(encoding="utf-8")
@@ -58,8 +62,9 @@ def test_rows_start_with_the_largest_loss(site: Path, runs: Path) -> None:
     index = (site / "index.html").read_text(encoding="utf-8")
     body = index.split('<table class="sortable targets">', 1)[1]
     first_row = body.split("<tbody>", 1)[1].split("</tr>", 1)[0]
-    shown = [float(v) for v in re.findall(r"data-v=\"([^\"]+)\"", first_row)]
-    assert shown[len(["psnr", "ssim", "lpips"])] == pytest.approx(gains.iloc[0])
+    shown = re.findall(r"data-v=\"([^\"]+)\"", first_row)
+    # target and group (names), the baseline's PSNR, SSIM, LPIPS, then reproject's PSNR gain
+    assert float(shown[2 + len(["psnr", "ssim", "lpips"])]) == pytest.approx(gains.iloc[0])
 
 
 def test_error_map_is_black_where_equal_and_bright_at_full_scale() -> None:
@@ -74,7 +79,7 @@ def test_error_map_is_black_where_equal_and_bright_at_full_scale() -> None:
 def test_sequences_follow_camera_and_time(runs: Path) -> None:
     rows = pd.read_parquet(runs / "reproject" / "metrics.parquet")
     sequences = target_sequences(rows)
-    assert [s.group for s in sequences] == list(SPEC.groups)
+    assert [(s.scene, s.group) for s in sequences] == [(a, g) for a in SPEC.scenes for g in SPEC.groups]
     for sequence in sequences:
         stamps = [
             rows.set_index(["packet_id", "view"]).loc[(k.packet_id, k.view), "timestamp_us"]
@@ -88,7 +93,7 @@ def test_video_only_writes_the_videos_alone(store: Path, runs: Path, tmp_path: P
     argv = ["report", "--runs", str(runs), "--packets", str(store), "--out", str(out), "--video-only"]
     assert main(argv) == 0
     assert sorted(p.name for p in out.iterdir()) == ["videos"]
-    assert len(list((out / "videos").glob("*.webm"))) == len(SPEC.groups)
+    assert len(list((out / "videos").glob("*.webm"))) == len(SPEC.scenes) * len(SPEC.groups)
 
 
 def test_refusals_are_one_line_and_write_nothing(
@@ -145,18 +150,31 @@ def test_site_in_headless_chromium(site: Path, tmp_path: Path) -> None:
             "Array.from(document.images).filter(i => i.loading !== 'lazy')"
             ".every(i => i.complete && i.naturalWidth > 0)"
         ), "an image of the index did not load"
-        # sort by the first gain column, then by it again (descending): the first row holds the maximum
+        # the page opens sorted by the first gain column (marked ascending); a click reverses it, another
+        # click sorts it ascending again: the first row holds the maximum, then the minimum
         column = browser.evaluate(
             "Array.from(document.querySelectorAll('table.targets th')).findIndex(t => /gain/.test(t.textContent))"
         )
         values = browser.evaluate(
             f"""(() => {{ const th = document.querySelectorAll('table.targets th')[{column}];
-                th.click(); const up = parseFloat(document.querySelector('table.targets tbody tr').cells[{column}].dataset.v);
-                th.click(); const down = parseFloat(document.querySelector('table.targets tbody tr').cells[{column}].dataset.v);
+                const first = () => parseFloat(document.querySelector('table.targets tbody tr').cells[{column}].dataset.v);
+                const opened = [first(), th.getAttribute('aria-sort')];
+                th.click(); const down = [first(), th.getAttribute('aria-sort')];
+                th.click(); const up = [first(), th.getAttribute('aria-sort')];
                 const all = Array.from(document.querySelectorAll('table.targets tbody tr')).map(r => parseFloat(r.cells[{column}].dataset.v));
-                return [up, down, Math.min(...all), Math.max(...all)]; }})()"""
+                return [opened, down, up, Math.min(...all), Math.max(...all)]; }})()"""
         )
-        assert values[0] == values[2] and values[1] == values[3]
+        opened, down, up, low, high = values
+        assert opened == [low, "ascending"] and down == [high, "descending"] and up == [low, "ascending"]
+        # the target and group columns sort by name, in natural order, both ways
+        for column, key in ((0, "target"), (1, "group")):
+            names = browser.evaluate(
+                f"""(() => {{ const th = document.querySelectorAll('table.targets th')[{column}];
+                    const col = () => Array.from(document.querySelectorAll('table.targets tbody tr')).map(r => r.cells[{column}].dataset.v);
+                    th.click(); const up = col(); th.click(); return [up, col()]; }})()"""
+            )
+            expected = sorted(names[0], key=natural_key)
+            assert names[0] == expected and names[1] == expected[::-1], key
 
         browser.open(target_page)
         assert browser.evaluate("Array.from(document.images).every(i => i.complete && i.naturalWidth > 0)")
@@ -169,6 +187,13 @@ def test_site_in_headless_chromium(site: Path, tmp_path: Path) -> None:
         assert "50%" in before and "80%" in after, (before, after)
 
         browser.open(site / "videos.html")
+        # before it plays, a player shows its poster (the first frame), not a black box
+        browser.evaluate(
+            """(async () => { const p = new Image(); p.src = document.querySelector('video').poster;
+                await p.decode(); await new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r))); })()"""
+        )
+        shown = cv2.imdecode(np.frombuffer(browser.screenshot("video"), np.uint8), cv2.IMREAD_COLOR)
+        assert shown is not None and shown.mean() > 40, "the video shows black before it plays"
         played = browser.evaluate(
             """(async () => { const v = document.querySelector('video'); await v.play();
                 const start = performance.now();

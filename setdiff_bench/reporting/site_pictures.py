@@ -1,0 +1,113 @@
+"""How the report site stores its pictures: JPEG (small; the default) or lossless PNG, thumbnails for the
+targets table, and the poster frames of the videos.
+
+A site of a large benchmark is mostly pictures: per target the render, the ground truth, every method's
+output and an error map per image.  As lossless PNG the sparse demo's 676 targets at 256×144 made a site of
+353 MB; as JPEG at quality 90 without chroma subsampling (4:4:4, so thin coloured edges keep their colour)
+the same pictures take a fraction of that (docs/report.md, "Size and time", gives the measured numbers).
+``--lossless`` (:attr:`PictureSettings.lossless`) keeps PNG for readers who must see every pixel as scored.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from setdiff_bench.errors import UsageError
+from setdiff_bench.io.images import write_png
+
+#: JPEG quality of pictures (1-100) when none is given: artefacts of the methods stay visible at it.
+DEFAULT_JPEG_QUALITY = 90
+#: JPEG quality of error maps (a colour scale of the error, not the picture itself: lower quality and
+#: 4:2:0 chroma change where the errors show no more than the colour scale's steps do).
+DEFAULT_ERROR_MAP_QUALITY = 75
+#: Height in pixels of the targets table's thumbnails (shown 40 px high: sharp on 2x displays).
+THUMBNAIL_HEIGHT = 80
+#: JPEG quality of those thumbnails.
+THUMBNAIL_QUALITY = 80
+
+
+@dataclass(frozen=True)
+class PictureSettings:
+    """How pictures are written.
+
+    Attributes:
+        lossless: PNG (every pixel as scored, several times larger) instead of JPEG.
+        quality: JPEG quality of the pictures (render, outputs, ground truth), 1-100, chroma 4:4:4.
+        error_quality: JPEG quality of the error maps, 1-100, chroma 4:2:0.
+    """
+
+    lossless: bool = False
+    quality: int = DEFAULT_JPEG_QUALITY
+    error_quality: int = DEFAULT_ERROR_MAP_QUALITY
+
+    def __post_init__(self) -> None:
+        for name, value in (("quality", self.quality), ("error_quality", self.error_quality)):
+            if not 1 <= value <= 100:
+                raise UsageError(f"JPEG {name} must be 1-100, got {value}")
+
+    @property
+    def suffix(self) -> str:
+        """The file suffix of pictures: ``.png`` or ``.jpg``."""
+        return ".png" if self.lossless else ".jpg"
+
+
+def write_jpeg(
+    path: str | Path, image: np.ndarray, quality: int = DEFAULT_JPEG_QUALITY, *, full_chroma: bool = True
+) -> Path:
+    """Write an 8-bit RGB ``(H, W, 3)`` image as a baseline JPEG, with 4:4:4 chroma (``full_chroma``: thin
+    coloured edges keep their colour) or 4:2:0 (chroma at half resolution; about a third smaller).
+
+    Written directly (the site is built in a staging folder that is renamed into place whole).
+
+    Raises:
+        UsageError: an image that is not 8-bit RGB, or one the encoder refuses.
+    """
+    path = Path(path)
+    array = np.asarray(image)
+    if array.dtype != np.uint8 or array.ndim != 3 or array.shape[2] != 3:
+        raise UsageError(f"a JPEG needs an 8-bit (H, W, 3) image, got {array.dtype} {array.shape}", path)
+    parameters = [
+        cv2.IMWRITE_JPEG_QUALITY,
+        int(quality),
+        cv2.IMWRITE_JPEG_SAMPLING_FACTOR,
+        cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444 if full_chroma else cv2.IMWRITE_JPEG_SAMPLING_FACTOR_420,
+    ]
+    ok, encoded = cv2.imencode(".jpg", cv2.cvtColor(array, cv2.COLOR_RGB2BGR), parameters)
+    if not ok:
+        raise UsageError("the JPEG encoder refused the image", path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(encoded.tobytes())
+    return path
+
+
+def write_picture(
+    path_without_suffix: Path, image: np.ndarray, settings: PictureSettings, *, error_map: bool = False
+) -> Path:
+    """Write ``image`` (8-bit RGB) as ``<path_without_suffix><settings.suffix>`` (an ``error_map`` at the
+    error maps' quality); returns the file."""
+    path = path_without_suffix.with_name(path_without_suffix.name + settings.suffix)
+    if settings.lossless:
+        write_png(path, image, atomic=False)
+        return path
+    if error_map:
+        return write_jpeg(path, image, settings.error_quality, full_chroma=False)
+    return write_jpeg(path, image, settings.quality)
+
+
+def thumbnail(image: np.ndarray, height: int = THUMBNAIL_HEIGHT) -> np.ndarray:
+    """``image`` scaled down (area averaging) to ``height`` pixels, keeping its aspect; unchanged when it is
+    not taller."""
+    rows, columns = image.shape[:2]
+    if rows <= height:
+        return image
+    width = max(1, round(columns * height / rows))
+    return cv2.resize(image, (width, height), interpolation=cv2.INTER_AREA)
+
+
+def write_thumbnail(path: str | Path, image: np.ndarray) -> Path:
+    """The targets table's preview of ``image``: :func:`thumbnail`, as a JPEG at quality 80, chroma 4:2:0."""
+    return write_jpeg(path, thumbnail(image), THUMBNAIL_QUALITY, full_chroma=False)
