@@ -16,6 +16,7 @@ from setdiff_bench.errors import CheckpointError
 from setdiff_bench.io.atomic import staged_folder, write_text_atomic
 from setdiff_bench.models.setdiff.averaging import average_weights
 from setdiff_bench.models.setdiff.checkpoint import read_config, write_weights
+from setdiff_bench.models.setdiff.distill import distillation_record
 from setdiff_bench.models.setdiff.files import CONFIG_FILE, MANIFEST_FILE, WEIGHTS_FILE
 from setdiff_bench.models.setdiff.packaged import file_table
 
@@ -29,6 +30,9 @@ def export_enhancer(
     average: Sequence[Path] = (),
 ) -> Path:
     """Copy a checkpoint's weights and config into ``destination`` (replaced atomically) with a manifest.
+
+    The manifest of a guidance-distilled student also names its teacher (``distillation``:
+    :func:`~setdiff_bench.models.setdiff.distill.distillation_record`).
 
     Args:
         checkpoint: a checkpoint folder (``config.json`` + ``model.safetensors``).
@@ -49,7 +53,9 @@ def export_enhancer(
     for name in names:
         if not (checkpoint / name).is_file():
             raise CheckpointError(f"checkpoint has no {name}", checkpoint)
-    config = read_config(checkpoint) if guidance_scale is not None or average else None
+    saved = read_config(checkpoint)
+    teacher = distillation_record(saved)
+    config = saved if guidance_scale is not None or average else None
     if config is not None and guidance_scale is not None:
         config = replace(config, model=replace(config.model, guidance_scale=float(guidance_scale)))
     averaged = average_weights(average) if average else None
@@ -63,5 +69,7 @@ def export_enhancer(
         else:
             shutil.copyfile(checkpoint / WEIGHTS_FILE, staging / WEIGHTS_FILE)
         manifest = {**training_manifest, **(extra or {}), "files": file_table(staging, names)}
+        if teacher is not None:  # a guidance-distilled student (:mod:`.distill`)
+            manifest["distillation"] = teacher
         write_text_atomic(staging / MANIFEST_FILE, json.dumps(manifest, indent=2, sort_keys=True) + "\n")
     return destination

@@ -273,13 +273,15 @@ class SetDiffModel(nn.Module):
         *,
         geometry_keep: torch.Tensor | None = None,
         decode_index: torch.Tensor | None = None,
+        guidance_scale: float = 1.0,
     ) -> SetPrediction:
-        """Training pass (no CFG): x̂0 of all targets, and decoded images of ``decode_index`` targets.
+        """Training pass (no CFG by default): x̂0 of all targets, and decoded images of ``decode_index`` targets.
 
         Args:
             batch: B sets of N references + M targets.
             geometry_keep: ``(B,)`` 0/1 geometry dropout per set (``None`` = keep all).
             decode_index: target indices (in ``[0, M)``, same for all sets) to decode; ``None`` = none.
+            guidance_scale: geometry CFG scale (a distillation teacher's targets, :mod:`.distill`); 1 = one pass.
         """
         sets, views, n = batch.num_sets, batch.num_views, batch.num_references
         images, geometry, points = _merged_views(batch)
@@ -289,7 +291,13 @@ class SetDiffModel(nn.Module):
             flat_decode = (offsets + n + decode_index[None, :].to(offsets.device)).reshape(-1)
         encoded = self.encode(images, flat_decode)
         x0 = self.predict_x0(
-            encoded.latents, geometry, views, geometry_keep=geometry_keep, points=points, num_references=n
+            encoded.latents,
+            geometry,
+            views,
+            guidance_scale=guidance_scale,
+            geometry_keep=geometry_keep,
+            points=points,
+            num_references=n,
         )
         x0 = x0.reshape(sets, views, *x0.shape[1:])
         target_x0 = x0[:, n:]

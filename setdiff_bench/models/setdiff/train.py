@@ -53,6 +53,7 @@ from setdiff_bench.models.setdiff.checkpoint import (
     step_folder,
 )
 from setdiff_bench.models.setdiff.config import Config, ModelConfig
+from setdiff_bench.models.setdiff.distill import check_student_config, distillation_targets, load_teacher
 from setdiff_bench.models.setdiff.files import LATEST_FILE, LOG_FILE, SAMPLES_FILE, VALIDATION_FILE
 from setdiff_bench.models.setdiff.inputs import training_set
 from setdiff_bench.models.setdiff.losses import ReconstructionLoss, latent_loss
@@ -187,6 +188,8 @@ class _Run:
     start: int  # optimiser steps done before this call
     previous: Path | None  # the checkpoint resumed from
     stream: SampleStream
+    teacher: SetDiffModel | None = None  # guidance distillation (:mod:`.distill`)
+    teacher_scale: float = 1.0
 
     @property
     def main(self) -> bool:
@@ -224,6 +227,12 @@ def _setup(
 
     model = initial_model(model_config, tc.seed, load_pretrained=previous is None)
     config = dataclasses.replace(config, model=model.config)  # saved with the resolved text-embedding choice
+    teacher, teacher_scale = None, 1.0
+    if tc.distill_from is not None:
+        check_student_config(config)
+        teacher, teacher_scale = load_teacher(config, device)
+        if previous is None:  # the student starts as the teacher
+            load_weights(model, resolve_checkpoint(tc.distill_from))
     if previous is not None:
         load_weights(model, previous)
     if tc.gradient_checkpointing:
@@ -260,7 +269,20 @@ def _setup(
     if accelerator.is_main_process and start > 0:  # records of steps after the checkpoint are redone now
         for name in (LOG_FILE, VALIDATION_FILE, SAMPLES_FILE):
             truncate_records(out / name, start)
-    return _Run(accelerator, model, core, optimizer, reconstruction, config, out, start, previous, stream)
+    return _Run(
+        accelerator,
+        model,
+        core,
+        optimizer,
+        reconstruction,
+        config,
+        out,
+        start,
+        previous,
+        stream,
+        teacher,
+        teacher_scale,
+    )
 
 
 def _optimiser_step(run: _Run, step: int, running: dict[str, float]) -> list[tuple[int, str]]:
@@ -280,7 +302,16 @@ def _optimiser_step(run: _Run, step: int, running: dict[str, float]) -> list[tup
         rng = random.Random(f"{tc.seed}/{position}")
         sync = micro == tc.gradient_accumulation - 1
         with contextlib.nullcontext() if sync else accelerator.no_sync(run.model):
-            terms = _micro_step(run.model, run.core, sample, rng, run.config, run.reconstruction, accelerator)
+            terms = _micro_step(
+                run.model,
+                run.core,
+                sample,
+                rng,
+                run.config,
+                run.reconstruction,
+                accelerator,
+                teacher=None if run.teacher is None else (run.teacher, run.teacher_scale),
+            )
         for key, value in terms.items():
             running[key] = running.get(key, 0.0) + value / tc.gradient_accumulation
     drawn = sorted(_gather_list(accelerator, drawn))
@@ -341,8 +372,12 @@ def _micro_step(
     config: Config,
     reconstruction: ReconstructionLoss | None,
     accelerator: Any,
+    teacher: tuple[SetDiffModel, float] | None = None,
 ) -> dict[str, float]:
-    """Forward + backward of one training set; returns the loss terms as floats."""
+    """Forward + backward of one training set; returns the loss terms as floats.
+
+    With ``teacher`` (model, CFG scale) the targets of every loss term are the teacher's guided outputs
+    (:func:`.distill.distillation_targets`), not the ground truth."""
     tc, mc = config.train, config.model
     device = accelerator.device
     drawn = training_set(
@@ -374,16 +409,26 @@ def _micro_step(
     gt = drawn.target_gt.to(device).flatten(0, 1)
     masks = drawn.target_masks.to(device).flatten(0, 1)
     prediction = model(batch, geometry_keep=keep, decode_index=decode_index)
+    guided = None
+    if teacher is not None:
+        with accelerator.autocast():
+            guided = distillation_targets(teacher[0], batch, teacher[1], decode_index)
     loss = torch.zeros((), device=device)
     terms: dict[str, float] = {}
     if tc.latent_weight > 0:
-        with accelerator.autocast():
-            gt_latents = core.encode(gt).latents
-        latent = latent_loss(prediction.target_x0.flatten(0, 1), gt_latents, masks)
+        if guided is not None:
+            target_latents = guided.target_x0.flatten(0, 1)
+        else:
+            with accelerator.autocast():
+                target_latents = core.encode(gt).latents
+        latent = latent_loss(prediction.target_x0.flatten(0, 1), target_latents, masks)
         loss = loss + tc.latent_weight * latent
         terms["latent"] = float(latent.detach())
     if reconstruction is not None and prediction.decoded is not None and decode_index is not None:
-        recon = reconstruction(prediction.decoded.flatten(0, 1), gt[decode_index], masks[decode_index])
+        wanted = (
+            gt[decode_index] if guided is None or guided.decoded is None else guided.decoded.flatten(0, 1)
+        )
+        recon = reconstruction(prediction.decoded.flatten(0, 1), wanted, masks[decode_index])
         loss = loss + recon["total"]
         terms.update({k: float(v.detach()) for k, v in recon.items() if k != "total"})
     terms["loss"] = float(loss.detach())
