@@ -20,13 +20,15 @@ def sparse_fit_keys(preset: SparsePreset) -> tuple[str, ...]:
 
 
 def sparse_fit_source(scene_dir: Path, preset: SparsePreset, key: str) -> dict[str, Any]:
-    """What ``fits/<key>.ply`` is fitted on: the 3DGS-Enhancer rule's views of the scene (:func:`fit_views`)."""
+    """What ``fits/<key>.ply`` is fitted on: the 3DGS-Enhancer rule's views of the scene (:func:`fit_views`),
+    from the preset's initial points (``init``)."""
     return {
         "scene_dir": scene_dir.parent,
         "frames": fit_views(preset)[key],
         "dataset": SCENE_KINDS["sparse"].dataset,
         "scene_name": scene_dir.name,
         "loader_options": {"distortion": "ignore"},
+        "init": preset.init,
     }
 
 
