@@ -37,7 +37,8 @@ def leaderboard(
         methods: measured methods to show, in this order (default: all, sorted).
         metrics: image metric columns (default: the layout's).
         profile: the evaluation profile tabulated (``paper`` for plain runs).
-        against: add every cell's paired difference to this method (bootstrap by scene).
+        against: add every cell's paired gain over this method (positive = better in every column,
+            :mod:`setdiff_bench.reporting.gains`; bootstrap by scene).
         with_reported: add the paper's reported rows, marked "(paper)".
         out: when given, write the tables there (``formats`` of parquet, latex, md).
         formats: what to write with ``out``.

@@ -32,6 +32,22 @@ __all__ = [
 ]
 
 
+def tensor_summary(value: torch.Tensor | np.ndarray | None) -> str:
+    """``"(3, 3, 32, 48) float32"``: an array's shape and dtype, for short reprs (``"None"`` for none)."""
+    if value is None:
+        return "None"
+    dtype = str(value.dtype).removeprefix("torch.")
+    return f"{tuple(value.shape)} {dtype}"
+
+
+def names_summary(names: Sequence[str], shown: int = 3) -> str:
+    """``"['a.jpg', 'b.jpg', ... 'z.jpg']"``: the first ``shown`` - 1 names and the last, for short reprs."""
+    if len(names) <= shown:
+        return repr(list(names))
+    head = ", ".join(repr(name) for name in names[: shown - 1])
+    return f"[{head}, ... {names[-1]!r}]"
+
+
 @dataclass(frozen=True)
 class Frame:
     """One captured image of a scene.
@@ -88,6 +104,13 @@ class Scene:
                 raise DatasetError(f"duplicate frame name {frame.name!r} in scene {self.name!r}", self.root)
             seen.add(frame.name)
 
+    def __repr__(self) -> str:
+        return (
+            f"Scene({self.dataset!r}, {self.name!r}, {len(self.frames)} frames "
+            f"{names_summary(self.frame_names)}, sensors {list(self.sensors)}, points3d "
+            f"{tensor_summary(self.points3d)}, root {str(self.root)!r})"
+        )
+
     def frame(self, name: str) -> Frame:
         """The frame called ``name``."""
         for frame in self.frames:
@@ -140,6 +163,12 @@ class ViewSet:
 
     def __len__(self) -> int:
         return len(self.names)
+
+    def __repr__(self) -> str:
+        return (
+            f"ViewSet({len(self)} views {names_summary(self.names)}, images {tensor_summary(self.images)}, "
+            f"cmaps {tensor_summary(self.cmaps)}, alphas {tensor_summary(self.alphas)})"
+        )
 
     @property
     def K(self) -> torch.Tensor:
@@ -249,6 +278,14 @@ class Packet(PacketKey):
             metadata={} if metadata is None else metadata,
         )
 
+    def __repr__(self) -> str:
+        where = "/".join((self.dataset, self.protocol, self.group, self.split, self.scene))
+        return (
+            f"Packet({self.packet_id!r}, {where}, {len(self.references)} references "
+            f"{names_summary(self.references.names)} + {len(self.targets)} targets "
+            f"{names_summary(self.targets.names)}, {self.height}x{self.width} px, scale {self.scale:g})"
+        )
+
     @property
     def height(self) -> int:
         return int(self.targets.images.shape[-2])
@@ -271,3 +308,9 @@ class TrainingSample:
     packet: Packet
     target_gt: torch.Tensor
     target_masks: torch.Tensor
+
+    def __repr__(self) -> str:
+        return (
+            f"TrainingSample({self.packet!r}, target_gt {tensor_summary(self.target_gt)}, "
+            f"target_masks {tensor_summary(self.target_masks)})"
+        )

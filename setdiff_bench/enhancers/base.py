@@ -94,6 +94,16 @@ class Enhancer(Protocol):
         ...
 
 
+def enhancer_repr(enhancer: object, **shown: object) -> str:
+    """The short repr every built-in enhancer uses: ``SetDiffEnhancer('setdiff', checkpoint='tiny_setdiff',
+    device='cpu')`` — the class, the method name, then ``shown`` (what identifies the built method: its checkpoint,
+    its images folder, options that differ from the defaults), ``None`` values left out.  A plugin may use it
+    too."""
+    parts = [repr(getattr(enhancer, "name", "?"))]
+    parts += [f"{key}={value!r}" for key, value in shown.items() if value is not None]
+    return f"{type(enhancer).__name__}({', '.join(parts)})"
+
+
 @runtime_checkable
 class ChecksTargets(Protocol):
     """An enhancer that can verify up front that it can serve every target of a run.

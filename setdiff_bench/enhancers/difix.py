@@ -80,6 +80,9 @@ class DifixEnhancer(ModelEnhancer):
         self.references = references
         self.options = {**self.options, "references": references}
 
+    def _repr_fields(self) -> dict[str, object]:
+        return {**super()._repr_fields(), "references": self.references}
+
     def enhance(self, packet: Packet) -> torch.Tensor:
         """``(M, 3, H, W)`` float32 in [0, 1], packet order, any H × W; each target with its rule's one
         reference."""

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import torch
 
+from setdiff_bench.enhancers.base import enhancer_repr
 from setdiff_bench.types import Packet
 
 
@@ -18,6 +19,9 @@ class IdentityEnhancer:
 
     def __init__(self) -> None:
         self.options: dict[str, object] = {}
+
+    def __repr__(self) -> str:
+        return enhancer_repr(self)
 
     def enhance(self, packet: Packet) -> torch.Tensor:
         """``(M, 3, H, W)`` float32: a copy of ``packet.targets.images``."""

@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from setdiff_bench.enhancers.base import enhancer_repr
 from setdiff_bench.errors import ImageError, UsageError
 from setdiff_bench.io.images import read_rgb
 from setdiff_bench.io.names import frame_relative, safe_component
@@ -63,6 +64,9 @@ class PrecomputedEnhancer:
         self.root = root.resolve()
         self.options = {"from": str(self.root)}
         self._listings: dict[Path, dict[str, list[Path]]] = {}
+
+    def __repr__(self) -> str:
+        return enhancer_repr(self, source=str(self.root))
 
     def _files_at(self, folder: Path, stem: str) -> list[Path]:
         """Image files ``folder/stem.<ext>`` (directory listings are cached: one per folder)."""

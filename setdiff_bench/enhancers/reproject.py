@@ -25,13 +25,14 @@ work is vectorised over references and pixels in torch (one Python iteration per
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 
 from setdiff_bench.cameras import Camera
+from setdiff_bench.enhancers.base import enhancer_repr
 from setdiff_bench.errors import PacketError, UsageError
 from setdiff_bench.geometry import (
     OVERLAP_ALPHA,
@@ -173,6 +174,15 @@ class ReprojectEnhancer:
         self.config = config or ReprojectConfig()
         self.device = torch.device(device)
         self.options = {**asdict(self.config), "device": str(self.device)}
+
+    def __repr__(self) -> str:
+        """The device and the options that differ from :class:`ReprojectConfig`'s defaults."""
+        changed = {
+            f.name: getattr(self.config, f.name)
+            for f in fields(self.config)
+            if getattr(self.config, f.name) != f.default
+        }
+        return enhancer_repr(self, device=str(self.device), **changed)
 
     def enhance(self, packet: Packet) -> torch.Tensor:
         """``(M, 3, H, W)`` float32 in [0, 1] on the CPU, packet order."""

@@ -16,6 +16,7 @@ from typing import Any
 
 import torch
 
+from setdiff_bench.enhancers.base import enhancer_repr
 from setdiff_bench.enhancers.padding import crop, pad_packet, padded_size
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.atomic import sha256_file
@@ -70,6 +71,18 @@ class ModelEnhancer:
             "sets_per_call": sets_per_call,
             "max_references": config.model.max_references if max_references is None else max_references,
             "targets_per_set": config.model.targets_per_set if targets_per_set is None else targets_per_set,
+        }
+
+    def __repr__(self) -> str:
+        """The method, the checkpoint (:attr:`model_name`; its folder as ``path``), device and dtype."""
+        return enhancer_repr(self, **self._repr_fields())
+
+    def _repr_fields(self) -> dict[str, object]:
+        return {
+            "checkpoint": self.model_name,
+            "path": str(self.checkpoint),
+            "device": self.device,
+            "dtype": self.options["dtype"],
         }
 
     @property

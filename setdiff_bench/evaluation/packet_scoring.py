@@ -30,12 +30,13 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+import pandas as pd
 import torch
 
 from setdiff_bench.errors import SetDiffBenchError
 from setdiff_bench.evaluation.scoring import quantize, resolve_metrics, score_images
 from setdiff_bench.metrics.registry import MetricSpec
-from setdiff_bench.types import Packet
+from setdiff_bench.types import Packet, names_summary, tensor_summary
 
 if TYPE_CHECKING:
     from setdiff_bench.enhancers.base import Enhancer
@@ -61,6 +62,8 @@ class PacketScore:
         has_ground_truth: ``(M,)`` bool, which targets were scored (``None``: all of them).
         skipped: the metrics not computed for some target because it has no ground truth (empty when
             every target has it).
+        targets: the ``M`` target frame names in stored order (``scores``' order); :meth:`per_target` is the
+            scores as a table indexed by them.
     """
 
     packet_id: str
@@ -70,6 +73,21 @@ class PacketScore:
     peak_memory_mb: float = float("nan")
     has_ground_truth: np.ndarray | None = None
     skipped: tuple[str, ...] = ()
+    targets: tuple[str, ...] = ()
+
+    def __repr__(self) -> str:
+        means = ", ".join(f"{name} {value:.4g}" for name, value in self.means().items())
+        return (
+            f"PacketScore({self.packet_id!r}, {len(self.enhanced)} targets {names_summary(self.targets)}, "
+            f"enhanced {tensor_summary(self.enhanced)}, means: {means or 'none'}, {self.elapsed_ms:.1f} ms)"
+        )
+
+    def per_target(self) -> pd.DataFrame:
+        """The scores as a table: one row per target, indexed by its frame name (``target``), one float column
+        per metric (NaN for a target without ground truth)."""
+        names = list(self.targets) or [str(i) for i in range(len(self.enhanced))]
+        index = pd.Index(names, name="target")
+        return pd.DataFrame({name: np.asarray(values) for name, values in self.scores.items()}, index=index)
 
     @property
     def ms_per_frame(self) -> float:
@@ -185,7 +203,9 @@ def score_packet(
         scores = score_images(
             specs, enhanced.to(target_device), gt.to(target_device), masks.to(target_device), batch_size
         )
-        return PacketScore(packet_id, enhanced, scores, elapsed_ms, peak_memory_mb)
+        return PacketScore(
+            packet_id, enhanced, scores, elapsed_ms, peak_memory_mb, targets=packet.targets.names
+        )
     scores = {spec.name: np.full(len(has_gt), np.nan) for spec in specs}
     if gt is not None and masks is not None:
         paired = score_images(
@@ -198,7 +218,9 @@ def score_packet(
         for name, values in paired.items():
             scores[name][scored] = values
     skipped = tuple(spec.name for spec in specs)
-    return PacketScore(packet_id, enhanced, scores, elapsed_ms, peak_memory_mb, has_gt, skipped)
+    return PacketScore(
+        packet_id, enhanced, scores, elapsed_ms, peak_memory_mb, has_gt, skipped, targets=packet.targets.names
+    )
 
 
 def peak_memory_bytes(device: torch.device) -> int:

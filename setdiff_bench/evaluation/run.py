@@ -125,7 +125,7 @@ def run_method(
     settings: RunSettings,
     *,
     shard: Shard = Shard(),
-    progress: bool | None = None,
+    progress: bool | None = True,
     enhancer: Enhancer | None = None,
     verify: bool = True,
     merge_only: bool = False,
@@ -137,7 +137,9 @@ def run_method(
         out: the run folder (created; a folder holding a run with other settings is refused).
         settings: method, options and scoring choices.
         shard: which packets this call enhances.
-        progress: tqdm bar (``None``: only on a terminal).
+        progress: a tqdm bar over the packets on stderr (a widget in a notebook); ``False``: none; ``None``:
+            only when stderr is a terminal or in a notebook (the CLI's default; ``--no-progress`` gives
+            ``False``).
         enhancer: an already built enhancer to use instead of building ``settings.method`` (tests,
             notebooks); its ``name`` must equal ``settings.method``.
         verify: re-hash every file of the packets to enhance before starting (seconds for a store of
@@ -148,7 +150,7 @@ def run_method(
     Raises:
         SetDiffBenchError: bad store, unknown method or option, an output of the wrong shape, ...
     """
-    from tqdm import tqdm
+    from tqdm.auto import tqdm
 
     store = _open_store(packets)
     out = Path(out)

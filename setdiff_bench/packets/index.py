@@ -46,6 +46,8 @@ INDEX_FILE = "index.parquet"
 PACKETS_DIR = "packets"
 TEMP_PREFIX = ".tmp-"
 ROLES = ("ref", "target")
+#: The values of the ``split`` column: the protocol's train or test scenes (a store may hold only one).
+SCENE_SPLITS = ("train", "test")
 FILE_COLUMNS = ("image", "cmap", "gt", "mask")
 
 

@@ -39,10 +39,10 @@ import pandas as pd
 import torch
 
 from setdiff_bench.cameras import Camera
-from setdiff_bench.errors import PacketError, SetDiffBenchError
+from setdiff_bench.errors import PacketError, SetDiffBenchError, UsageError
 from setdiff_bench.io.atomic import sha256_file
 from setdiff_bench.io.images import read_exr, read_mask, read_rgb, to_tensor_chw
-from setdiff_bench.packets.index import INDEX_FILE, NoGroundTruthError, merge_index, read_rows
+from setdiff_bench.packets.index import INDEX_FILE, SCENE_SPLITS, NoGroundTruthError, merge_index, read_rows
 from setdiff_bench.packets.training_dataset import PacketTrainingDataset
 from setdiff_bench.packets.writer import (
     CMAP_CHANNELS,
@@ -106,10 +106,28 @@ class PacketStore:
 
     # ------------------------------------------------------------------ listing
     def packet_ids(self, split: str | None = None) -> list[str]:
-        """Packet ids in sorted order; ``split`` (``"train"``/``"test"``) filters by scene split."""
-        if split is None:
+        """Packet ids in sorted order.
+
+        Args:
+            split: ``"train"`` or ``"test"`` (the packets of the protocol's train or test scenes; ``[]`` when the
+                store holds none), another split this store's index holds, or ``None`` / ``"all"``: every packet.
+
+        Raises:
+            UsageError: (naming ``split``) a split that is no split name and not in this store, e.g. a typo
+                (``"tset"``), naming the valid ones.
+        """
+        if split is None or split == "all":
             return list(self._rows)
-        return [pid for pid, rows in self._rows.items() if rows["split"].iloc[0] == split]
+        chosen = [pid for pid, rows in self._rows.items() if rows["split"].iloc[0] == split]
+        if not chosen and split not in SCENE_SPLITS:
+            present = sorted({str(rows["split"].iloc[0]) for rows in self._rows.values()})
+            valid = list(dict.fromkeys([*SCENE_SPLITS, *present, "all"]))
+            raise UsageError(
+                f"unknown split; valid splits: {', '.join(valid)} (this store holds: {', '.join(present) or 'none'})",
+                split,
+                parameter="split",
+            )
+        return chosen
 
     def rows(self, packet_id: str) -> pd.DataFrame:
         """The index rows of one packet (references first, then targets, each by position)."""
