@@ -14,9 +14,11 @@
 //   image (H, W, C), alpha (H, W), final_t (H, W), stop (H, W) = list position after the last
 //   Gaussian that a pixel composited (the backward pass walks positions stop-1 .. 0).
 //
-// Parallelism: OpenMP over tiles.  The forward pass writes disjoint pixels; the backward pass
-// accumulates per-Gaussian gradients into one buffer per thread (static schedule), reduced in
-// thread order, so results are deterministic for a given thread count.
+// Parallelism: OpenMP over tiles.  The forward pass writes disjoint pixels.  The backward pass
+// accumulates per-Gaussian gradients into kSlices buffers, one per contiguous range of tiles (a fixed
+// partition, whatever the thread count), and sums the buffers in slice order, so its results are the
+// same bits for any thread count.  Compiled without fused multiply-adds (-ffp-contract=off), every
+// float operation is rounded alone, so the bits do not depend on the CPU either.
 
 #include <algorithm>
 #include <cmath>
@@ -32,6 +34,9 @@ namespace {
 constexpr float kAlphaMax = 0.99f;
 constexpr float kAlphaMin = 1.0f / 255.0f;
 constexpr float kTransmittanceMin = 1e-4f;
+// Backward gradient buffers: a fixed partition of the tiles, so gradients do not depend on the thread
+// count (the parallelism of the backward pass is at most this; memory is kSlices x N x (6 + C) floats).
+constexpr int64_t kSlices = 8;
 
 struct Tiling {
     int width, height, tile_size, tiles_x, tiles_y;
@@ -150,22 +155,18 @@ int setdiff_rasterize_backward(int64_t num_gaussians, int channels, const float*
     const Tiling tiling{width, height, tile_size, tiles_x, tiles_y};
     const int64_t num_tiles = static_cast<int64_t>(tiles_x) * tiles_y;
     const int threads = thread_count(num_threads);
-    // Per-thread gradient rows: means2d (2), conic (3), opacity (1), features (C).
+    // Per-slice gradient rows: means2d (2), conic (3), opacity (1), features (C).
     const int64_t row = 6 + channels;
-    std::vector<std::vector<float>> buffers(threads);
-#pragma omp parallel num_threads(threads)
-    {
-#ifdef _OPENMP
-        const int thread = omp_get_thread_num();
-#else
-        const int thread = 0;
-#endif
-        std::vector<float>& grad = buffers[thread];
+    const int64_t slices = std::min<int64_t>(kSlices, std::max<int64_t>(num_tiles, 1));
+    std::vector<std::vector<float>> buffers(slices);
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
+    for (int64_t slice = 0; slice < slices; ++slice) {
+        std::vector<float>& grad = buffers[slice];
         grad.assign(num_gaussians * row, 0.0f);
         std::vector<float> behind(channels);  // sum over Gaussians behind of w_j f_j
         std::vector<Splat> splats;
-#pragma omp for schedule(static)
-        for (int64_t tile = 0; tile < num_tiles; ++tile) {
+        const int64_t first_tile = num_tiles * slice / slices, end_tile = num_tiles * (slice + 1) / slices;
+        for (int64_t tile = first_tile; tile < end_tile; ++tile) {
             const int64_t start = tile_starts[tile];
             int64_t longest = 0;  // only the part of the list that some pixel composited
             tiling.for_each_pixel(tile, [&](int, int, int64_t pixel) { longest = std::max<int64_t>(longest, stop[pixel]); });
@@ -213,8 +214,8 @@ int setdiff_rasterize_backward(int64_t num_gaussians, int channels, const float*
     }
     for (int64_t g = 0; g < num_gaussians; ++g) {
         float sums[6] = {0, 0, 0, 0, 0, 0};
-        for (int t = 0; t < threads; ++t) {
-            const float* gr = buffers[t].data() + g * row;
+        for (int64_t slice = 0; slice < slices; ++slice) {
+            const float* gr = buffers[slice].data() + g * row;
             for (int i = 0; i < 6; ++i) sums[i] += gr[i];
             for (int ch = 0; ch < channels; ++ch) grad_features[g * channels + ch] += gr[6 + ch];
         }

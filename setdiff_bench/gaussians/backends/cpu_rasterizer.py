@@ -39,7 +39,7 @@ from setdiff_bench.errors import FallbackWarning, UsageError
 from setdiff_bench.gaussians.backends import torch_ref
 
 SOURCE = Path(__file__).with_name("cpu_rasterizer.cpp")
-COMPILE_FLAGS = ("-O3", "-std=c++17", "-fPIC", "-shared", "-fopenmp", "-fno-math-errno")
+COMPILE_FLAGS = ("-O3", "-std=c++17", "-fPIC", "-shared", "-fopenmp", "-fno-math-errno", "-ffp-contract=off")
 MODE_ENV = "SETDIFF_RASTERIZER"
 MODES = ("auto", "torch", "native")
 
