@@ -7,6 +7,7 @@ the functions under test.
 from __future__ import annotations
 
 import math
+import random
 from dataclasses import replace
 
 import numpy as np
@@ -16,9 +17,10 @@ from diffusers.models.attention_processor import Attention, AttnProcessor2_0
 
 from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import UsageError
+from setdiff_bench.models.setdiff import set_mixer
 from setdiff_bench.models.setdiff.config import model_config_from_dict
 from setdiff_bench.models.setdiff.inference import enhance_packet
-from setdiff_bench.models.setdiff.inputs import ray_snapped_points, surface_points
+from setdiff_bench.models.setdiff.inputs import ray_snapped_points, surface_points, training_set
 from setdiff_bench.models.setdiff.set_mixer import (
     NO_MATCH_KEY,
     NO_MATCH_VALUE,
@@ -30,7 +32,7 @@ from setdiff_bench.models.setdiff.set_mixer import (
     relative_distance_bias,
     set_kwargs,
 )
-from tests.models.setdiff_fixtures import make_packet, residual_model
+from tests.models.setdiff_fixtures import make_packet, make_sample, residual_model
 
 
 def attention_layer(width: int = 32, heads: int = 4) -> Attention:
@@ -117,7 +119,13 @@ def naive_knn(attn: Attention, tokens: torch.Tensor, allowed: dict[int, list[int
     return attn.to_out[1](attn.to_out[0](out)).reshape(tokens.shape[0], tokens.shape[1], -1)
 
 
-def test_knn_attends_exactly_own_view_nearest_references_and_no_match() -> None:
+@pytest.mark.parametrize("block_elements", [None, 1])
+def test_knn_attends_exactly_own_view_nearest_references_and_no_match(
+    monkeypatch: pytest.MonkeyPatch, block_elements: int | None
+) -> None:
+    """Also computed one query at a time (``block_elements`` 1): the blocks give the same result."""
+    if block_elements is not None:
+        monkeypatch.setattr(set_mixer, "BIAS_BLOCK_ELEMENTS", block_elements)
     attn = attention_layer()
     generator = torch.Generator().manual_seed(5)
     for name in (NO_MATCH_KEY, NO_MATCH_VALUE):
@@ -244,6 +252,19 @@ def test_models_with_restricted_levels_run(bias: str) -> None:
     other = replace(packet, references=replace(packet.references, images=1 - packet.references.images))
     assert first.shape == (2, 3, 32, 32) and torch.isfinite(first).all()
     assert not torch.equal(first, enhance_packet(model, other, guidance_scale=1.5))
+    drawn = training_set(
+        make_sample(2, 2, size=(32, 32)),
+        random.Random(0),
+        min_views=2,
+        max_views=8,
+        use_geometry=True,
+        cmap_clip=10.0,
+        with_points=True,
+        snapped_points=bias == "cmap_relative",
+    )
+    model.train()
+    model(drawn.batch).target_x0.square().mean().backward()  # trains: the no-match key gets a gradient
+    assert all(p.grad is not None for n, p in model.unet.named_parameters() if NO_MATCH_VALUE in n)
 
 
 def test_set_attention_config_errors() -> None:

@@ -349,8 +349,10 @@ def nearest_reference_attention(
     spare_key = no_match_key.to(query.dtype).reshape(heads, head_dim)
     spare_value = no_match_value.to(value.dtype).reshape(heads, head_dim)
     all_index = torch.arange(total, device=device)
-    per_query = tokens + 2 * neighbours * head_dim + neighbours + 1
-    block = max(1, min(tokens, BIAS_BLOCK_ELEMENTS // max(1, sets * heads * per_query)))
+    # per query: its logits over L + k + 1 keys and its k gathered keys and values (each head), and its
+    # distances to every candidate (the N·L reference tokens at most)
+    per_query = max(heads * (tokens + 2 * neighbours * head_dim + neighbours + 1), num_references * tokens)
+    block = max(1, min(tokens, BIAS_BLOCK_ELEMENTS // max(1, sets * per_query)))
     output = query.new_empty(*query.shape[:3], value.shape[-1])
     for view in range(num_views):
         own = slice(view * tokens, (view + 1) * tokens)
