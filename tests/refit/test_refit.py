@@ -13,6 +13,7 @@ import torch
 
 from setdiff_bench.cli.main import main
 from setdiff_bench.enhancers.base import BUILTIN_METHODS, MethodSpec
+from setdiff_bench.errors import CheckpointError
 from setdiff_bench.gaussians.ply import read_ply, write_ply
 from setdiff_bench.packets.store import PacketStore
 from setdiff_bench.refit import MANIFEST_FILE, RefitSettings, RefitTask, refit_scene
@@ -26,7 +27,8 @@ SETTINGS = RefitSettings.preset("progressive", steps=8, update_every=4, checkpoi
 
 
 def task(root: Path, out: Path, method: str = "reproject", **fields: object) -> RefitTask:
-    return RefitTask("synthetic", root, SCENE, out, method, group="lane+2", fits=root, **fields)  # type: ignore[arg-type]
+    chosen: dict[str, object] = {"fits": root, **fields}
+    return RefitTask("synthetic", root, SCENE, out, method, group="lane+2", **chosen)  # type: ignore[arg-type]
 
 
 @pytest.fixture(scope="module")
@@ -200,3 +202,49 @@ def test_sigkill_mid_refit_then_rerun_gives_the_same_bytes(street_root: Path, tm
     rerun = subprocess.run(command, env=env, capture_output=True, text=True, check=True)
     assert "resumed at step" in rerun.stdout
     assert (out / SCENE / "lane0.ply").read_bytes() == (reference / SCENE / "lane0.ply").read_bytes()
+
+
+def fit_checkpoint(root: Path, folder: Path, model_path: Path) -> None:
+    """A fit checkpoint (``fit --checkpoint``) whose parameters are the PLY at ``model_path``: the state a fit of
+    the lane+2 group's fit frames ends with."""
+    from setdiff_bench.gaussians.fit_checkpoint import save_checkpoint
+    from setdiff_bench.gaussians.fit_config import FitConfig
+    from setdiff_bench.gaussians.fit_data import load_fit_views
+    from setdiff_bench.gaussians.fit_trainer import Trainer
+    from setdiff_bench.loaders import load_scenes
+    from setdiff_bench.protocols import load_protocol
+
+    scene = load_scenes("synthetic", root, [SCENE])[0]
+    frames = load_protocol("synthetic").group("lane+2").select(scene).fit
+    views = load_fit_views(scene, [f.name for f in frames])
+    trainer = Trainer(views, read_ply(model_path), FitConfig(), torch.device("cpu"))
+    save_checkpoint(trainer, folder, [v.name for v in views])
+
+
+def test_fit_checkpoint_must_hold_the_ply(street_root: Path, tmp_path: Path) -> None:
+    fit = street_root / SCENE / "fits" / "lane0.ply"
+    settings = RefitSettings.preset("one-shot", steps=2)
+    fit_checkpoint(street_root, tmp_path / "ckpt", fit)
+    result = refit_scene(
+        task(street_root, tmp_path / "a", fit_checkpoint=tmp_path / "ckpt"), settings, progress=False
+    )
+    assert result.manifest["identity"]["fit_checkpoint"] is not None
+    other = read_ply(fit)
+    other.opacity_logits = other.opacity_logits - 1.0
+    write_ply(tmp_path / "other.ply", other)
+    fit_checkpoint(street_root, tmp_path / "other_ckpt", tmp_path / "other.ply")
+    with pytest.raises(CheckpointError, match="does not hold the PLY"):
+        refit_scene(
+            task(street_root, tmp_path / "b", fit_checkpoint=tmp_path / "other_ckpt"),
+            settings,
+            progress=False,
+        )
+    assert not (tmp_path / "b" / MANIFEST_FILE).exists()
+
+
+def test_refit_fits_the_scene_first_without_fits(street_root: Path, tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    settings = RefitSettings.preset("one-shot", steps=2, min_fit_correlation=-1.0)  # a 4-iteration fit
+    result = refit_scene(task(street_root, out, fits=None, fit_iterations=4), settings, progress=False)
+    assert Path(result.manifest["fit"]["path"]) == (out / "base" / "fits" / SCENE / "lane0.ply").resolve()
+    assert (out / SCENE / "lane0.ply").is_file()
