@@ -1,0 +1,1 @@
+"""A template setdiff-bench enhancer plugin: an unsharp mask on each rendered target (see README.md)."""
