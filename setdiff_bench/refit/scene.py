@@ -216,7 +216,7 @@ class _Inputs:
 
 def _inputs(task: RefitTask, settings: RefitSettings) -> _Inputs:
     """Read and check every input (module docstring, steps 1-4)."""
-    from setdiff_bench.enhancers.base import available_methods, create_enhancer
+    from setdiff_bench.enhancers.base import ChecksTargets, available_methods, create_enhancer
     from setdiff_bench.evaluation.run_settings import jsonable_options
     from setdiff_bench.gaussians.fit_config import FitConfig
     from setdiff_bench.gaussians.fit_data import load_fit_views
@@ -229,6 +229,7 @@ def _inputs(task: RefitTask, settings: RefitSettings) -> _Inputs:
     from setdiff_bench.packets.trajectory import check_within_bounds, scene_bounds
     from setdiff_bench.protocols import load_protocol
     from setdiff_bench.refit.loop import RefitLoop
+    from setdiff_bench.types import TargetRef, key_fields
 
     protocol = load_protocol(task.protocol or task.dataset)
     if protocol.dataset != task.dataset:
@@ -292,6 +293,10 @@ def _inputs(task: RefitTask, settings: RefitSettings) -> _Inputs:
 
     method = available_methods().get(task.method)
     enhancer = create_enhancer(task.method, optional={"device": device}, **task.method_options)
+    if isinstance(enhancer, ChecksTargets):  # e.g. precomputed: every image it will be asked for, up front
+        enhancer.check_targets(
+            [TargetRef(**key_fields(job), frame=v.frame) for job in jobs for v in job.targets]
+        )
     files = method.model_files(task.method_options) if method is not None else {}
 
     config = source.config() if task.fits is None else FitConfig()
@@ -310,7 +315,8 @@ def _inputs(task: RefitTask, settings: RefitSettings) -> _Inputs:
             "options": jsonable_options(dict(task.method_options)),
             "files": files,
         },
-        "settings": settings.to_json(),
+        # the checkpoint cadence does not change the result: a resume may use another
+        "settings": {k: v for k, v in settings.to_json().items() if k != "checkpoint_every"},
         "backend": backend,
     }
     from setdiff_bench.refit.updates import PseudoViewUpdater
