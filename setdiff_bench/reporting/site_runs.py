@@ -20,7 +20,8 @@ from setdiff_bench.reporting.leaderboard import find_runs
 
 def run_folders(paths: Sequence[str | Path]) -> dict[str, Path]:
     """Method label → run folder of every finished run under ``paths`` (each a run folder or a folder of
-    runs).  The label is the run's method; a method found twice is labelled ``method (folder name)``.
+    runs).  The label is the run's display name (``run --name``, recorded in ``run.json``), else its method,
+    as in the rows' ``method`` column; a label found twice is labelled ``label (folder name)``.
     Evaluation profiles' tables (``<run>/profiles/<profile>/metrics.parquet``, written by ``evaluate``) are
     not runs here: they hold scores, not images.
 
@@ -46,8 +47,9 @@ def run_folders(paths: Sequence[str | Path]) -> dict[str, Path]:
 
 def _run_method(folder: Path) -> str:
     try:
-        return str(json.loads((folder / RUN_FILE).read_text(encoding="utf-8"))["method"])
-    except (OSError, ValueError, KeyError):
+        record = json.loads((folder / RUN_FILE).read_text(encoding="utf-8"))
+        return str(record.get("name") or record["method"])
+    except (OSError, ValueError, KeyError, AttributeError):
         return str(pd.read_parquet(folder / "metrics.parquet", columns=["method"])["method"].iloc[0])
 
 

@@ -67,7 +67,7 @@ def _cell(gain: PairedGain | None, metric: str, pooled: bool) -> str:
     css = (' class="good"' if gain.value > 0 else ' class="bad"') if gain.holds else ""
     return (
         f'<td data-v="{gain.value}" data-low="{gain.low}" data-high="{gain.high}"{css}>{value}'
-        f"<br><small>{interval} · {difference.targets} targets{wins}</small></td>"
+        f"<br><small>{interval}{wins}</small></td>"
     )
 
 
@@ -124,8 +124,12 @@ def scene_table_html(
                     for method in compared
                     for metric in metrics
                 )
+                counts = [g.difference.targets for m in compared for g in gains[m].get(label, {}).values()]
+                count = f"<br><small>{max(counts)} targets</small>" if counts else ""
                 name = f"<b>{esc(label)}</b>" if pooled else esc(label)
-                body.append(f'<tr><td class="l">{esc(group)}</td><td class="l">{name}</td>{cells}</tr>')
+                body.append(
+                    f'<tr><td class="l">{esc(group)}</td><td class="l">{name}{count}</td>{cells}</tr>'
+                )
         note = few_scenes_note(scene_count)
         parts.append(
             f'<table class="scenes"><caption>{esc(dataset)}: gain over {esc(baseline)} (the render) per '

@@ -228,3 +228,21 @@ def test_pictures_of_a_target_fit_the_sparse_report_budget(tmp_path: Path) -> No
     jpeg = [written(row, False) for row in range(6)]
     assert np.mean(jpeg) < PICTURE_SHARE * SITE_BUDGET / SPARSE_TARGETS, jpeg
     assert written(0, True) > 4 * jpeg[0]  # PNG (writing it is slow: one row)
+
+
+def test_runs_are_labelled_by_their_display_name(site: Path, runs: Path, tmp_path: Path) -> None:
+    """Two ``precomputed`` runs named apart (``run --name``: ``name`` in run.json, the rows' method column)
+    keep their names in the report, not ``precomputed (folder)``."""
+    from setdiff_bench.reporting.site_runs import run_folders
+
+    copied = tmp_path / "runs"
+    shutil.copytree(runs, copied)
+    for name in ("mine", "theirs"):
+        folder = copied / f"precomputed_{name}"
+        shutil.copytree(runs / "reproject", folder)
+        record = json.loads((folder / "run.json").read_text(encoding="utf-8"))
+        record.update(method="precomputed", name=name)
+        (folder / "run.json").write_text(json.dumps(record), encoding="utf-8")
+        rows = pd.read_parquet(folder / "metrics.parquet")
+        rows.assign(method=name).to_parquet(folder / "metrics.parquet")
+    assert sorted(run_folders([copied])) == ["identity", "mine", "reproject", "theirs"]
