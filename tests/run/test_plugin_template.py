@@ -32,19 +32,11 @@ def installed(tmp_path_factory: pytest.TempPathFactory) -> Path:
     nothing is downloaded), as ``pip install`` would put it into site-packages."""
     target = tmp_path_factory.mktemp("site")
     build = tmp_path_factory.mktemp("build")  # a copy: pip's build leaves files beside the sources
-    offline = ["--no-deps", "--no-build-isolation", "--no-index", "--disable-pip-version-check"]
+    # nothing from the network: no dependencies, the build backend already installed, no package index
+    offline = ["--no-deps", "--no-build-isolation", "--no-index", "--disable-pip-version-check", "--quiet"]
+    source = _copy(TEMPLATE, build)
     subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "pip",
-            "install",
-            "--quiet",
-            *offline,
-            "--target",
-            str(target),
-            str(_copy(TEMPLATE, build)),
-        ],
+        [sys.executable, "-m", "pip", "install", *offline, f"--target={target}", str(source)],
         check=True,
         capture_output=True,
     )
