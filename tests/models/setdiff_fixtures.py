@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import random
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, ClassVar
@@ -19,6 +20,7 @@ import torch.nn.functional as F
 
 from setdiff_bench.cameras import Camera
 from setdiff_bench.models.setdiff.config import Config, TrainConfig, model_config_from_dict
+from setdiff_bench.models.setdiff.inputs import TrainingSet, training_set
 from setdiff_bench.models.setdiff.model import SetDiffModel
 from setdiff_bench.models.setdiff.presets import TINY_UNET, TINY_VAE
 from setdiff_bench.packets.index import merge_index
@@ -89,6 +91,20 @@ def make_sample(
     packet.targets.images = (blurred + 0.1 * torch.randn(gt.shape, generator=generator)).clamp(0, 1)
     masks = torch.ones(num_targets, 1, size[0], size[1], dtype=torch.bool)
     return TrainingSample(packet=packet, target_gt=gt, target_masks=masks)
+
+
+def geometry_set(num_refs: int = 2, num_targets: int = 2, **options: Any) -> TrainingSet:
+    """One training set with geometry drawn from :func:`make_sample` (32×32, seed 0) with ``random.Random(0)``;
+    ``options`` go to :func:`~setdiff_bench.models.setdiff.inputs.training_set`."""
+    return training_set(
+        make_sample(num_refs, num_targets, size=(32, 32)),
+        random.Random(0),
+        min_views=2,
+        max_views=8,
+        use_geometry=True,
+        cmap_clip=10.0,
+        **options,
+    )
 
 
 #: Model overrides that make the tiny architecture a Difix-style baseline: RGB only, one reference per target.

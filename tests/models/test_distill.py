@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import math
-import random
 from dataclasses import replace
 from pathlib import Path
 
@@ -19,9 +18,8 @@ from setdiff_bench.models.setdiff.config import Config
 from setdiff_bench.models.setdiff.distill import check_student_config, distillation_targets
 from setdiff_bench.models.setdiff.export import export_enhancer
 from setdiff_bench.models.setdiff.inference import enhance_packet
-from setdiff_bench.models.setdiff.inputs import training_set
 from setdiff_bench.models.setdiff.train import train
-from tests.models.setdiff_fixtures import make_packet, make_sample, perturbed_model
+from tests.models.setdiff_fixtures import geometry_set, make_packet, make_sample, perturbed_model
 
 #: ᾱ at t = 199 of SD-Turbo's scaled-linear schedule (docs/model.md, "SD-Turbo schedule at t = 199").
 ALPHA_BAR = 0.7552384
@@ -49,15 +47,7 @@ def student_config(teacher: Path, config: Config, **train: object) -> Config:
 def test_targets_are_the_teachers_cfg_output(tmp_path: Path) -> None:
     folder, _ = teacher_folder(tmp_path)
     teacher, _ = load_model(folder)
-    drawn = training_set(
-        make_sample(2, 2, size=(32, 32)),
-        random.Random(0),
-        min_views=2,
-        max_views=8,
-        use_geometry=True,
-        cmap_clip=10.0,
-    )
-    batch = drawn.batch
+    batch = geometry_set().batch
     targets = distillation_targets(teacher, batch, 1.5, torch.tensor([0, 1]))
     with torch.no_grad():  # by hand: two UNet passes, v = u + s·(c − u), x̂0 = √ᾱ·z − √(1−ᾱ)·v
         images = batch.images[0]

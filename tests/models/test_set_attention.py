@@ -7,7 +7,6 @@ the functions under test.
 from __future__ import annotations
 
 import math
-import random
 from dataclasses import replace
 
 import numpy as np
@@ -20,7 +19,7 @@ from setdiff_bench.errors import UsageError
 from setdiff_bench.models.setdiff import set_mixer
 from setdiff_bench.models.setdiff.config import model_config_from_dict
 from setdiff_bench.models.setdiff.inference import enhance_packet
-from setdiff_bench.models.setdiff.inputs import ray_snapped_points, surface_points, training_set
+from setdiff_bench.models.setdiff.inputs import ray_snapped_points, surface_points
 from setdiff_bench.models.setdiff.set_mixer import (
     NO_MATCH_KEY,
     NO_MATCH_VALUE,
@@ -32,7 +31,7 @@ from setdiff_bench.models.setdiff.set_mixer import (
     relative_distance_bias,
     set_kwargs,
 )
-from tests.models.setdiff_fixtures import make_packet, make_sample, residual_model
+from tests.models.setdiff_fixtures import geometry_set, make_packet, residual_model
 
 
 def attention_layer(width: int = 32, heads: int = 4) -> Attention:
@@ -252,16 +251,7 @@ def test_models_with_restricted_levels_run(bias: str) -> None:
     other = replace(packet, references=replace(packet.references, images=1 - packet.references.images))
     assert first.shape == (2, 3, 32, 32) and torch.isfinite(first).all()
     assert not torch.equal(first, enhance_packet(model, other, guidance_scale=1.5))
-    drawn = training_set(
-        make_sample(2, 2, size=(32, 32)),
-        random.Random(0),
-        min_views=2,
-        max_views=8,
-        use_geometry=True,
-        cmap_clip=10.0,
-        with_points=True,
-        snapped_points=bias == "cmap_relative",
-    )
+    drawn = geometry_set(with_points=True, snapped_points=bias == "cmap_relative")
     model.train()
     model(drawn.batch).target_x0.square().mean().backward()  # trains: the no-match key gets a gradient
     assert all(p.grad is not None for n, p in model.unet.named_parameters() if NO_MATCH_VALUE in n)
