@@ -31,7 +31,8 @@ def leaderboard(
     """The leaderboard of finished runs, as ``setdiff-bench leaderboard`` builds it.
 
     Args:
-        runs: a folder searched for run folders (each holds ``metrics.parquet``), or run folders.
+        runs: a folder searched for run folders (each holds ``metrics.parquet``), or several (run folders or
+            folders of runs, as ``leaderboard --runs A B``); a run reached twice counts once.
         dataset: dataset key (``synthetic``, ``euvs``, ...): selects the table layout and the rows.
         split: targets of this split (``None``: all).
         methods: measured methods to show, in this order (default: all, sorted).
@@ -52,15 +53,14 @@ def leaderboard(
     """
     from setdiff_bench.reporting.leaderboard import (
         build_leaderboard,
+        find_runs,
         load_runs,
         reported_for,
         write_leaderboard,
     )
 
-    sources: str | Path | list[Path] = (
-        Path(runs) if isinstance(runs, str | os.PathLike) else [Path(run) for run in runs]
-    )
-    images, sequences = load_runs(sources)
+    roots = [Path(runs)] if isinstance(runs, str | os.PathLike) else [Path(run) for run in runs]
+    images, sequences = load_runs(find_runs(roots))
     board = build_leaderboard(
         dataset,
         images,

@@ -14,6 +14,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+import setdiff_bench as sb
 from setdiff_bench.cli.main import main
 from setdiff_bench.reporting.leaderboard import find_runs, survey_runs
 from tests.run.store_fixtures import leaderboard_argv
@@ -106,3 +107,14 @@ def test_compare_takes_runs_by_name_under_several_folders(
         err = capsys.readouterr().err.strip().splitlines()
         assert code == 2 and len(err) == 1 and err[0].startswith(f"setdiff-bench compare: error: {name}: ")
         assert fragment in err[0], err
+
+
+def test_the_python_leaderboard_takes_several_folders_too(
+    lb_runs: Path, split_runs: tuple[Path, Path], tmp_path: Path
+) -> None:
+    baselines, mine = split_runs
+    one = sb.leaderboard_frame(sb.leaderboard(lb_runs, "synthetic"))
+    pd.testing.assert_frame_equal(sb.leaderboard_frame(sb.leaderboard([baselines, mine], "synthetic")), one)
+    # run folders themselves, as before, and a run reached twice
+    both = [baselines / "identity", mine / "reproject", mine]
+    pd.testing.assert_frame_equal(sb.leaderboard_frame(sb.leaderboard(both, "synthetic")), one)
