@@ -22,8 +22,8 @@ from setdiff_bench.runtime.threads import torch_threads
 from setdiff_bench.types import Packet
 
 SCENE = "street_00"
-#: 8 steps, updates before steps 1 and 5 (t = 0.5, then the targets), steps 4 and 8 on pseudo-views (r = 0.7)
-SETTINGS = RefitSettings.preset("progressive", steps=8, update_every=4, checkpoint_every=2)
+#: 6 steps, updates before steps 1 and 4 (t = 0.5, then the targets), step 4 on a pseudo-view (r = 0.7)
+SETTINGS = RefitSettings.preset("progressive", steps=6, update_every=3, checkpoint_every=2)
 
 
 def task(root: Path, out: Path, method: str = "reproject", **fields: object) -> RefitTask:
@@ -48,11 +48,11 @@ def test_refit_writes_a_ply_prepare_can_render_and_a_manifest(
     assert manifest["ply"]["path"] == f"{SCENE}/lane0.ply"
     assert (manifest["group"], manifest["fit_key"], manifest["updates"]) == ("lane+2", "lane0", 2)
     assert manifest["pseudo_views"] == manifest["targets"] == 5  # the lane+2 front camera's 5 timesteps
-    assert manifest["enhancer"]["method"] == "reproject" and manifest["schedule"]["steps"] == 8
-    assert manifest["time"]["steps_run"] == 8 and manifest["peak_memory_mb"] > 0
+    assert manifest["enhancer"]["method"] == "reproject" and manifest["schedule"]["steps"] == 6
+    assert manifest["time"]["steps_run"] == 6 and manifest["peak_memory_mb"] > 0
     assert not (finished / "checkpoint").exists()
     refit, fit = read_ply(ply), read_ply(street_root / SCENE / "fits" / "lane0.ply")
-    # Adam moves a parameter by at most about its rate per step: 8 steps x 1.6e-6 x extent (~25 m) < 1e-3
+    # Adam moves a parameter by at most about its rate per step: 6 steps x 1.6e-6 x extent (~25 m) < 1e-3
     assert float((refit.means - fit.means).abs().max()) < 1e-3
     assert not torch.equal(refit.sh, fit.sh)
     # scoring X 3D: prepare renders the refit scene from OUT as it renders any fit folder
@@ -92,9 +92,8 @@ def test_interrupted_refit_resumes_to_the_same_bytes(
 
     def save_then_stop(loop: RefitLoop, folder: Path) -> None:
         save(loop, folder)
-        if (
-            loop.step_count == 6
-        ):  # after the second update: pseudo-views and their order come from the checkpoint
+        # stop after the second update: the pseudo-views and their order must come from the checkpoint
+        if loop.step_count == 4:
             raise KeyboardInterrupt
 
     out = tmp_path / "out"
@@ -104,7 +103,7 @@ def test_interrupted_refit_resumes_to_the_same_bytes(
     assert not (out / MANIFEST_FILE).exists() and not (out / SCENE).exists()
     monkeypatch.setattr(RefitLoop, "save", save)
     result = refit_scene(task(street_root, out), SETTINGS, progress=False)
-    assert result.resumed_at == 6
+    assert result.resumed_at == 4
     assert (out / SCENE / "lane0.ply").read_bytes() == (finished / SCENE / "lane0.ply").read_bytes()
 
 
@@ -223,7 +222,7 @@ def fit_checkpoint(root: Path, folder: Path, model_path: Path) -> None:
 
 def test_fit_checkpoint_must_hold_the_ply(street_root: Path, tmp_path: Path) -> None:
     fit = street_root / SCENE / "fits" / "lane0.ply"
-    settings = RefitSettings.preset("one-shot", steps=2)
+    settings = RefitSettings.preset("one-shot", steps=1)
     fit_checkpoint(street_root, tmp_path / "ckpt", fit)
     result = refit_scene(
         task(street_root, tmp_path / "a", fit_checkpoint=tmp_path / "ckpt"), settings, progress=False
@@ -244,7 +243,7 @@ def test_fit_checkpoint_must_hold_the_ply(street_root: Path, tmp_path: Path) -> 
 
 def test_refit_fits_the_scene_first_without_fits(street_root: Path, tmp_path: Path) -> None:
     out = tmp_path / "out"
-    settings = RefitSettings.preset("one-shot", steps=2, min_fit_correlation=-1.0)  # a 4-iteration fit
-    result = refit_scene(task(street_root, out, fits=None, fit_iterations=4), settings, progress=False)
+    settings = RefitSettings.preset("one-shot", steps=1, min_fit_correlation=-1.0)  # a 2-iteration fit
+    result = refit_scene(task(street_root, out, fits=None, fit_iterations=2), settings, progress=False)
     assert Path(result.manifest["fit"]["path"]) == (out / "base" / "fits" / SCENE / "lane0.ply").resolve()
     assert (out / SCENE / "lane0.ply").is_file()
