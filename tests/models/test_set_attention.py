@@ -268,3 +268,19 @@ def test_set_attention_config_errors() -> None:
         model_config_from_dict({"preset": "tiny", "set_attention_neighbours": 0})
     config = model_config_from_dict({"preset": "tiny", "set_attention": ["knn"]})
     assert config.needs_points and not config.snapped_points
+
+
+def test_token_footprint_by_hand() -> None:
+    """Pixel footprint 0.01 everywhere: a latent cell of 8×8 pixels spans 0.08, a token of 2×2 cells 0.16;
+    half-covered tokens keep their valid cells' mean."""
+    model = residual_model(attention_bias="cmap_relative")
+    assert model.config.latent_factor == 8
+    pixels = torch.zeros(1, 5, 32, 32)
+    pixels[:, 3] = 1.0
+    pixels[:, 4] = 0.01
+    pixels[:, 3:, :, :16] = 0.0  # the left half has no surface
+    pixels[:, :3, :, 16:] = torch.tensor([1.0, 2.0, 3.0]).view(3, 1, 1)
+    geometry = pool_token_geometry(model.latent_points(pixels), 4)  # 4×4 cells → 2×2 tokens
+    torch.testing.assert_close(geometry.coverage, torch.tensor([[0.0, 1.0, 0.0, 1.0]]))
+    torch.testing.assert_close(geometry.footprint[0, [1, 3]], torch.tensor([0.16, 0.16]))
+    torch.testing.assert_close(geometry.points[0, 1], torch.tensor([1.0, 2.0, 3.0]))
