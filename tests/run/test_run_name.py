@@ -30,16 +30,21 @@ def darkened_copy(images: Path, out: Path, factor: float) -> Path:
 
 
 def test_two_named_precomputed_runs_share_one_leaderboard(
-    store: Path, identity_run: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    store: Path,
+    identity_run: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    runs = tmp_path / "runs"
-    shutil.copytree(identity_run, runs / "identity")
     same = tmp_path / "same"
     shutil.copytree(identity_run / IMAGES_DIR, same)
     dark = darkened_copy(identity_run / IMAGES_DIR, tmp_path / "dark", 0.5)
+    monkeypatch.chdir(tmp_path)  # no --out: each run's default folder is named after the run
+    runs = tmp_path / "results" / "runs" / store.name
+    shutil.copytree(identity_run, runs / "identity")
     for name, source in (("copied", same), ("darker", dark)):
-        argv = run_argv("precomputed", store, runs / name, "--from", str(source), "--name", name)
-        assert main(argv) == 0
+        argv = ["run", "--method", "precomputed", "--packets", str(store), "--no-progress"]
+        assert main([*argv, "--from", str(source), "--name", name]) == 0
         assert capsys.readouterr().out.startswith(f"{name} [0/1]: enhanced 4 packets")
 
     copied = pd.read_parquet(runs / "copied" / METRICS_FILE)
@@ -54,20 +59,17 @@ def test_two_named_precomputed_runs_share_one_leaderboard(
     assert claimed_label(run_file) == "darker" and claimed_label(runs / "identity" / RUN_FILE) == "identity"
     # an unnamed run's run.json is as before (no "name"), so runs made before names existed still resume
     assert "name" not in json.loads((runs / "identity" / RUN_FILE).read_text())
+    # the name is part of the run's settings: the same run without it is another run
+    unnamed = RunSettings("precomputed", {"source": str(dark.resolve())})
+    assert unnamed.label == "precomputed" and RunSettings("precomputed", name="darker").label == "darker"
+    with pytest.raises(UsageError, match=r"other settings \(name differ\)"):
+        run_method(store, runs / "darker", unnamed, progress=False)
 
     assert main(leaderboard_argv("synthetic", runs, tmp_path / "tables", "--format", "parquet")) == 0
     table = pd.read_parquet(tmp_path / "tables" / "synthetic.parquet")
     assert sorted(set(table["label"])) == ["copied", "darker", "identity"]
     psnr = table[(table["metric"] == "psnr") & (table["block"] == "lane+1")].set_index("label")["value"]
     assert psnr["copied"] == pytest.approx(psnr["identity"]) and psnr["darker"] < psnr["identity"] - 1.0
-
-
-def test_a_name_is_part_of_the_run_settings(store: Path, identity_run: Path, tmp_path: Path) -> None:
-    settings = RunSettings("precomputed", {"source": str(identity_run)}, name="mine")
-    run_method(store, tmp_path / "mine", settings, progress=False)
-    with pytest.raises(UsageError, match=r"other settings \(name differ\)"):
-        run_method(store, tmp_path / "mine", RunSettings("precomputed", settings.options), progress=False)
-    assert RunSettings("identity").label == "identity" and settings.label == "mine"
 
 
 @pytest.mark.parametrize(
@@ -92,12 +94,3 @@ def test_bad_names_are_refused_before_anything_is_written(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("setdiff-bench run: error: --name ") and problem in err[0], err
     assert not out.exists()
-
-
-def test_the_default_folder_is_named_after_the_run(
-    store: Path, identity_run: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
-) -> None:
-    monkeypatch.chdir(tmp_path)
-    argv = ["run", "--method", "precomputed", "--packets", str(store), "--no-progress"]
-    assert main([*argv, "--from", str(identity_run), "--name", "named"]) == 0
-    assert (tmp_path / "results" / "runs" / store.name / "named" / METRICS_FILE).is_file()
