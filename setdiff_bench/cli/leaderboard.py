@@ -39,6 +39,8 @@ from setdiff_bench.reporting.bootstrap import BootstrapSettings
 VERB = "leaderboard"
 #: Where ``--runs`` looks when it is not given (``run``'s default ``--out`` is under it).
 DEFAULT_RUNS = Path("results/runs")
+#: Where the tables go without ``--out``: outside the tracked tree (results/ holds what is published).
+DEFAULT_OUT = Path("runs/leaderboards")
 HELP = "tabulate finished runs per method and group: Parquet, LaTeX (booktabs), Markdown; plots and grids"
 DESCRIPTION = __doc__
 
@@ -53,7 +55,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     formats = declared_value("setdiff_bench.reporting.leaderboard.render", "FORMATS")
     parser.add_argument("--format", default=",".join(formats), help=f"comma list of {', '.join(formats)}")
-    parser.add_argument("--out", type=Path, default=Path("results/leaderboards"), help="output folder")
+    parser.add_argument(
+        "--out", type=Path, default=DEFAULT_OUT, help=f"output folder (default {DEFAULT_OUT}, ignored by git)"
+    )
     parser.add_argument(
         "--with-reported",
         action="store_true",

@@ -118,3 +118,14 @@ def test_the_python_leaderboard_takes_several_folders_too(
     # run folders themselves, as before, and a run reached twice
     both = [baselines / "identity", mine / "reproject", mine]
     pd.testing.assert_frame_equal(sb.leaderboard_frame(sb.leaderboard(both, "synthetic")), one)
+
+
+def test_the_default_output_is_outside_the_tracked_tree(
+    split_runs: tuple[Path, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    baselines, mine = split_runs
+    monkeypatch.chdir(tmp_path)
+    argv = ["leaderboard", "--dataset", "synthetic", "--runs", str(baselines), str(mine), "--format", "md"]
+    assert main(argv) == 0
+    assert [p.name for p in (tmp_path / "runs" / "leaderboards").iterdir()] == ["synthetic.md"]
+    assert not (tmp_path / "results").exists()
