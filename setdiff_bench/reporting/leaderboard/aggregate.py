@@ -73,7 +73,8 @@ def build_leaderboard(
             ``paper``; ``setdiff-bench evaluate`` tables carry their profile.  The caption names it, and the
             profile's averaging is used (``scene_mean``: the mean of per-scene means).
         against: a measured method shown in the table: every other measured cell gets its paired difference
-            to it (:mod:`setdiff_bench.reporting.paired`; image metrics only, warp error is per sequence).
+            to it (:mod:`setdiff_bench.reporting.paired`; image metrics only, warp error is per sequence), which
+            the writers show as a gain, positive = better (:mod:`setdiff_bench.reporting.gains`).
         bootstrap: how those intervals are drawn (default :class:`BootstrapSettings`).
         cost: add a "Cost" block of :data:`COST_COLUMNS` (ms per frame, peak memory) per measured method.
         distribution: FID / KID rows (:func:`~setdiff_bench.reporting.leaderboard.inputs.load_distribution`),
