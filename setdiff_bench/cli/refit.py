@@ -10,10 +10,11 @@ Interrupted, the same command resumes from OUT/checkpoint/ and ends with the sam
 
 Examples::
 
-    setdiff-bench refit synthetic --root runs/scenes --scene scene_0000_00 --fits runs/scenes \\
-        --group lane+2 --method setdiff --checkpoint tiny_setdiff --out runs/refit/setdiff
-    setdiff-bench refit synthetic --root runs/scenes --scene scene_0000_00 --fits runs/scenes \\
-        --trajectory shift:3 --method difix --checkpoint tiny_difix --schedule one-shot --out runs/refit/difix
+    setdiff-bench refit synthetic --root runs/demo/work/scenes --scene scene_0000_00 --fits runs/demo/work/scenes \
+        --group lane+2 --method setdiff --checkpoint tiny_setdiff --steps 300 --out runs/refit/setdiff
+    setdiff-bench refit synthetic --root runs/demo/work/scenes --scene scene_0000_00 --fits runs/demo/work/scenes \
+        --trajectory shift:-3 --method difix --checkpoint tiny_difix --schedule one-shot --steps 300 \
+        --out runs/refit/difix
 """
 
 from __future__ import annotations
