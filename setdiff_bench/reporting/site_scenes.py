@@ -33,16 +33,16 @@ ALL_GROUPS = "all groups"
 
 
 def scene_gains(
-    rows: pd.DataFrame,
     method_rows: pd.DataFrame,
     baseline_rows: pd.DataFrame,
     metrics: Sequence[str],
     settings: BootstrapSettings,
 ) -> dict[str, dict[str, PairedGain]]:
     """Row label (each scene, then :data:`ALL_SCENES`) → metric → :class:`PairedGain` of the method over
-    the baseline on the targets of ``rows`` (the per-image rows of one dataset and group, or of all groups).
+    the baseline, on the targets both have.
 
-    ``method_rows`` / ``baseline_rows``: those rows of the method's and the baseline's run."""
+    ``method_rows`` / ``baseline_rows``: the method's and the baseline's per-image rows of one dataset and
+    group (or of all its groups)."""
     pairs = pair_targets(method_rows, baseline_rows, metrics, keys=PAIR_KEYS, names=("method", "baseline"))
     if not len(pairs):
         return {}
@@ -113,7 +113,7 @@ def scene_table_html(
         for group, rows in sections:
             base = rows[rows["run"] == runs[baseline]]
             gains = {
-                method: scene_gains(rows, rows[rows["run"] == runs[method]], base, metrics, settings)
+                method: scene_gains(rows[rows["run"] == runs[method]], base, metrics, settings)
                 for method in compared
             }
             labels_in_order = list(dict.fromkeys(label for g in gains.values() for label in g))
