@@ -128,11 +128,12 @@ def render_request(
     tick: int,
     image_format: int = pb.ImageFormat.JPEG,
     spec: pb.CameraSpec | None = None,
+    scene_id: str = SCENE_ID,
 ) -> pb.RGBRenderRequest:
     """What ``construct_rgb_render_request`` of AlpaSim's runtime sends for one camera (10 Hz, 30 ms shutter)."""
     start = 100_000 * tick
     return pb.RGBRenderRequest(
-        scene_id=SCENE_ID,
+        scene_id=scene_id,
         resolution_h=camera.height,
         resolution_w=camera.width,
         camera_intrinsics=spec or pinhole_spec(camera, logical_id),

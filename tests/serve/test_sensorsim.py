@@ -460,3 +460,38 @@ def test_token_tls_and_the_bind_rule_are_the_enhancer_servers(
         ]
     with pytest.raises(UsageError, match=r"0\.0\.0\.0 is not a loopback address"):
         start_sensorsim(SensorsimSettings(ServeSettings(host="0.0.0.0", port=0), scenes=scenes))
+
+
+def test_cli_builds_the_settings_and_refuses_in_one_line(scenes: Path) -> None:
+    import argparse
+
+    from setdiff_bench.cli import serve as cli
+
+    parser = argparse.ArgumentParser()
+    cli.add_arguments(parser)
+
+    def settings(*words: str) -> SensorsimSettings:
+        return cli.sensorsim_settings_from_arguments(parser.parse_args(["--protocol", "sensorsim", *words]))
+
+    made = settings(
+        "--scenes", str(scenes), "--role", "proxy", "--upstream", "127.0.0.1:7", "--checkpoint", "c"
+    )
+    assert (made.role, made.upstream, made.scenes, made.upstream_png) == (
+        "proxy",
+        "127.0.0.1:7",
+        scenes,
+        True,
+    )
+    assert made.serve.host == "127.0.0.1" and settings("--scenes", str(scenes)).upstream is None
+    for words, message in (
+        ((), "--scenes: --protocol sensorsim needs a folder of fitted scenes"),
+        (("--scenes", str(scenes), "--role", "proxy", "--checkpoint", "c"), "--upstream: give the upstream"),
+        (
+            ("--scenes", str(scenes), "--role", "proxy", "--upstream", "h:1"),
+            "--checkpoint: the proxy enhances",
+        ),
+        (("--scenes", str(scenes), "--host", "0.0.0.0"), "--host: 0.0.0.0 is not a loopback address"),
+    ):
+        with pytest.raises(UsageError) as caught:
+            settings(*words)
+        assert caught.value.one_line().startswith(message)

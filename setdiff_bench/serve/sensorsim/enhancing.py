@@ -28,7 +28,8 @@ from setdiff_bench.evaluation.stream import StreamInputError, StreamSession, Vie
 from setdiff_bench.serve.rpc_errors import LOG
 from setdiff_bench.serve.sensorsim.lens import LensCamera, render_lens
 from setdiff_bench.serve.sensorsim.scenes import FittedScene
-from setdiff_bench.serve.sessions import EXPIRED_MEMORY, FairLock, Session, release_freed_memory
+from setdiff_bench.serve.servicer import EnhancerService
+from setdiff_bench.serve.sessions import FairLock, Session, release_freed_memory
 from setdiff_bench.serve.settings import ServeSettings, reference_bytes
 
 
@@ -61,24 +62,9 @@ class SceneSessions:
         self.model_lock = FairLock()
         self.opened = 0
 
-    def expire_idle(self, now: float | None = None) -> int:
-        """Close sessions idle past their timeout (none with a call in flight); returns how many."""
-        now = self.clock() if now is None else now
-        with self._sessions_lock:
-            stale = [
-                key
-                for key, session in self.sessions.items()
-                if session.busy == 0 and now - session.last_used > session.idle_timeout
-            ]
-            for key in stale:
-                self.expired[key] = self.sessions.pop(key).idle_timeout
-                while len(self.expired) > EXPIRED_MEMORY:
-                    self.expired.popitem(last=False)
-        for key in stale:
-            LOG.info("enhancement session %s expired", key)
-        if stale:
-            release_freed_memory()
-        return len(stale)
+    #: Close sessions idle past their timeout (none with a call in flight); returns how many -- the enhancer
+    #: server's own method, over this table.
+    expire_idle = EnhancerService.expire_idle
 
     def close_all(self) -> None:
         with self._sessions_lock:
