@@ -306,10 +306,9 @@ def nearest_reference_keys(
         empty = torch.zeros((sets, queries.shape[1], 0), dtype=torch.long, device=queries.device)
         return empty, empty.bool()
     distance = torch.cdist(queries.float(), geometry.points[:, candidates].float())
-    usable = geometry.valid[:, rows, None] & geometry.valid[:, None, candidates]
-    distance = torch.where(usable, distance, torch.full_like(distance, math.inf))
+    distance.masked_fill_(~geometry.valid[:, None, candidates], math.inf)  # keys without a surface point
     nearest, order = distance.topk(count, dim=-1, largest=False)
-    return candidates[order], torch.isfinite(nearest)
+    return candidates[order], torch.isfinite(nearest) & geometry.valid[:, rows, None]
 
 
 def nearest_reference_attention(
@@ -349,6 +348,10 @@ def nearest_reference_attention(
     spare_key = no_match_key.to(query.dtype).reshape(heads, head_dim)
     spare_value = no_match_value.to(value.dtype).reshape(heads, head_dim)
     all_index = torch.arange(total, device=device)
+    set_index = torch.arange(sets, device=device)[:, None, None]
+    # (S, T, h·d): each token's keys / values of all heads in one row, gathered by token index
+    token_keys = key.transpose(1, 2).reshape(sets, total, heads * head_dim)
+    token_values = value.transpose(1, 2).reshape(sets, total, heads * head_dim)
     # per query: its logits over L + k + 1 keys and its k gathered keys and values (each head), and its
     # distances to every candidate (the N·L reference tokens at most)
     per_query = max(heads * (tokens + 2 * neighbours * head_dim + neighbours + 1), num_references * tokens)
@@ -369,10 +372,11 @@ def nearest_reference_attention(
             else:
                 index = torch.zeros((sets, q.shape[2], 0), dtype=torch.long, device=device)
                 found = index.bool()
-            picked = index.reshape(sets, 1, -1, 1).expand(-1, heads, -1, head_dim)
-            near_keys = torch.gather(key, 2, picked).reshape(sets, heads, *index.shape[1:], head_dim)
-            near_values = torch.gather(value, 2, picked).reshape(sets, heads, *index.shape[1:], head_dim)
-            near_logits = (q[:, :, :, None] * near_keys).sum(-1) * factor  # (S, h, Q, k)
+            near_keys, near_values = (
+                rows_of[set_index, index].reshape(*index.shape, heads, head_dim).permute(0, 3, 1, 2, 4)
+                for rows_of in (token_keys, token_values)
+            )  # (S, h, Q, k, d)
+            near_logits = (q.unsqueeze(-2) @ near_keys.transpose(-1, -2)).squeeze(-2) * factor  # (S, h, Q, k)
             if bias_scale is not None and geometry is not None:
                 query_index = all_index[rows].expand(sets, -1)[..., None]
                 own_index = all_index[own].expand(sets, q.shape[2], -1)
@@ -386,7 +390,7 @@ def nearest_reference_attention(
             spare_logits = (q * spare_key[None, :, None]).sum(-1, keepdim=True) * factor  # (S, h, Q, 1)
             weights = torch.softmax(torch.cat([own_logits, near_logits, spare_logits], dim=-1), dim=-1)
             own_w, near_w, spare_w = weights.split([tokens, index.shape[-1], 1], dim=-1)
-            mixed = own_w @ own_values + (near_w[..., None] * near_values).sum(-2)
+            mixed = own_w @ own_values + (near_w.unsqueeze(-2) @ near_values).squeeze(-2)
             output[:, :, rows] = mixed + spare_w * spare_value[None, :, None]
     return output
 
