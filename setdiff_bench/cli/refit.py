@@ -4,9 +4,9 @@ The scene is read as ``prepare`` reads it (dataset, --root, --scene, protocol); 
 group's targets (--group lane+2) or a trajectory (--trajectory shift:3), planned as ``prepare`` plans their
 packets.  During the refit the enhancer is given packets of the current model's renders (RGB, C-maps) with the
 real fit frames as references, exactly as ``run`` gives it stored packets; ground truth of the targets is never
-read.  Output: OUT/<scene>/<fit_key>.ply and OUT/refit.json; ``prepare --fits OUT`` then renders the refit
-scene's packets, and ``run`` on them scores ``X 3D`` (--method identity) and ``X 3D+`` (--method X).
-Interrupted, the same command resumes from OUT/checkpoint/ and ends with the same bytes.  docs/refit.md.
+read.  Output: OUT/<scene>/<fit_key>.ply and its manifest <fit_key>.refit.json beside it (several scenes may
+share OUT); ``prepare --fits OUT`` then renders the refit scenes' packets, and ``run`` on them scores ``X 3D`` (--method identity) and ``X 3D+`` (--method X).
+Interrupted, the same command resumes from OUT/<scene>/<fit_key>.refit-checkpoint/ and ends with the same bytes.  docs/refit.md.
 
 Examples::
 
@@ -142,7 +142,7 @@ def run(args: argparse.Namespace) -> int:
     result = refit_scene(task, settings, progress=not args.no_progress)
     manifest = result.manifest
     if result.already_done:
-        print(f"already refitted: {result.ply} ({args.out / 'refit.json'})")
+        print(f"already refitted: {result.ply} ({result.manifest_path})")
         return 0
     timing = manifest["time"]
     resumed = f", resumed at step {result.resumed_at}" if result.resumed_at else ""

@@ -21,9 +21,9 @@ for those cameras among the fit frames (the packet's own references once at the 
 current model's renders (:func:`~setdiff_bench.refit.packets.current_packet`), ``enhancer.enhance(packet)``
 checked for shape (:func:`~setdiff_bench.evaluation.packet_scoring.check_output`) and put on the 8-bit grid.
 
-Output in ``out``: ``<scene>/<fit_key>.ply`` (so that ``prepare --fits OUT`` renders the refit scene) and
-``refit.json`` (the manifest, written last), both atomically; ``checkpoint/`` while it runs (removed at the
-end).  A rerun resumes from the checkpoint and ends with the same bytes; a finished ``out`` is left as it is.
+Output in ``out`` (:func:`refit_paths`): ``<scene>/<fit_key>.ply`` (so that ``prepare --fits OUT`` renders the
+refit scene; several scenes' refits share one ``out``) and ``<scene>/<fit_key>.refit.json`` (the manifest,
+written last), both atomically; ``<scene>/<fit_key>.refit-checkpoint/`` while it runs (removed at the end).  A rerun resumes from the checkpoint and ends with the same bytes; a finished ``out`` is left as it is.
 """
 
 from __future__ import annotations
@@ -45,8 +45,18 @@ from setdiff_bench.errors import CheckpointError, PlyError, UsageError
 from setdiff_bench.refit.settings import RefitSettings
 
 REFIT_FORMAT = "setdiff-refit/1"
-MANIFEST_FILE = "refit.json"
-CHECKPOINT_DIR = "checkpoint"
+MANIFEST_SUFFIX = ".refit.json"
+CHECKPOINT_SUFFIX = ".refit-checkpoint"
+
+
+def refit_paths(out: str | os.PathLike[str], scene: str, fit_key: str) -> tuple[Path, Path, Path]:
+    """``(PLY, manifest, checkpoint folder)`` of ``scene``'s refit of fit ``fit_key`` in ``out``."""
+    base = Path(out) / scene
+    return (
+        base / f"{fit_key}.ply",
+        base / f"{fit_key}{MANIFEST_SUFFIX}",
+        base / f"{fit_key}{CHECKPOINT_SUFFIX}",
+    )
 
 
 @dataclass(frozen=True)
@@ -85,9 +95,11 @@ class RefitTask:
 
 @dataclass
 class RefitResult:
-    """What :func:`refit_scene` did: the PLY, the manifest, and whether it resumed or found the work done."""
+    """What :func:`refit_scene` did: the PLY, the manifest (its file and content), and whether it resumed or
+    found the work done."""
 
     ply: Path
+    manifest_path: Path
     manifest: dict[str, Any]
     resumed_at: int = 0
     already_done: bool = False
@@ -109,16 +121,15 @@ def refit_scene(task: RefitTask, settings: RefitSettings, *, progress: bool = Tr
     started = time.perf_counter()
     inputs = _inputs(task, settings)
     out = Path(task.out)
-    manifest_path = out / MANIFEST_FILE
+    ply, manifest_path, checkpoints = refit_paths(out, inputs.scene_name, inputs.fit_key)
     if manifest_path.is_file():
         done = json.loads(manifest_path.read_text(encoding="utf-8"))
         if done.get("identity") != json.loads(json.dumps(inputs.identity)):
             raise UsageError(
                 "holds a finished refit of other inputs or settings; remove it or choose another --out", out
             )
-        return RefitResult(out / done["ply"]["path"], done, already_done=True)
+        return RefitResult(ply, manifest_path, done, already_done=True)
     loop = inputs.loop
-    checkpoints = out / CHECKPOINT_DIR
     resumed_at = loop.step_count if loop.load(checkpoints) else 0
     timing = {"steps_s": 0.0, "updates_s": 0.0, "enhance_s": 0.0}
     updates = settings.update_steps()
@@ -154,7 +165,6 @@ def refit_scene(task: RefitTask, settings: RefitSettings, *, progress: bool = Tr
     from setdiff_bench.gaussians.ply import write_ply
     from setdiff_bench.io.atomic import sha256_file, write_text_atomic
 
-    ply = out / inputs.scene_name / f"{inputs.fit_key}.ply"
     ply.parent.mkdir(parents=True, exist_ok=True)
     write_ply(ply, loop.trainer.params.model().detach())
     steps_run = settings.steps - resumed_at
@@ -194,7 +204,7 @@ def refit_scene(task: RefitTask, settings: RefitSettings, *, progress: bool = Tr
     }
     write_text_atomic(manifest_path, json.dumps(manifest, indent=1, sort_keys=True) + "\n")
     shutil.rmtree(checkpoints, ignore_errors=True)
-    return RefitResult(ply, manifest, resumed_at=resumed_at)
+    return RefitResult(ply, manifest_path, manifest, resumed_at=resumed_at)
 
 
 @dataclass

@@ -16,7 +16,7 @@ from setdiff_bench.enhancers.base import BUILTIN_METHODS, MethodSpec
 from setdiff_bench.errors import CheckpointError
 from setdiff_bench.gaussians.ply import read_ply, write_ply
 from setdiff_bench.packets.store import PacketStore
-from setdiff_bench.refit import MANIFEST_FILE, RefitSettings, RefitTask, refit_scene
+from setdiff_bench.refit import RefitSettings, RefitTask, refit_paths, refit_scene
 from setdiff_bench.refit.loop import RefitLoop
 from setdiff_bench.runtime.threads import torch_threads
 from setdiff_bench.types import Packet
@@ -43,14 +43,14 @@ def finished(street_root: Path, tmp_path_factory: pytest.TempPathFactory) -> Pat
 def test_refit_writes_a_ply_prepare_can_render_and_a_manifest(
     finished: Path, street_root: Path, tmp_path: Path
 ) -> None:
-    manifest = json.loads((finished / MANIFEST_FILE).read_text())
+    manifest = json.loads(refit_paths(finished, SCENE, "lane0")[1].read_text())
     ply = finished / SCENE / "lane0.ply"
     assert manifest["ply"]["path"] == f"{SCENE}/lane0.ply"
     assert (manifest["group"], manifest["fit_key"], manifest["updates"]) == ("lane+2", "lane0", 2)
     assert manifest["pseudo_views"] == manifest["targets"] == 5  # the lane+2 front camera's 5 timesteps
     assert manifest["enhancer"]["method"] == "reproject" and manifest["schedule"]["steps"] == 6
     assert manifest["time"]["steps_run"] == 6 and manifest["peak_memory_mb"] > 0
-    assert not (finished / "checkpoint").exists()
+    assert not refit_paths(finished, SCENE, "lane0")[2].exists()
     refit, fit = read_ply(ply), read_ply(street_root / SCENE / "fits" / "lane0.ply")
     # Adam moves a parameter by at most about its rate per step: 6 steps x 1.6e-6 x extent (~25 m) < 1e-3
     assert float((refit.means - fit.means).abs().max()) < 1e-3
@@ -64,9 +64,9 @@ def test_refit_writes_a_ply_prepare_can_render_and_a_manifest(
 
 
 def test_rerun_of_a_finished_refit_changes_nothing(finished: Path, street_root: Path) -> None:
-    before = (finished / MANIFEST_FILE).read_bytes()
+    before = refit_paths(finished, SCENE, "lane0")[1].read_bytes()
     result = refit_scene(task(street_root, finished), SETTINGS, progress=False)
-    assert result.already_done and (finished / MANIFEST_FILE).read_bytes() == before
+    assert result.already_done and result.manifest_path.read_bytes() == before
 
 
 def test_ground_truth_of_the_targets_never_reaches_the_refit(
@@ -100,7 +100,7 @@ def test_interrupted_refit_resumes_to_the_same_bytes(
     monkeypatch.setattr(RefitLoop, "save", save_then_stop)
     with pytest.raises(KeyboardInterrupt):
         refit_scene(task(street_root, out), SETTINGS, progress=False)
-    assert not (out / MANIFEST_FILE).exists() and not (out / SCENE).exists()
+    assert not any(path.exists() for path in refit_paths(out, SCENE, "lane0")[:2])
     monkeypatch.setattr(RefitLoop, "save", save)
     result = refit_scene(task(street_root, out), SETTINGS, progress=False)
     assert result.resumed_at == 4
@@ -168,7 +168,7 @@ def test_bad_inputs_get_one_line_exit_2_and_nothing_written(
         "poses outside the scene": "scene bounds",
     }
     assert expected[case] in err[0]
-    assert not (out / MANIFEST_FILE).exists() and not (out / SCENE).exists()
+    assert not any(path.exists() for path in refit_paths(out, SCENE, "lane0")[:2])
 
 
 @pytest.mark.slow  # two CLI processes (torch start-up); test_interrupted_refit_resumes_to_the_same_bytes covers resume fast
@@ -189,7 +189,7 @@ def test_sigkill_mid_refit_then_rerun_gives_the_same_bytes(street_root: Path, tm
     command += ["--group", "lane+2", "--method", "reproject"]
     env = {**os.environ, "SETDIFF_THREADS": "1"}
     process = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    latest = out / "checkpoint" / "LATEST"
+    latest = refit_paths(out, SCENE, "lane0")[2] / "LATEST"
     deadline = time.monotonic() + 120
     while (
         not (latest.is_file() and latest.read_text().strip() >= "step-000012") and time.monotonic() < deadline
@@ -197,7 +197,7 @@ def test_sigkill_mid_refit_then_rerun_gives_the_same_bytes(street_root: Path, tm
         time.sleep(0.02)
     os.kill(process.pid, signal.SIGKILL)
     process.wait()
-    assert not (out / MANIFEST_FILE).exists(), "the refit finished before it could be killed"
+    assert not refit_paths(out, SCENE, "lane0")[1].exists(), "the refit finished before it could be killed"
     rerun = subprocess.run(command, env=env, capture_output=True, text=True, check=True)
     assert "resumed at step" in rerun.stdout
     assert (out / SCENE / "lane0.ply").read_bytes() == (reference / SCENE / "lane0.ply").read_bytes()
@@ -238,7 +238,7 @@ def test_fit_checkpoint_must_hold_the_ply(street_root: Path, tmp_path: Path) -> 
             settings,
             progress=False,
         )
-    assert not (tmp_path / "b" / MANIFEST_FILE).exists()
+    assert not refit_paths(tmp_path / "b", SCENE, "lane0")[1].exists()
 
 
 def test_refit_fits_the_scene_first_without_fits(street_root: Path, tmp_path: Path) -> None:
