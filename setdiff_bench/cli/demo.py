@@ -3,8 +3,10 @@
     setdiff-bench demo [--benchmark driving|sparse] [--preset tiny|default|full] [--out runs/demo]
                        [--train [--ablations]]
 
-The outputs go to a scratch folder (default ``runs/demo``, git-ignored); ``setdiff-bench publish``
-copies a finished run over the published results on purpose.
+The outputs go to a scratch folder of the benchmark's own (default ``runs/demo`` for driving,
+``runs/demo_sparse`` for sparse; git-ignored); ``setdiff-bench publish`` copies a finished run over the
+published results on purpose.  The demo ends by printing its leaderboard and one line saying whether it
+equals the published table (:mod:`setdiff_bench.pipeline.reproduction`).
 """
 
 from __future__ import annotations
@@ -20,20 +22,20 @@ HELP = "the embedded benchmark end to end: synthetic scenes, 3DGS fits, packets,
 DESCRIPTION = (
     "Generate the synthetic benchmark's test scenes, fit their 3DGS, build packets, run identity, "
     "reproject and the shipped DiFix and SetDiff models (tiny_difix, tiny_setdiff; trained on other "
-    "scenes), and write the leaderboard, plots and grids into a scratch folder (default runs/demo, "
+    "scenes), and write the leaderboard, plots and grids into a scratch folder (default runs/demo, runs/demo_sparse for sparse, "
     "git-ignored; `setdiff-bench publish` copies a finished run to results/). --train makes every scene "
     "and trains SetDiff and DiFix first. Every stage resumes. --benchmark sparse runs the sparse-view "
     "benchmark instead (DL3DV-style walks, 3DGS on 3/6/9 views, shipped tiny_setdiff_sparse and "
     "tiny_difix_sparse, the leaderboard in Table 4's layout beside the paper's rows).\n\n"
     "Examples:\n\n    setdiff-bench demo\n    setdiff-bench demo --preset tiny --out runs/smoke\n"
-    "    setdiff-bench demo --benchmark sparse --out runs/demo_sparse\n"
+    "    setdiff-bench demo --benchmark sparse\n"
     "    setdiff-bench demo --train --setdiff-steps 1000 --difix-steps 1000\n"
     "    setdiff-bench demo --train --setdiff-steps 1000 --difix-steps 1000 --ablations"
 )
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from setdiff_bench.pipeline.presets import DEFAULT_BENCHMARK, DEFAULT_OUT, DEMO_BENCHMARKS
+    from setdiff_bench.pipeline.presets import DEFAULT_BENCHMARK, DEMO_BENCHMARKS
 
     parser.add_argument(
         "--benchmark",
@@ -55,8 +57,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--out",
         type=Path,
-        default=Path(DEFAULT_OUT),
-        help=f"output folder (default {DEFAULT_OUT}, a git-ignored scratch folder)",
+        default=None,
+        help="output folder (default: "
+        + ", ".join(f"{b.default_out} for {name}" for name, b in DEMO_BENCHMARKS.items())
+        + "; git-ignored scratch folders, one per benchmark)",
     )
     parser.add_argument("--work", type=Path, default=None, help="intermediate data (default: <out>/work)")
     parser.add_argument("--seed", type=int, default=0, help="scene and training seed")
@@ -105,7 +109,8 @@ def invocation(args: argparse.Namespace) -> str:
 def run(args: argparse.Namespace) -> int:
     # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     from setdiff_bench.errors import UsageError
-    from setdiff_bench.pipeline.demo import DemoPaths, get_demo_preset, run_demo
+    from setdiff_bench.pipeline.demo import DemoPaths, get_benchmark, get_demo_preset, run_demo
+    from setdiff_bench.pipeline.reproduction import Reproduction
     from setdiff_bench.pipeline.stages import StageFailed
     from setdiff_bench.runtime.devices import resolve_device
 
@@ -115,6 +120,8 @@ def run(args: argparse.Namespace) -> int:
         args.device
     )  # checked here; passed on as given (auto: not at all), so the stages resolve it
     preset = get_demo_preset(args.preset, args.benchmark)
+    benchmark = get_benchmark(args.benchmark)
+    args.out = args.out if args.out is not None else Path(benchmark.default_out)
     paths = DemoPaths(out=args.out, work=args.work or args.out / "work")
     device = None if args.device == "auto" else args.device  # the stages' own default is auto
     try:
@@ -134,6 +141,10 @@ def run(args: argparse.Namespace) -> int:
     except StageFailed as failure:
         return failure.code
     this_run = summary["this_run_seconds"]
+    board = args.out / f"{benchmark.leaderboard}.md"
+    if board.is_file():
+        print(board.read_text(encoding="utf-8").strip() + "\n")
+    print(Reproduction.from_json(summary["reproduction"]).line())
     print(
         f"demo finished: {summary['total_seconds'] / 60:.1f} min of stage work, {this_run / 60:.1f} min in this run: "
         f"{args.out / 'README.md'}"

@@ -64,9 +64,7 @@ def use_opencv(*tensors: torch.Tensor, backend: Backend = "auto") -> bool:
             raise UsageError("backend='opencv' needs CPU float32/float64 tensors without gradients")
         return True
     if backend != "auto":
-        raise UsageError(
-            f"unknown filter backend {backend!r}; expected 'auto', 'torch', 'opencv' or 'exact'"
-        )
+        raise UsageError(f"unknown filter backend {backend!r}; expected 'auto', 'torch', 'opencv' or 'exact'")
     return eligible and not needs_grad
 
 

@@ -53,7 +53,7 @@ from typing import Any
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.atomic import sha256_file, write_text_atomic
-from setdiff_bench.pipeline.demo_layout import REPORT_FILE, SUMMARY_FILE, DemoPaths
+from setdiff_bench.pipeline.demo_layout import BENCHMARK_FILE, REPORT_FILE, SUMMARY_FILE, DemoPaths
 from setdiff_bench.pipeline.demo_report import report_markdown
 from setdiff_bench.pipeline.demo_scenes import (
     SHIPPED_MODELS,
@@ -71,18 +71,17 @@ from setdiff_bench.pipeline.demo_summary import (
     summarize,
 )
 from setdiff_bench.pipeline.presets import (
-    DEFAULT_OUT,
     DEMO_PRESETS,
     DemoBenchmark,
     DemoPreset,
     get_benchmark,
     get_demo_preset,
 )
+from setdiff_bench.pipeline.reproduction import check_reproduction
 from setdiff_bench.pipeline.stages import LEDGER_FILE, Pipeline
 from setdiff_bench.runtime.devices import resolve_device
 
 __all__ = [
-    "DEFAULT_OUT",
     "DEMO_PRESETS",
     "METHODS",
     "REPORT_FILE",
@@ -97,6 +96,7 @@ __all__ = [
     "DemoStages",
     "Pipeline",
     "better",
+    "check_folder",
     "check_unseen",
     "demo_stages",
     "evaluation_scene_indices",
@@ -110,6 +110,36 @@ __all__ = [
     "scene_namer",
     "summarize",
 ]
+
+
+def folder_benchmark(paths: DemoPaths) -> str | None:
+    """Which benchmark's outputs ``paths`` already hold (``None``: none).
+
+    The demo records it in ``<work>/benchmark``; a folder made before that record existed is known by its
+    finished run's ``demo.json`` (whose preset names its benchmark, ``driving`` when it predates the key).
+    """
+    marker = paths.work / BENCHMARK_FILE
+    if marker.is_file():
+        return marker.read_text(encoding="utf-8").strip()
+    summary = paths.out / SUMMARY_FILE
+    if summary.is_file():
+        try:
+            return json.loads(summary.read_text(encoding="utf-8"))["preset"].get("benchmark", "driving")
+        except (ValueError, KeyError, TypeError, AttributeError):
+            return None
+    return None
+
+
+def check_folder(paths: DemoPaths, benchmark: DemoBenchmark) -> None:
+    """Refuse, before any work, a folder that holds another benchmark's outputs (its store and runs stay
+    untouched); :class:`UsageError` naming the option to pass."""
+    other = folder_benchmark(paths)
+    if other is not None and other != benchmark.name:
+        raise UsageError(
+            f"{paths.out} holds the {other} demo's outputs; pass --out for the {benchmark.name} benchmark "
+            f"(its default is {benchmark.default_out})",
+            "--out",
+        )
 
 
 def run_demo(
@@ -142,6 +172,7 @@ def run_demo(
             "--setdiff-steps, --difix-steps and --ablations train models: add --train", "--train"
         )
     benchmark = get_benchmark(preset.benchmark)
+    check_folder(paths, benchmark)
     scene_name = scene_namer(preset)
     test_indices = evaluation_scene_indices(preset, seed)
     shipped = (
@@ -151,6 +182,8 @@ def run_demo(
     )
     base = Path.cwd()
     (paths.out / SUMMARY_FILE).unlink(missing_ok=True)  # until this run completes, the folder is not a run
+    paths.work.mkdir(parents=True, exist_ok=True)
+    write_text_atomic(paths.work / BENCHMARK_FILE, benchmark.name + "\n")
     pipeline = Pipeline(cwd=base, quiet=not progress, ledger=paths.work / LEDGER_FILE)
     plan = DemoPlan(
         preset,
@@ -197,6 +230,8 @@ def run_demo(
     )
     summary["test_scenes"] = [scene_name(seed, index) for index in test_indices]
     summary["provenance"] = run_provenance(seed)
+    summary["provenance"]["tolerance"] = dict(benchmark.tolerance)
+    summary["reproduction"] = check_reproduction(benchmark, preset.name, seed, paths.out).as_json()
     write_text_atomic(paths.out / REPORT_FILE, report_markdown(summary, paths))
     summary["files"] = {
         p.name: sha256_file(p)

@@ -10,6 +10,8 @@ from pathlib import Path
 SUMMARY_FILE = "demo.json"
 #: The demo's report in ``<out>``: what ran, how long, the tables and the files.
 REPORT_FILE = "README.md"
+#: Which benchmark a demo folder holds, in ``<work>`` (one line: its name), written before the first stage.
+BENCHMARK_FILE = "benchmark"
 
 
 @dataclass(frozen=True)

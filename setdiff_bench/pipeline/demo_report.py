@@ -61,6 +61,14 @@ def report_markdown(summary: dict[str, Any], paths: DemoPaths) -> str:
     if board.is_file():
         lines += ["## Leaderboard (test scenes)", "", board.read_text(encoding="utf-8").strip(), ""]
         lines += [benchmark.note, ""] if benchmark.note else []
+        tolerance = ", ".join(f"{metric.upper()} {value:g}" for metric, value in benchmark.tolerance.items())
+        lines += [
+            f"On another x86-64 CPU the same command gives the same scenes, fits and packets byte for byte, "
+            f"and every cell within {tolerance} of this table (the largest differences measured between CPU "
+            f"instruction sets and thread counts, rounded up; docs/reproducibility.md). `setdiff-bench demo` "
+            f"prints whether its table is identical to the published one, within that tolerance, or outside it.",
+            "",
+        ]
     verdict = summary.get(benchmark.verdict_key) or {}
     if verdict.get("means"):
         specs = [get_metric(name) for name in VERDICT_METRICS]

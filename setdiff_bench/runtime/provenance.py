@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import platform
 import subprocess
 from importlib import metadata
@@ -64,10 +65,38 @@ def git_revision(folder: Path | None = None) -> dict[str, Any]:
     return {"revision": revision or None, "dirty": bool(status.strip())}
 
 
+#: Environment variables that choose the CPU kernels torch runs (ATen, oneDNN, MKL) or the rasteriser.
+NUMERIC_ENVIRONMENT = (
+    "ATEN_CPU_CAPABILITY",
+    "ONEDNN_MAX_CPU_ISA",
+    "MKL_ENABLE_INSTRUCTIONS",
+    "SETDIFF_RASTERIZER",
+)
+
+
+def numeric_settings() -> dict[str, Any]:
+    """The settings a run's last bits depend on: the ATen kernel set in use (``default``, ``AVX2``,
+    ``AVX512``), the environment variables that choose kernels, and the torch thread count.
+
+    Scene fits, renders and packets do not depend on them (docs/reproducibility.md); enhancer inference
+    and scoring change in the last bits, within the published tolerance.
+    """
+    return {
+        "cpu_capability": torch.backends.cpu.get_cpu_capability(),
+        "environment": {name: os.environ.get(name) for name in NUMERIC_ENVIRONMENT},
+        "torch_threads": torch.get_num_threads(),
+    }
+
+
 def device_description(device: str | torch.device) -> dict[str, Any]:
-    """The compute device in words: type, name (GPU model or CPU architecture), torch threads."""
+    """The compute device in words: type, name (GPU model or CPU architecture), torch threads, and the
+    numeric settings (:func:`numeric_settings`)."""
     device = torch.device(device)
-    info: dict[str, Any] = {"type": device.type, "torch_threads": torch.get_num_threads()}
+    info: dict[str, Any] = {
+        "type": device.type,
+        "torch_threads": torch.get_num_threads(),
+        "numeric": numeric_settings(),
+    }
     if device.type == "cuda" and torch.cuda.is_available():
         index = device.index if device.index is not None else torch.cuda.current_device()
         info["name"] = torch.cuda.get_device_name(index)

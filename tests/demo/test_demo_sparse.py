@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import hashlib
+import os
 from pathlib import Path
 
 import pytest
@@ -85,17 +87,45 @@ def test_shipped_sparse_models_never_saw_a_sparse_test_walk() -> None:
     )
 
 
-def test_sparse_demo_end_to_end_with_the_shipped_models(tmp_path: Path) -> None:
-    """``demo --benchmark sparse --preset tiny``: the two listed test walks (64x40), their n3/n6/n9 fits, DL3DV
-    packets, the four methods with the shipped sparse models, and Table 4's layout beside the paper's rows."""
+def tree_digest(folder: Path) -> dict[str, str]:
+    """``{relative path: SHA-256}`` of every file under ``folder``."""
+    return {
+        str(path.relative_to(folder)): hashlib.sha256(path.read_bytes()).hexdigest()
+        for path in sorted(folder.rglob("*"))
+        if path.is_file()
+    }
+
+
+def test_sparse_demo_after_the_driving_demo_in_readme_order(
+    shipped_demo_out: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The README's two demos in its order with default folders: ``demo --preset tiny`` (the session's shipped
+    tiny demo, in ``runs/demo``), then ``demo --benchmark sparse --preset tiny`` from the same folder.  The sparse
+    demo writes to ``runs/demo_sparse`` (the two listed test walks at 64x40, their n3/n6/n9 fits, DL3DV packets,
+    the four methods with the shipped sparse models, Table 4's layout beside the paper's rows) and leaves every
+    byte of the driving demo as it was; pointed at the driving folder, it refuses before any work."""
     import json
 
     import pandas as pd
 
-    out = tmp_path / "demo"
-    assert (
-        main(["demo", "--benchmark", "sparse", "--preset", "tiny", "--out", str(out), "--no-progress"]) == 0
-    )
+    folder = shipped_demo_out.parents[1]
+    before = tree_digest(shipped_demo_out)
+    previous = Path.cwd()
+    try:
+        os.chdir(folder)
+        capsys.readouterr()
+        refused = main(
+            ["demo", "--benchmark", "sparse", "--preset", "tiny", "--out", "runs/demo", "--no-progress"]
+        )
+        refusal = capsys.readouterr().err.strip().splitlines()
+        assert main(["demo", "--benchmark", "sparse", "--preset", "tiny", "--no-progress"]) == 0
+        printed = capsys.readouterr().out
+    finally:
+        os.chdir(previous)
+    assert refused == 2 and len(refusal) == 1
+    assert "holds the driving demo's outputs" in refusal[0] and "runs/demo_sparse" in refusal[0]
+    assert tree_digest(shipped_demo_out) == before
+    out = folder / "runs" / "demo_sparse"
     summary = json.loads((out / "demo.json").read_text(encoding="utf-8"))
     assert summary["test_scenes"] == LISTED_TEST_SCENES
     assert {m["shipped"] for m in summary["models"].values()} == {"tiny_setdiff_sparse", "tiny_difix_sparse"}
@@ -112,3 +142,7 @@ def test_sparse_demo_end_to_end_with_the_shipped_models(tmp_path: Path) -> None:
     commands = [stage["command"] for stage in summary["stages"]]
     assert any("prepare dl3dv --protocol dl3dv_sparse_synthetic" in c for c in commands)
     assert any("--checkpoint tiny_setdiff_sparse" in c for c in commands)
+    # the demo ends by printing its leaderboard and whether it reproduces the published one
+    assert (out / "dl3dv.md").read_text(encoding="utf-8").strip() in printed
+    assert "reproduction: not compared with the published table (results/synthetic_sparse)" in printed
+    assert "--preset default --seed 0" in printed

@@ -4,7 +4,6 @@ writes well-formed, shareable outputs, and gives byte-identical results when run
 from __future__ import annotations
 
 import json
-import os
 import stat
 from pathlib import Path
 
@@ -25,25 +24,7 @@ from setdiff_bench.io.run_layout import (
 from setdiff_bench.pipeline.demo import METHODS, SUMMARY_FILE
 from setdiff_bench.pipeline.stages import LEDGER_FILE
 from setdiff_bench.runtime.threads import compute_threads
-
-
-def run_tiny_demo(folder: Path, omp_threads: str, *extra: str) -> Path:
-    """``setdiff-bench demo --preset tiny [extra]`` from ``folder`` (relative ``--out``, so that the recorded commands
-    match between folders), under umask 022 and the given ``OMP_NUM_THREADS`` (which must not matter)."""
-    previous_cwd, previous_umask = Path.cwd(), os.umask(0o022)
-    previous_omp = os.environ.get("OMP_NUM_THREADS")
-    os.environ["OMP_NUM_THREADS"] = omp_threads
-    try:
-        os.chdir(folder)
-        assert main(["demo", "--preset", "tiny", "--out", "runs/demo", "--no-progress", *extra]) == 0
-    finally:
-        os.chdir(previous_cwd)
-        os.umask(previous_umask)
-        if previous_omp is None:
-            os.environ.pop("OMP_NUM_THREADS", None)
-        else:
-            os.environ["OMP_NUM_THREADS"] = previous_omp
-    return folder / "runs" / "demo"
+from tests.demo.conftest import run_tiny_demo
 
 
 @pytest.fixture(scope="module")
@@ -55,12 +36,6 @@ def demo_out(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="module")
 def second_demo_out(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return run_tiny_demo(tmp_path_factory.mktemp("demo_again"), "2", "--train")
-
-
-@pytest.fixture(scope="module")
-def shipped_demo_out(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The default path: the preset's test scenes and the shipped models."""
-    return run_tiny_demo(tmp_path_factory.mktemp("demo_shipped"), "1")
 
 
 #: Files that record wall times or absolute paths, never results (compared without those fields below).
