@@ -334,15 +334,17 @@ def main() -> None:
         ]
         with served(proxy_argv) as (process, proxy_port):
             direct, proxy = stub(f"127.0.0.1:{upstream_port}"), stub(f"127.0.0.1:{proxy_port}")
+            result["command"] = "python " + " ".join(sys.argv)
+            if not args.skip_load:
+                result["load"] = load(args, scenes, scene_id, proxy, process.pid)
+                print(result["load"], flush=True)
+                write_result(args.output, result)  # each phase is kept as soon as it ends
             result["overhead"] = {}
             for size in args.sizes:
                 height, width = (int(v) for v in size.split("x"))
                 result["overhead"][size] = overhead(args, scenes, scene_id, direct, proxy, (height, width))
                 print(size, result["overhead"][size], flush=True)
-            if not args.skip_load:
-                result["load"] = load(args, scenes, scene_id, proxy, process.pid)
-                print(result["load"], flush=True)
-    result["command"] = "python " + " ".join(sys.argv)
+                write_result(args.output, result)
     print("wrote", write_result(args.output, result))
 
 

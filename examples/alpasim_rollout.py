@@ -15,7 +15,8 @@ for the same frames; the video shows them side by side.
     python examples/alpasim_rollout.py --scenes runs/scenes --out runs/alpasim_rollout [--ticks 30]
     python examples/alpasim_rollout.py --scenes runs/scenes --out OUT --renderer HOST:PORT --proxy HOST:PORT
 
-Writes ``OUT/rollout.webm`` (render | enhanced, every camera stacked) and ``OUT/<camera>/<tick>_{render,enhanced}.jpg``.
+Writes ``OUT/rollout.webm`` (render | enhanced, every camera stacked), ``OUT/<camera>/<tick>_{render,enhanced}.jpg``
+and the servers' messages to ``OUT/{renderer,proxy}.log``.
 """
 
 from __future__ import annotations
@@ -49,22 +50,27 @@ MESSAGE_BYTES = 64 * 1024 * 1024
 
 
 @contextmanager
-def serving(argv: list[str]) -> Iterator[str]:
-    """``setdiff-bench serve ...`` in its own process; yields ``127.0.0.1:PORT`` once it listens."""
-    process = subprocess.Popen(
-        [sys.executable, "-m", "setdiff_bench", "serve", *argv, "--port", "0"],
-        stdout=subprocess.PIPE,
-        text=True,
-        env={**os.environ, "SETDIFF_THREADS": os.environ.get("SETDIFF_THREADS", "1")},
-    )
-    try:
-        line = process.stdout.readline()
-        if not line.startswith("serving on "):
-            raise SystemExit(f"serve did not start: {line!r}")
-        yield "127.0.0.1:" + line.split(":")[1].split()[0]
-    finally:
-        process.terminate()
-        process.wait(timeout=60)
+def serving(argv: list[str], log: Path) -> Iterator[str]:
+    """``setdiff-bench serve ...`` in its own process (its messages to ``log``); yields ``127.0.0.1:PORT`` once it
+    listens, and stops it with SIGTERM (in-flight calls finish) at the end."""
+    log.parent.mkdir(parents=True, exist_ok=True)
+    with log.open("w") as messages:
+        process = subprocess.Popen(
+            [sys.executable, "-m", "setdiff_bench", "serve", *argv, "--port", "0"],
+            stdout=subprocess.PIPE,
+            stderr=messages,
+            text=True,
+            env={**os.environ, "SETDIFF_THREADS": os.environ.get("SETDIFF_THREADS", "1")},
+        )
+        try:
+            line = process.stdout.readline()
+            if not line.startswith("serving on "):
+                process.wait(timeout=60)
+                raise SystemExit(f"serve did not start: {line!r}; see {log}")
+            yield "127.0.0.1:" + line.split(":")[1].split()[0]
+        finally:
+            process.terminate()
+            process.wait(timeout=60)
 
 
 def stub(address: str) -> pb_grpc.SensorsimServiceStub:
@@ -102,7 +108,8 @@ def ego_trajectory(scene_dir: Path, ticks: int, shift_m: float | None) -> list[n
         pose[:3, 3] = drive[low][:3, 3] + (position - low) * (drive[high][:3, 3] - drive[low][:3, 3])
         pose[:3, 3] -= shift_m * drive[low][:3, 1]  # rig y is left: minus moves right
         poses.append(pose)
-    print(f"rollout: {ticks} ticks along {len(drive)} recorded frames, {shift_m:+.2f} m to the right")
+    side = "right" if shift_m >= 0 else "left"
+    print(f"rollout: {ticks} ticks along {len(drive)} recorded frames, {abs(shift_m):.2f} m to the {side}")
     return poses
 
 
@@ -159,11 +166,11 @@ def main() -> None:
     args = parser.parse_args()
     with ExitStack() as stack:
         renderer = args.renderer or stack.enter_context(
-            serving(["--protocol", "sensorsim", "--scenes", str(args.scenes)])
+            serving(["--protocol", "sensorsim", "--scenes", str(args.scenes)], args.out / "renderer.log")
         )
         proxy_argv = ["--protocol", "sensorsim", "--role", "proxy", "--scenes", str(args.scenes)]
         proxy_argv += ["--upstream", renderer, "--checkpoint", args.checkpoint]
-        proxy = args.proxy or stack.enter_context(serving(proxy_argv))
+        proxy = args.proxy or stack.enter_context(serving(proxy_argv, args.out / "proxy.log"))
         plain, enhanced = stub(renderer), stub(proxy)
         print("renderer:", plain.get_version(common.Empty(), timeout=300, wait_for_ready=True).version_id)
         print("proxy:   ", enhanced.get_version(common.Empty(), timeout=300, wait_for_ready=True).version_id)
@@ -188,7 +195,7 @@ def main() -> None:
                 for kind, image in (("render", rendered[name]), ("enhanced", better[name])):
                     cv2.imwrite(str(args.out / name / f"{tick:04d}_{kind}.jpg"), image[:, :, ::-1])
                 rows.append([rendered[name], better[name]])
-            frames.append(compose(rows, ["3DGS render", f"enhanced ({args.checkpoint})"], list(rendered)))
+            frames.append(compose(rows, ["3DGS render", "enhanced"], list(rendered)))
             print(f"tick {tick + 1}/{args.ticks}", flush=True)
     print("wrote", write_video(args.out / "rollout.webm", frames, fps=10.0))
 

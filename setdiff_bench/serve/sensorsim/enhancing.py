@@ -58,7 +58,7 @@ class SceneSessions:
         self.sessions: collections.OrderedDict[str, Session] = collections.OrderedDict()
         self.expired: collections.OrderedDict[str, float] = collections.OrderedDict()
         self._sessions_lock = threading.Lock()
-        self._opening: dict[str, threading.Lock] = collections.defaultdict(threading.Lock)
+        self._opening = threading.Lock()
         self.model_lock = FairLock()
         self.opened = 0
 
@@ -74,24 +74,36 @@ class SceneSessions:
     def _acquire(self, scene: FittedScene, height: int, width: int) -> tuple[str, Session]:
         """The session of this scene and size, opened if needed, marked busy."""
         key = f"{scene.scene_id}@{height}x{width}"
-        with self._opening[key]:
-            with self._sessions_lock:
-                session = self.sessions.get(key)
-                if session is not None:
-                    self.sessions.move_to_end(key)
-                    session.busy += 1
-                    return key, session
+        session = self._busy(key)
+        if session is not None:
+            return key, session
+        with self._opening:  # one session opens at a time (rare); ticks of open sessions do not wait for it
+            session = self._busy(key)
+            if session is not None:
+                return key, session
             session = self._open(scene, height, width)
             with self._sessions_lock:
-                self._make_room()
+                closed = self._make_room()
                 self.sessions[key] = session
                 session.busy += 1
                 self.opened += 1
+            if closed:
+                release_freed_memory()
         LOG.info("enhancement session %s opened (%.1f MiB)", key, session.held_bytes / 2**20)
         return key, session
 
-    def _make_room(self) -> None:
-        """Close the least recently used idle session while ``max_sessions`` are open (lock held)."""
+    def _busy(self, key: str) -> Session | None:
+        """The open session ``key`` marked busy, or ``None``."""
+        with self._sessions_lock:
+            session = self.sessions.get(key)
+            if session is not None:
+                self.sessions.move_to_end(key)
+                session.busy += 1
+            return session
+
+    def _make_room(self) -> int:
+        """Close the least recently used idle sessions while ``max_sessions`` are open (lock held); how many."""
+        closed = 0
         while len(self.sessions) >= self.settings.max_sessions:
             idle = [key for key, session in self.sessions.items() if session.busy == 0]
             if not idle:
@@ -100,7 +112,10 @@ class SceneSessions:
                     "retry, or serve with a larger --max-sessions",
                     "scene_id",
                 )
+            LOG.info("enhancement session %s closed to make room", idle[0])
             self.sessions.pop(idle[0])
+            closed += 1
+        return closed
 
     def _open(self, scene: FittedScene, height: int, width: int) -> Session:
         per_view = reference_bytes(height, width)
