@@ -239,6 +239,7 @@ def _inputs(task: RefitTask, settings: RefitSettings) -> _Inputs:
     from setdiff_bench.packets.trajectory import check_within_bounds, scene_bounds
     from setdiff_bench.protocols import load_protocol
     from setdiff_bench.refit.loop import RefitLoop
+    from setdiff_bench.refit.packets import target_view
     from setdiff_bench.types import TargetRef, key_fields
 
     protocol = load_protocol(task.protocol or task.dataset)
@@ -291,7 +292,7 @@ def _inputs(task: RefitTask, settings: RefitSettings) -> _Inputs:
     else:
         plans = plan_scene(protocol, scene, assignment[scene.name], source, backend=backend)
     plan = plans[0]
-    jobs = [dataclasses.replace(job, targets=tuple(_strip(v) for v in job.targets)) for job in plan.jobs]
+    jobs = [dataclasses.replace(job, targets=tuple(target_view(v) for v in job.targets)) for job in plan.jobs]
     targets = [(j, v) for j, job in enumerate(jobs) for v in job.targets]
 
     model = read_ply(fit_path)
@@ -345,12 +346,6 @@ def _inputs(task: RefitTask, settings: RefitSettings) -> _Inputs:
         loop=RefitLoop(trainer, settings, identity),
         update=updater,
     )
-
-
-def _strip(view: Any) -> Any:
-    from setdiff_bench.refit.packets import target_view
-
-    return target_view(view)
 
 
 def _check_fit_renders_scene(model: Any, views: list[Any], floor: float, path: Path) -> None:
