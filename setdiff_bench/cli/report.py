@@ -33,11 +33,10 @@ DESCRIPTION = __doc__
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    # the settings' defaults, read without importing the site's heavy modules at every CLI start
-    from setdiff_bench.reporting.bootstrap import BootstrapSettings
-    from setdiff_bench.reporting.site_pictures import DEFAULT_JPEG_QUALITY
+    # the settings' defaults (a light module: no heavy import at every CLI start)
+    from setdiff_bench.reporting.site_settings import SiteSettings
 
-    bootstrap = BootstrapSettings()
+    defaults = SiteSettings()
     parser.add_argument(
         "--runs", required=True, nargs="+", type=Path, metavar="RUN", help="run folders, or folders of runs"
     )
@@ -51,17 +50,29 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, type=Path, help="site folder (replaced whole)")
     parser.add_argument(
         "--baseline",
-        default="identity",
+        default=defaults.baseline,
         metavar="METHOD",
         help="method gains are measured against; its outputs are the render (default identity)",
     )
     parser.add_argument("--split", default="test", help="split of the targets to show (train, test, all)")
-    parser.add_argument("--fps", type=float, default=4.0, help="frames per second of the videos (default 4)")
+    parser.add_argument(
+        "--fps",
+        type=float,
+        default=defaults.fps,
+        help="frames per second of the videos (default %(default)s)",
+    )
     parser.add_argument(
         "--max-width",
         type=int,
-        default=768,
+        default=defaults.max_width,
         help="pictures and videos wider than this many pixels are scaled down (0: full size; default 768)",
+    )
+    parser.add_argument(
+        "--video-width",
+        type=int,
+        default=defaults.video_width,
+        help="the widest panel of a video frame in pixels (render, method, ground truth side by side; "
+        "0: the pictures' width; default %(default)s)",
     )
     parser.add_argument(
         "--lossless",
@@ -71,7 +82,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--jpeg-quality",
         type=int,
-        default=DEFAULT_JPEG_QUALITY,
+        default=defaults.pictures.quality,
         help="JPEG quality of the pictures, 1-100 (default %(default)s)",
     )
     parser.add_argument(
@@ -83,13 +94,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--bootstrap-resamples",
         type=int,
-        default=bootstrap.resamples,
+        default=defaults.bootstrap.resamples,
         help="resamples of the per-scene paired bootstrap intervals (default %(default)s)",
     )
     parser.add_argument(
         "--bootstrap-seed",
         type=int,
-        default=bootstrap.seed,
+        default=defaults.bootstrap.seed,
         help="seed of those resamples (default %(default)s)",
     )
     videos = parser.add_mutually_exclusive_group()
@@ -101,13 +112,15 @@ def run(args: argparse.Namespace) -> int:
     # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     from setdiff_bench.errors import UsageError
     from setdiff_bench.reporting.bootstrap import BootstrapSettings
-    from setdiff_bench.reporting.site import SiteSettings, build_site
-    from setdiff_bench.reporting.site_pictures import PictureSettings
+    from setdiff_bench.reporting.site import build_site
+    from setdiff_bench.reporting.site_settings import PictureSettings, SiteSettings
 
     if not args.fps > 0:
         raise UsageError(f"needs a positive frame rate, got {args.fps}", "--fps")
     if args.max_width < 0:
         raise UsageError(f"needs a width >= 0, got {args.max_width}", "--max-width")
+    if args.video_width < 0:
+        raise UsageError(f"needs a width >= 0, got {args.video_width}", "--video-width")
     if not 1 <= args.jpeg_quality <= 100:
         raise UsageError(f"needs a quality of 1-100, got {args.jpeg_quality}", "--jpeg-quality")
     if args.bootstrap_resamples < 1:
@@ -128,6 +141,7 @@ def run(args: argparse.Namespace) -> int:
         pictures=PictureSettings(lossless=args.lossless, quality=args.jpeg_quality),
         with_reported=not args.no_reported,
         bootstrap=BootstrapSettings(resamples=args.bootstrap_resamples, seed=args.bootstrap_seed),
+        video_width=args.video_width or None,
     )
     summary = build_site(
         args.runs, args.out, packets=args.packets, settings=settings, video_only=args.video_only

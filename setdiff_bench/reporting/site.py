@@ -41,7 +41,6 @@ import pandas as pd
 from setdiff_bench.errors import UsageError
 from setdiff_bench.evaluation.profiles import DEFAULT_PROFILE, PROFILE_COLUMN
 from setdiff_bench.io.atomic import staged_folder
-from setdiff_bench.reporting.bootstrap import BootstrapSettings
 from setdiff_bench.reporting.leaderboard import (
     Leaderboard,
     build_leaderboard,
@@ -61,9 +60,9 @@ from setdiff_bench.reporting.site_html import (
     videos_page,
 )
 from setdiff_bench.reporting.site_index import damage_html, index_body, plot_caption, targets_table_html
-from setdiff_bench.reporting.site_pictures import PictureSettings
 from setdiff_bench.reporting.site_runs import open_store, recorded_store, run_folders
 from setdiff_bench.reporting.site_scenes import scene_table_html
+from setdiff_bench.reporting.site_settings import DEFAULT_BASELINE, SiteSettings
 from setdiff_bench.reporting.site_target_pages import THUMBNAIL_FILE, target_page, write_target_images
 from setdiff_bench.reporting.site_targets import (
     TARGET_KEY,
@@ -103,37 +102,8 @@ __all__ = [
     "write_target_images",
 ]
 
-DEFAULT_BASELINE = "identity"
 #: The metrics the plots draw, one panel each.
 PLOT_METRICS = ("psnr", "ssim", "lpips")
-
-
-@dataclass(frozen=True)
-class SiteSettings:
-    """What :func:`build_site` writes.
-
-    Attributes:
-        baseline: the method gains are measured against (its outputs are the render; ``identity``).
-        split: targets of this split (``None``: all).
-        fps: frames per second of the videos.
-        max_width: pictures and videos wider than this are scaled down (``None``: full size).
-        videos: write the sequence videos.
-        command: the command that built the site, shown at the foot of each page.
-        pictures: JPEG (quality) or lossless PNG pictures.
-        with_reported: add the paper's reported rows, marked "(paper)", to the leaderboards of datasets whose
-            layout has them (the rows ``leaderboard --with-reported`` adds; never to other profiles' tables).
-        bootstrap: resamples, level and seed of the per-scene breakdown's paired intervals.
-    """
-
-    baseline: str = DEFAULT_BASELINE
-    split: str | None = "test"
-    fps: float = 4.0
-    max_width: int | None = 768
-    videos: bool = True
-    command: str | None = None
-    pictures: PictureSettings = field(default_factory=PictureSettings)
-    with_reported: bool = True
-    bootstrap: BootstrapSettings = field(default_factory=BootstrapSettings)
 
 
 @dataclass
@@ -153,7 +123,7 @@ def build_site(
     out: str | Path,
     *,
     packets: str | Path | None = None,
-    settings: SiteSettings = SiteSettings(),
+    settings: SiteSettings | None = None,
     video_only: bool = False,
 ) -> SiteSummary:
     """Write the site of the runs under ``runs`` to ``out`` (replacing it whole when complete).
@@ -163,7 +133,7 @@ def build_site(
         out: the site folder.
         packets: the packet store the runs were made on (pictures, videos); ``None``: the store the runs'
             manifests name if it exists here, else tables and metrics only.
-        settings: baseline, split, video rate and picture size.
+        settings: baseline, split, video rate, picture size and format... (default :class:`SiteSettings`).
         video_only: write only ``videos/`` (needs a store).
 
     Raises:
@@ -171,6 +141,7 @@ def build_site(
             method given that no run has.
         LeaderboardError: runs that cannot be tabulated (a method missing targets another has).
     """
+    settings = settings or SiteSettings()
     labels = run_folders(runs)
     if settings.baseline and settings.baseline != DEFAULT_BASELINE and settings.baseline not in labels:
         raise UsageError(f"no run of the baseline method {settings.baseline!r} (runs: {', '.join(labels)})")
@@ -200,7 +171,12 @@ def build_site(
         )
         if pictures is not None and (settings.videos or video_only):
             video_records = write_videos(
-                pictures, target_sequences(plain), compared, staging / "videos", fps=settings.fps
+                pictures,
+                target_sequences(plain),
+                compared,
+                staging / "videos",
+                fps=settings.fps,
+                panel_width=settings.video_width,
             )
         elif pictures is None:
             video_note = "No videos: the site was built without the packet store the runs were made on."
@@ -219,7 +195,7 @@ def build_site(
                 by_target.setdefault(key, []).append(video)
         if pictures is not None:
             for i, record in enumerate(records):
-                write_target_images(
+                size = write_target_images(
                     pictures,
                     record,
                     [m for m in methods if m != baseline],
@@ -236,6 +212,7 @@ def build_site(
                     command=settings.command,
                     videos=by_target.get(record.key, []),
                     suffix=settings.pictures.suffix,
+                    size=size,
                 )
                 (staging / "targets" / f"{record.slug}.html").write_text(page_text, encoding="utf-8")
             summary.pages += len(records)

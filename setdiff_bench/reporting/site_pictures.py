@@ -10,7 +10,6 @@ the same pictures take a fraction of that (docs/report.md, "Size and time", give
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -18,41 +17,27 @@ import numpy as np
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.images import write_png
+from setdiff_bench.reporting.site_settings import DEFAULT_JPEG_QUALITY, PictureSettings
+from setdiff_bench.reporting.targets import error_map
 
-#: JPEG quality of pictures (1-100) when none is given: artefacts of the methods stay visible at it.
-DEFAULT_JPEG_QUALITY = 90
-#: JPEG quality of error maps (a colour scale of the error, not the picture itself: lower quality and
-#: 4:2:0 chroma change where the errors show no more than the colour scale's steps do).
-DEFAULT_ERROR_MAP_QUALITY = 75
+__all__ = [
+    "ERROR_MAP_POOL",
+    "THUMBNAIL_HEIGHT",
+    "PictureSettings",
+    "pooled_error_map",
+    "thumbnail",
+    "write_jpeg",
+    "write_picture",
+    "write_thumbnail",
+]
+
+#: Error maps are written at 1 / this of the pictures' width and height, each pixel the largest error of the
+#: block it covers (pages show them at the pictures' size).
+ERROR_MAP_POOL = 2
 #: Height in pixels of the targets table's thumbnails (shown 40 px high: sharp on 2x displays).
 THUMBNAIL_HEIGHT = 80
 #: JPEG quality of those thumbnails.
 THUMBNAIL_QUALITY = 80
-
-
-@dataclass(frozen=True)
-class PictureSettings:
-    """How pictures are written.
-
-    Attributes:
-        lossless: PNG (every pixel as scored, several times larger) instead of JPEG.
-        quality: JPEG quality of the pictures (render, outputs, ground truth), 1-100, chroma 4:4:4.
-        error_quality: JPEG quality of the error maps, 1-100, chroma 4:2:0.
-    """
-
-    lossless: bool = False
-    quality: int = DEFAULT_JPEG_QUALITY
-    error_quality: int = DEFAULT_ERROR_MAP_QUALITY
-
-    def __post_init__(self) -> None:
-        for name, value in (("quality", self.quality), ("error_quality", self.error_quality)):
-            if not 1 <= value <= 100:
-                raise UsageError(f"JPEG {name} must be 1-100, got {value}")
-
-    @property
-    def suffix(self) -> str:
-        """The file suffix of pictures: ``.png`` or ``.jpg``."""
-        return ".png" if self.lossless else ".jpg"
 
 
 def write_jpeg(
@@ -88,7 +73,8 @@ def write_picture(
     path_without_suffix: Path, image: np.ndarray, settings: PictureSettings, *, error_map: bool = False
 ) -> Path:
     """Write ``image`` (8-bit RGB) as ``<path_without_suffix><settings.suffix>`` (an ``error_map`` at the
-    error maps' quality); returns the file."""
+    error maps' quality); returns the file.  (Error maps are passed at the size they are stored:
+    :func:`pooled_error_map` for JPEG sites, full size for lossless ones.)"""
     path = path_without_suffix.with_name(path_without_suffix.name + settings.suffix)
     if settings.lossless:
         write_png(path, image, atomic=False)
@@ -106,6 +92,23 @@ def thumbnail(image: np.ndarray, height: int = THUMBNAIL_HEIGHT) -> np.ndarray:
         return image
     width = max(1, round(columns * height / rows))
     return cv2.resize(image, (width, height), interpolation=cv2.INTER_AREA)
+
+
+def pooled_error_map(image: np.ndarray, truth: np.ndarray, pool: int = ERROR_MAP_POOL) -> np.ndarray:
+    """The error map of ``image`` against ``truth`` (:func:`~setdiff_bench.reporting.targets.error_map`: mean
+    absolute RGB error on its colour scale) at ``1 / pool`` of their size, each pixel the **largest** error of
+    the ``pool × pool`` block it covers, so a single wrong pixel stays as bright as at full size (averaging
+    would dim it).  Sides that do not divide by ``pool`` are padded by repeating the edge."""
+    if image.shape != truth.shape:
+        raise UsageError(f"image {image.shape} and ground truth {truth.shape} differ in size")
+    error = np.abs(image.astype(np.float32) - truth.astype(np.float32)).mean(axis=2)  # (H, W), 0-255
+    if pool > 1:
+        rows, columns = error.shape
+        padded = np.pad(error, ((0, -rows % pool), (0, -columns % pool)), mode="edge")
+        blocks = padded.reshape(padded.shape[0] // pool, pool, padded.shape[1] // pool, pool)
+        error = blocks.max(axis=(1, 3))
+    grey = np.repeat(error[:, :, None], 3, axis=2)  # every channel the error: error_map's mean is the error
+    return error_map(grey, np.zeros_like(grey))
 
 
 def write_thumbnail(path: str | Path, image: np.ndarray) -> Path:

@@ -20,7 +20,12 @@ from setdiff_bench.reporting.site_html import (
     signed,
     video_players,
 )
-from setdiff_bench.reporting.site_pictures import PictureSettings, write_picture, write_thumbnail
+from setdiff_bench.reporting.site_pictures import (
+    PictureSettings,
+    pooled_error_map,
+    write_picture,
+    write_thumbnail,
+)
 from setdiff_bench.reporting.site_targets import TargetRecord, target_gain
 from setdiff_bench.reporting.targets import ERROR_MAP_FULL_SCALE, TargetImages, error_map
 from setdiff_bench.reporting.video import VideoRecord, slug
@@ -37,15 +42,24 @@ def target_page(
     command: str | None,
     videos: Sequence[VideoRecord] = (),
     suffix: str = ".jpg",
+    size: tuple[int, int] | None = None,
 ) -> str:
     """The page of one target: pictures, sliders, error maps, metrics (images under ``../images``, files
-    ending in ``suffix``) and the ``videos`` of its camera sequence (under ``../videos``)."""
+    ending in ``suffix``) and the ``videos`` of its camera sequence (under ``../videos``).  ``size``: the
+    pictures' ``(width, height)``; error maps stored smaller are shown at it (pixels kept square)."""
     folder = f"../images/{record.slug}"
     shown = [m for m in methods if m != baseline]
     render_label = f"3DGS render (= {baseline})" if baseline in record.values else "3DGS render"
 
-    def figure(src: str, caption: str) -> str:
-        return f'<figure><img src="{folder}/{src}" alt="{esc(caption)}"><figcaption>{esc(caption)}</figcaption></figure>'
+    def figure(src: str, caption: str, shown_at: str = "") -> str:
+        return (
+            f'<figure><img src="{folder}/{src}" alt="{esc(caption)}"{shown_at}>'
+            f"<figcaption>{esc(caption)}</figcaption></figure>"
+        )
+
+    at_size = (
+        f' width="{size[0]}" height="{size[1]}" style="image-rendering:pixelated"' if size is not None else ""
+    )
 
     def psnr_of(method: str) -> str:
         value = record.values.get(method, {}).get(metrics[0]) if metrics else None
@@ -61,8 +75,8 @@ def target_page(
         + "".join(figure(f"{slug(m)}{suffix}", m + psnr_of(m)) for m in shown)
         + figure(f"gt{suffix}", "ground truth")
     )
-    errors = figure(f"render.err{suffix}", "|render − GT|") + "".join(
-        figure(f"{slug(m)}.err{suffix}", f"|{m} − GT|") for m in shown
+    errors = figure(f"render.err{suffix}", "|render − GT|", at_size) + "".join(
+        figure(f"{slug(m)}.err{suffix}", f"|{m} − GT|", at_size) for m in shown
     )
     sliders = "".join(
         f'<div class="cmpwrap"><div>render ◀ ▶ {esc(m)}</div><div class="cmp" data-method="{esc(m)}">'
@@ -123,17 +137,24 @@ def write_target_images(
     methods: Sequence[str],
     folder: Path,
     settings: PictureSettings | None = None,
-) -> None:
+) -> tuple[int, int]:
     """The pictures of one target page (render, each method, ground truth, and their error maps, as
-    ``settings`` says, default JPEG) and the targets table's thumbnail of the render (:data:`THUMBNAIL_FILE`)."""
+    ``settings`` says, default JPEG, where error maps are :func:`pooled_error_map` at half size; full size
+    when lossless) and the targets table's thumbnail of the render (:data:`THUMBNAIL_FILE`).
+
+    Returns:
+        The pictures' ``(width, height)``, for the page to show the error maps at.
+    """
     settings = settings or PictureSettings()
+    errors = error_map if settings.lossless else pooled_error_map
     folder.mkdir(parents=True, exist_ok=True)
     render, truth = images.render(record.key), images.ground_truth(record.key)
     write_picture(folder / "render", render, settings)
     write_picture(folder / "gt", truth, settings)
-    write_picture(folder / "render.err", error_map(render, truth), settings, error_map=True)
+    write_picture(folder / "render.err", errors(render, truth), settings, error_map=True)
     write_thumbnail(folder / THUMBNAIL_FILE, render)
     for method in methods:
         output = images.output(method, record.key)
         write_picture(folder / slug(method), output, settings)
-        write_picture(folder / f"{slug(method)}.err", error_map(output, truth), settings, error_map=True)
+        write_picture(folder / f"{slug(method)}.err", errors(output, truth), settings, error_map=True)
+    return render.shape[1], render.shape[0]

@@ -33,6 +33,7 @@ from setdiff_bench.io.atomic import atomic_path
 from setdiff_bench.loaders.common import natural_key
 from setdiff_bench.reporting.grids import compose
 from setdiff_bench.reporting.site_pictures import write_jpeg
+from setdiff_bench.reporting.site_settings import DEFAULT_PANEL_WIDTH
 from setdiff_bench.reporting.targets import TargetImages, TargetKey
 
 VIDEO_SUFFIX = ".webm"
@@ -154,11 +155,25 @@ def write_video(path: str | Path, frames: Iterable[np.ndarray], fps: float = 4.0
     return path
 
 
+def _panel(image: np.ndarray, width: int | None) -> np.ndarray:
+    height, columns = image.shape[:2]
+    if width is None or columns <= width:
+        return image
+    size = (width, max(1, round(height * width / columns)))
+    return cv2.resize(image, size, interpolation=cv2.INTER_AREA)
+
+
 def side_by_side(
-    render: np.ndarray, output: np.ndarray, truth: np.ndarray, method: str, caption: str
+    render: np.ndarray,
+    output: np.ndarray,
+    truth: np.ndarray,
+    method: str,
+    caption: str,
+    panel_width: int | None = None,
 ) -> np.ndarray:
     """One video frame: render | method | ground truth with a title band, and ``caption`` (the frame)
-    on the left."""
+    on the left; panels wider than ``panel_width`` are scaled down (area averaging; ``None``: as given)."""
+    render, output, truth = (_panel(image, panel_width) for image in (render, output, truth))
     return compose(
         [[render, output, truth]],
         ["3DGS render", method, "ground truth"],
@@ -180,10 +195,16 @@ class VideoRecord:
 
 
 def sequence_video(
-    images: TargetImages, sequence: TargetSequence, method: str, path: str | Path, *, fps: float = 4.0
+    images: TargetImages,
+    sequence: TargetSequence,
+    method: str,
+    path: str | Path,
+    *,
+    fps: float = 4.0,
+    panel_width: int | None = DEFAULT_PANEL_WIDTH,
 ) -> VideoRecord:
-    """Write the render | ``method`` | ground truth video of ``sequence`` to ``path``, and its poster (the
-    first frame) to ``path`` with the suffix ``.jpg``."""
+    """Write the render | ``method`` | ground truth video of ``sequence`` to ``path`` (panels at most
+    ``panel_width`` pixels wide), and its poster (the first frame) to ``path`` with the suffix ``.jpg``."""
     path = Path(path)
     poster = path.with_suffix(POSTER_SUFFIX)
 
@@ -195,6 +216,7 @@ def sequence_video(
                 images.ground_truth(key),
                 method,
                 f"{number + 1}/{len(sequence.targets)}",
+                panel_width,
             )
             if number == 0:
                 write_jpeg(poster, frame)
@@ -212,6 +234,7 @@ def write_videos(
     *,
     fps: float = 4.0,
     min_frames: int = 2,
+    panel_width: int | None = DEFAULT_PANEL_WIDTH,
 ) -> list[VideoRecord]:
     """One video per sequence (of at least ``min_frames`` targets) and method, named
     ``<sequence slug>__<method>.webm`` in ``folder``, each with its poster ``<same name>.jpg``."""
@@ -221,5 +244,5 @@ def write_videos(
             continue
         for method in methods:
             path = Path(folder) / f"{sequence.slug}__{slug(method)}{VIDEO_SUFFIX}"
-            records.append(sequence_video(images, sequence, method, path, fps=fps))
+            records.append(sequence_video(images, sequence, method, path, fps=fps, panel_width=panel_width))
     return records

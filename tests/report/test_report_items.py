@@ -246,3 +246,30 @@ def test_runs_are_labelled_by_their_display_name(site: Path, runs: Path, tmp_pat
         rows = pd.read_parquet(folder / "metrics.parquet")
         rows.assign(method=name).to_parquet(folder / "metrics.parquet")
     assert sorted(run_folders([copied])) == ["identity", "mine", "reproject", "theirs"]
+
+
+def test_half_size_error_maps_keep_a_single_wrong_pixel_bright() -> None:
+    """Error maps of a JPEG site are stored at half size, each pixel the worst of its 2x2 block: one wrong
+    pixel at the colour scale's top (0.25 of full scale = 64 levels) shows as inferno's brightest colour, not
+    a quarter of it."""
+    from setdiff_bench.reporting.site_pictures import pooled_error_map
+
+    truth = np.zeros((4, 6, 3), np.uint8)
+    image = truth.copy()
+    image[3, 5] = 64
+    heat = pooled_error_map(image, truth)
+    brightest = cv2.applyColorMap(np.array([[255]], np.uint8), cv2.COLORMAP_INFERNO)[0, 0][::-1]  # to RGB
+    black = cv2.applyColorMap(np.array([[0]], np.uint8), cv2.COLORMAP_INFERNO)[0, 0][::-1]
+    assert heat.shape == (2, 3, 3)
+    assert (heat[1, 2] == brightest).all()
+    assert all((heat[r, c] == black).all() for r in range(2) for c in range(3) if (r, c) != (1, 2))
+
+
+def test_video_panels_are_scaled_to_the_panel_width() -> None:
+    from setdiff_bench.reporting.video import side_by_side
+
+    wide = np.full((144, 256, 3), 120, np.uint8)
+    narrow = np.full((108, 192, 3), 120, np.uint8)  # 256 x 144 at 192 pixels wide
+    scaled = side_by_side(wide, wide, wide, "m", "1/2", panel_width=192)
+    assert scaled.shape == side_by_side(narrow, narrow, narrow, "m", "1/2").shape
+    assert side_by_side(wide, wide, wide, "m", "1/2", panel_width=None).shape[1] > scaled.shape[1] + 3 * 60
