@@ -39,7 +39,7 @@ from setdiff_bench.geometry import (
     OVERLAP_BETA,
     max_pairwise_distance,
     overlap_score_matrix,
-    pixel_centers,
+    snap_to_rays,
 )
 from setdiff_bench.types import Packet
 
@@ -94,32 +94,6 @@ def cmap_points(
     valid = alphas > alpha_threshold
     points = torch.where(valid, cmaps / alphas.clamp_min(alpha_threshold), torch.zeros_like(cmaps))
     return points, valid
-
-
-def snap_to_rays(points: torch.Tensor, valid: torch.Tensor, cameras: tuple[Camera, ...]) -> torch.Tensor:
-    """Move each view's surface points onto their pixels' rays, keeping their camera-frame depth.
-
-    Args:
-        points: ``(V, 3, H, W)`` points in the packet frame (e.g. from :func:`cmap_points`).
-        valid: ``(V, 1, H, W)`` bool; invalid pixels stay 0.
-        cameras: the V cameras.
-
-    Returns:
-        ``(V, 3, H, W)``: ``X' = Rᵀ(z · [x_n, y_n, 1] − t)`` with ``z`` the camera-frame depth of ``X`` and
-        ``(x_n, y_n)`` the pixel centre's normalised coordinates (undistorted if the camera has distortion).
-    """
-    height, width = points.shape[-2:]
-    snapped = torch.zeros_like(points)
-    for v, camera in enumerate(cameras):
-        R = torch.tensor(camera.R, dtype=points.dtype, device=points.device)
-        t = torch.tensor(camera.t, dtype=points.dtype, device=points.device)
-        xn, yn = camera.pixel_to_normalized(pixel_centers(height, width))
-        rays = torch.from_numpy(np.stack([xn, yn, np.ones_like(xn)], axis=1)).to(points)  # (HW, 3)
-        flat = points[v].reshape(3, -1).T
-        depth = (flat @ R.T + t)[:, 2:3]
-        world = (rays * depth - t) @ R  # Rᵀ (z d − t) for row vectors
-        snapped[v] = torch.where(valid[v], world.T.reshape(3, height, width), torch.zeros_like(points[v]))
-    return snapped
 
 
 def project(cameras: tuple[Camera, ...], points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

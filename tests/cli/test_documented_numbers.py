@@ -5,7 +5,9 @@ commands as written in a fresh folder, and compares every documented value with 
 wrote, at the precision the document prints: the per-block PSNR / SSIM / LPIPS of both profiles, the
 largest PSNR gap between them ("moves PSNR by up to ... dB"), the rescoring agreement ("to within
 2·10⁻⁶ dB") and the count of positionally mispaired targets.  The block takes about a minute on 2 cores
-(three tiny 80×48 scenes), so it runs with the default suite.
+(three tiny 80×48 scenes), so it runs with the default suite, twice: with the machine's own kernels and
+with the scalar ones (``ATEN_CPU_CAPABILITY=default``), which gave other numbers before scene fits were
+made CPU-independent (setdiff_bench/gaussians/portable.py).
 """
 
 from __future__ import annotations
@@ -50,13 +52,23 @@ def _shown(value: float, template: str) -> str:
     return f"{value:.{decimals}f}"
 
 
-@pytest.fixture(scope="module")
-def outputs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
-    """The folder the documented commands ran in and the output of the EUVS ``evaluate``."""
+#: The machine's own kernels, and the scalar ones an older CPU runs (ATen without vector instructions,
+#: oneDNN at SSE4.1): the documented numbers must come out of both (scene fits are CPU-independent).
+INSTRUCTION_SETS = {
+    "native": {},
+    "default-isa": {"ATEN_CPU_CAPABILITY": "default", "ONEDNN_MAX_CPU_ISA": "SSE41"},
+}
+
+
+@pytest.fixture(scope="module", params=sorted(INSTRUCTION_SETS))
+def outputs(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
+    """The folder the documented commands ran in and the output of the EUVS ``evaluate``, once per
+    instruction set of :data:`INSTRUCTION_SETS`."""
     folder = tmp_path_factory.mktemp("evaluation_profiles")
     commands, _, _ = documented()
     env = {
         **os.environ,
+        **INSTRUCTION_SETS[request.param],
         "SETDIFF_THREADS": "1",
         "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}",
     }

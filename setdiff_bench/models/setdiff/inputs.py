@@ -17,7 +17,7 @@ import torch
 
 from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import PacketError
-from setdiff_bench.geometry import max_pairwise_distance, overlap_score_matrix, ray_directions, renormalize
+from setdiff_bench.geometry import max_pairwise_distance, overlap_score_matrix, renormalize, snap_to_rays
 from setdiff_bench.models.setdiff.geometry_encoder import GEOMETRY_INPUTS, geometry_input
 from setdiff_bench.types import Packet, TrainingSample, ViewSet
 
@@ -133,10 +133,9 @@ def surface_points(packet: Packet, *, snapped: bool = False) -> torch.Tensor:
 
 
 def ray_snapped_points(points: torch.Tensor, cameras: Sequence[Camera]) -> tuple[torch.Tensor, torch.Tensor]:
-    """Each pixel's point moved onto the pixel's ray, keeping its camera-frame depth ``z``:
-    ``X' = o + d·z/(d·ẑ)`` (``o`` the camera centre, ``d`` the unit ray through the pixel centre,
-    :func:`~setdiff_bench.geometry.ray_directions`; ``ẑ`` the camera's optical axis), and the pixel's
-    footprint ``z / √(f_x f_y)`` (focal lengths at the image size).
+    """Each pixel's point moved onto the pixel's ray at its camera-frame depth ``z``
+    (:func:`setdiff_bench.geometry.snap_to_rays`), and the pixel's footprint ``z / √(f_x f_y)`` (focal lengths at
+    the image size).
 
     Args:
         points: ``(V, 3, H, W)`` packet-frame points.
@@ -146,17 +145,17 @@ def ray_snapped_points(points: torch.Tensor, cameras: Sequence[Camera]) -> tuple
         ``(V, 3, H, W)`` snapped points and ``(V, 1, H, W)`` footprints (negative where ``z`` ≤ 0), float32.
     """
     height, width = int(points.shape[-2]), int(points.shape[-1])
-    snapped, footprints = [], []
+    points = points.float()
+    valid = torch.ones((points.shape[0], 1, height, width), dtype=torch.bool, device=points.device)
+    snapped = snap_to_rays(points, valid, tuple(cameras))
+    footprints = []
     for view, camera in enumerate(cameras):
-        rays = torch.from_numpy(ray_directions(camera, height, width)).permute(2, 0, 1)  # (3, H, W) float64
-        origin = torch.tensor(camera.center, dtype=torch.float64).view(3, 1, 1)
-        axis = torch.tensor(camera.R[2], dtype=torch.float64).view(3, 1, 1)
-        depth = ((points[view].double() - origin) * axis).sum(0, keepdim=True)
-        along = depth / (rays * axis).sum(0, keepdim=True)
-        snapped.append((origin + rays * along).float())
+        R = torch.tensor(camera.R, dtype=torch.float32, device=points.device)
+        t = torch.tensor(camera.t, dtype=torch.float32, device=points.device)
+        depth = torch.einsum("c,chw->hw", R[2], points[view]) + t[2]
         focal = math.sqrt(camera.K[0, 0] * width / camera.width * camera.K[1, 1] * height / camera.height)
-        footprints.append((depth / focal).float())
-    return torch.stack(snapped).to(points.device), torch.stack(footprints).to(points.device)
+        footprints.append(depth[None] / focal)
+    return snapped, torch.stack(footprints)
 
 
 @dataclass
