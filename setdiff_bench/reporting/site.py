@@ -60,6 +60,7 @@ from setdiff_bench.reporting.site_html import (
     videos_page,
 )
 from setdiff_bench.reporting.site_index import damage_html, index_body, plot_caption, targets_table_html
+from setdiff_bench.reporting.site_pictures import ERROR_MAP_POOL
 from setdiff_bench.reporting.site_runs import open_store, recorded_store, run_folders
 from setdiff_bench.reporting.site_scenes import scene_table_html
 from setdiff_bench.reporting.site_settings import DEFAULT_BASELINE, SiteSettings
@@ -213,6 +214,7 @@ def build_site(
                     videos=by_target.get(record.key, []),
                     suffix=settings.pictures.suffix,
                     size=size,
+                    error_pool=1 if settings.pictures.lossless else ERROR_MAP_POOL,
                 )
                 (staging / "targets" / f"{record.slug}.html").write_text(page_text, encoding="utf-8")
             summary.pages += len(records)

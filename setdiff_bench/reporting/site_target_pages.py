@@ -43,10 +43,12 @@ def target_page(
     videos: Sequence[VideoRecord] = (),
     suffix: str = ".jpg",
     size: tuple[int, int] | None = None,
+    error_pool: int = 1,
 ) -> str:
     """The page of one target: pictures, sliders, error maps, metrics (images under ``../images``, files
     ending in ``suffix``) and the ``videos`` of its camera sequence (under ``../videos``).  ``size``: the
-    pictures' ``(width, height)``; error maps stored smaller are shown at it (pixels kept square)."""
+    pictures' ``(width, height)``; error maps stored smaller are shown at it (pixels kept square).
+    ``error_pool``: the error maps' pixel covers ``error_pool × error_pool`` pixels (its largest error)."""
     folder = f"../images/{record.slug}"
     shown = [m for m in methods if m != baseline]
     render_label = f"3DGS render (= {baseline})" if baseline in record.values else "3DGS render"
@@ -112,7 +114,12 @@ def target_page(
         f"output on the right.</p>{sliders}"
         f'<h2>Error maps</h2><p class="note">Mean absolute RGB error against the ground truth; black = '
         f"none, brightest = {ERROR_MAP_FULL_SCALE:g} (on a 0–1 scale) or more, the same scale in every map."
-        f'</p><div class="strip">{errors}</div>'
+        + (
+            f"  Each pixel of a map is the largest error of the {error_pool}×{error_pool} pixels it covers."
+            if error_pool > 1
+            else ""
+        )
+        + f'</p><div class="strip">{errors}</div>'
         f'<h2>Metrics</h2><table><thead><tr><th class="l">Method</th>{head}{gains}</tr></thead>'
         f"<tbody>{''.join(rows)}</tbody></table>"
     )

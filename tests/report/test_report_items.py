@@ -66,6 +66,7 @@ def test_numbers_carry_their_units(site: Path) -> None:
     page = sorted((site / "targets").glob("*.html"))[0].read_text(encoding="utf-8")
     assert "<th>PSNR (dB)↑</th>" in page and "<th>PSNR gain (dB)</th>" in page
     assert re.search(r"reproject — PSNR \d+\.\d\d dB</figcaption>", page)
+    assert "largest error of the 2×2 pixels it covers" in page  # the half-size error maps say what they show
 
 
 def test_plot_caption_says_what_the_plot_shows(site: Path) -> None:
