@@ -21,14 +21,18 @@ along the scene's held-out lane (lane 1: one lane over from the recorded one).
 ``load`` phase: ``--rollouts`` client threads at once (8), each ``--load-ticks`` ticks (100) of 2 cameras at
 ``--load-height x --load-width`` on one of four lateral offsets; every reply must succeed and equal byte for
 byte the reply to the same request made alone beforehand (no references or frames mixed between rollouts);
-the proxy's resident memory once the rollouts' sessions expired, against its idle level after a warm-up round.
+the proxy's resident memory once the rollouts' sessions expired, against its idle level after a warm-up round of
+the same rollouts (``--warmup-ticks`` ticks: the first concurrent round grows grpc's threads and the allocator's
+per-thread arenas once, as ``benchmarks/serve.py`` measures its idle level).
 
-    python benchmarks/sensorsim_proxy.py [--scenes DIR] [--sizes 320x512 576x1024] [--ticks 5] [--rollouts 8 --load-ticks 100]
+    python benchmarks/sensorsim_proxy.py [--scenes DIR] [--sizes 320x512 576x1024] [--ticks 3] [--rollouts 8 --load-ticks 100]
+    python benchmarks/sensorsim_proxy.py --scenes DIR --sizes --update     # the load phase alone, other phases kept
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import subprocess
 import sys
@@ -44,7 +48,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # run as a script from anywhere
     sys.path.insert(0, str(ROOT))
 
-from benchmarks.common import machine, write_result  # noqa: E402
+from benchmarks.common import RESULTS, machine, write_result  # noqa: E402
 from benchmarks.serve import rss_mib  # noqa: E402
 from setdiff_bench.cameras import Camera  # noqa: E402
 from setdiff_bench.serve.sensorsim import sensorsim_pb2 as pb  # noqa: E402
@@ -245,33 +249,48 @@ def load(args: argparse.Namespace, scenes: Path, scene_id: str, proxy: Any, pid:
         [batch(scene_id, t, cameras, size, pb.ImageFormat.JPEG) for t, cameras in enumerate(lane)]
         for lane in lanes
     ]
-    alone = [[proxy.batch_render_rgb(r, timeout=600) for r in lane] for lane in requests]  # also the warm-up
-    time.sleep(args.idle_timeout + 2.0)  # sessions expire: the idle level
+    alone = [[proxy.batch_render_rgb(r, timeout=600) for r in lane] for lane in requests]
+    time.sleep(args.idle_timeout + 2.0)  # sessions expire
+    after_alone = rss_mib(pid)
+
+    def concurrently(ticks: int) -> dict[str, Any]:
+        """``args.rollouts`` rollouts at once over the first ``ticks`` ticks, each reply checked against alone."""
+        errors: list[str] = []
+        mismatches = [0]
+        latencies: list[float] = []
+        lock = threading.Lock()
+
+        def rollout(index: int) -> None:
+            lane = index % 4
+            for tick, request in enumerate(requests[lane][:ticks]):
+                reply, ms = timed(lambda request=request: proxy.batch_render_rgb(request, timeout=600))
+                with lock:
+                    latencies.append(ms)
+                    errors.extend(f"{i.camera_name}: {i.error_message}" for i in reply.items if not i.success)
+                    mismatches[0] += reply != alone[lane][tick]
+
+        started = time.perf_counter()
+        threads = [threading.Thread(target=rollout, args=(i,)) for i in range(args.rollouts)]
+        for thread in threads:
+            thread.start()
+        busy_peak = 0.0
+        while any(t.is_alive() for t in threads):
+            busy_peak = max(busy_peak, rss_mib(pid))
+            time.sleep(0.5)
+        return {
+            "calls": len(latencies),
+            "errors": errors[:5],
+            "error_count": len(errors),
+            "replies_differing_from_alone": mismatches[0],
+            "tick_ms": {"p50": p50(latencies), "p99": p99(latencies)},
+            "wall_s": time.perf_counter() - started,
+            "busy_peak_rss_mib": busy_peak,
+        }
+
+    warmup = concurrently(args.warmup_ticks)  # grows grpc's threads and the allocator's arenas once
+    time.sleep(args.idle_timeout + 2.0)
     idle = rss_mib(pid)
-    errors: list[str] = []
-    mismatches = 0
-    latencies: list[float] = []
-    lock = threading.Lock()
-
-    def rollout(index: int) -> None:
-        nonlocal mismatches
-        lane = index % 4
-        for tick, request in enumerate(requests[lane]):
-            reply, ms = timed(lambda request=request: proxy.batch_render_rgb(request, timeout=600))
-            with lock:
-                latencies.append(ms)
-                errors.extend(f"{i.camera_name}: {i.error_message}" for i in reply.items if not i.success)
-                mismatches += reply != alone[lane][tick]
-
-    started = time.perf_counter()
-    threads = [threading.Thread(target=rollout, args=(i,)) for i in range(args.rollouts)]
-    for thread in threads:
-        thread.start()
-    busy_peak = 0.0
-    while any(t.is_alive() for t in threads):
-        busy_peak = max(busy_peak, rss_mib(pid))
-        time.sleep(0.5)
-    wall = time.perf_counter() - started
+    run = concurrently(args.load_ticks)
     time.sleep(args.idle_timeout + 2.0)
     after = rss_mib(pid)
     return {
@@ -279,20 +298,16 @@ def load(args: argparse.Namespace, scenes: Path, scene_id: str, proxy: Any, pid:
         "cameras": len(SENSORS),
         "ticks": args.load_ticks,
         "size": list(size),
-        "calls": len(latencies),
-        "errors": errors[:5],
-        "error_count": len(errors),
-        "replies_differing_from_alone": mismatches,
-        "tick_ms": {"p50": p50(latencies), "p99": p99(latencies)},
-        "wall_s": wall,
+        "warmup": warmup,
+        **run,
         "rss_mib": {
+            "after_sequential_pass": after_alone,
             "idle": idle,
-            "busy_peak": busy_peak,
             "after_expiry": after,
             "after_minus_idle": after - idle,
         },
         "memory_goal_mib": 16.0,
-        "met": not errors and mismatches == 0 and after - idle <= 16.0,
+        "met": not run["error_count"] and not run["replies_differing_from_alone"] and after - idle <= 16.0,
     }
 
 
@@ -304,21 +319,31 @@ def main() -> None:
     parser.add_argument("--work", type=Path, default=Path("runs/sensorsim_bench"))
     parser.add_argument("--checkpoint", default="tiny_setdiff")
     parser.add_argument(
-        "--sizes", nargs="+", default=["320x512", "576x1024"], help="HxW of the overhead phase, each in turn"
+        "--sizes",
+        nargs="*",
+        default=["320x512", "576x1024"],
+        help="HxW of the overhead phase, each in turn (none: skip it)",
     )
-    parser.add_argument("--ticks", type=int, default=5)
+    parser.add_argument("--ticks", type=int, default=3)
     parser.add_argument("--rollouts", type=int, default=8)
     parser.add_argument("--load-ticks", type=int, default=100)
     parser.add_argument("--load-height", type=int, default=48)
     parser.add_argument("--load-width", type=int, default=80)
     parser.add_argument("--idle-timeout", type=float, default=3.0)
+    parser.add_argument("--warmup-ticks", type=int, default=10, help="ticks of the concurrent warm-up round")
     parser.add_argument("--skip-load", action="store_true")
+    parser.add_argument(
+        "--update", action="store_true", help="keep the other phases of an existing result file"
+    )
     parser.add_argument("--output", default="sensorsim_proxy")
     args = parser.parse_args()
     scenes = fitted_scenes(args.scenes, args.work)
     scene_id = sorted(p.name for p in scenes.iterdir() if (p / "fits" / "lane0.ply").is_file())[0]
     common = ["--protocol", "sensorsim", "--scenes", str(scenes), "--port", "0", "--workers", "12"]
-    result: dict[str, Any] = {"machine": machine(), "scene": scene_id, "checkpoint": args.checkpoint}
+    result: dict[str, Any] = {}
+    if args.update and (RESULTS / f"{args.output}.json").is_file():
+        result = json.loads((RESULTS / f"{args.output}.json").read_text())
+    result.update({"machine": machine(), "scene": scene_id, "checkpoint": args.checkpoint})
     with served(["serve", *common]) as (_, upstream_port):
         proxy_argv = [
             "serve",
@@ -334,12 +359,13 @@ def main() -> None:
         ]
         with served(proxy_argv) as (process, proxy_port):
             direct, proxy = stub(f"127.0.0.1:{upstream_port}"), stub(f"127.0.0.1:{proxy_port}")
-            result["command"] = "python " + " ".join(sys.argv)
+            command = "python " + " ".join(sys.argv)
             if not args.skip_load:
-                result["load"] = load(args, scenes, scene_id, proxy, process.pid)
+                result["load"] = {"command": command, **load(args, scenes, scene_id, proxy, process.pid)}
                 print(result["load"], flush=True)
                 write_result(args.output, result)  # each phase is kept as soon as it ends
-            result["overhead"] = {}
+            if args.sizes:
+                result["overhead"] = {"command": command}
             for size in args.sizes:
                 height, width = (int(v) for v in size.split("x"))
                 result["overhead"][size] = overhead(args, scenes, scene_id, direct, proxy, (height, width))
