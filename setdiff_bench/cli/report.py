@@ -38,7 +38,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     defaults = SiteSettings()
     parser.add_argument(
-        "--runs", required=True, nargs="+", type=Path, metavar="RUN", help="run folders, or folders of runs"
+        "--runs",
+        required=True,
+        nargs="+",
+        action="extend",
+        type=Path,
+        metavar="RUN",
+        help="run folders, or folders of runs",
     )
     parser.add_argument(
         "--packets",

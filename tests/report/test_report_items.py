@@ -274,3 +274,14 @@ def test_video_panels_are_scaled_to_the_panel_width() -> None:
     scaled = side_by_side(wide, wide, wide, "m", "1/2", panel_width=192)
     assert scaled.shape == side_by_side(narrow, narrow, narrow, "m", "1/2").shape
     assert side_by_side(wide, wide, wide, "m", "1/2", panel_width=None).shape[1] > scaled.shape[1] + 3 * 60
+
+
+def test_report_takes_several_runs_options_like_leaderboard() -> None:
+    import argparse
+
+    from setdiff_bench.cli import report as report_verb
+
+    parser = argparse.ArgumentParser()
+    report_verb.add_arguments(parser)
+    args = parser.parse_args(["--runs", "a", "--runs", "b", "c", "--out", "o"])
+    assert [str(p) for p in args.runs] == ["a", "b", "c"]  # before: only the last --runs was kept
