@@ -31,6 +31,8 @@ from setdiff_bench.pipeline.presets import DemoBenchmark
 #: Where the published results live, relative to the package folder (a source checkout).
 RESULTS_FOLDER = Path(__file__).resolve().parents[2] / "results"
 KEYS = ["method", "block", "metric"]
+#: Cells beyond the tolerance that the printed line names (the largest differences; demo.json has all).
+SHOWN_CELLS = 5
 
 
 @dataclass
@@ -64,11 +66,17 @@ class Reproduction:
         stated = ", ".join(f"{metric} {value:g}" for metric, value in sorted(self.tolerance.items()))
         if self.status == "within":
             return f"reproduction: within the stated tolerance of {where} ({stated}); largest differences: {largest}"
+        worst = sorted(self.outside, key=lambda cell: -abs(cell[3] - cell[4]))[:SHOWN_CELLS]
         cells = "; ".join(
             f"{method} {block} {metric} {ours:.4f} vs {theirs:.4f}"
-            for method, block, metric, ours, theirs in self.outside
+            for method, block, metric, ours, theirs in worst
         )
-        return f"reproduction: OUTSIDE the stated tolerance of {where} ({stated}): {cells}"
+        more = (
+            f" (the {len(worst)} largest of {len(self.outside)}; all in demo.json)"
+            if len(self.outside) > len(worst)
+            else ""
+        )
+        return f"reproduction: OUTSIDE the stated tolerance of {where} ({stated}): {cells}{more}"
 
     @classmethod
     def from_json(cls, record: dict[str, Any]) -> Reproduction:

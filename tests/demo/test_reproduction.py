@@ -60,6 +60,15 @@ def test_cells_outside_the_tolerance_are_named():
     assert "OUTSIDE" in result.line() and "identity lane+2 psnr 18.0000 vs 17.8900" in result.line()
 
 
+def test_the_line_names_only_the_largest_cells():
+    moved = {key: value + 1.0 + i for i, (key, value) in enumerate(BASE.items())}
+    moved.update({("identity", f"b{i}", "psnr"): 10.0 + i for i in range(6)})
+    theirs = {**BASE, **{("identity", f"b{i}", "psnr"): 10.0 for i in range(6)}}
+    line = compare_tables(board(moved), board(theirs), TOLERANCE).line()
+    assert "the 5 largest of 9" in line and "identity b5 psnr 15.0000 vs 10.0000" in line
+    assert "identity b0" not in line  # equal cells are not outside
+
+
 def test_another_set_of_cells_is_not_comparable():
     fewer = {key: value for key, value in BASE.items() if key[0] == "setdiff"}
     result = compare_tables(board(fewer), board(BASE), TOLERANCE)
