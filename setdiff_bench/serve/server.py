@@ -63,6 +63,8 @@ __all__ = [
     "RunningServer",
     "Session",
     "TokenInterceptor",
+    "bind",
+    "grpc_server",
     "pid_line",
     "release_freed_memory",
     "rpc",
@@ -136,36 +138,12 @@ def start_server(
     """
     settings = settings or ServeSettings()
     check_bind(settings.host, settings.tls, settings.token, settings.insecure)
-    server = grpc.server(
-        futures.ThreadPoolExecutor(max_workers=settings.workers, thread_name_prefix="enhance"),
-        interceptors=[TokenInterceptor(settings.token)] if settings.token is not None else None,
-        maximum_concurrent_rpcs=settings.max_queue,
-        options=[
-            ("grpc.max_receive_message_length", MAX_MESSAGE_BYTES),
-            ("grpc.max_send_message_length", MAX_MESSAGE_BYTES),
-            ("grpc.so_reuseport", 0),
-        ],
-    )
+    server = grpc_server(settings, "enhance")
     service = EnhancerService(enhancer, settings, clock)
     pb_grpc.add_EnhancerServicer_to_server(service, server)
     health_servicer = health.HealthServicer()
     health_pb2_grpc.add_HealthServicer_to_server(health_servicer, server)
-    address = f"{settings.host}:{settings.port}"
-    try:
-        with _quiet_stderr():
-            if settings.tls is None:
-                port = server.add_insecure_port(address)
-            else:
-                credentials = grpc.ssl_server_credentials(
-                    [(settings.tls.private_key, settings.tls.cert_chain)],
-                    root_certificates=settings.tls.client_ca,
-                    require_client_auth=settings.tls.client_ca is not None,
-                )
-                port = server.add_secure_port(address, credentials)
-    except RuntimeError:
-        raise SetDiffBenchError("cannot bind (address in use or not available)", address) from None
-    if port == 0:
-        raise SetDiffBenchError("cannot bind (address in use or not available)", address)
+    port = bind(server, settings)
     server.start()
     for name in ("", SERVICE_NAME):
         health_servicer.set(name, health_pb2.HealthCheckResponse.SERVING)
@@ -200,3 +178,43 @@ def pid_line(running: RunningServer, host: str) -> str:
     mode = "plaintext" if tls is None else ("mutual TLS" if tls.client_ca is not None else "TLS")
     token = "token" if running.service.settings.token is not None else "no token"
     return f"serving on {host}:{running.port} (pid {os.getpid()}; {mode}, {token})"
+
+
+def grpc_server(
+    settings: ServeSettings, thread_prefix: str, max_message_bytes: int = MAX_MESSAGE_BYTES
+) -> grpc.Server:
+    """A gRPC server with the service's bounds: ``settings.workers`` threads, the token interceptor when a
+    token is set, ``settings.max_queue`` concurrent RPCs, messages up to ``max_message_bytes``, no port
+    sharing."""
+    return grpc.server(
+        futures.ThreadPoolExecutor(max_workers=settings.workers, thread_name_prefix=thread_prefix),
+        interceptors=[TokenInterceptor(settings.token)] if settings.token is not None else None,
+        maximum_concurrent_rpcs=settings.max_queue,
+        options=[
+            ("grpc.max_receive_message_length", max_message_bytes),
+            ("grpc.max_send_message_length", max_message_bytes),
+            ("grpc.so_reuseport", 0),
+        ],
+    )
+
+
+def bind(server: grpc.Server, settings: ServeSettings) -> int:
+    """Bind ``server`` to ``settings.host:port`` (TLS when ``settings.tls``); the bound port, or
+    :class:`SetDiffBenchError` naming the address when it cannot be bound."""
+    address = f"{settings.host}:{settings.port}"
+    try:
+        with _quiet_stderr():
+            if settings.tls is None:
+                port = server.add_insecure_port(address)
+            else:
+                credentials = grpc.ssl_server_credentials(
+                    [(settings.tls.private_key, settings.tls.cert_chain)],
+                    root_certificates=settings.tls.client_ca,
+                    require_client_auth=settings.tls.client_ca is not None,
+                )
+                port = server.add_secure_port(address, credentials)
+    except RuntimeError:
+        port = 0
+    if port == 0:
+        raise SetDiffBenchError("cannot bind (address in use or not available)", address)
+    return port

@@ -7,7 +7,6 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
-from concurrent import futures
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -15,13 +14,12 @@ import grpc
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 
 from setdiff_bench.errors import SetDiffBenchError
-from setdiff_bench.serve.auth import TokenInterceptor
 from setdiff_bench.serve.security import check_bind
 from setdiff_bench.serve.sensorsim import sensorsim_pb2 as pb
 from setdiff_bench.serve.sensorsim import sensorsim_pb2_grpc as pb_grpc
 from setdiff_bench.serve.sensorsim.service import ProxyService, RendererService, SensorsimBase
 from setdiff_bench.serve.sensorsim.settings import MAX_MESSAGE_BYTES, SensorsimSettings
-from setdiff_bench.serve.server import _quiet_stderr, _reap
+from setdiff_bench.serve.server import _reap, bind, grpc_server
 
 #: The fully qualified service name (AlpaSim's and NuRec's).
 SERVICE_NAME = pb.DESCRIPTOR.services_by_name["SensorsimService"].full_name
@@ -70,37 +68,16 @@ def start_sensorsim(
         service: SensorsimBase = ProxyService(settings, enhancer, clock)
     else:
         service = RendererService(settings, enhancer, clock)
-    server = grpc.server(
-        futures.ThreadPoolExecutor(max_workers=serve.workers, thread_name_prefix="sensorsim"),
-        interceptors=[TokenInterceptor(serve.token)] if serve.token is not None else None,
-        maximum_concurrent_rpcs=serve.max_queue,
-        options=[
-            ("grpc.max_receive_message_length", MAX_MESSAGE_BYTES),
-            ("grpc.max_send_message_length", MAX_MESSAGE_BYTES),
-            ("grpc.so_reuseport", 0),
-        ],
-    )
+    server = grpc_server(serve, "sensorsim", MAX_MESSAGE_BYTES)
     pb_grpc.add_SensorsimServiceServicer_to_server(service, server)
     health_servicer = health.HealthServicer()
     health_pb2_grpc.add_HealthServicer_to_server(health_servicer, server)
-    address = f"{serve.host}:{serve.port}"
     try:
-        with _quiet_stderr():
-            if serve.tls is None:
-                port = server.add_insecure_port(address)
-            else:
-                credentials = grpc.ssl_server_credentials(
-                    [(serve.tls.private_key, serve.tls.cert_chain)],
-                    root_certificates=serve.tls.client_ca,
-                    require_client_auth=serve.tls.client_ca is not None,
-                )
-                port = server.add_secure_port(address, credentials)
-    except RuntimeError:
-        port = 0
-    if port == 0:
+        port = bind(server, serve)
+    except SetDiffBenchError:
         if isinstance(service, ProxyService):
             service.close()
-        raise SetDiffBenchError("cannot bind (address in use or not available)", address)
+        raise
     server.start()
     for name in ("", SERVICE_NAME):
         health_servicer.set(name, health_pb2.HealthCheckResponse.SERVING)
