@@ -105,15 +105,17 @@ def test_publish_refuses_what_it_cannot_vouch_for(tmp_path: Path) -> None:
 
 
 def test_demo_default_output_is_git_ignored() -> None:
-    from setdiff_bench.pipeline.demo import DEFAULT_OUT
+    from setdiff_bench.pipeline.presets import DEMO_BENCHMARKS
 
     root = Path(__file__).resolve().parents[2]
     if not (root / ".git").exists():
         pytest.skip("not a git checkout")
-    result = subprocess.run(
-        ["git", "-C", str(root), "check-ignore", "-q", f"{DEFAULT_OUT}/README.md"], check=False
-    )
-    assert result.returncode == 0 and not DEFAULT_OUT.startswith("results")
+    for benchmark in DEMO_BENCHMARKS.values():  # each benchmark's own default folder
+        out = benchmark.default_out
+        result = subprocess.run(
+            ["git", "-C", str(root), "check-ignore", "-q", f"{out}/README.md"], check=False
+        )
+        assert result.returncode == 0 and not out.startswith("results"), out
 
 
 class FakeProcess:

@@ -3,6 +3,7 @@ a student step runs from the teacher's weights, and the exported student enhance
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from dataclasses import replace
@@ -120,7 +121,7 @@ def test_exported_student_runs_one_unet_pass(tmp_path: Path) -> None:
     assert manifest["distillation"]["guidance_scale"] == 1.5
     assert (
         manifest["distillation"]["weights_sha256"]
-        == __import__("hashlib").sha256((folder / "model.safetensors").read_bytes()).hexdigest()
+        == hashlib.sha256((folder / "model.safetensors").read_bytes()).hexdigest()
     )
     packet = make_packet(2, 3, size=(32, 32), seed=5)
     student, _ = load_model(exported)
