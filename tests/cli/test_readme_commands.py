@@ -119,6 +119,7 @@ NOT_RUN = {
     "pip install -e .": "installs packages",
     'pip install -e ".[serve]"': "installs packages",
     "setdiff-bench demo --benchmark sparse": "run at --preset tiny by tests/demo/test_demo_sparse.py",
+    "python3 examples/alpasim_rollout.py": "its renderer and proxy calls are tests/serve/test_sensorsim.py's",
     "python3 -m pytest -q": "this test suite",
     ".ci/run": "CI's entry point: this test suite",
     "ruff check .": "tests/core/test_style.py",
