@@ -7,10 +7,9 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
-import grpc
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 
 from setdiff_bench.errors import SetDiffBenchError
@@ -19,27 +18,22 @@ from setdiff_bench.serve.sensorsim import sensorsim_pb2 as pb
 from setdiff_bench.serve.sensorsim import sensorsim_pb2_grpc as pb_grpc
 from setdiff_bench.serve.sensorsim.service import ProxyService, RendererService, SensorsimBase
 from setdiff_bench.serve.sensorsim.settings import MAX_MESSAGE_BYTES, SensorsimSettings
-from setdiff_bench.serve.server import _reap, bind, grpc_server
+from setdiff_bench.serve.server import RunningServer, _reap, bind, grpc_server
 
 #: The fully qualified service name (AlpaSim's and NuRec's).
 SERVICE_NAME = pb.DESCRIPTOR.services_by_name["SensorsimService"].full_name
 
 
 @dataclass
-class RunningSensorsim:
-    """A started sensorsim server: ``port`` is the bound port, ``service`` the role's servicer."""
+class RunningSensorsim(RunningServer):
+    """A started sensorsim server (:class:`RunningServer` with the role's servicer); stopping it also closes
+    the proxy's upstream channel."""
 
-    server: grpc.Server
-    port: int
-    service: SensorsimBase
-    health: health.HealthServicer
-    reaper_stop: threading.Event = field(default_factory=threading.Event)
+    service: SensorsimBase  # type: ignore[assignment]
 
     def stop(self, grace: float | None) -> None:
         """Refuse new RPCs, let in-flight ones finish for up to ``grace`` seconds, close the upstream channel."""
-        self.reaper_stop.set()
-        self.health.enter_graceful_shutdown()
-        self.server.stop(grace).wait()
+        super().stop(grace)
         if isinstance(self.service, ProxyService):
             self.service.close()
         if self.service.enhancement is not None:
