@@ -13,10 +13,15 @@ along the scene's held-out lane (lane 1: one lane over from the recorded one).
 
 * ``direct_ms``: client → upstream renderer;
 * ``proxy_ms``: client → proxy → upstream renderer;
-* ``enhancer_ms``: the enhancer's own time on the same tick (``StreamSession.enhance_packet`` in this process,
+* ``enhancer_alone_ms``: the enhancer's time on the same tick in this process (``StreamSession.enhance_packet``,
   the packet built beforehand), ``cmap_ms``: the proxy's C-map render of the 2 cameras from the PLY,
   ``png_round_trip_ms``: the upstream's PNG encode + the proxy's decode of the 2 frames;
-* ``overhead_ratio = (proxy_ms - direct_ms) / enhancer_ms`` (goal: <= 1.15).
+* ``enhancer_in_proxy_ms``: the enhancer's own time on the same request, as the proxy reports it (the reply's
+  ``server-timing`` trailing metadata, ``enhance`` stage);
+* ``overhead_ratio``: p50 over ticks of ``(proxy_ms - direct_ms) / enhancer_in_proxy_ms`` (goal: <= 1.15):
+  what the proxy costs beyond its enhancer, measured on the same tick, so a loaded machine slows both sides
+  of the ratio alike; ``overhead_ratio_vs_enhancer_alone`` divides by the enhancer timed in this process
+  instead (``enhancer_alone_ms``), which a loaded machine skews.
 
 ``load`` phase: ``--rollouts`` client threads at once (8), each ``--load-ticks`` ticks (100) of 2 cameras at
 ``--load-height x --load-width`` on one of four lateral offsets; every reply must succeed and equal byte for
@@ -52,6 +57,7 @@ from benchmarks.common import RESULTS, machine, write_result  # noqa: E402
 from benchmarks.serve import rss_mib  # noqa: E402
 from setdiff_bench.cameras import Camera  # noqa: E402
 from setdiff_bench.serve.sensorsim import sensorsim_pb2 as pb  # noqa: E402
+from setdiff_bench.serve.sensorsim.service import parse_server_timing  # noqa: E402
 from tests.serve.sensorsim_fixtures import pinhole_spec, render_request, stub  # noqa: E402
 from tests.serve.serve_fixtures import environment, served  # noqa: E402
 
@@ -171,15 +177,19 @@ def overhead(
         check(
             proxy.batch_render_rgb(batch(scene_id, tick, ticks[tick], size, pb.ImageFormat.JPEG), timeout=600)
         )
-    direct_ms, proxy_ms = [], []
+    direct_ms, proxy_ms, inside_ms, ratios = [], [], [], []
     for tick, cameras in enumerate(ticks):
         request = batch(scene_id, tick, cameras, size, pb.ImageFormat.JPEG)
         reply, ms = timed(lambda request=request: direct.batch_render_rgb(request, timeout=600))
         check(reply)
         direct_ms.append(ms)
-        reply, ms = timed(lambda request=request: proxy.batch_render_rgb(request, timeout=600))
+        (reply, call), ms = timed(
+            lambda request=request: proxy.batch_render_rgb.with_call(request, timeout=600)
+        )
         check(reply)
         proxy_ms.append(ms)
+        inside_ms.append(parse_server_timing(call.trailing_metadata())["enhance"])
+        ratios.append((proxy_ms[-1] - direct_ms[-1]) / inside_ms[-1])
         time.sleep(max(0.0, 0.1 - (proxy_ms[-1] + direct_ms[-1]) / 1000.0))  # 10 Hz at most
     enhancer_ms, cmap_ms, png_ms = enhancer_time(args, scenes, scene_id, ticks, size)
     added = p50(proxy_ms) - p50(direct_ms)
@@ -190,12 +200,15 @@ def overhead(
         "direct_ms": {"p50": p50(direct_ms), "p99": p99(direct_ms)},
         "proxy_ms": {"p50": p50(proxy_ms), "p99": p99(proxy_ms)},
         "added_ms_p50": added,
-        "enhancer_ms_p50": p50(enhancer_ms),
+        "enhancer_in_proxy_ms_p50": p50(inside_ms),
+        "enhancer_alone_ms_p50": p50(enhancer_ms),
         "cmap_render_ms_p50": p50(cmap_ms),
         "png_round_trip_ms_p50": p50(png_ms),
-        "overhead_ratio": added / p50(enhancer_ms),
+        "overhead_ratio": p50(ratios),
+        "overhead_ratio_per_tick": ratios,
+        "overhead_ratio_vs_enhancer_alone": added / p50(enhancer_ms),
         "goal_ratio": 1.15,
-        "met": added / p50(enhancer_ms) <= 1.15,
+        "met": p50(ratios) <= 1.15,
         "per_camera_added_ms_p50": added / len(SENSORS),
     }
 

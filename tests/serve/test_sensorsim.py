@@ -35,6 +35,7 @@ from setdiff_bench.serve.sensorsim import common_pb2 as common
 from setdiff_bench.serve.sensorsim import sensorsim_pb2 as pb
 from setdiff_bench.serve.sensorsim import sensorsim_pb2_grpc as pb_grpc
 from setdiff_bench.serve.sensorsim.server import RunningSensorsim, start_sensorsim
+from setdiff_bench.serve.sensorsim.service import parse_server_timing
 from setdiff_bench.serve.sensorsim.settings import SensorsimSettings
 from setdiff_bench.serve.settings import ServeSettings
 from tests.serve.sensorsim_fixtures import (
@@ -259,8 +260,13 @@ def test_proxy_png_equals_run_for_the_same_views_and_cmaps(
     replies = {}
     for tick in range(2):
         request = batch_request(tick, pb.ImageFormat.PNG)
-        reply = client.batch_render_rgb(request, timeout=60)
+        started = time.perf_counter()
+        reply, call = client.batch_render_rgb.with_call(request, timeout=60)
+        wall_ms = (time.perf_counter() - started) * 1e3
         decoded(reply, NAMES)
+        stages = parse_server_timing(call.trailing_metadata())
+        assert set(stages) == {"frames", "enhance", "encode"}
+        assert all(ms > 0 for ms in stages.values()) and sum(stages.values()) < wall_ms
         replies[tick] = {item.camera_name: item.result.image_bytes for item in reply.items}
         cameras = [wire_camera(item.request) for item in request.items]
         with torch.no_grad():

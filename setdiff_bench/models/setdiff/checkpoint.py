@@ -17,6 +17,7 @@ import json
 import os
 import pickle
 import shutil
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -79,10 +80,21 @@ def read_config(checkpoint: str | os.PathLike[str]) -> Config:
 _FIRST_REPORTED = ("method", "preset")
 
 
-def check_compatible(saved: Config, expected: Config, where: str | os.PathLike[str]) -> None:
-    """Raise :class:`CheckpointError` when the two model architectures differ, naming one differing key:
-    ``method`` or ``preset`` when they differ, else the alphabetically first."""
+#: Architecture keys a model may change from the weights it starts from (``[train] init_from``) or from its
+#: teacher (``distill_from``): what the set-mixing layers attend to.  They change no weight's shape; a
+#: ``knn`` level adds a "no match" key and value (zeros when the source lacks them).
+SET_ATTENTION_KEYS = ("set_attention", "set_attention_neighbours")
+
+
+def check_compatible(
+    saved: Config, expected: Config, where: str | os.PathLike[str], *, ignore: Sequence[str] = ()
+) -> None:
+    """Raise :class:`CheckpointError` when the two model architectures differ outside ``ignore``, naming one
+    differing key: ``method`` or ``preset`` when they differ, else the alphabetically first."""
     a, b = saved.model.architecture(), expected.model.architecture()
+    for key in ignore:
+        a.pop(key, None)
+        b.pop(key, None)
     if a != b:
         rest = sorted((set(a) | set(b)) - set(_FIRST_REPORTED))
         key = next(k for k in (*_FIRST_REPORTED, *rest) if a.get(k) != b.get(k))
@@ -133,8 +145,18 @@ def write_weights(path: Path, state: dict[str, torch.Tensor], config: Config) ->
     os.chmod(path, new_file_mode())  # safetensors creates it 0600 whatever the umask
 
 
-def load_weights(model: torch.nn.Module, checkpoint: str | os.PathLike[str]) -> None:
-    """Load ``model.safetensors`` into ``model`` strictly (every key, every shape)."""
+def load_weights(
+    model: torch.nn.Module,
+    checkpoint: str | os.PathLike[str],
+    *,
+    optional: Callable[[str], bool] | None = None,
+) -> None:
+    """Load ``model.safetensors`` into ``model`` strictly (every key, every shape).
+
+    ``optional``: keys it accepts may be absent on either side (the model keeps its initial value, or the
+    file's tensor is dropped), e.g. :func:`.set_mixer.is_no_match_parameter` when starting a ``knn`` model
+    from a ``full`` one.
+    """
     from safetensors import SafetensorError
     from safetensors.torch import load_file
 
@@ -144,6 +166,9 @@ def load_weights(model: torch.nn.Module, checkpoint: str | os.PathLike[str]) -> 
     except (OSError, SafetensorError) as error:
         raise CheckpointError(f"cannot read weights: {error}", path) from error
     expected = model.state_dict()
+    if optional is not None:
+        state = {k: v for k, v in state.items() if k in expected or not optional(k)}
+        state |= {k: v for k, v in expected.items() if k not in state and optional(k)}
     mismatch = key_mismatch(expected, state, examples=2)
     if mismatch:
         raise CheckpointError(f"weights do not match the model: {mismatch}", path)
@@ -161,6 +186,7 @@ def load_model(
     checkpoint: str | os.PathLike[str],
     *,
     expected: Config | None = None,
+    ignore: Sequence[str] = (),
     method: str | None = None,
     device: str | torch.device = "cpu",
     dtype: torch.dtype | None = None,
@@ -169,7 +195,7 @@ def load_model(
 
     Args:
         checkpoint: checkpoint folder or training output folder.
-        expected: when given, the checkpoint's architecture must equal this config's.
+        expected: when given, the checkpoint's architecture must equal this config's (outside ``ignore``).
         method: when given (``setdiff``/``difix``), the checkpoint must have been trained as that method.
         device, dtype: where and in which float type to put the model (default float32).
 
@@ -179,7 +205,7 @@ def load_model(
     folder = resolve_checkpoint(checkpoint)
     config = read_config(folder)
     if expected is not None:
-        check_compatible(config, expected, folder)
+        check_compatible(config, expected, folder, ignore=ignore)
     if method is not None and config.model.method != method:
         raise CheckpointError(
             f"checkpoint was trained as method {config.model.method!r}, not {method!r}", folder

@@ -299,6 +299,14 @@ class TrainConfig:
             teacher's geometry-CFG output; its targets replace the ground truth in every loss term.
             ``None`` = ordinary training.
         distill_guidance_scale: the teacher's CFG scale for the targets; ``None`` = the teacher config's.
+            The teacher's architecture must be the student's except for what the set mixer attends to
+            (``set_attention``, ``set_attention_neighbours``): a student may restrict it.
+        init_from: a fine-tune: start from a trained model's weights (checkpoint or training folder or
+            packaged name) and train as usual on the ground truth.  Its architecture must be this config's
+            except for what the set mixer attends to, so a model can be re-trained with restricted set
+            attention (a ``knn`` level's "no match" key and value start at zero).  ``None`` = from scratch
+            (or the pretrained weights the preset loads).  Not with ``distill_from`` (a student already
+            starts from its teacher).
     """
 
     steps: int = 40_000
@@ -333,9 +341,14 @@ class TrainConfig:
     sparsest_share: float = 0.0
     distill_from: str | None = None
     distill_guidance_scale: float | None = None
+    init_from: str | None = None
 
     def __post_init__(self) -> None:
         where = "[train]"
+        if self.init_from is not None and self.distill_from is not None:
+            raise UsageError(
+                "init_from and distill_from exclude each other: a student starts from its teacher", where
+            )
         check_choice(self.set_shape, SetShape, "set_shape", where)
         targets = tuple(int(t) for t in self.test_targets)
         if len(targets) != 2 or not 1 <= targets[0] <= targets[1]:

@@ -18,7 +18,12 @@ import torch
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.atomic import sha256_file
-from setdiff_bench.models.setdiff.checkpoint import load_model, read_config, resolve_checkpoint
+from setdiff_bench.models.setdiff.checkpoint import (
+    SET_ATTENTION_KEYS,
+    load_model,
+    read_config,
+    resolve_checkpoint,
+)
 from setdiff_bench.models.setdiff.config import Config
 from setdiff_bench.models.setdiff.files import WEIGHTS_FILE
 from setdiff_bench.models.setdiff.inputs import SetBatch
@@ -60,7 +65,7 @@ def load_teacher(config: Config, device: str | torch.device = "cpu") -> tuple[Se
     tc = config.train
     if tc.distill_from is None:
         raise UsageError("no teacher: set [train] distill_from", "[train]")
-    teacher, saved = load_model(tc.distill_from, expected=config, device=device)
+    teacher, saved = load_model(tc.distill_from, expected=config, ignore=SET_ATTENTION_KEYS, device=device)
     teacher.requires_grad_(False)
     scale = (
         saved.model.guidance_scale if tc.distill_guidance_scale is None else float(tc.distill_guidance_scale)
@@ -83,8 +88,9 @@ def distillation_targets(
 
 
 def distillation_record(config: Config) -> dict[str, Any] | None:
-    """The teacher of a student's config for its manifest: ``{"teacher", "folder", "weights_sha256",
-    "guidance_scale"}`` (``None`` for a model that was not distilled)."""
+    """The teacher of a student's config for its manifest: ``{"teacher", "weights_sha256", "guidance_scale"}``
+    (``None`` for a model that was not distilled).  The teacher as the config names it (a packaged name
+    for the shipped students), its weights by hash: no machine path."""
     tc = config.train
     if tc.distill_from is None:
         return None
@@ -94,7 +100,6 @@ def distillation_record(config: Config) -> dict[str, Any] | None:
         scale = read_config(folder).model.guidance_scale
     return {
         "teacher": tc.distill_from,
-        "folder": str(folder),
         "weights_sha256": sha256_file(folder / WEIGHTS_FILE),
         "guidance_scale": float(scale),
     }

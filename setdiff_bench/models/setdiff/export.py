@@ -13,12 +13,22 @@ from pathlib import Path
 from typing import Any
 
 from setdiff_bench.errors import CheckpointError
-from setdiff_bench.io.atomic import staged_folder, write_text_atomic
+from setdiff_bench.io.atomic import sha256_file, staged_folder, write_text_atomic
 from setdiff_bench.models.setdiff.averaging import average_weights
-from setdiff_bench.models.setdiff.checkpoint import read_config, write_weights
+from setdiff_bench.models.setdiff.checkpoint import read_config, resolve_checkpoint, write_weights
+from setdiff_bench.models.setdiff.config import Config
 from setdiff_bench.models.setdiff.distill import distillation_record
 from setdiff_bench.models.setdiff.files import CONFIG_FILE, MANIFEST_FILE, WEIGHTS_FILE
 from setdiff_bench.models.setdiff.packaged import file_table
+
+
+def initialisation_record(config: Config) -> dict[str, Any] | None:
+    """``{"model", "weights_sha256"}`` of the model a fine-tune started from (``[train] init_from``, as the
+    config names it), ``None`` for a model trained from scratch."""
+    if config.train.init_from is None:
+        return None
+    folder = resolve_checkpoint(config.train.init_from)
+    return {"model": config.train.init_from, "weights_sha256": sha256_file(folder / WEIGHTS_FILE)}
 
 
 def export_enhancer(
@@ -32,7 +42,8 @@ def export_enhancer(
     """Copy a checkpoint's weights and config into ``destination`` (replaced atomically) with a manifest.
 
     The manifest of a guidance-distilled student also names its teacher (``distillation``:
-    :func:`~setdiff_bench.models.setdiff.distill.distillation_record`).
+    :func:`~setdiff_bench.models.setdiff.distill.distillation_record`), that of a fine-tune the model it
+    started from (``initialised_from``: :func:`initialisation_record`).
 
     Args:
         checkpoint: a checkpoint folder (``config.json`` + ``model.safetensors``).
@@ -55,6 +66,7 @@ def export_enhancer(
             raise CheckpointError(f"checkpoint has no {name}", checkpoint)
     saved = read_config(checkpoint)
     teacher = distillation_record(saved)
+    origin = initialisation_record(saved)
     config = saved if guidance_scale is not None or average else None
     if config is not None and guidance_scale is not None:
         config = replace(config, model=replace(config.model, guidance_scale=float(guidance_scale)))
@@ -71,5 +83,7 @@ def export_enhancer(
         manifest = {**training_manifest, **(extra or {}), "files": file_table(staging, names)}
         if teacher is not None:  # a guidance-distilled student (:mod:`.distill`)
             manifest["distillation"] = teacher
+        if origin is not None:  # a fine-tune of another model
+            manifest["initialised_from"] = origin
         write_text_atomic(staging / MANIFEST_FILE, json.dumps(manifest, indent=2, sort_keys=True) + "\n")
     return destination

@@ -431,6 +431,11 @@ def add_bias_parameters(unet: torch.nn.Module, names: list[str], initial: float 
             module.register_parameter(BIAS_PARAMETER, nn.Parameter(torch.tensor(math.log(initial))))
 
 
+def is_no_match_parameter(name: str) -> bool:
+    """Whether a state-dict key is a ``knn`` layer's "no match" key or value (present only with ``knn``)."""
+    return name.rsplit(".", 1)[-1] in (NO_MATCH_KEY, NO_MATCH_VALUE)
+
+
 def add_no_match_parameters(unet: torch.nn.Module, names: list[str]) -> None:
     """Give each ``knn`` set-mixing ``attn1`` its learned "no match" key and value (zeros, saved with the UNet)."""
     modules = dict(unet.named_modules())

@@ -43,6 +43,7 @@ import torch
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.models.setdiff.checkpoint import (
+    SET_ATTENTION_KEYS,
     check_compatible,
     load_training_state,
     load_weights,
@@ -59,6 +60,7 @@ from setdiff_bench.models.setdiff.inputs import training_set
 from setdiff_bench.models.setdiff.losses import ReconstructionLoss, latent_loss
 from setdiff_bench.models.setdiff.model import SetDiffModel
 from setdiff_bench.models.setdiff.sample_stream import SampleStream, dataset_reference_counts
+from setdiff_bench.models.setdiff.set_mixer import is_no_match_parameter
 from setdiff_bench.models.setdiff.train_log import append_record, truncate_records
 from setdiff_bench.models.setdiff.validation import reduce_means, validation_totals
 from setdiff_bench.runtime.devices import resolve_device
@@ -232,7 +234,11 @@ def _setup(
         check_student_config(config)
         teacher, teacher_scale = load_teacher(config, device)
         if previous is None:  # the student starts as the teacher
-            load_weights(model, resolve_checkpoint(tc.distill_from))
+            load_weights(model, resolve_checkpoint(tc.distill_from), optional=is_no_match_parameter)
+    if tc.init_from is not None and previous is None:  # a fine-tune of a trained model
+        source = resolve_checkpoint(tc.init_from)
+        check_compatible(read_config(source), config, source, ignore=SET_ATTENTION_KEYS)
+        load_weights(model, source, optional=is_no_match_parameter)
     if previous is not None:
         load_weights(model, previous)
     if tc.gradient_checkpointing:
