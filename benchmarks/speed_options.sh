@@ -1,0 +1,60 @@
+#!/usr/bin/env bash
+# Quality of SetDiff's speed options (issue 55) on one embedded benchmark, against the shipped model they
+# come from, with the toolkit's own commands:
+#   student       the guidance-distilled one-pass student (packaged config <teacher>_student: one UNet pass
+#                 instead of the teacher's two CFG branches);
+#   view0         the teacher re-trained with per-view set attention at level 0 (benchmarks/configs/<teacher>_view0);
+#   knn0          the same with the 16 nearest reference tokens in 3D (<teacher>_knn0);
+#   student_view0 the student with per-view level-0 attention (both options: <teacher>_student_view0);
+#   one_pass      the teacher itself run in one pass (guidance 1): what the student is for.
+# Each is trained from the shipped teacher (students: distilled; view0 / knn0: fine-tuned on the ground truth,
+# [train] init_from), exported, run on the test split and compared with the teacher (`compare`: paired
+# gains, intervals resampled by scene).
+#
+#   bash benchmarks/speed_options.sh BENCHMARK PACKETS WORK [OPTION ...]
+#
+# BENCHMARK: driving (teacher tiny_setdiff; PACKETS from benchmarks/train_shipped_models.sh's data steps) or
+# sparse (tiny_setdiff_sparse; PACKETS from benchmarks/train_sparse_models.sh STAGE=data).  WORK receives
+# checkpoints, exported models, runs and comparisons.  OPTION: which of the above (default all, in that
+# order); two invocations with different options may run side by side (one torch thread each).  Every step
+# resumes.  The quality table in docs/performance.md is made from WORK/compare/*.md.
+set -euo pipefail
+benchmark=$1
+packets=$2
+work=$3
+shift 3
+options=("$@")
+[[ ${#options[@]} -eq 0 ]] && options=(student view0 knn0 student_view0 one_pass)
+export SETDIFF_THREADS=${SETDIFF_THREADS:-1}
+bench="python3 -m setdiff_bench"
+here=$(dirname "$0")
+case $benchmark in
+    driving) teacher=tiny_setdiff ;;
+    sparse) teacher=tiny_setdiff_sparse ;;
+    *) echo "speed_options.sh: BENCHMARK must be driving or sparse, got '$benchmark'" >&2; exit 2 ;;
+esac
+score() {  # score NAME RUN_OPTIONS...: run on the test split, then compare with the teacher
+    local name=$1
+    shift
+    $bench run "$@" --packets "$packets" --split test --out "$work/runs/$name" --name "$name" \
+        --metrics psnr,ssim,lpips --warp off --no-progress
+    if [[ $name != teacher ]]; then
+        $bench compare "$work/runs/$name" "$work/runs/teacher" --out "$work/compare" --metrics psnr,ssim,lpips
+    fi
+}
+mkdir -p "$work"
+[[ -f $work/runs/teacher/metrics.parquet ]] || score teacher --method setdiff --checkpoint "$teacher"
+for option in "${options[@]}"; do
+    case $option in
+        student) config=${teacher}_student ;;
+        view0 | knn0 | student_view0) config=$here/configs/${teacher}_$option.toml ;;
+        one_pass)
+            score one_pass --method setdiff --checkpoint "$teacher" -o guidance_scale=1
+            continue
+            ;;
+        *) echo "speed_options.sh: unknown option '$option'" >&2; exit 2 ;;
+    esac
+    $bench train --config "$config" --packets "$packets" --out "$work/ckpt/$option" --no-progress
+    $bench weights export "$work/ckpt/$option" --name "${teacher}_$option" --to "$work/weights"
+    score "$option" --method setdiff --checkpoint "$work/weights/${teacher}_$option"
+done
