@@ -40,6 +40,13 @@ def test_packaged_configs_load() -> None:
 #: lowest-layer bias and LPIPS x2; the older arms are A/Bs against it.
 PLAIN = "tiny_setdiff_plain.toml"
 BIAS_LOWEST = {("model", "attention_bias"): "cmap_distance", ("model", "attention_bias_layers"): "lowest"}
+#: What a fine-tune of a shipped model changes in its recipe (500 steps at learning rate 1e-4).
+FINE_TUNE = {
+    ("train", "steps"): 500,
+    ("train", "learning_rate"): 1e-4,
+    ("train", "checkpoint_every"): 250,
+    ("train", "validate_every"): 250,
+}
 AB_CONFIGS: dict[str, tuple[str, dict[tuple[str, str], object]]] = {
     PLAIN: (
         "tiny_setdiff",
@@ -56,6 +63,20 @@ AB_CONFIGS: dict[str, tuple[str, dict[tuple[str, str], object]]] = {
     "tiny_setdiff_cmap_bias_lowest_lpips2.toml": ("tiny_setdiff", {}),
     "tiny_setdiff_lpips2.toml": (PLAIN, {("train", "lpips_weight"): 2.0}),
     "tiny_setdiff_masked_copy.toml": (PLAIN, {("train", "masked_copy_fraction"): 0.4}),
+    # issue 55's speed options (benchmarks/speed_options.sh): fine-tunes with restricted level-0 attention
+    **{
+        f"{teacher}_{attention}0.toml": (
+            "tiny_setdiff",
+            {**FINE_TUNE, ("model", "set_attention"): [attention], ("train", "init_from"): teacher},
+        )
+        for teacher in ("tiny_setdiff", "tiny_setdiff_sparse")
+        for attention in ("view", "knn")
+    },
+    "tiny_setdiff_student_view0.toml": ("tiny_setdiff_student", {("model", "set_attention"): ["view"]}),
+    "tiny_setdiff_sparse_student_view0.toml": (
+        "tiny_setdiff_sparse_student",
+        {("model", "set_attention"): ["view"]},
+    ),
 }
 AB_FOLDER = Path(__file__).parents[2] / "benchmarks" / "configs"
 
