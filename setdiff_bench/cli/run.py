@@ -33,6 +33,7 @@ from pathlib import Path
 
 from setdiff_bench.cli import add_device_argument, add_option_argument, add_progress_argument
 from setdiff_bench.cli.declared import declared_field_default, declared_literal
+from setdiff_bench.models.setdiff.packaged import SPEEDS
 
 #: Where the run's settings are declared (read from source: ``--help`` imports no torch).
 RUN_SETTINGS_MODULE = "setdiff_bench.evaluation.run_settings"
@@ -76,6 +77,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="the run's display name (default: the method's name): recorded in the manifest, shown by "
         "leaderboard, compare and report instead of the method, so that several precomputed methods share "
         "one table; letters, digits, _ . + -",
+    )
+    parser.add_argument(
+        "--speed",
+        choices=SPEEDS,
+        default=None,
+        help="setdiff/difix speed preset: paper (the checkpoint as it is) or fast (a shipped SetDiff's "
+        "one-pass student; quality cost in docs/performance.md); same as -o speed=NAME",
     )
     add_option_argument(parser, "method option, value parsed as JSON when valid (e.g. -o tolerance=0.05)")
     parser.add_argument(
@@ -139,6 +147,10 @@ def run(args: argparse.Namespace) -> int:
     shard = Shard.parse(args.shard)
     device = resolve_device(args.device)
     options = dict(parse_option(text) for text in args.option)
+    if args.speed is not None:
+        if "speed" in options:
+            raise UsageError("speed given twice (flag and -o)", "--option")
+        options["speed"] = args.speed
     for key, value in (("checkpoint", args.checkpoint), ("source", args.source)):
         if value is not None:
             if key in options:

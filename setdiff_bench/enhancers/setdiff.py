@@ -21,15 +21,41 @@ from setdiff_bench.enhancers.padding import crop, pad_packet, padded_size
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.atomic import sha256_file
 from setdiff_bench.models.setdiff import inference  # module attribute: looked up per call (tests replace it)
-from setdiff_bench.models.setdiff.checkpoint import load_model, resolve_checkpoint
+from setdiff_bench.models.setdiff.checkpoint import load_model, read_config, resolve_checkpoint
 from setdiff_bench.models.setdiff.config import check_guidance_scale
 from setdiff_bench.models.setdiff.domain import DataDomain, checkpoint_domain, domain_mismatch
 from setdiff_bench.models.setdiff.files import CONFIG_FILE, MANIFEST_FILE, WEIGHTS_FILE
 from setdiff_bench.models.setdiff.memory import inference_bytes
+from setdiff_bench.models.setdiff.packaged import SPEEDS, one_pass_student
 from setdiff_bench.runtime.devices import resolve_device
 from setdiff_bench.types import Packet
 
 DTYPES = {"float32": torch.float32, "bfloat16": torch.bfloat16, "float16": torch.float16}
+
+
+def speed_checkpoint(method: str, checkpoint: str | None, speed: str | None) -> str | None:
+    """The checkpoint that ``speed`` runs for ``checkpoint`` (unchanged for ``paper`` or ``None``).
+
+    Raises:
+        UsageError: an unknown preset, or ``fast`` for a two-pass checkpoint that has no shipped student.
+    """
+    if speed is None or speed == "paper" or not checkpoint:
+        if speed is not None and speed not in SPEEDS:
+            raise UsageError(f"speed must be one of {', '.join(SPEEDS)}, got {speed!r}", "--speed")
+        return checkpoint
+    if speed not in SPEEDS:
+        raise UsageError(f"speed must be one of {', '.join(SPEEDS)}, got {speed!r}", "--speed")
+    config = read_config(resolve_checkpoint(checkpoint))
+    if method != "setdiff" or not config.model.uses_cfg or config.model.guidance_scale == 1.0:
+        return checkpoint  # one UNet pass already
+    student = one_pass_student(checkpoint)
+    if student is None:
+        raise UsageError(
+            f"--speed fast runs a shipped SetDiff's one-pass student, and none ships for {checkpoint!r}: "
+            "train one with [train] distill_from (docs/model.md) and pass it as --checkpoint",
+            "--speed",
+        )
+    return student
 
 
 class ModelEnhancer:
@@ -158,10 +184,12 @@ def load_enhancer(
     sets_per_call: int | None = None,
     max_references: int | None = None,
     targets_per_set: int | None = None,
+    speed: str | None = None,
 ) -> ModelEnhancer:
     """Load ``checkpoint`` (a checkpoint folder or a training output folder) for ``method``.
 
     Args:
+        speed: a preset of :data:`SPEEDS` (``fast``: the checkpoint's shipped one-pass student).
         device: ``cuda``/``cpu``/...; default CUDA when available.
         dtype: ``float32``, ``bfloat16`` or ``float16``; default bfloat16 on CUDA, float32 elsewhere.
         max_references, targets_per_set: inference set sizes (default: the checkpoint config's).
@@ -190,7 +218,7 @@ def load_enhancer(
         guidance_scale = check_guidance_scale(guidance_scale, "-o guidance_scale")
     if dtype not in DTYPES:
         raise UsageError(f"dtype must be one of {', '.join(DTYPES)}, got {dtype!r}", "--dtype")
-    folder = resolve_checkpoint(checkpoint)
+    folder = resolve_checkpoint(speed_checkpoint(method, checkpoint, speed))
     model, config = load_model(folder, method=method, device=device, dtype=DTYPES[dtype])
     return ModelEnhancer(
         method,
@@ -204,7 +232,7 @@ def load_enhancer(
     )
 
 
-def fingerprint(checkpoint: str | None = None, **_: Any) -> dict[str, str]:
+def fingerprint(checkpoint: str | None = None, speed: str | None = None, **_: Any) -> dict[str, str]:
     """``{file: SHA-256}`` of the weights and config that ``checkpoint`` resolves to (empty without one: the
     factory then refuses with its own message).  A training folder resolves to its newest checkpoint, so a
     run resumed after more training is refused, as its results would mix two models.
@@ -214,7 +242,7 @@ def fingerprint(checkpoint: str | None = None, **_: Any) -> dict[str, str]:
     """
     if not checkpoint:
         return {}
-    folder = resolve_checkpoint(checkpoint)
+    folder = resolve_checkpoint(speed_checkpoint("setdiff", checkpoint, speed))
     return {name: sha256_file(folder / name) for name in (WEIGHTS_FILE, CONFIG_FILE)}
 
 

@@ -87,6 +87,23 @@ def packaged_names(kind: str) -> list[str]:
     return [name for name, model in packaged_models().items() if model.kind == kind]
 
 
+#: Speed presets of the shipped enhancers (``-o speed=NAME``, ``run --speed NAME``): ``paper`` runs the
+#: checkpoint as it is (SetDiff: geometry CFG, two UNet branches); ``fast`` runs the shipped one-pass student
+#: of a shipped SetDiff instead (one UNet pass; its quality against the teacher: docs/performance.md).  A
+#: checkpoint that already runs one pass (a student, DiFix) is the same under both.
+SPEEDS = ("paper", "fast")
+
+
+def one_pass_student(teacher: str) -> str | None:
+    """The name of the shipped guidance-distilled student of the shipped model ``teacher`` (the enhancer whose
+    manifest's ``distillation.teacher`` is ``teacher``), or ``None`` when none ships."""
+    for name, model in packaged_models().items():
+        record = model.manifest.get("distillation")
+        if model.kind == "enhancer" and isinstance(record, dict) and record.get("teacher") == teacher:
+            return name
+    return None
+
+
 def read_json(path: Path) -> dict[str, Any]:
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
