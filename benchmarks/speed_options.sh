@@ -33,17 +33,21 @@ case $benchmark in
     sparse) teacher=tiny_setdiff_sparse ;;
     *) echo "speed_options.sh: BENCHMARK must be driving or sparse, got '$benchmark'" >&2; exit 2 ;;
 esac
-score() {  # score NAME RUN_OPTIONS...: run on the test split, then compare with the teacher
+run_test() {  # run_test NAME RUN_OPTIONS...: enhance and score the test split
     local name=$1
     shift
     $bench run "$@" --packets "$packets" --split test --out "$work/runs/$name" --name "$name" \
         --metrics psnr,ssim,lpips --warp off --no-progress
-    if [[ $name != teacher ]]; then
-        $bench compare "$work/runs/$name" "$work/runs/teacher" --out "$work/compare" --metrics psnr,ssim,lpips
-    fi
+}
+score() {  # score NAME RUN_OPTIONS...: run_test, then compare with the teacher (scored once, under a lock)
+    run_test "$@"
+    until mkdir "$work/teacher.lock" 2>/dev/null; do sleep 10; done
+    [[ -f $work/runs/teacher/metrics.parquet ]] || run_test teacher --method setdiff --checkpoint "$teacher" \
+        || { rmdir "$work/teacher.lock"; exit 1; }
+    rmdir "$work/teacher.lock"
+    $bench compare "$work/runs/$1" "$work/runs/teacher" --out "$work/compare" --metrics psnr,ssim,lpips
 }
 mkdir -p "$work"
-[[ -f $work/runs/teacher/metrics.parquet ]] || score teacher --method setdiff --checkpoint "$teacher"
 for option in "${options[@]}"; do
     case $option in
         student) config=${teacher}_student ;;
