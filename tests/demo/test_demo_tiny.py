@@ -51,6 +51,11 @@ TIMED_OR_LOCAL = {
 }
 
 
+# Slow: a second --train demo.  Each stage's determinism has a faster test: fits across instruction sets and
+# threads (tests/fit/test_portable_fit.py), packets and runs killed and resumed byte-identical
+# (tests/reliability/test_crash_resume.py), training resumed exactly (tests/models/test_train.py), and the
+# documented numbers recomputed from their commands (tests/cli/test_documented_numbers.py).
+@pytest.mark.slow
 def test_same_command_gives_byte_identical_results(demo_out: Path, second_demo_out: Path) -> None:
     """Scenes, fits, packets, checkpoints, enhanced images and leaderboards are byte-identical between two
     runs of the same command (another OMP_NUM_THREADS, another moment's load); per-target metrics equal

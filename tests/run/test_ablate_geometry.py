@@ -9,6 +9,7 @@ import json
 from pathlib import Path
 
 import pandas as pd
+import pytest
 
 from setdiff_bench.cli.main import main
 from setdiff_bench.io.run_layout import METRICS_FILE
@@ -19,7 +20,8 @@ from tests.models.setdiff_fixtures import write_store
 METRICS = ("psnr", "ssim", "lpips")
 
 
-def test_two_variants_are_trained_run_and_tabulated(tmp_path: Path) -> None:
+def ablate_two_variants(tmp_path: Path) -> tuple[list[str], Path, Path]:
+    """``ablate geometry --variants both,none`` on a tiny store, checked; returns ``(argv, out, work)``."""
     write_store(tmp_path / "packets")
     config = tmp_path / "tiny.toml"
     config.write_text(CONFIG.replace("checkpoint_every = 2", "checkpoint_every = 1"))
@@ -47,9 +49,18 @@ def test_two_variants_are_trained_run_and_tabulated(tmp_path: Path) -> None:
     assert "- PSNR: Both vs None " in markdown
     assert "--variants both,none" in markdown
     assert "| Both |" in markdown and "| None |" in markdown and "| Coordinate maps |" not in markdown
+    return argv, out, work
 
-    # again, each variant as the mean of its two newest checkpoints (steps 1 and 2) at CFG scale 1: the
-    # trainings are done, so only the export and run stages run; the cells are those runs' pooled means
+
+def test_two_variants_are_trained_run_and_tabulated(tmp_path: Path) -> None:
+    ablate_two_variants(tmp_path)
+
+
+@pytest.mark.slow  # the trainings again, then their averages (averaged export: tests/models/test_packaged.py)
+def test_averaged_variants_are_run_at_the_given_scale(tmp_path: Path) -> None:
+    """Each variant as the mean of its two newest checkpoints (steps 1 and 2) at CFG scale 1: the trainings
+    are done, so only the export and run stages run; the cells are those runs' pooled means."""
+    argv, out, work = ablate_two_variants(tmp_path)
     assert main([*argv, "--average", "2", "--guidance-scale", "1"]) == 0
     table = pd.read_parquet(out / "ablation_geometry.parquet").set_index("variant")
     for variant in ("none", "both"):

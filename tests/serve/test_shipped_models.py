@@ -73,7 +73,18 @@ def test_stream_session_with_each_shipped_model(name: str, method: str, tmp_path
             assert np.array_equal(quantised[position], expected[tick, sensor]), (tick, sensor)
 
 
-@pytest.mark.parametrize(("name", "method"), SHIPPED_ENHANCERS)
+#: The real server's path is the same for every shipped model: the default suite serves the driving SetDiff
+#: and DiFix; the others are ``slow`` (each is still streamed above, and served in the slow suite).
+SERVED_BY_DEFAULT = {"tiny_setdiff", "tiny_difix"}
+
+
+@pytest.mark.parametrize(
+    ("name", "method"),
+    [
+        pytest.param(name, method, marks=() if name in SERVED_BY_DEFAULT else pytest.mark.slow)
+        for name, method in SHIPPED_ENHANCERS
+    ],
+)
 def test_serve_each_shipped_model_with_a_real_server(name: str, method: str, tmp_path: Path) -> None:
     """``serve --checkpoint NAME``: a client drives 4 ticks (byte-equal to ``run``), then the example replays
     the same ticks from a packet store (within one level: C-maps take a float64 trip to the world frame)."""
