@@ -118,7 +118,7 @@ def resample(
     return cv2.resize(np.ascontiguousarray(window), (out_w, out_h), interpolation=interpolation)
 
 
-def _capture(view: ViewJob, resolution: tuple[int, int]) -> np.ndarray:
+def capture_image(view: ViewJob, resolution: tuple[int, int]) -> np.ndarray:
     """The capture of ``view`` at the working resolution, ``(H, W, 3)`` float32 in [0, 1]."""
     assert view.image_path is not None, "a novel-trajectory view has no capture"
     image = resample(read_rgb(view.image_path), view.crop, resolution)
@@ -175,10 +175,10 @@ def build_packet(job: PacketJob, root: Path, backend: str, device: str) -> JobSt
                 camera_world=view.camera,
                 image=to_numpy_hwc(rgb[i - len(job.references)])
                 if is_target
-                else _capture(view, job.resolution),
+                else capture_image(view, job.resolution),
                 cmap=to_numpy_hwc(normalised.cmaps[i]),
                 alpha=alpha[i, 0].numpy(),
-                gt=_capture(view, job.resolution) if is_target and view.image_path is not None else None,
+                gt=capture_image(view, job.resolution) if is_target and view.image_path is not None else None,
                 mask=_mask(view, job.resolution) if is_target and view.image_path is not None else None,
                 overlap_score=view.overlap_score,
             )

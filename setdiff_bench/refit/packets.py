@@ -14,7 +14,6 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 
-import numpy as np
 import torch
 
 from setdiff_bench.cameras import Camera
@@ -22,12 +21,11 @@ from setdiff_bench.evaluation.scoring import quantize
 from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.gaussians.render import render
 from setdiff_bench.geometry import normalize_packet
-from setdiff_bench.io.images import read_rgb, to_tensor_chw
+from setdiff_bench.io.images import to_tensor_chw
 from setdiff_bench.packets.jobs import PacketJob
-from setdiff_bench.packets.worker import resample
+from setdiff_bench.packets.worker import capture_image
 from setdiff_bench.packets.working_view import ViewJob
 from setdiff_bench.types import Packet, ViewSet
-from setdiff_bench.undistort import is_distorted, undistort_image
 
 
 def target_view(view: ViewJob) -> ViewJob:
@@ -46,10 +44,7 @@ class ReferenceCaptures:
         if view.frame not in self._images:
             if view.image_path is None:
                 raise ValueError(f"reference {view.frame!r} has no capture")
-            image = resample(read_rgb(view.image_path), view.crop, self.resolution)
-            if is_distorted(view.camera):  # the renderer draws the pinhole camera: resample the capture to it
-                image = undistort_image(image, view.camera)[0]
-            self._images[view.frame] = to_tensor_chw(np.clip(image, 0.0, 1.0).astype(np.float32))
+            self._images[view.frame] = to_tensor_chw(capture_image(view, self.resolution))
         return self._images[view.frame]
 
 

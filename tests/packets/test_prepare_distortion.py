@@ -8,7 +8,7 @@ import numpy as np
 
 from setdiff_bench.cameras import Camera, Distortion
 from setdiff_bench.packets.plan import Crop, ViewJob
-from setdiff_bench.packets.worker import _capture, _mask
+from setdiff_bench.packets.worker import _mask, capture_image
 
 WIDTH, HEIGHT = 160, 120
 K = np.array([[100.0, 0.0, 80.0], [0.0, 100.0, 60.0], [0.0, 0.0, 1.0]])
@@ -39,7 +39,7 @@ def test_capture_of_a_distorted_camera_is_undistorted(tmp_path):
     dot = np.exp(-((jj - u_d) ** 2 + (ii - v_d) ** 2) / 4.0)
     cv2.imwrite(str(tmp_path / "f.png"), np.rint(np.repeat(dot[..., None], 3, 2) * 255).astype(np.uint8))
     camera = Camera(K, np.eye(4), WIDTH, HEIGHT, LENS)
-    image = _capture(_job(tmp_path / "f.png", camera), (HEIGHT, WIDTH))
+    image = capture_image(_job(tmp_path / "f.png", camera), (HEIGHT, WIDTH))
     weight = image[..., 0].astype(np.float64)
     u, v = (weight * jj).sum() / weight.sum(), (weight * ii).sum() / weight.sum()
     u_p, v_p = K[0, 0] * xn + K[0, 2], K[1, 1] * yn + K[1, 2]  # where the pinhole renderer puts the point
