@@ -5,6 +5,7 @@
 #                 instead of the teacher's two CFG branches);
 #   view0         the teacher re-trained with per-view set attention at level 0 (benchmarks/configs/<teacher>_view0);
 #   knn0          the same with the 16 nearest reference tokens in 3D (<teacher>_knn0);
+#   finetune      the control of view0 / knn0: the same fine-tune with full set attention (<teacher>_finetune);
 #   student_view0 the student with per-view level-0 attention (both options: <teacher>_student_view0);
 #   one_pass      the teacher itself run in one pass (guidance 1): what the student is for.
 # Each is trained from the shipped teacher (students: distilled; view0 / knn0: fine-tuned on the ground truth,
@@ -24,7 +25,7 @@ packets=$2
 work=$3
 shift 3
 options=("$@")
-[[ ${#options[@]} -eq 0 ]] && options=(student view0 knn0 student_view0 one_pass)
+[[ ${#options[@]} -eq 0 ]] && options=(student view0 knn0 finetune student_view0 one_pass)
 export SETDIFF_THREADS=${SETDIFF_THREADS:-1}
 bench="python3 -m setdiff_bench"
 here=$(dirname "$0")
@@ -51,7 +52,7 @@ mkdir -p "$work"
 for option in "${options[@]}"; do
     case $option in
         student) config=${teacher}_student ;;
-        view0 | knn0 | student_view0) config=$here/configs/${teacher}_$option.toml ;;
+        view0 | knn0 | finetune | student_view0) config=$here/configs/${teacher}_$option.toml ;;
         one_pass)
             score one_pass --method setdiff --checkpoint "$teacher" -o guidance_scale=1
             continue

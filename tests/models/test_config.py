@@ -72,6 +72,10 @@ AB_CONFIGS: dict[str, tuple[str, dict[tuple[str, str], object]]] = {
         for teacher in ("tiny_setdiff", "tiny_setdiff_sparse")
         for attention in ("view", "knn")
     },
+    **{
+        f"{teacher}_finetune.toml": ("tiny_setdiff", {**FINE_TUNE, ("train", "init_from"): teacher})
+        for teacher in ("tiny_setdiff", "tiny_setdiff_sparse")
+    },
     "tiny_setdiff_student_view0.toml": ("tiny_setdiff_student", {("model", "set_attention"): ["view"]}),
     "tiny_setdiff_sparse_student_view0.toml": (
         "tiny_setdiff_sparse_student",
