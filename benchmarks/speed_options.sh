@@ -63,3 +63,9 @@ for option in "${options[@]}"; do
     $bench weights export "$work/ckpt/$option" --name "${teacher}_$option" --to "$work/weights"
     score "$option" --method setdiff --checkpoint "$work/weights/${teacher}_$option"
 done
+# the restricted fine-tunes against the control fine-tune: what the restriction alone costs
+for option in view0 knn0; do
+    if [[ -f $work/runs/$option/metrics.parquet && -f $work/runs/finetune/metrics.parquet ]]; then
+        $bench compare "$work/runs/$option" "$work/runs/finetune" --out "$work/compare" --metrics psnr,ssim,lpips
+    fi
+done

@@ -1,7 +1,8 @@
 """The quality table of SetDiff's speed options (issue 55) from ``benchmarks/speed_options.sh``'s comparisons.
 
 Reads ``WORK/compare/compare_<option>_vs_teacher.parquet`` of each benchmark (``setdiff-bench compare``'s
-paired gains over the shipped teacher, intervals resampled by scene) and writes one JSON with, per benchmark
+paired gains over the shipped teacher, intervals resampled by scene; for the restricted-attention fine-tunes
+also ``..._vs_finetune``, their gains over the full-attention fine-tune of the same recipe) and writes one JSON with, per benchmark
 and option, the gain in PSNR / SSIM / LPIPS (positive = the option better) over every test target and over
 the benchmark's verdict group (driving: ``lane+2``, sparse: ``n3``), with its 95 % interval, and prints the
 Markdown table of docs/performance.md.
@@ -38,6 +39,8 @@ OPTIONS = {
     "student_view0": "student with per-view level 0",
 }
 TEACHERS = {"driving": "tiny_setdiff", "sparse": "tiny_setdiff_sparse"}
+#: Options also compared with the full-attention fine-tune (``finetune``): the restriction's own cost.
+RESTRICTED = ("view0", "knn0")
 
 
 def gains(table: pd.DataFrame, level: str, key: str) -> dict[str, Any]:
@@ -85,10 +88,13 @@ def main() -> None:
         benchmark, folder = spec.split("=", 1)
         group = DEMO_BENCHMARKS[benchmark].verdict_group
         entries = {}
-        for option, words in OPTIONS.items():
-            path = Path(folder) / "compare" / f"compare_{option}_vs_teacher.parquet"
+        rows = [(option, "teacher", words) for option, words in OPTIONS.items()]
+        rows += [(option, "finetune", f"{OPTIONS[option]}, against the control") for option in RESTRICTED]
+        for option, reference, words in rows:
+            path = Path(folder) / "compare" / f"compare_{option}_vs_{reference}.parquet"
             if not path.is_file():
                 continue
+            option = option if reference == "teacher" else f"{option}_vs_finetune"
             table = pd.read_parquet(path)
             entries[option] = {
                 "what": words,
