@@ -14,7 +14,9 @@ of N references + M targets with geometry CFG.  Three parts, each written to the
     ``cfg1`` (one UNet pass: what a guidance-distilled student costs), ``set_levels_lowest`` (set
     attention only in the lowest-resolution level and the mid block, per-view attention elsewhere),
     ``cached_references`` (reference latents reused: only the M targets are encoded) and their
-    combination.  Only speed is measured here; an option's quality cost needs trained models.
+    combination.  Only speed is measured here; an option's quality cost needs trained models.  The rows of
+    the speed presets of ``run --speed`` (``paper``, ``fast``) are repeated under ``presets_eager`` and printed
+    with frames/s.
 ``compiled``
     ``torch.compile`` (inductor, default mode) of the UNet and the VAE walks for the paper configuration
     and for the combination, and DiFix (1 reference + 1 target per set, the M pairs batched) eager and
@@ -46,9 +48,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.common import add_device_and_size, machine, time_call, write_result
 from benchmarks.enhance import apply_step, build, inputs, stage_times
 from setdiff_bench.models.setdiff.model import SetDiffModel
+from setdiff_bench.models.setdiff.packaged import SPEEDS
 from setdiff_bench.models.setdiff.set_mixer import mixer_level, per_view_processor_class
 
 PARTS = ("profile", "options", "compiled")
+#: The options row each speed preset of ``run --speed`` runs (``fast``: the one-pass student, whose cost is
+#: one conditional UNet pass; its quality: docs/performance.md).
+PRESET_ROWS = {
+    "paper": "paper (CFG 2 batched, set attention at every level)",
+    "fast": "cfg1 (one UNet pass, as a guidance-distilled student)",
+}
+assert set(PRESET_ROWS) == set(SPEEDS)
 
 
 class BlockTimer:
@@ -232,8 +242,8 @@ def options(
         "mid",
     }  # the last level with attention, and the mid block
     cases: dict[str, tuple[float, set[str] | None, bool]] = {
-        "paper (CFG 2 batched, set attention at every level)": (guidance, None, False),
-        "cfg1 (one UNet pass, as a guidance-distilled student)": (1.0, None, False),
+        PRESET_ROWS["paper"]: (guidance, None, False),
+        PRESET_ROWS["fast"]: (1.0, None, False),
         "set_levels_lowest (set attention at " + "+".join(sorted(lowest)) + " only)": (
             guidance,
             lowest,
@@ -330,6 +340,12 @@ def main() -> None:
     if "options" in parts:
         print("options (eager):", flush=True)
         payload["options_eager"] = options(model, batch, args.guidance, cuda=cuda, repeats=repeats, warmup=1)
+        payload["presets_eager"] = {
+            preset: {"row": row, **payload["options_eager"][row]} for preset, row in PRESET_ROWS.items()
+        }
+        for preset, row in payload["presets_eager"].items():
+            ms = row["total_ms_per_frame"]
+            print(f"  preset {preset:<10} {ms:8.1f} ms/frame ({1000.0 / ms:.1f} frames/s)", flush=True)
         save()
     if "compiled" in parts and cuda:
         print("compiled (inductor, default mode):", flush=True)
