@@ -61,7 +61,6 @@ def twin_packet(
     first = rows.iloc[0]
     if not np.isclose(normalised.scale, float(first["scale"]), rtol=1e-9):
         raise RuntimeError(f"{packet_id}: normalisation scale {normalised.scale} != stored {first['scale']}")
-    targets = rows[rows["role"] == "target"]
     has_truth = store.has_ground_truth(packet_id)
     truth, masks = (
         store.load_ground_truth(packet_id, [int(i) for i in np.flatnonzero(has_truth)])
@@ -97,7 +96,6 @@ def twin_packet(
         recipe=str(first["recipe"]),
         cmap_half=False,  # float32 EXRs whatever the source's: the true C-maps at full precision
     )
-    assert len(targets) == len(contents) - references
     write_packet(out, header, contents[:references], contents[references:])
 
 

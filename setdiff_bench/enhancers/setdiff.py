@@ -39,14 +39,11 @@ def speed_checkpoint(method: str, checkpoint: str | None, speed: str | None) -> 
     Raises:
         UsageError: an unknown preset, or ``fast`` for a two-pass checkpoint that has no shipped student.
     """
-    if speed is None or speed == "paper" or not checkpoint:
-        if speed is not None and speed not in SPEEDS:
-            raise UsageError(f"speed must be one of {', '.join(SPEEDS)}, got {speed!r}", "--speed")
-        return checkpoint
-    if speed not in SPEEDS:
+    if speed is not None and speed not in SPEEDS:
         raise UsageError(f"speed must be one of {', '.join(SPEEDS)}, got {speed!r}", "--speed")
-    config = read_config(resolve_checkpoint(checkpoint))
-    if method != "setdiff" or not config.model.uses_cfg or config.model.guidance_scale == 1.0:
+    if speed != "fast" or not checkpoint or method != "setdiff":
+        return checkpoint
+    if not read_config(resolve_checkpoint(checkpoint)).model.uses_cfg:
         return checkpoint  # one UNet pass already
     student = one_pass_student(checkpoint)
     if student is None:
