@@ -5,13 +5,18 @@ not depend on the weights) through the toolkit's own training step (``models.set
 bf16 mixed precision on CUDA, AdamW, gradient clipping, latent + L2 + SSIM + LPIPS-VGG losses on the
 decoded targets, geometry dropout) on one synthetic 8-view packet at 576×1024 (4 references + 4 targets;
 the packet of ``benchmarks/memory.py``).  It reports the median seconds per optimiser step after warm-up
-and the peak GPU memory, with gradient checkpointing on (the packaged config) and off.
+and the peak GPU memory, with gradient checkpointing on (the packaged config) and off, for each objective:
+``ground_truth`` (the paper's) and ``student`` (issue 55's guidance distillation: a one-pass student, guidance 1
+and no geometry dropout, whose loss targets are a frozen teacher's CFG-2 outputs, computed in the same step; the
+teacher is the same architecture with other random weights, saved as a checkpoint and loaded as ``[train]
+distill_from`` loads it).
 
 Without the converted LPIPS weights (``setdiff-bench weights lpips``), ``--random-lpips`` builds the loss
 network with random weights of the same shapes (speed and memory only; refused otherwise, as training is).
 
     python benchmarks/train_step.py [--device cuda|cpu] [--height H --width W] [--views V] [--steps N]
-                                    [--checkpointing on,off] [--random-lpips] [--out train_step_h100]
+                                    [--checkpointing on,off] [--objective ground_truth,student]
+                                    [--config sd_turbo_setdiff] [--random-lpips] [--out train_step_h100]
 """
 
 from __future__ import annotations
@@ -32,6 +37,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.common import add_device_and_size, machine, write_result
 from benchmarks.memory import plane_packet
+from setdiff_bench.models.setdiff.config import Config
 from setdiff_bench.models.setdiff.config_io import load_config
 from setdiff_bench.types import TrainingSample
 
@@ -56,6 +62,25 @@ def random_lpips_weights(folder: Path) -> None:
     torch.manual_seed(0)
     save_file({k: v.contiguous() for k, v in LPIPS("vgg").state_dict().items()}, str(path))
     os.environ[ENV_VAR] = str(path)
+
+
+def student_config(config: Config, folder: Path) -> Config:
+    """``config`` as a one-pass student (guidance 1, no geometry dropout) of a teacher of its architecture with
+    random weights (seed 1), saved to ``folder`` with the config's guidance scale (the paper's 2)."""
+    from setdiff_bench.models.setdiff.checkpoint import save_checkpoint
+    from setdiff_bench.models.setdiff.train import initial_model
+
+    teacher = initial_model(config.model, seed=1, load_pretrained=False)
+    save_checkpoint(folder, teacher, config)
+    del teacher
+    gc.collect()
+    return dataclasses.replace(
+        config,
+        model=dataclasses.replace(config.model, guidance_scale=1.0, geometry_dropout=0.0),
+        train=dataclasses.replace(
+            config.train, distill_from=str(folder), distill_guidance_scale=config.model.guidance_scale
+        ),
+    )
 
 
 def measure(config: Any, dataset: list[TrainingSample], steps: int, device: str) -> dict[str, Any]:
@@ -95,17 +120,22 @@ def main() -> None:
     parser.add_argument("--views", type=int, default=8, help="views per training packet (half references)")
     parser.add_argument("--steps", type=int, default=5, help="timed steps after two warm-up steps")
     parser.add_argument("--checkpointing", default="on,off", help="gradient checkpointing settings to run")
+    parser.add_argument("--objective", default="ground_truth", help="comma list of ground_truth, student")
+    parser.add_argument("--config", default="sd_turbo_setdiff", help="packaged config (a test's small one)")
     parser.add_argument("--random-lpips", action="store_true", help="random LPIPS-VGG weights if none found")
     parser.add_argument("--out", default="train_step")
     args = parser.parse_args()
     cuda = args.device == "cuda"
     height, width = args.height or (576 if cuda else 64), args.width or (1024 if cuda else 128)
-    base = load_config("sd_turbo_setdiff")
+    objectives = [o.strip() for o in args.objective.split(",") if o.strip()]
+    if set(objectives) - {"ground_truth", "student"}:
+        parser.error(f"unknown objectives {sorted(set(objectives) - {'ground_truth', 'student'})}")
+    base = load_config(args.config)
     train = dataclasses.replace(base.train, min_views=args.views, max_views=args.views, num_workers=0)
     payload: dict[str, Any] = {
         "benchmark": "train_step",
         "architecture": "sd-turbo (random weights)",
-        "config": "sd_turbo_setdiff",
+        "config": args.config,
         "height": height,
         "width": width,
         "views": args.views,
@@ -129,11 +159,20 @@ def main() -> None:
             payload["lpips_weights"] = "random (same shapes; speed and memory only)"
         refs = args.views // 2
         dataset = [sample(refs, args.views - refs, height, width)]
-        for setting in [s.strip() for s in args.checkpointing.split(",") if s.strip()]:
+        runs = [
+            (objective, setting)
+            for objective in objectives
+            for setting in [s.strip() for s in args.checkpointing.split(",") if s.strip()]
+        ]
+        for objective, setting in runs:
             config = dataclasses.replace(
                 base, train=dataclasses.replace(train, gradient_checkpointing=setting == "on")
             )
+            if objective == "student":
+                config = student_config(config, Path(scratch) / "teacher")
             label = f"gradient_checkpointing={setting}"
+            if objective != "ground_truth":
+                label = f"objective={objective}, {label}"
             try:
                 row = measure(config, dataset, args.steps, args.device)
             except torch.OutOfMemoryError as error:
@@ -142,7 +181,7 @@ def main() -> None:
                 torch.cuda.empty_cache()
             payload["runs"][label] = row
             print(f"{label}: {row}", flush=True)
-            path = write_result(args.out, payload)  # after each setting: a stopped run keeps what it measured
+            path = write_result(args.out, payload)  # after each run: a stopped run keeps what it measured
             print(f"wrote {path}")
 
 
