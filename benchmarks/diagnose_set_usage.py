@@ -7,6 +7,10 @@ change of the enhanced targets (``(M, 3, H, W)`` in [0, 1]) when
 * every set-mixer self-attention output is zeroed (the UNet keeps its convolutions);
 * the UNet's correction is dropped (the render's own latents are decoded),
 
+and, as controls against ground truth (PSNR of the targets in dB, masked as the benchmark scores them):
+the full packet, its references removed (N → 0), and its references replaced by those of the same-group
+packet of another test scene (``--other-scene``: what a model that fetches by geometry must lose),
+
 and, per set-mixer layer (one pass without guidance, the whole packet as one set):
 
 * ``own_view``: the share of attention mass a token puts on its own view (1/V = no preference);
@@ -20,17 +24,26 @@ and, per set-mixer layer (one pass without guidance, the whole packet as one set
   the tokens (1 = no preference for references);
 * ``correspondence_lift``: the mass a target token puts on the reference tokens that see the same
   surface (token surface points, from the C-maps, closer than one token footprint), over those
-  tokens' share of all tokens (1 = attention ignores geometry; the paper's mechanism needs ≫ 1).
+  tokens' share of all tokens (1 = attention ignores geometry; the paper's mechanism needs ≫ 1);
+  ``correspondence_lift_true``: the same with the surface points of ``--true-packets`` (the store's
+  true-geometry twin, ``benchmarks/true_geometry_store.py``): lift on true correspondences.
+
+The C-map bias is the model's own: absolute (``cmap_distance``) or relative to the query token's
+footprint (``cmap_relative``, on ray-snapped points).
 
 Usage (on the demo's packets and the shipped model)::
 
     python benchmarks/diagnose_set_usage.py --packets runs/demo/work/packets --checkpoint tiny_setdiff \
         --group lane+2 --packets-max 2 --out benchmarks/results/set_usage_tiny_setdiff_step2250_lane2.json
+
+    python benchmarks/diagnose_set_usage.py --packets runs/sparse/packets --checkpoint CKPT --group n3 \
+        --packets-max 4 --other-scene --true-packets runs/sparse/packets_true --out set_usage.json
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import sys
@@ -43,6 +56,7 @@ import torch
 import torch.nn.functional as F
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from setdiff_bench.metrics.psnr import psnr
 from setdiff_bench.models.setdiff import set_mixer
 from setdiff_bench.models.setdiff.checkpoint import load_model
 from setdiff_bench.models.setdiff.inference import enhance_packet
@@ -120,8 +134,33 @@ def token_points(points: torch.Tensor, tokens: int) -> tuple[torch.Tensor, torch
     return xyz.flatten(2).transpose(1, 2).reshape(-1, 3), valid.reshape(-1), footprint
 
 
+def correspondence(
+    target_rows: torch.Tensor, is_ref: torch.Tensor, points: torch.Tensor, tokens: int, total: int
+) -> dict[str, float]:
+    """Lift of the attention rows of target tokens ``(T_target, T)`` on the reference tokens whose surface
+    points ``(V, 4, H, W)`` lie within one token footprint of theirs (empty when no token has a match)."""
+    xyz, valid, footprint = token_points(points, tokens)
+    if total != xyz.shape[0] or not math.isfinite(footprint):
+        return {}
+    near = torch.cdist(xyz[~is_ref], xyz[is_ref]) < footprint
+    near &= valid[~is_ref][:, None] & valid[is_ref][None, :]
+    rows = near.any(-1)
+    if not rows.any():
+        return {}
+    mass = (target_rows[:, is_ref] * near).sum(-1)[rows]
+    chance = near.sum(-1)[rows].float() / total
+    return {
+        "correspondence_lift": float(mass.sum() / chance.sum()),
+        "corresponding_tokens": float(near.sum(-1)[rows].float().mean()),
+        "footprint": footprint,  # packet units: the "near" radius
+    }
+
+
 def attention_stats(
-    record: list[dict[str, float]], points: torch.Tensor, references: int
+    record: list[dict[str, float]],
+    points: torch.Tensor,
+    references: int,
+    true_points: torch.Tensor | None = None,
 ) -> Callable[[ProcessorCall], ProcessorCall]:
     """A processor that appends, per layer, the statistics listed in the module docstring."""
 
@@ -140,12 +179,13 @@ def attention_stats(
             content_logit_std = float(logits.float().std(dim=-1).mean())
             log_scale = getattr(attn, set_mixer.BIAS_PARAMETER, None)
             if kwargs.get("token_points") is not None and log_scale is not None:  # the C-map distance bias
-                bias_points, bias_valid = set_mixer.pool_token_points(kwargs["token_points"], tokens)
-                logits = logits + set_mixer.distance_bias(
-                    bias_points.reshape(sets, views * tokens, 3),
-                    bias_valid.reshape(sets, -1),
-                    log_scale.exp(),
-                )
+                geometry = set_mixer.pool_token_geometry(kwargs["token_points"], tokens).grouped(sets)
+                if getattr(self, "relative_bias", False):
+                    logits = logits + set_mixer.relative_distance_bias(geometry, log_scale.exp())
+                else:
+                    logits = logits + set_mixer.distance_bias(
+                        geometry.points, geometry.valid, log_scale.exp()
+                    )
             weights = torch.softmax(logits.float(), dim=-1).mean(dim=(0, 1))  # (T, T), over sets and heads
             total = views * tokens
             view_of = torch.arange(total) // tokens
@@ -163,17 +203,11 @@ def attention_stats(
             if references > 0 and target_rows.numel():
                 share = references / views
                 stats["reference_mass"] = float(target_rows[:, is_ref].sum(-1).mean() / share)
-                xyz, valid, footprint = token_points(points, tokens)
-                if views * tokens == xyz.shape[0] and math.isfinite(footprint):
-                    near = torch.cdist(xyz[~is_ref], xyz[is_ref]) < footprint
-                    near &= valid[~is_ref][:, None] & valid[is_ref][None, :]
-                    rows = near.any(-1)
-                    if rows.any():
-                        mass = (target_rows[:, is_ref] * near).sum(-1)[rows]
-                        chance = near.sum(-1)[rows].float() / total
-                        stats["correspondence_lift"] = float(mass.sum() / chance.sum())
-                        stats["corresponding_tokens"] = float(near.sum(-1)[rows].float().mean())
-                        stats["footprint"] = footprint  # packet units: the "near" radius
+                stats.update(correspondence(target_rows, is_ref, points, tokens, total))
+                if true_points is not None:
+                    true = correspondence(target_rows, is_ref, true_points, tokens, total)
+                    if "correspondence_lift" in true:
+                        stats["correspondence_lift_true"] = true["correspondence_lift"]
             record.append(stats)
             return original(self, attn, hidden_states, num_views=num_views, **kwargs)
 
@@ -195,6 +229,40 @@ def set_mixer_drift(model: Any, config: Any) -> dict[str, float]:
     return drift
 
 
+def mean_psnr(images: torch.Tensor, gt: torch.Tensor, masks: torch.Tensor) -> float:
+    """Mean over targets of the masked PSNR (dB) of ``(M, 3, H, W)`` images against their ground truth."""
+    return float(psnr(images.clamp(0, 1), gt, masks).mean())
+
+
+def scene_of(packet_id: str) -> str:
+    """``dataset__scene__group__index`` → ``scene``."""
+    return packet_id.split("__")[1]
+
+
+def spread_over_scenes(ids: list[str], count: int) -> list[str]:
+    """Up to ``count`` packets, taken from the scenes in turn (first packets first)."""
+    by_scene: dict[str, list[str]] = {}
+    for packet_id in ids:
+        by_scene.setdefault(scene_of(packet_id), []).append(packet_id)
+    chosen: list[str] = []
+    for rank in range(max((len(v) for v in by_scene.values()), default=0)):
+        chosen += [v[rank] for v in by_scene.values() if rank < len(v)]
+    return chosen[:count]
+
+
+def other_scene_packet(packet_id: str, ids: list[str]) -> str | None:
+    """The packet of the same group and index in the next other scene (cyclically), else its first."""
+    scenes = sorted({scene_of(i) for i in ids})
+    here = scene_of(packet_id)
+    at = scenes.index(here)
+    for scene in scenes[at + 1 :] + scenes[:at]:
+        candidates = [i for i in ids if scene_of(i) == scene]
+        same_index = [i for i in candidates if i.rsplit("__", 1)[-1] == packet_id.rsplit("__", 1)[-1]]
+        if same_index or candidates:
+            return (same_index or candidates)[0]
+    return None
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--packets", required=True, help="packet store")
@@ -203,13 +271,19 @@ def main() -> None:
     )
     parser.add_argument("--group", default="lane+2")
     parser.add_argument("--packets-max", type=int, default=2)
+    parser.add_argument("--true-packets", help="the store's true-geometry twin: lift on true correspondences")
+    parser.add_argument(
+        "--other-scene", action="store_true", help="control: references of another test scene's packet"
+    )
     parser.add_argument("--out", type=Path, help="also write the JSON here")
     args = parser.parse_args()
     torch.set_num_threads(1)
     store = PacketStore(args.packets)
     model, config = load_model(args.checkpoint)[:2]
     model = model.eval()
-    ids = [pid for pid in store.packet_ids("test") if f"__{args.group}__" in pid][: args.packets_max]
+    group_ids = [pid for pid in store.packet_ids("test") if f"__{args.group}__" in pid]
+    ids = spread_over_scenes(group_ids, args.packets_max)
+    twin = PacketStore(args.true_packets) if args.true_packets else None
     rows = []
     with torch.no_grad():
         for packet_id in ids:
@@ -220,6 +294,18 @@ def main() -> None:
                 "references": len(packet.references),
                 "targets": len(packet.targets),
             }
+            gt, masks = store.load_ground_truth(packet_id)
+            row["psnr_full"] = mean_psnr(full, gt, masks)
+            row["psnr_render"] = mean_psnr(packet.targets.images.float(), gt, masks)
+            row["psnr_no_references"] = mean_psnr(enhance_packet(model, packet, max_references=0), gt, masks)
+            if args.other_scene:
+                donor_id = other_scene_packet(packet_id, group_ids)
+                if donor_id is not None:
+                    swapped = dataclasses.replace(packet, references=store.load_packet(donor_id).references)
+                    other = enhance_packet(model, swapped)
+                    row["other_scene_references"] = donor_id
+                    row["psnr_other_scene_references"] = mean_psnr(other, gt, masks)
+                    row["mean_abs_change_other_scene_references"] = float((other - full).abs().mean())
             for refs in (0, 1, 3):
                 smaller = enhance_packet(model, packet, max_references=refs, targets_per_set=1)
                 row[f"mean_abs_change_{refs}+1"] = float((smaller - full).abs().mean())
@@ -235,7 +321,8 @@ def main() -> None:
                 model.to_x0 = original_to_x0  # type: ignore[method-assign]
             stats: list[dict[str, float]] = []
             points = surface_points(packet)
-            with patched_set_attention(attention_stats(stats, points, len(packet.references))):
+            true_points = surface_points(twin.load_packet(packet_id)) if twin is not None else None
+            with patched_set_attention(attention_stats(stats, points, len(packet.references), true_points)):
                 enhance_packet(
                     model,
                     packet,
@@ -251,6 +338,7 @@ def main() -> None:
             "checkpoint": args.checkpoint,
             "packets": str(args.packets),
             "group": args.group,
+            "true_packets": args.true_packets,
             "set_mixer_drift_from_init": set_mixer_drift(model, config),
             "rows": rows,
         },
