@@ -1,4 +1,4 @@
-"""Keep C libraries from printing a failure a second time on the process's stderr.
+"""Keep C libraries from printing a failure a second time on the process's stderr, or at all.
 
 libpng reports a corrupt or truncated PNG by printing ``libpng error: <what>`` straight to file
 descriptor 2, even though OpenImageIO also returns the same problem through ``geterror()``, which
@@ -7,6 +7,9 @@ single stderr line per error, so image opens and decodes run inside :func:`nativ
 file descriptor 2 is pointed at a temporary file for the duration, then restored, and every line the
 libraries wrote is written back except libpng's error lines (warnings and anything else pass
 through unchanged).  Python's own ``sys.stderr`` is flushed first and is unaffected.
+:func:`native_stderr_silenced` drops every line: FFmpeg's notes on a video container's codec tag
+(``reporting.video``) and grpc core's own log of a bind failure that the server reports in one line
+(``serve.server``).
 
 Done by hand because no maintained library exposes a hook for libpng's messages through
 OpenImageIO's Python bindings.  A lock serialises the redirection, so threads reading images at the
@@ -30,8 +33,9 @@ _LOCK = threading.RLock()
 
 
 @contextlib.contextmanager
-def native_stderr_filtered() -> Iterator[None]:
-    """Capture file descriptor 2 during the block; re-emit what was written minus libpng's error lines."""
+def native_stderr_filtered(dropped: tuple[str, ...] | None = DROPPED_PREFIXES) -> Iterator[None]:
+    """Capture file descriptor 2 during the block; re-emit what was written minus the lines that start with
+    one of ``dropped`` (default: libpng's error lines; ``None``: every line)."""
     with _LOCK:
         with contextlib.suppress(AttributeError, OSError, ValueError):
             sys.stderr.flush()
@@ -47,19 +51,27 @@ def native_stderr_filtered() -> Iterator[None]:
                     yield
                 finally:
                     os.dup2(saved, 2)
-                    _replay(capture)
+                    if dropped is not None:
+                        _replay(capture, dropped)
         finally:
             os.close(saved)
 
 
-def _replay(capture: IO[bytes]) -> None:
+@contextlib.contextmanager
+def native_stderr_silenced() -> Iterator[None]:
+    """Silence file descriptor 2 during the block (C code that logs what the caller reports itself)."""
+    with native_stderr_filtered(None):
+        yield
+
+
+def _replay(capture: IO[bytes], dropped: tuple[str, ...]) -> None:
     """Write the captured bytes back to descriptor 2, without the dropped lines."""
     try:
         capture.seek(0)
         text = capture.read().decode("utf-8", errors="replace")
     except OSError:
         return
-    kept = [line for line in text.splitlines(keepends=True) if not line.startswith(DROPPED_PREFIXES)]
+    kept = [line for line in text.splitlines(keepends=True) if not line.startswith(dropped)]
     if kept:
         with contextlib.suppress(OSError):
             os.write(2, "".join(kept).encode("utf-8", errors="replace"))

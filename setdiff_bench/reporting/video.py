@@ -15,10 +15,7 @@ Each video has a poster, ``<video name>.jpg``: its first frame, which a page sho
 
 from __future__ import annotations
 
-import contextlib
-import os
 import re
-import sys
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,6 +27,7 @@ import pandas as pd
 from setdiff_bench.errors import SetDiffBenchError
 from setdiff_bench.evaluation.run_settings import SEQUENCE_PROTOCOLS
 from setdiff_bench.io.atomic import atomic_path
+from setdiff_bench.io.native_stderr import native_stderr_silenced
 from setdiff_bench.loaders.common import natural_key
 from setdiff_bench.reporting.grids import compose
 from setdiff_bench.reporting.site_pictures import write_jpeg
@@ -107,20 +105,6 @@ def target_sequences(rows: pd.DataFrame) -> list[TargetSequence]:
     )
 
 
-@contextlib.contextmanager
-def _quiet_stderr() -> Iterator[None]:
-    """Silence file descriptor 2 (FFmpeg's notes on the container's codec tag are printed there by C code)."""
-    sys.stderr.flush()
-    saved = os.dup(2)
-    try:
-        with open(os.devnull, "w") as null:
-            os.dup2(null.fileno(), 2)
-        yield
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
-
-
 def _even(image: np.ndarray) -> np.ndarray:
     height, width = image.shape[:2]
     return np.pad(image, ((0, height % 2), (0, width % 2), (0, 0)), constant_values=255)
@@ -141,7 +125,7 @@ def write_video(path: str | Path, frames: Iterable[np.ndarray], fps: float = 4.0
     height, width = first.shape[:2]
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
-        with _quiet_stderr():
+        with native_stderr_silenced():
             writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*FOURCC), fps, (width, height))
         if not writer.isOpened():
             raise VideoError("this OpenCV build cannot write VP9/WebM video (no FFmpeg VP9 encoder)", path)

@@ -31,9 +31,8 @@ import os
 import signal
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from concurrent import futures
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -41,6 +40,7 @@ import grpc
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
 
 from setdiff_bench.errors import SetDiffBenchError
+from setdiff_bench.io.native_stderr import native_stderr_silenced
 from setdiff_bench.serve import enhancer_pb2 as pb
 from setdiff_bench.serve import enhancer_pb2_grpc as pb_grpc
 from setdiff_bench.serve.auth import UNAUTHENTICATED_PREFIX, TokenInterceptor
@@ -93,23 +93,6 @@ class RunningServer:
         self.reaper_stop.set()
         self.health.enter_graceful_shutdown()
         self.server.stop(grace).wait()
-
-
-@contextmanager
-def _quiet_stderr() -> Iterator[None]:
-    """Silence file descriptor 2 (grpc core logs a bind failure there itself; ours is the one line)."""
-    try:
-        saved = os.dup(2)
-    except OSError:  # no stderr at all
-        yield
-        return
-    try:
-        with open(os.devnull, "wb") as null:
-            os.dup2(null.fileno(), 2)
-        yield
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
 
 
 def _reap(service: EnhancerService, stop: threading.Event) -> None:
@@ -203,7 +186,7 @@ def bind(server: grpc.Server, settings: ServeSettings) -> int:
     :class:`SetDiffBenchError` naming the address when it cannot be bound."""
     address = f"{settings.host}:{settings.port}"
     try:
-        with _quiet_stderr():
+        with native_stderr_silenced():
             if settings.tls is None:
                 port = server.add_insecure_port(address)
             else:
