@@ -32,6 +32,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from setdiff_bench.errors import WeightsError
+from setdiff_bench.io.state_dicts import shapes_of, state_dict_problem
 
 INPUT_SIZE = 299
 FEATURES = 2048
@@ -264,29 +265,22 @@ def load_inception(file: str | Path, device: str | torch.device = "cpu") -> FIDI
         )
     state = _read_state_dict(path)
     model = FIDInceptionV3()
-    expected = model.state_dict()
-    optional = {key for key in expected if key.endswith("num_batches_tracked")}
-    missing = sorted(set(expected) - set(state) - optional)
-    if missing:
-        raise WeightsError(
-            f"not the FID Inception-v3 weights: {len(missing)} tensors missing (first {missing[0]!r})", path
-        )
-    unexpected = sorted(set(state) - set(expected))
-    if unexpected:
-        raise WeightsError(
-            f"not the FID Inception-v3 weights: unexpected tensor {unexpected[0]!r} "
-            f"({len(unexpected)} in all; an auxiliary classifier is not part of the FID network)",
-            path,
-        )
-    for key, tensor in state.items():
-        if tuple(tensor.shape) != tuple(expected[key].shape):
-            raise WeightsError(
-                f"tensor {key!r} has shape {tuple(tensor.shape)}, the FID Inception-v3 has "
-                f"{tuple(expected[key].shape)}",
-                path,
-            )
-        if tensor.is_floating_point() and not torch.isfinite(tensor).all():
-            raise WeightsError(f"tensor {key!r} contains NaN or infinite values", path)
+    problem = state_dict_problem(
+        shapes_of(model.state_dict()),
+        state,
+        optional=lambda key: key.endswith("num_batches_tracked"),
+        finite=True,
+    )
+    if problem is not None:
+        first = problem.names[0]
+        messages = {
+            "missing": f"not the FID Inception-v3 weights: {len(problem.names)} tensors missing (first {first!r})",
+            "unexpected": f"not the FID Inception-v3 weights: unexpected tensor {first!r} "
+            f"({len(problem.names)} in all; an auxiliary classifier is not part of the FID network)",
+            "shape": f"tensor {first!r} has shape {problem.found}, the FID Inception-v3 has {problem.expected}",
+            "non_finite": f"tensor {first!r} contains NaN or infinite values",
+        }
+        raise WeightsError(messages[problem.kind], path)
     model.load_state_dict(state, strict=False)
     return model.eval().to(device)
 

@@ -40,6 +40,7 @@ import torch
 
 from setdiff_bench.errors import WeightsError, key_mismatch
 from setdiff_bench.io.atomic import atomic_path, sha256_file
+from setdiff_bench.io.state_dicts import state_dict_problem
 from setdiff_bench.metrics.lpips_arch import LPIPS_VERSION, NETS, TRUNKS, canonical_net, expected_shapes
 
 ENV_VAR = "SETDIFF_LPIPS_WEIGHTS"
@@ -161,25 +162,18 @@ def jax_to_torch(arrays: dict[str, np.ndarray], net: str, source: str) -> dict[s
 def validate_state(state: dict[str, np.ndarray] | dict[str, torch.Tensor], net: str, source: str) -> None:
     """Raise :class:`WeightsError` unless ``state`` has exactly the names, shapes, float32 dtype and finite values
     of :func:`~setdiff_bench.metrics.lpips_arch.expected_shapes` for ``net``."""
-    shapes = expected_shapes(net)
-    missing = sorted(set(shapes) - set(state))
-    extra = sorted(set(state) - set(shapes))
-    if missing or extra:
-        raise WeightsError(
-            f"LPIPS {net} weights: missing tensors {missing[:3]}, unexpected tensors {extra[:3]}", source
-        )
-    for name, shape in shapes.items():
-        value = state[name]
-        if tuple(value.shape) != shape:
-            raise WeightsError(
-                f"LPIPS {net} tensor {name} has shape {tuple(value.shape)}, expected {shape}", source
-            )
-        dtype_ok = value.dtype == (torch.float32 if isinstance(value, torch.Tensor) else np.float32)
-        if not dtype_ok:
-            raise WeightsError(f"LPIPS {net} tensor {name} has dtype {value.dtype}, expected float32", source)
-        finite = torch.isfinite(value).all() if isinstance(value, torch.Tensor) else np.isfinite(value).all()
-        if not bool(finite):
-            raise WeightsError(f"LPIPS {net} tensor {name} has non-finite values", source)
+    problem = state_dict_problem(expected_shapes(net), state, float32=True, finite=True)
+    if problem is None:
+        return
+    name = problem.names[0]
+    messages = {
+        "missing": f"LPIPS {net} weights: missing tensors {list(problem.missing[:3])}, "
+        f"unexpected tensors {list(problem.unexpected[:3])}",
+        "shape": f"LPIPS {net} tensor {name} has shape {problem.found}, expected {problem.expected}",
+        "dtype": f"LPIPS {net} tensor {name} has dtype {problem.found}, expected float32",
+        "non_finite": f"LPIPS {net} tensor {name} has non-finite values",
+    }
+    raise WeightsError(messages["missing" if problem.kind == "unexpected" else problem.kind], source)
 
 
 # ---------------------------------------------------------------------------------------------------

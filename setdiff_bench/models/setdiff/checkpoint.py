@@ -26,6 +26,7 @@ import torch
 from setdiff_bench.errors import CheckpointError, UsageError, key_mismatch
 from setdiff_bench.io.atomic import new_file_mode, staged_folder, write_text_atomic
 from setdiff_bench.io.safetensors_header import sort_metadata
+from setdiff_bench.io.state_dicts import shapes_of, state_dict_problem
 from setdiff_bench.models.setdiff.config import Config, ModelConfig, config_from_dict
 from setdiff_bench.models.setdiff.files import (
     CHECKPOINTS_DIR,
@@ -169,16 +170,15 @@ def load_weights(
     if optional is not None:
         state = {k: v for k, v in state.items() if k in expected or not optional(k)}
         state |= {k: v for k, v in expected.items() if k not in state and optional(k)}
-    mismatch = key_mismatch(expected, state, examples=2)
-    if mismatch:
-        raise CheckpointError(f"weights do not match the model: {mismatch}", path)
-    for name, tensor in state.items():
-        if tuple(tensor.shape) != tuple(expected[name].shape):
-            raise CheckpointError(
-                f"weight {name} has shape {tuple(tensor.shape)}, the model expects "
-                f"{tuple(expected[name].shape)}",
-                path,
-            )
+    problem = state_dict_problem(shapes_of(expected), state)
+    if problem is not None and problem.kind == "shape":
+        raise CheckpointError(
+            f"weight {problem.names[0]} has shape {problem.found}, the model expects {problem.expected}", path
+        )
+    if problem is not None:
+        raise CheckpointError(
+            f"weights do not match the model: {key_mismatch(expected, state, examples=2)}", path
+        )
     model.load_state_dict(state, strict=True)
 
 
