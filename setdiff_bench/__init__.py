@@ -115,4 +115,5 @@ def __getattr__(name: str) -> Any:
 
 
 def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY))
+    """The documented API only (``docs/api.md``): not the helpers this module imports for itself."""
+    return sorted(__all__)
