@@ -13,11 +13,21 @@ Reference: ``docs/api.md``.
 
 from __future__ import annotations
 
+import os as _os
 from importlib import import_module
 from typing import TYPE_CHECKING, Any
 
 from setdiff_bench.errors import SetDiffBenchError, UsageError
 from setdiff_bench.version import __version__
+
+# pyproject installs the repository's ``loaders/`` and ``protocols/`` folders as ``setdiff_bench.loaders`` and
+# ``setdiff_bench.protocols``.  Run from a source checkout without an install (``PYTHONPATH=.``, a copy on a
+# machine with nothing installed), the package finds them beside itself.  Installed, it never looks there.
+_CHECKOUT = _os.path.dirname(_os.path.dirname(_os.path.abspath(__file__)))
+if _os.path.isfile(_os.path.join(_CHECKOUT, "pyproject.toml")) and _os.path.isfile(
+    _os.path.join(_CHECKOUT, "protocols", "__init__.py")
+):
+    __path__.append(_CHECKOUT)  # setdiff_bench.<name> not found in the package: <checkout>/<name>
 
 #: Public name → ``"module:attribute"`` it is loaded from on first use.
 _LAZY: dict[str, str] = {

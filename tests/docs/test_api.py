@@ -107,3 +107,20 @@ def test_a_wrong_output_shape_is_refused(tmp_path: Path) -> None:
 
     with pytest.raises(sb.EnhancerOutputError, match="expected"):
         sb.score_packet(Cropping(), store, store.packet_ids()[0])  # type: ignore[arg-type]
+
+
+def test_a_source_checkout_works_without_an_install() -> None:
+    """``PYTHONPATH=.`` on a machine where nothing is installed: the root's ``loaders/`` and ``protocols/`` load
+    as ``setdiff_bench.loaders`` / ``.protocols`` (simulated by dropping the editable install's finder)."""
+    code = (
+        "import sys; "
+        "sys.meta_path[:] = [f for f in sys.meta_path if 'editable' not in getattr(f, '__module__', '')]; "
+        f"sys.path.insert(0, {str(ROOT)!r}); "
+        "import setdiff_bench as sb, setdiff_bench.loaders as loaders, setdiff_bench.protocols as protocols; "
+        "print(protocols.__file__); print(loaders.__file__); print(sb.load_protocol('dl3dv').name)"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    protocols_file, loaders_file, name = result.stdout.split()
+    assert Path(protocols_file) == ROOT / "protocols" / "__init__.py"
+    assert Path(loaders_file) == ROOT / "loaders" / "__init__.py"
+    assert name == "dl3dv"
