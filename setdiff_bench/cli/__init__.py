@@ -6,12 +6,17 @@ A verb module defines ``VERB`` (its name), ``HELP`` (one line), ``add_arguments(
 Options that several verbs share are declared here, once, so that they are spelled, defaulted and
 explained alike: :func:`add_device_argument` (``--device``, default ``auto``),
 :func:`add_progress_argument` (``--no-progress``) and :func:`add_option_argument` (``-o KEY=VALUE``).
-Older spellings stay accepted, hidden from ``--help``, for one release.
+Older spellings stay accepted, hidden from ``--help``, for one release.  :func:`settings_from` turns
+parsed arguments into a verb's settings dataclass (fields read by their own names, the rest derived).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+from typing import Any, TypeVar
+
+SettingsT = TypeVar("SettingsT")
 
 DEVICES = "auto (cuda when available, else cpu), cpu, cuda or cuda:N"
 
@@ -35,3 +40,19 @@ def add_option_argument(
     """A repeatable ``KEY=VALUE`` flag (``-o/--option`` unless ``names`` says otherwise), collected as a list
     of strings (``args.option``) for :func:`setdiff_bench.cli.list.parse_option`; ``help`` explains it."""
     parser.add_argument(*names, action="append", default=[], metavar="KEY=VALUE", help=help)
+
+
+def settings_from(cls: type[SettingsT], args: argparse.Namespace, **derived: Any) -> SettingsT:
+    """``cls`` (a settings dataclass) with every field that ``derived`` does not give read from ``args`` by its own
+    name (the verb declares its flags with the fields' names as destinations).
+
+    Raises:
+        TypeError: a field is neither derived nor an argument (a verb out of step with its settings).
+    """
+    values = dict(derived)
+    for field in dataclasses.fields(cls):  # type: ignore[arg-type]
+        if field.name not in values:
+            if not hasattr(args, field.name):
+                raise TypeError(f"{cls.__name__}.{field.name}: neither derived nor a parsed argument")
+            values[field.name] = getattr(args, field.name)
+    return cls(**values)

@@ -37,7 +37,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from setdiff_bench.cli import add_device_argument, add_progress_argument
+from setdiff_bench.cli import add_device_argument, add_progress_argument, settings_from
 from setdiff_bench.cli.declared import (
     dataset_names,
     declared_field_default,
@@ -160,26 +160,15 @@ def run(args: argparse.Namespace) -> int:
         from setdiff_bench.cli.fit import fit_config
 
         config = fit_config(args.fit_preset, args.fit_iterations, seed=0)
-    settings = PrepareSettings(
-        protocol=args.protocol,
-        fits=args.fits,
-        fit=args.fit,
-        split=args.split,
-        scenes=args.scenes,
-        workers=args.workers,
+    settings = settings_from(
+        PrepareSettings,
+        args,
         shard=Shard.parse(args.shard),
-        backend=args.backend,
         device=resolve_device(args.device),
-        threads=args.threads,
-        cmap_precision=args.cmap_precision,
         loader_options=options,
         fit_iterations=DEFAULT_FIT_ITERATIONS if args.fit_iterations is None else args.fit_iterations,
         fit_config=config,
         progress=not args.no_progress,
-        groups=args.groups,
-        test_scenes=args.test_scenes,
-        trajectories=args.trajectories,
-        pairs=args.pairs,
     )
     summary = prepare(args.dataset, args.root, args.out, settings)
     print(summary.line())

@@ -31,7 +31,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from setdiff_bench.cli import add_device_argument, add_option_argument, add_progress_argument
+from setdiff_bench.cli import add_device_argument, add_option_argument, add_progress_argument, settings_from
 from setdiff_bench.cli.declared import declared_field_default, declared_literal
 from setdiff_bench.models.setdiff.packaged import SPEEDS
 
@@ -160,17 +160,15 @@ def run(args: argparse.Namespace) -> int:
             path = Path(value).expanduser()
             options[key] = str(path.resolve()) if path.exists() else value
     metrics = tuple(spec.name for spec in resolve_metrics(args.metrics))
-    settings = RunSettings(
-        method=args.method,
+    settings = settings_from(
+        RunSettings,
+        args,
         options=options,
         split=None if args.split == "all" else args.split,
         metrics=metrics,
-        warp=args.warp,
         flow_method=args.flow,
         device=device,
-        batch_size=args.batch_size,
         warp_cache=None if args.warp_cache == "none" else args.warp_cache,
-        name=args.name,
     )
     out = args.out or Path("results") / "runs" / Path(args.packets).resolve().name / settings.label
     inception = None

@@ -11,7 +11,7 @@ import math
 from pathlib import Path
 from typing import get_args
 
-from setdiff_bench.cli import add_device_argument
+from setdiff_bench.cli import add_device_argument, settings_from
 from setdiff_bench.models.setdiff.methods import Method
 from setdiff_bench.serve.sensorsim.settings import ROLES, SensorsimSettings
 from setdiff_bench.serve.settings import DEFAULT_HOST, SESSION_BYTES_PER_PIXEL, ServeSettings
@@ -211,22 +211,7 @@ def settings_from_arguments(args: argparse.Namespace) -> ServeSettings:
     tls = ServerTls.from_files(args.tls_cert, args.tls_key, args.tls_client_ca)
     token = token_source(args.token_file)
     check_bind(args.host, tls, token, args.insecure)
-    return ServeSettings(
-        host=args.host,
-        port=args.port,
-        workers=args.workers,
-        max_queue=args.max_queue,
-        max_sessions=args.max_sessions,
-        max_cameras=args.max_cameras,
-        grace=args.grace,
-        cache_reference_latents=args.cache_reference_latents,
-        session_idle_timeout=args.session_idle_timeout,
-        max_session_mib=args.max_session_mib,
-        tls=tls,
-        token=token,
-        insecure=args.insecure,
-        ply_root=args.ply_root,
-    )
+    return settings_from(ServeSettings, args, tls=tls, token=token)
 
 
 def sensorsim_settings_from_arguments(args: argparse.Namespace) -> SensorsimSettings:
