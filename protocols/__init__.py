@@ -18,7 +18,7 @@ A protocol file (``protocols/<name>.toml``, format ``setdiff-protocol/1``) decla
   (the paper's "clipped by scene scale"; ``d_max`` = largest pairwise camera distance in the scene;
   0 = no clipping);
 * ``[evaluation]`` — ``profiles``: the evaluation profiles that apply to this protocol's runs
-  (:data:`setdiff_bench.evaluation.profiles.PROFILES`; default ``["paper"]``, the first is the default);
+  (:data:`setdiff_bench.protocols.profiles.PROFILES`; default ``["paper"]``, the first is the default);
 * ``[leaderboard]`` — the table shape of the dataset's leaderboard (:class:`Layout`), read from the
   dataset's default protocol (``protocols/<dataset>.toml``) by :mod:`setdiff_bench.reporting.leaderboard`:
   ``title`` (caption), ``blocks`` (column blocks in order: ``{ group = "<group name>", label = "..." }``

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from setdiff_bench.errors import ProtocolError
-from setdiff_bench.evaluation import profiles as evaluation_profiles  # its PROFILES read per call
+from setdiff_bench.protocols import profiles  # its PROFILES read per call
 
 from .model import (
     POOLED,
@@ -184,10 +184,10 @@ def _images(table: Table) -> ImageSpec:
 def _evaluation(table: Table) -> tuple[str, ...]:
     table.check_keys(("profiles",))
     names = table.strings("profiles", ["paper"])
-    unknown = [name for name in names if name not in evaluation_profiles.PROFILES]
+    unknown = [name for name in names if name not in profiles.PROFILES]
     if unknown:
         raise table.error(
-            "profiles", f"unknown profile {unknown[0]!r}; known: {', '.join(evaluation_profiles.PROFILES)}"
+            "profiles", f"unknown profile {unknown[0]!r}; known: {', '.join(profiles.PROFILES)}"
         )
     return names
 

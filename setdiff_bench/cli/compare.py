@@ -78,8 +78,8 @@ def _command(args: argparse.Namespace) -> str:
 def run(args: argparse.Namespace) -> int:
     # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     from setdiff_bench.errors import UsageError
-    from setdiff_bench.evaluation.profiles import DEFAULT_PROFILE
     from setdiff_bench.metrics.registry import METRICS
+    from setdiff_bench.protocols.profiles import DEFAULT_PROFILE
     from setdiff_bench.reporting.compare import compare_frames, write_comparison
     from setdiff_bench.reporting.leaderboard import load_runs, profile_rows
     from setdiff_bench.reporting.paired import PairingError

@@ -52,7 +52,7 @@ def _assigned(module: str, name: str) -> ast.expr:
 
 def declared_value(module: str, name: str) -> Any:
     """The literal (a string, a number, a tuple of them, ...) assigned to ``name`` at the top of ``module``
-    (e.g. ``setdiff_bench.evaluation.profiles.DEFAULT_PROFILE``), read from its source.
+    (e.g. ``setdiff_bench.protocols.profiles.DEFAULT_PROFILE``), read from its source.
 
     Raises:
         LookupError: no such assignment, or not a literal.

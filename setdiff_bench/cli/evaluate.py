@@ -70,8 +70,8 @@ def run(args: argparse.Namespace) -> int:
     # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     from setdiff_bench.errors import SetDiffBenchError, UsageError
     from setdiff_bench.evaluation.profile_scoring import score_run
-    from setdiff_bench.evaluation.profiles import get_profile
     from setdiff_bench.io.run_layout import EUVS_COMPAT_FILE
+    from setdiff_bench.protocols.profiles import get_profile
     from setdiff_bench.runtime.devices import resolve_device
 
     device = resolve_device(args.device)

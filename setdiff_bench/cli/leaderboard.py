@@ -72,7 +72,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--profile",
-        default=declared_value("setdiff_bench.evaluation.profiles", "DEFAULT_PROFILE"),
+        default=declared_value("setdiff_bench.protocols.profiles", "DEFAULT_PROFILE"),
         help="evaluation profile to tabulate (paper = plain runs; others come from "
         "`setdiff-bench evaluate`); named in every caption",
     )

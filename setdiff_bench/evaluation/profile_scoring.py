@@ -1,4 +1,4 @@
-"""Score a finished run under an evaluation profile (:mod:`setdiff_bench.evaluation.profiles`).
+"""Score a finished run under an evaluation profile (:mod:`setdiff_bench.protocols.profiles`).
 
 Output, next to the run's own tables (``<run>/profiles/<profile>/``)::
 
@@ -32,15 +32,6 @@ import torch
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.evaluation.euvs_compat import compat_report
-from setdiff_bench.evaluation.profiles import (
-    PROFILE_COLUMN,
-    EvaluationProfile,
-    aggregate,
-    centre_crop_box,
-    nearest_resize_mask,
-    pil_resize,
-    render_size,
-)
 from setdiff_bench.io.atomic import atomic_path, write_text_atomic
 from setdiff_bench.io.images import read_mask, read_rgb
 from setdiff_bench.io.jsonable import jsonable
@@ -60,6 +51,15 @@ from setdiff_bench.metrics.registry import METRICS
 from setdiff_bench.packets.plan import crop_window
 from setdiff_bench.packets.store import PacketStore
 from setdiff_bench.protocols import load_protocol
+from setdiff_bench.protocols.profiles import (
+    PROFILE_COLUMN,
+    EvaluationProfile,
+    aggregate,
+    centre_crop_box,
+    nearest_resize_mask,
+    pil_resize,
+    render_size,
+)
 
 
 @dataclass(frozen=True)

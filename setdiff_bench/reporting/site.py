@@ -39,8 +39,8 @@ from pathlib import Path
 import pandas as pd
 
 from setdiff_bench.errors import UsageError
-from setdiff_bench.evaluation.profiles import DEFAULT_PROFILE, PROFILE_COLUMN
 from setdiff_bench.io.atomic import staged_folder
+from setdiff_bench.protocols.profiles import DEFAULT_PROFILE, PROFILE_COLUMN
 from setdiff_bench.reporting.leaderboard import (
     Leaderboard,
     build_leaderboard,

@@ -9,10 +9,10 @@ import pytest
 
 from setdiff_bench.cli import fit, leaderboard, serve, synth, weights
 from setdiff_bench.cli.declared import declared_value, module_source, registry_names
-from setdiff_bench.evaluation.profiles import DEFAULT_PROFILE
 from setdiff_bench.metrics.lpips_arch import NETS
 from setdiff_bench.models.setdiff.config import ModelConfig
 from setdiff_bench.models.setdiff.methods import Method
+from setdiff_bench.protocols.profiles import DEFAULT_PROFILE
 from setdiff_bench.reporting.leaderboard import FORMATS
 from setdiff_bench.synthetic.presets import PRESETS
 from setdiff_bench.synthetic.sparse import SPARSE_PRESETS
@@ -39,7 +39,7 @@ def test_registry_names_are_the_imported_registries_keys() -> None:
 
 def test_declared_values_are_the_imported_ones() -> None:
     assert declared_value("setdiff_bench.reporting.leaderboard.render", "FORMATS") == FORMATS
-    assert declared_value("setdiff_bench.evaluation.profiles", "DEFAULT_PROFILE") == DEFAULT_PROFILE
+    assert declared_value("setdiff_bench.protocols.profiles", "DEFAULT_PROFILE") == DEFAULT_PROFILE
     assert declared_value("setdiff_bench.metrics.lpips_arch", "NETS") == NETS
 
 

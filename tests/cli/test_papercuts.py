@@ -13,8 +13,8 @@ import pytest
 
 from setdiff_bench.cli.main import build_parser, main
 from setdiff_bench.cli.synth import SceneProgress
-from setdiff_bench.evaluation.profiles import get_profile
 from setdiff_bench.models.setdiff.train import TrainResult
+from setdiff_bench.protocols.profiles import get_profile
 from setdiff_bench.runtime.threads import torch_threads
 from tests.cli.conftest import IndexedFakeStore
 from tests.cli.helpers import extract_examples, help_texts

@@ -17,14 +17,23 @@ from pathlib import Path
 PACKAGE = Path(__file__).resolve().parents[2] / "setdiff_bench"
 
 
+#: Repository folders pyproject installs inside the package (``package-dir``): folder → dotted package name.
+INSTALLED_AS = {"loaders": "setdiff_bench.loaders", "protocols": "setdiff_bench.protocols"}
+
+
 def _modules() -> dict[str, Path]:
-    """Dotted module name → source file, for every module and package of the library."""
+    """Dotted module name → source file, for every module and package of the library, the repository's
+    ``loaders/`` and ``protocols/`` under the names they are installed as."""
     found: dict[str, Path] = {}
-    for path in sorted(PACKAGE.rglob("*.py")):
-        parts = list(path.relative_to(PACKAGE.parent).with_suffix("").parts)
-        if parts[-1] == "__init__":
-            parts.pop()
-        found[".".join(parts)] = path
+    roots = [(PACKAGE, PACKAGE.name)] + [
+        (PACKAGE.parent / folder, name) for folder, name in INSTALLED_AS.items()
+    ]
+    for root, dotted in roots:
+        for path in sorted(root.rglob("*.py")):
+            parts = [dotted, *path.relative_to(root).with_suffix("").parts]
+            if parts[-1] == "__init__":
+                parts.pop()
+            found[".".join(parts)] = path
     return found
 
 

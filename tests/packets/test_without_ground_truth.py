@@ -15,12 +15,12 @@ from PIL import Image
 
 from setdiff_bench.cli.main import main
 from setdiff_bench.evaluation.profile_scoring import score_run
-from setdiff_bench.evaluation.profiles import EvaluationProfile
 from setdiff_bench.models.setdiff.autoencoder_train import ground_truth_frames
 from setdiff_bench.models.setdiff.config_io import load_config
 from setdiff_bench.packets.index import NoGroundTruthError
 from setdiff_bench.packets.prepare import prepare
 from setdiff_bench.packets.store import PacketStore
+from setdiff_bench.protocols.profiles import EvaluationProfile
 from setdiff_bench.runtime.threads import torch_threads
 
 

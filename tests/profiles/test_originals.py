@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from setdiff_bench.evaluation.profile_scoring import _Originals, profile_pair
-from setdiff_bench.evaluation.profiles import get_profile
+from setdiff_bench.protocols.profiles import get_profile
 from tests.loaders.loader_fixtures import HEIGHT, MARS_TEST, WIDTH, write_euvs_scene, write_mask
 
 

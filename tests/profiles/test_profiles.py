@@ -8,7 +8,7 @@ import pytest
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.evaluation.profile_scoring import profile_pair
-from setdiff_bench.evaluation.profiles import (
+from setdiff_bench.protocols.profiles import (
     PROFILES,
     aggregate,
     centre_crop_box,

@@ -13,8 +13,8 @@ import pytest
 from setdiff_bench.cli.main import main
 from setdiff_bench.errors import UsageError
 from setdiff_bench.evaluation.profile_scoring import score_run
-from setdiff_bench.evaluation.profiles import EvaluationProfile, get_profile
 from setdiff_bench.io.run_layout import GROUPS_FILE, METRICS_FILE, PROFILE_FILE, PROFILES_DIR
+from setdiff_bench.protocols.profiles import EvaluationProfile, get_profile
 from setdiff_bench.reporting.leaderboard import (
     LeaderboardError,
     build_leaderboard,
@@ -47,7 +47,7 @@ def test_scene_mean_profile_in_the_leaderboard_caption_and_never_mixed(
     run_copy: Path, store: Path, monkeypatch
 ):
     identity_run = run_copy
-    from setdiff_bench.evaluation import profiles
+    from setdiff_bench.protocols import profiles
 
     custom = EvaluationProfile(
         "scene_test", "test profile: per-scene means", "", ("psnr",), aggregation="scene_mean"

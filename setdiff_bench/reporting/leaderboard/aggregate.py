@@ -14,11 +14,11 @@ from pathlib import Path
 
 import pandas as pd
 
-from setdiff_bench.evaluation.profiles import DEFAULT_PROFILE, get_profile
 from setdiff_bench.io.images import image_size
 from setdiff_bench.io.run_layout import TARGET_COLUMNS
 from setdiff_bench.loaders.common import natural_key
 from setdiff_bench.protocols import Block, Layout
+from setdiff_bench.protocols.profiles import DEFAULT_PROFILE, get_profile
 from setdiff_bench.reporting.bootstrap import BootstrapSettings
 from setdiff_bench.reporting.leaderboard.cells import (
     add_differences,
@@ -69,7 +69,7 @@ def build_leaderboard(
         metrics: image metric columns (default: the layout's).
         methods: measured methods to show, in this order (default: all, sorted).
         layout: override the dataset's layout.
-        profile: the evaluation profile tabulated (:mod:`setdiff_bench.evaluation.profiles`): rows of plain runs are
+        profile: the evaluation profile tabulated (:mod:`setdiff_bench.protocols.profiles`): rows of plain runs are
             ``paper``; ``setdiff-bench evaluate`` tables carry their profile.  The caption names it, and the
             profile's averaging is used (``scene_mean``: the mean of per-scene means).
         against: a measured method shown in the table: every other measured cell gets its paired difference

@@ -7,8 +7,8 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
-from setdiff_bench.evaluation.profiles import DEFAULT_PROFILE
 from setdiff_bench.protocols import Block
+from setdiff_bench.protocols.profiles import DEFAULT_PROFILE
 from setdiff_bench.reporting.bootstrap import BootstrapSettings
 from setdiff_bench.reporting.leaderboard.columns import ALL, higher_is_better, metric_decimals
 from setdiff_bench.reporting.paired import PairedDifference
