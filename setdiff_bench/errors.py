@@ -136,6 +136,11 @@ class SetDiffBenchWarning(UserWarning):
     ``setdiff-bench <verb>: warning: <message>`` on stderr (:func:`setdiff_bench.cli.main.one_line_warnings`)."""
 
 
+class OutOfDistributionWarning(UserWarning):
+    """A model runs on a dataset or an image size it was not trained on (``run``, the stream session and ``serve``
+    warn once; the model's manifest says what it was trained on)."""
+
+
 class DatasetWarning(SetDiffBenchWarning):
     """A dataset on disk is read with a repair: frames skipped, values rounded, files paired by order."""
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import pandas as pd
 
 from setdiff_bench.enhancers.base import Enhancer, EstimatesMemory, KnowsTrainingData
-from setdiff_bench.models.setdiff.domain import OutOfDistributionWarning
+from setdiff_bench.errors import OutOfDistributionWarning
 from setdiff_bench.runtime.memory import check_memory
 
 #: What a user can change when a packet does not fit (the options every model enhancer takes).

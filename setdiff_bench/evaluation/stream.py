@@ -32,11 +32,10 @@ import torch
 
 from setdiff_bench.cameras import Camera
 from setdiff_bench.enhancers.base import EstimatesMemory, KnowsTrainingData
-from setdiff_bench.errors import UsageError
+from setdiff_bench.errors import OutOfDistributionWarning, UsageError
 from setdiff_bench.evaluation.tick_limits import DEFAULT_REFERENCES_PER_TICK, MAX_CAMERAS_PER_TICK
 from setdiff_bench.geometry import max_pairwise_distance, normalize_packet, select_references
 from setdiff_bench.io.images import uint8_to_float
-from setdiff_bench.models.setdiff.domain import OutOfDistributionWarning
 from setdiff_bench.runtime.memory import check_memory
 from setdiff_bench.types import Packet, ViewSet
 

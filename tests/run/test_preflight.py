@@ -11,8 +11,8 @@ import pytest
 
 from setdiff_bench.cli.main import main
 from setdiff_bench.enhancers.setdiff import load_enhancer
+from setdiff_bench.errors import OutOfDistributionWarning
 from setdiff_bench.evaluation.preflight import packet_shapes, warn_out_of_distribution
-from setdiff_bench.models.setdiff.domain import OutOfDistributionWarning
 from setdiff_bench.runtime.memory import MEMORY_LIMIT_ENV, parse_bytes
 from tests.run.store_fixtures import HEIGHT, WIDTH, StoreSpec, build_store, run_argv
 

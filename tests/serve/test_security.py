@@ -25,9 +25,7 @@ from tests.serve.serve_fixtures import Certificates, environment
 from tests.stream.stream_fixtures import HEIGHT, WIDTH, recorded_references, tick_frames
 
 #: The tests' 48×32 frames are smaller than the shipped models' 256×144: the domain warning is expected.
-pytestmark = pytest.mark.filterwarnings(
-    "ignore::setdiff_bench.models.setdiff.domain.OutOfDistributionWarning"
-)
+pytestmark = pytest.mark.filterwarnings("ignore::setdiff_bench.errors.OutOfDistributionWarning")
 
 TOKEN = "s3cret-token-0123456789abcdef"
 

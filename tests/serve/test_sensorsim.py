@@ -54,9 +54,7 @@ from tests.serve.serve_fixtures import Certificates
 from tests.stream.stream_fixtures import run_batch
 
 #: Small frames (48×32): the domain warning is expected.
-pytestmark = pytest.mark.filterwarnings(
-    "ignore::setdiff_bench.models.setdiff.domain.OutOfDistributionWarning"
-)
+pytestmark = pytest.mark.filterwarnings("ignore::setdiff_bench.errors.OutOfDistributionWarning")
 ROOT = Path(__file__).resolve().parents[2]
 NAMES = [name for name, _ in CAMERAS]
 

@@ -30,9 +30,7 @@ from tests.stream.stream_fixtures import (
 )
 
 #: The tests' 48×32 frames are smaller than the shipped models' 256×144: the domain warning is expected.
-pytestmark = pytest.mark.filterwarnings(
-    "ignore::setdiff_bench.models.setdiff.domain.OutOfDistributionWarning"
-)
+pytestmark = pytest.mark.filterwarnings("ignore::setdiff_bench.errors.OutOfDistributionWarning")
 
 TICKS = 4
 

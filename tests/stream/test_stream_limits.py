@@ -8,9 +8,8 @@ import warnings
 import pytest
 
 from setdiff_bench.enhancers.setdiff import load_enhancer
-from setdiff_bench.errors import MemoryNeedError
+from setdiff_bench.errors import MemoryNeedError, OutOfDistributionWarning
 from setdiff_bench.evaluation.stream import StreamSession
-from setdiff_bench.models.setdiff.domain import OutOfDistributionWarning
 from setdiff_bench.runtime.memory import MEMORY_LIMIT_ENV
 from tests.stream.stream_fixtures import HEIGHT, WIDTH, recorded_references, rig_camera, views
 

@@ -5,7 +5,7 @@ A model trained on the synthetic streets at 256×144 can damage an object captur
 training run records its data's datasets and image sizes in its manifest (``data.datasets``,
 ``data.resolutions``, from the packet store's index: :func:`~setdiff_bench.models.setdiff.manifest.training_data_record`);
 :func:`domain_mismatch` compares them with the data a model is about to enhance and gives the one line
-that ``run``, the stream session and ``serve`` warn with (:class:`OutOfDistributionWarning`).
+that ``run``, the stream session and ``serve`` warn with (:class:`setdiff_bench.errors.OutOfDistributionWarning`).
 """
 
 from __future__ import annotations
@@ -17,10 +17,6 @@ from pathlib import Path
 from typing import Any
 
 from setdiff_bench.models.setdiff.files import MANIFEST_FILE
-
-
-class OutOfDistributionWarning(UserWarning):
-    """A model runs on a dataset or an image size it was not trained on."""
 
 
 @dataclass(frozen=True)
