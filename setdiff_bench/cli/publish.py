@@ -40,7 +40,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
-    from setdiff_bench.reporting.publish import PROVENANCE_FILE, publish
+    from setdiff_bench.pipeline.publish import PROVENANCE_FILE, publish
 
     command = "setdiff-bench " + shlex.join(
         ["publish", "--run", str(args.run), "--to", str(args.destination)]

@@ -15,7 +15,7 @@ Every stage is an ordinary ``setdiff-bench`` command run in its own process
 ``<out>/README.md`` and ``<out>/demo.json``.  Bulky intermediate data (scenes, packets,
 checkpoints, runs) goes to ``<out>/work``; tables, plots and the report sit in ``<out>``, by default
 the scratch folder ``runs/demo`` (git-ignored).  The project's published results are replaced only
-on purpose, by ``setdiff-bench publish`` (:mod:`setdiff_bench.reporting.publish`).  Every stage resumes, so an
+on purpose, by ``setdiff-bench publish`` (:mod:`setdiff_bench.pipeline.publish`).  Every stage resumes, so an
 interrupted demo continues where it stopped; a stage finished by an earlier run keeps its original
 time in the report, marked resumed (``<work>/stages.json``).
 

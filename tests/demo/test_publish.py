@@ -19,8 +19,8 @@ from setdiff_bench.errors import UsageError
 from setdiff_bench.io.atomic import sha256_file
 from setdiff_bench.pipeline.demo import SUMMARY_FILE
 from setdiff_bench.pipeline.demo_report import threads_line
+from setdiff_bench.pipeline.publish import PROVENANCE_FILE, publish
 from setdiff_bench.pipeline.stages import LEDGER_FILE, Pipeline, StageFailed, StageRecord
-from setdiff_bench.reporting.publish import PROVENANCE_FILE, publish
 
 REVISION = "0123456789abcdef0123456789abcdef01234567"
 
