@@ -65,7 +65,7 @@ def declared_value(module: str, name: str) -> Any:
 
 def declared_literal(module: str, name: str) -> tuple[str, ...]:
     """The choices of the ``Literal`` type alias assigned to ``name`` at the top of ``module`` (e.g.
-    ``WarpMode = Literal["auto", "on", "off"]`` in :mod:`setdiff_bench.evaluation.run_settings`), in order,
+    ``WarpMode = Literal["auto", "on", "off"]`` in :mod:`setdiff_bench.evaluation.run`), in order,
     read from its source; ``typing.get_args`` of the imported alias gives the same.
 
     Raises:

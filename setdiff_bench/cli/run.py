@@ -36,7 +36,7 @@ from setdiff_bench.cli.declared import declared_field_default, declared_literal
 from setdiff_bench.models.setdiff.packaged import SPEEDS
 
 #: Where the run's settings are declared (read from source: ``--help`` imports no torch).
-RUN_SETTINGS_MODULE = "setdiff_bench.evaluation.run_settings"
+RUN_SETTINGS_MODULE = "setdiff_bench.evaluation.run._settings"
 RUN_SETTINGS = (RUN_SETTINGS_MODULE, "RunSettings")
 
 VERB = "run"

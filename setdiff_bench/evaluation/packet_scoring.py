@@ -1,6 +1,6 @@
 """Enhance and score one packet: the rules every run applies, in one place.
 
-:func:`score_packet` is what ``setdiff-bench run`` does for each packet (``evaluation/run.py`` calls it),
+:func:`score_packet` is what ``setdiff-bench run`` does for each packet (``evaluation/run/`` calls it),
 and what a notebook calls to try a method on one packet::
 
     import setdiff_bench as sb

@@ -9,7 +9,7 @@ Image metrics come from :mod:`setdiff_bench.metrics` specs and see the protocol'
 (True = evaluate).  Warp error (Lai et al. 2018) is a sequence metric: one value per time-ordered
 sequence of one camera's targets (flow and occlusion from the ground truth, or, for targets without
 ground truth, from the packet's 3DGS renders; see :mod:`setdiff_bench.metrics.warp` and
-:mod:`setdiff_bench.evaluation.sequences`).
+:mod:`setdiff_bench.evaluation.run._sequences`).
 """
 
 from __future__ import annotations

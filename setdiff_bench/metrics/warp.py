@@ -8,7 +8,7 @@ reference code (phoenix104104/fast_blind_video_consistency ``evaluate_WarpError.
 - the flow ``F`` and the non-occlusion mask ``M`` are computed **once on the ground-truth sequence**
   (:func:`warp_reference`), so every method is scored with the same flow and mask.  A sequence without
   ground truth (a novel trajectory) takes them from its 3DGS renders instead, which every method also
-  shares (:mod:`setdiff_bench.evaluation.sequences`, ``flow_source = "render"``);
+  shares (:mod:`setdiff_bench.evaluation.run._sequences`, ``flow_source = "render"``);
 - ``warp`` samples frame t at ``x + F(x)`` bilinearly with border clamping (their ``Resample2d``);
 - ``M = 1`` except where forward–backward consistency fails,
   ``|F_fw + F_bw(x + F_fw)|² > 0.01 (|F_fw|² + |F_bw(x + F_fw)|²) + 0.5``, or on motion boundaries,

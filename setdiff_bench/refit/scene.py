@@ -227,7 +227,7 @@ class _Inputs:
 def _inputs(task: RefitTask, settings: RefitSettings) -> _Inputs:
     """Read and check every input (module docstring, steps 1-4)."""
     from setdiff_bench.enhancers.base import ChecksTargets, available_methods, create_enhancer
-    from setdiff_bench.evaluation.run_settings import jsonable_options
+    from setdiff_bench.evaluation.run import jsonable_options
     from setdiff_bench.gaussians.fit_config import FitConfig
     from setdiff_bench.gaussians.fit_data import load_fit_views
     from setdiff_bench.gaussians.ply import read_ply

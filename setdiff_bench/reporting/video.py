@@ -25,7 +25,7 @@ import numpy as np
 import pandas as pd
 
 from setdiff_bench.errors import SetDiffBenchError
-from setdiff_bench.evaluation.run_settings import SEQUENCE_PROTOCOLS
+from setdiff_bench.evaluation.run import SEQUENCE_PROTOCOLS
 from setdiff_bench.io.atomic import atomic_path
 from setdiff_bench.io.native_stderr import native_stderr_silenced
 from setdiff_bench.loaders.common import natural_key

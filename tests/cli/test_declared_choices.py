@@ -69,7 +69,7 @@ def test_run_and_prepare_choices_and_defaults_are_the_settings_dataclasses() -> 
     PrepareSettings declare (read from their sources, so ``--help`` imports no torch)."""
     from setdiff_bench.cli import prepare, run
     from setdiff_bench.cli.declared import declared_literal
-    from setdiff_bench.evaluation.run_settings import RunSettings, WarpMode
+    from setdiff_bench.evaluation.run import RunSettings, WarpMode
     from setdiff_bench.metrics.optical_flow import FLOW_METHODS, FlowMethod
     from setdiff_bench.packets.prepare_settings import SPLIT_CHOICES, CmapPrecision, PrepareSettings
 

@@ -19,7 +19,7 @@ def test_missing_is_none_else_int() -> None:
 
 
 def test_run_uses_the_same_function() -> None:
-    from setdiff_bench.evaluation import run
+    from setdiff_bench.evaluation.run import _packet  # where a run writes a target's timestamp_us
 
-    assert run.timestamp_or_none is timestamp_or_none
-    assert not hasattr(run, "_timestamp")
+    assert _packet.timestamp_or_none is timestamp_or_none
+    assert not hasattr(_packet, "_timestamp")

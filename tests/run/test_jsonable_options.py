@@ -7,7 +7,7 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from setdiff_bench.evaluation.run_settings import jsonable_options
+from setdiff_bench.evaluation.run import jsonable_options
 from setdiff_bench.io.jsonable import jsonable
 
 

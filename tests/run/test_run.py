@@ -23,18 +23,14 @@ from skimage.metrics import structural_similarity
 from setdiff_bench.cli.main import main
 from setdiff_bench.enhancers.identity import IdentityEnhancer
 from setdiff_bench.errors import ImageError, UsageError
-from setdiff_bench.evaluation.run import (
-    EnhancerOutputError,
-    RunSettings,
-    Shard,
-    comparable_metrics,
-    run_method,
-)
+from setdiff_bench.evaluation.packet_scoring import EnhancerOutputError
+from setdiff_bench.evaluation.run import RunSettings, comparable_metrics, run_method
 from setdiff_bench.io import run_layout as paths
 from setdiff_bench.io.run_layout import IMAGES_DIR, MANIFEST_FILE, METRICS_FILE, RUN_FILE, SEQUENCES_FILE
 from setdiff_bench.metrics.warp import warp_error, warp_reference
 from setdiff_bench.metrics.weights import resolve_lpips_weights
 from setdiff_bench.packets.index import INDEX_FILE
+from setdiff_bench.packets.shards import Shard
 from setdiff_bench.packets.store import PacketStore
 from tests.enhancers.plugin_fixtures import install_plugin
 from tests.metrics.lpips_numpy import lpips_numpy

@@ -8,9 +8,9 @@ from typing import Any
 
 from setdiff_bench.enhancers.base import Enhancer, TargetRef
 from setdiff_bench.evaluation.packet_scoring import score_packet
-from setdiff_bench.evaluation.run_folder import fragment_path
-from setdiff_bench.evaluation.run_rows import write_rows
-from setdiff_bench.evaluation.run_settings import RunSettings
+from setdiff_bench.evaluation.run._folder import fragment_path
+from setdiff_bench.evaluation.run._rows import write_rows
+from setdiff_bench.evaluation.run._settings import RunSettings
 from setdiff_bench.evaluation.scoring import to_uint8_hwc
 from setdiff_bench.io.atomic import sha256_file
 from setdiff_bench.io.images import write_png

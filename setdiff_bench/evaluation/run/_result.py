@@ -10,7 +10,7 @@ from typing import Any
 import pandas as pd
 
 from setdiff_bench.errors import UsageError
-from setdiff_bench.evaluation.run_settings import RunSettings
+from setdiff_bench.evaluation.run._settings import RunSettings
 from setdiff_bench.io.run_layout import METRICS_FILE
 from setdiff_bench.metrics.registry import MetricSpec
 from setdiff_bench.packets.store import PacketStore, target_has_ground_truth
@@ -23,7 +23,7 @@ class SkippedMetrics:
     Attributes:
         metrics: metric names skipped: the run's image metrics.  Never ``warp``: with warp error on, the
             targets without ground truth get it from their renders' flow
-            (:mod:`setdiff_bench.evaluation.sequences`, ``flow_source = "render"``).
+            (:mod:`setdiff_bench.evaluation.run._sequences`, ``flow_source = "render"``).
         targets: how many selected targets have no ground truth.
         groups: the groups those targets are in, sorted.
     """

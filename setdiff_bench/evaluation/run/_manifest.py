@@ -13,7 +13,7 @@ import pandas as pd
 import pyarrow as pa
 
 from setdiff_bench.enhancers.base import available_methods
-from setdiff_bench.evaluation.run_settings import RUN_FORMAT, RunSettings, jsonable_options
+from setdiff_bench.evaluation.run._settings import RUN_FORMAT, RunSettings, jsonable_options
 from setdiff_bench.io.atomic import sha256_file
 from setdiff_bench.io.run_layout import ENHANCER_FILE, IMAGES_DIR, METRICS_FILE, SEQUENCES_FILE
 from setdiff_bench.metrics.registry import MetricSpec

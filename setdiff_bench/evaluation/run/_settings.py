@@ -43,7 +43,7 @@ class RunSettings:
         metrics: image metric names (default: the ``standard`` preset: PSNR, SSIM, LPIPS-alex).
         warp: warp error per sequence: ``auto`` (on for :data:`SEQUENCE_PROTOCOLS`, their novel-trajectory
             packets included), ``on`` or ``off``.  Targets with ground truth take the flow from it; targets
-            without (novel trajectories) from their 3DGS renders (:mod:`setdiff_bench.evaluation.sequences`).
+            without (novel trajectories) from their 3DGS renders (:mod:`setdiff_bench.evaluation.run._sequences`).
         flow_method: optical flow for warp error (``deepflow`` or ``dis``).
         device: where the enhancer (if it takes ``device``) and the metrics run.
         batch_size: images per metric call (bounds LPIPS memory); does not change results.

@@ -31,7 +31,7 @@ import pyarrow as pa
 import torch
 
 from setdiff_bench.errors import PacketError
-from setdiff_bench.evaluation.run_settings import RunSettings
+from setdiff_bench.evaluation.run._settings import RunSettings
 from setdiff_bench.evaluation.scoring import default_warp_cache, sequence_warp_error
 from setdiff_bench.io.images import read_rgb, to_tensor_chw
 from setdiff_bench.packets.index import key_columns

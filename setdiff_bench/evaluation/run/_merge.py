@@ -16,12 +16,12 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from setdiff_bench.errors import PacketError, UsageError
-from setdiff_bench.evaluation.run_folder import fragment_path, remove_stale_temporaries
-from setdiff_bench.evaluation.run_manifest import run_manifest
-from setdiff_bench.evaluation.run_result import RunResult, skipped_metrics
-from setdiff_bench.evaluation.run_rows import row_schema
-from setdiff_bench.evaluation.run_settings import RunSettings, warp_enabled
-from setdiff_bench.evaluation.sequences import sequence_table
+from setdiff_bench.evaluation.run._folder import fragment_path, remove_stale_temporaries
+from setdiff_bench.evaluation.run._manifest import run_manifest
+from setdiff_bench.evaluation.run._result import RunResult, skipped_metrics
+from setdiff_bench.evaluation.run._rows import row_schema
+from setdiff_bench.evaluation.run._sequences import sequence_table
+from setdiff_bench.evaluation.run._settings import RunSettings, warp_enabled
 from setdiff_bench.io.atomic import atomic_path, sha256_file, write_text_atomic
 from setdiff_bench.io.run_layout import MANIFEST_FILE, METRICS_FILE, RUN_FILE, SEQUENCES_FILE
 from setdiff_bench.metrics.registry import MetricSpec

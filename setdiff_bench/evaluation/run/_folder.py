@@ -15,7 +15,7 @@ from typing import Any
 
 from setdiff_bench.enhancers.base import Enhancer
 from setdiff_bench.errors import UsageError
-from setdiff_bench.evaluation.run_settings import jsonable_options
+from setdiff_bench.evaluation.run._settings import jsonable_options
 from setdiff_bench.io.atomic import is_stale_temporary, private_temporary, write_text_atomic
 from setdiff_bench.io.names import safe_component
 from setdiff_bench.io.run_layout import ENHANCER_FILE, FRAGMENTS_DIR, IMAGES_DIR, RUN_FILE
