@@ -230,3 +230,20 @@ if __name__ == "__main__":
     print(_describe(cycles(modules), modules) or "no module cycles")
     packages = package_graph(modules)
     print(_describe(cycles(packages), packages) or "no package cycles")
+
+
+def private_imports() -> list[tuple[str, str]]:
+    """(importer, private module) pairs where a library module imports another package's private module: a
+    module named ``_name`` inside a package whose ``__init__`` is its face."""
+    found = []
+    for importer, targets in import_graph().items():
+        for target in targets:
+            package, _, leaf = target.rpartition(".")
+            private = leaf.startswith("_") and not leaf.startswith("__")
+            if private and not (importer == package or importer.startswith(package + ".")):
+                found.append((importer, target))
+    return sorted(found)
+
+
+def test_packages_are_entered_through_their_face() -> None:
+    assert private_imports() == []
