@@ -35,7 +35,7 @@ import numpy as np
 
 from setdiff_bench.loaders import detect_dataset, load_scenes
 from setdiff_bench.reporting.grids import compose
-from setdiff_bench.reporting.video import write_video
+from setdiff_bench.reporting.site import write_video
 from setdiff_bench.rotations import quaternion_to_matrix
 from setdiff_bench.serve.sensorsim import common_pb2 as common
 from setdiff_bench.serve.sensorsim import sensorsim_pb2 as pb

@@ -34,7 +34,7 @@ DESCRIPTION = __doc__
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     # the settings' defaults (a light module: no heavy import at every CLI start)
-    from setdiff_bench.reporting.site_settings import SiteSettings
+    from setdiff_bench.reporting.site import SiteSettings
 
     defaults = SiteSettings()
     parser.add_argument(
@@ -118,8 +118,7 @@ def run(args: argparse.Namespace) -> int:
     # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     from setdiff_bench.errors import UsageError
     from setdiff_bench.reporting.bootstrap import BootstrapSettings
-    from setdiff_bench.reporting.site import build_site
-    from setdiff_bench.reporting.site_settings import PictureSettings, SiteSettings
+    from setdiff_bench.reporting.site import PictureSettings, SiteSettings, build_site
 
     if not args.fps > 0:
         raise UsageError(f"needs a positive frame rate, got {args.fps}", "--fps")

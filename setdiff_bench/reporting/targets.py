@@ -1,8 +1,8 @@
 """The images of one target as a report shows them: the 3DGS render and the ground truth (from the packet
 store), each run's written output (through its ``metrics.parquet``), and error maps ``|method − GT|``.
 
-Shared by the HTML site (:mod:`setdiff_bench.reporting.site`) and the videos
-(:mod:`setdiff_bench.reporting.video`), so both show the same pixels.  Every image is 8-bit RGB
+Shared by the HTML site (:mod:`setdiff_bench.reporting.site`) and its videos, so both show the same pixels.
+Every image is 8-bit RGB
 ``(H, W, 3)``; files are checked against the store's SHA-256 on read (:meth:`PacketStore.file_path`).
 """
 

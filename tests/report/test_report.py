@@ -16,8 +16,8 @@ import pytest
 
 from setdiff_bench.cli.main import main
 from setdiff_bench.loaders.common import natural_key
+from setdiff_bench.reporting.site import target_sequences, write_video
 from setdiff_bench.reporting.targets import error_map
-from setdiff_bench.reporting.video import target_sequences, write_video
 from tests.report.browser import Browser, find_browser
 from tests.report.conftest import SPEC
 
@@ -127,7 +127,7 @@ def test_refusals_are_one_line_and_write_nothing(
 
 
 def test_write_video_refuses_no_frames(tmp_path: Path) -> None:
-    from setdiff_bench.reporting.video import VideoError
+    from setdiff_bench.reporting.site import VideoError
 
     with pytest.raises(VideoError, match="no frames"):
         write_video(tmp_path / "v.webm", [])
@@ -212,7 +212,7 @@ def test_a_run_evaluated_under_a_profile_is_reported_once(runs: Path, tmp_path: 
 
     import pandas as pd
 
-    from setdiff_bench.reporting.site_runs import run_folders
+    from setdiff_bench.reporting.site import run_folders
 
     copied = tmp_path / "runs"
     shutil.copytree(runs, copied)

@@ -17,9 +17,7 @@ import pytest
 import scipy.stats
 
 from setdiff_bench.reporting.grids import BAND, GAP
-from setdiff_bench.reporting.site import SiteSettings, build_site
-from setdiff_bench.reporting.site_target_pages import write_target_images
-from setdiff_bench.reporting.site_targets import TargetRecord
+from setdiff_bench.reporting.site import SiteSettings, TargetRecord, build_site, write_target_images
 from setdiff_bench.reporting.targets import TargetKey
 from tests.report.conftest import SPEC
 
@@ -215,7 +213,7 @@ PICTURE_SHARE = 0.6
 def test_pictures_of_a_target_fit_the_sparse_report_budget(tmp_path: Path) -> None:
     """Real 256x144 pictures of the sparse demo (render, three methods, ground truth, four error maps and a
     thumbnail) take at most 60 % of 100 MB / 676 targets, and at least four times less than as PNG."""
-    from setdiff_bench.reporting.site_pictures import PictureSettings
+    from setdiff_bench.reporting.site import PictureSettings
 
     record = TargetRecord(TargetKey("p", 0), "dl3dv", "s", "n3", "f", "t", {})
     grid = cv2.imread(str(REPO / "results" / "synthetic_sparse" / "dl3dv_grid.png"), cv2.IMREAD_COLOR)
@@ -234,7 +232,7 @@ def test_pictures_of_a_target_fit_the_sparse_report_budget(tmp_path: Path) -> No
 def test_runs_are_labelled_by_their_display_name(site: Path, runs: Path, tmp_path: Path) -> None:
     """Two ``precomputed`` runs named apart (``run --name``: ``name`` in run.json, the rows' method column)
     keep their names in the report, not ``precomputed (folder)``."""
-    from setdiff_bench.reporting.site_runs import run_folders
+    from setdiff_bench.reporting.site import run_folders
 
     copied = tmp_path / "runs"
     shutil.copytree(runs, copied)
@@ -253,7 +251,7 @@ def test_half_size_error_maps_keep_a_single_wrong_pixel_bright() -> None:
     """Error maps of a JPEG site are stored at half size, each pixel the worst of its 2x2 block: one wrong
     pixel at the colour scale's top (0.25 of full scale = 64 levels) shows as inferno's brightest colour, not
     a quarter of it."""
-    from setdiff_bench.reporting.site_pictures import pooled_error_map
+    from setdiff_bench.reporting.site import pooled_error_map
 
     truth = np.zeros((4, 6, 3), np.uint8)
     image = truth.copy()
@@ -267,7 +265,7 @@ def test_half_size_error_maps_keep_a_single_wrong_pixel_bright() -> None:
 
 
 def test_video_panels_are_scaled_to_the_panel_width() -> None:
-    from setdiff_bench.reporting.video import side_by_side
+    from setdiff_bench.reporting.site import side_by_side
 
     wide = np.full((144, 256, 3), 120, np.uint8)
     narrow = np.full((108, 192, 3), 120, np.uint8)  # 256 x 144 at 192 pixels wide

@@ -18,7 +18,7 @@ import numpy as np
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.images import write_png
-from setdiff_bench.reporting.site_settings import DEFAULT_JPEG_QUALITY, PictureSettings
+from setdiff_bench.reporting.site._settings import DEFAULT_JPEG_QUALITY, PictureSettings
 from setdiff_bench.reporting.targets import error_map
 
 __all__ = [

@@ -23,7 +23,7 @@ from setdiff_bench.reporting.bootstrap import BootstrapSettings
 from setdiff_bench.reporting.gains import GAIN_CONVENTION, PairedGain
 from setdiff_bench.reporting.leaderboard import metric_decimals
 from setdiff_bench.reporting.paired import few_scenes_note, pair_targets, paired_differences
-from setdiff_bench.reporting.site_html import esc, metric_label
+from setdiff_bench.reporting.site._html import esc, metric_label
 
 #: The columns that pair a method's target with the baseline's (``scene`` is needed by the bootstrap).
 PAIR_KEYS = ("dataset", "group", "scene", "packet_id", "view")

@@ -13,8 +13,8 @@ import numpy as np
 
 from setdiff_bench.reporting.leaderboard import Leaderboard, metric_decimals, metric_header
 from setdiff_bench.reporting.plots import PLOTS
-from setdiff_bench.reporting.site_html import cell_class, esc, leaderboard_html, metric_label, number, signed
-from setdiff_bench.reporting.site_targets import TargetRecord, target_gain
+from setdiff_bench.reporting.site._html import cell_class, esc, leaderboard_html, metric_label, number, signed
+from setdiff_bench.reporting.site._targets import TargetRecord, target_gain
 
 
 def targets_table_html(
@@ -165,7 +165,7 @@ def index_body(
     Args:
         plots: ``(plot file, caption)`` pairs (:func:`plot_caption`; files under ``staging``, the site folder
             being written: links are relative to it).
-        scenes: the per-scene breakdown's HTML (:func:`~setdiff_bench.reporting.site_scenes.scene_table_html`),
+        scenes: the per-scene breakdown's HTML (:func:`~setdiff_bench.reporting.site._scenes.scene_table_html`),
             or ``""`` for none.
         thumbnail: file name of each target's thumbnail in ``images/<target>/``.
     """

@@ -9,7 +9,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from setdiff_bench.reporting.leaderboard import metric_decimals, metric_header
-from setdiff_bench.reporting.site_html import (
+from setdiff_bench.reporting.site._html import (
     SLIDER_SCRIPT,
     cell_class,
     esc,
@@ -20,15 +20,15 @@ from setdiff_bench.reporting.site_html import (
     signed,
     video_players,
 )
-from setdiff_bench.reporting.site_pictures import (
+from setdiff_bench.reporting.site._pictures import (
     PictureSettings,
     pooled_error_map,
     write_picture,
     write_thumbnail,
 )
-from setdiff_bench.reporting.site_targets import TargetRecord, target_gain
+from setdiff_bench.reporting.site._targets import TargetRecord, target_gain
+from setdiff_bench.reporting.site._video import VideoRecord, slug
 from setdiff_bench.reporting.targets import ERROR_MAP_FULL_SCALE, TargetImages, error_map
-from setdiff_bench.reporting.video import VideoRecord, slug
 
 
 def target_page(

@@ -13,8 +13,8 @@ import pandas as pd
 from setdiff_bench.loaders.common import natural_key
 from setdiff_bench.metrics.registry import METRICS
 from setdiff_bench.reporting.gains import gain
+from setdiff_bench.reporting.site._video import slug
 from setdiff_bench.reporting.targets import TargetKey
-from setdiff_bench.reporting.video import slug
 
 #: The columns naming one target in the runs' per-image rows.
 TARGET_KEY = ["packet_id", "view"]

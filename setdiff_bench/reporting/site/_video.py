@@ -30,8 +30,8 @@ from setdiff_bench.io.atomic import atomic_path
 from setdiff_bench.io.native_stderr import native_stderr_silenced
 from setdiff_bench.loaders.common import natural_key
 from setdiff_bench.reporting.grids import compose
-from setdiff_bench.reporting.site_pictures import write_jpeg
-from setdiff_bench.reporting.site_settings import DEFAULT_PANEL_WIDTH
+from setdiff_bench.reporting.site._pictures import write_jpeg
+from setdiff_bench.reporting.site._settings import DEFAULT_PANEL_WIDTH
 from setdiff_bench.reporting.targets import TargetImages, TargetKey
 
 VIDEO_SUFFIX = ".webm"

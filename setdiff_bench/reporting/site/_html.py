@@ -10,7 +10,7 @@ from collections.abc import Sequence
 
 from setdiff_bench.metrics.registry import METRICS
 from setdiff_bench.reporting.leaderboard import Leaderboard, metric_arrow, metric_header
-from setdiff_bench.reporting.video import VideoRecord
+from setdiff_bench.reporting.site._video import VideoRecord
 
 STYLE = """
 body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:0;color:#1d2330;background:#fafbfc}

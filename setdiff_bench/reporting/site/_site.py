@@ -1,34 +1,4 @@
-"""A static HTML site of finished runs, browsed from the file system: no server, no network, no CDN.
-
-Pages (every stylesheet and script inline, every link relative)::
-
-    index.html                 leaderboards (one per dataset and evaluation profile, blocks = groups, the
-                               cost block: ms per frame, peak memory, and the paper's reported rows where the
-                               dataset's layout has them), the dataset's plots, each method's gain per scene
-                               with paired bootstrap intervals, and every target in a table sortable by any
-                               column (opening sorted, and marked so, by the first method's loss)
-    videos.html                render | method | ground truth per camera sequence (WebM, VP9, with posters)
-    targets/<target>.html      render | each method | ground truth, a before/after slider per method,
-                               error maps |image − GT|, the target's metrics
-    images/<target>/*.jpg      the pictures those pages show (``*.png`` with ``lossless``) and thumb.jpg
-    plots/*.png, videos/*.webm, videos/*.jpg (the videos' posters)
-
-The tables come from :func:`setdiff_bench.reporting.leaderboard.build_leaderboard` (the same aggregation,
-refusals and bold-best as ``setdiff-bench leaderboard``), the plots from
-:func:`setdiff_bench.reporting.plots.write_plots`.  The *baseline* (default ``identity``: its outputs are the
-3DGS render) is what gains are measured against: per target, ``method − baseline`` for metrics where higher
-is better and ``baseline − method`` where lower is, so a negative gain is damage in every column.
-
-Pictures and videos need the packet store the runs were made on (``packets``; its ``index.parquet`` must be
-the one the runs recorded); without one the site has the tables, plots and per-target metrics only.  The
-site is built in a staging folder beside ``out`` and renamed into place when complete.
-
-Modules, along the data path: :mod:`.site_runs` (the runs and their packet store), :mod:`.site_targets`
-(per-target records and gains), :mod:`.site_pictures` (JPEG or PNG pictures, thumbnails), :mod:`.site_html`
-(style, scripts, page frame, units, leaderboard tables, video players), :mod:`.site_scenes` (the per-scene
-breakdown), :mod:`.site_target_pages` (a target's page and pictures), :mod:`.site_index` (``index.html``) and
-this module (:func:`build_site`, which writes them all).
-"""
+"""``build_site``: the report site of finished runs, page by page (the package's docstring says what it holds)."""
 
 from __future__ import annotations
 
@@ -50,58 +20,23 @@ from setdiff_bench.reporting.leaderboard import (
     reported_for,
 )
 from setdiff_bench.reporting.plots import write_plots
-from setdiff_bench.reporting.site_html import (
-    SLIDER_SCRIPT,
+from setdiff_bench.reporting.site._html import (
     SORT_SCRIPT,
-    STYLE,
-    leaderboard_html,
     page,
-    video_players,
     videos_page,
 )
-from setdiff_bench.reporting.site_index import damage_html, index_body, plot_caption, targets_table_html
-from setdiff_bench.reporting.site_pictures import ERROR_MAP_POOL
-from setdiff_bench.reporting.site_runs import open_store, recorded_store, run_folders
-from setdiff_bench.reporting.site_scenes import scene_table_html
-from setdiff_bench.reporting.site_settings import DEFAULT_BASELINE, SiteSettings
-from setdiff_bench.reporting.site_target_pages import THUMBNAIL_FILE, target_page, write_target_images
-from setdiff_bench.reporting.site_targets import (
-    TARGET_KEY,
-    TargetRecord,
-    gain,
+from setdiff_bench.reporting.site._index import index_body, plot_caption
+from setdiff_bench.reporting.site._pictures import ERROR_MAP_POOL
+from setdiff_bench.reporting.site._runs import open_store, recorded_store, run_folders
+from setdiff_bench.reporting.site._scenes import scene_table_html
+from setdiff_bench.reporting.site._settings import DEFAULT_BASELINE, SiteSettings
+from setdiff_bench.reporting.site._target_pages import THUMBNAIL_FILE, target_page, write_target_images
+from setdiff_bench.reporting.site._targets import (
     image_metrics,
-    target_gain,
     target_records,
 )
+from setdiff_bench.reporting.site._video import VideoRecord, target_sequences, write_videos
 from setdiff_bench.reporting.targets import TargetImages, TargetKey
-from setdiff_bench.reporting.video import VideoRecord, target_sequences, write_videos
-
-__all__ = [
-    "DEFAULT_BASELINE",
-    "SLIDER_SCRIPT",
-    "SORT_SCRIPT",
-    "STYLE",
-    "TARGET_KEY",
-    "SiteSettings",
-    "SiteSummary",
-    "TargetRecord",
-    "build_site",
-    "damage_html",
-    "gain",
-    "image_metrics",
-    "leaderboard_html",
-    "open_store",
-    "page",
-    "recorded_store",
-    "run_folders",
-    "target_gain",
-    "target_page",
-    "target_records",
-    "targets_table_html",
-    "video_players",
-    "videos_page",
-    "write_target_images",
-]
 
 #: The metrics the plots draw, one panel each.
 PLOT_METRICS = ("psnr", "ssim", "lpips")
