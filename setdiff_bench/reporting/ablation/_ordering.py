@@ -8,8 +8,8 @@ from collections.abc import Mapping, Sequence
 import pandas as pd
 
 from setdiff_bench.metrics.registry import get_metric
-from setdiff_bench.reporting.ablation_design import METRICS
-from setdiff_bench.reporting.ablation_results import Key, paired_over_targets, seed_spread
+from setdiff_bench.reporting.ablation._design import METRICS
+from setdiff_bench.reporting.ablation._results import Key, paired_over_targets, seed_spread
 from setdiff_bench.reporting.bootstrap import BootstrapSettings
 from setdiff_bench.reporting.paired import PairedDifference, few_scenes_note
 

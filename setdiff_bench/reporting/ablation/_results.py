@@ -17,7 +17,7 @@ import pandas as pd
 
 from setdiff_bench.errors import SetDiffBenchError
 from setdiff_bench.metrics.registry import get_metric
-from setdiff_bench.reporting.ablation_design import METRICS
+from setdiff_bench.reporting.ablation._design import METRICS
 from setdiff_bench.reporting.bootstrap import BootstrapSettings
 from setdiff_bench.reporting.paired import TARGET_COLUMNS, PairedDifference, pair_targets, paired_differences
 

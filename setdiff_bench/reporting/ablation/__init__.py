@@ -21,15 +21,15 @@ never mixed into our rows — and the exact commands that produced them.  The se
 per set size (the paper prints Table 6 transposed, one row per metric); its Parquet keeps the paper's
 shape.
 
-The concepts live in modules of their own, one each, and are re-exported here: what an ablation varies
-(:mod:`~setdiff_bench.reporting.ablation_design`), its numbers over runs and trained models
-(:mod:`~setdiff_bench.reporting.ablation_results`), the comparison with the paper's ordering
-(:mod:`~setdiff_bench.reporting.ablation_ordering`) and its tables (:mod:`~setdiff_bench.reporting.ablation_tables`).
+The concepts live in private modules of their own, one each; this face exports them: what an ablation varies
+(:mod:`~setdiff_bench.reporting.ablation._design`), its numbers over runs and trained models
+(:mod:`~setdiff_bench.reporting.ablation._results`), the comparison with the paper's ordering
+(:mod:`~setdiff_bench.reporting.ablation._ordering`) and its tables (:mod:`~setdiff_bench.reporting.ablation._tables`).
 """
 
 from __future__ import annotations
 
-from setdiff_bench.reporting.ablation_design import (
+from setdiff_bench.reporting.ablation._design import (
     GEOMETRY_VARIANTS,
     METRICS,
     SET_SIZES,
@@ -38,8 +38,8 @@ from setdiff_bench.reporting.ablation_design import (
     parse_variants,
     size_label,
 )
-from setdiff_bench.reporting.ablation_ordering import ordering_geometry, ordering_setsize
-from setdiff_bench.reporting.ablation_results import (
+from setdiff_bench.reporting.ablation._ordering import ordering_geometry, ordering_setsize
+from setdiff_bench.reporting.ablation._results import (
     Key,
     ModelResults,
     RunMeans,
@@ -50,7 +50,7 @@ from setdiff_bench.reporting.ablation_results import (
     seed_spread,
     spread_notes,
 )
-from setdiff_bench.reporting.ablation_tables import (
+from setdiff_bench.reporting.ablation._tables import (
     GEOMETRY_HEADER,
     SETSIZE_HEADER,
     geometry_board,

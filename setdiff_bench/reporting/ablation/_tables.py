@@ -12,8 +12,8 @@ import pyarrow.parquet as pq
 
 from setdiff_bench.io.atomic import atomic_path, write_text_atomic
 from setdiff_bench.metrics.registry import get_metric
-from setdiff_bench.reporting.ablation_design import GEOMETRY_VARIANTS, METRICS, size_label
-from setdiff_bench.reporting.ablation_results import ModelResults
+from setdiff_bench.reporting.ablation._design import GEOMETRY_VARIANTS, METRICS, size_label
+from setdiff_bench.reporting.ablation._results import ModelResults
 from setdiff_bench.reporting.leaderboard import (
     Leaderboard,
     load_reported,
