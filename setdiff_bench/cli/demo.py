@@ -109,7 +109,8 @@ def invocation(args: argparse.Namespace) -> str:
 def run(args: argparse.Namespace) -> int:
     # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     from setdiff_bench.errors import UsageError
-    from setdiff_bench.pipeline.demo import DemoPaths, get_benchmark, get_demo_preset, run_demo
+    from setdiff_bench.pipeline.demo import DemoPaths, run_demo
+    from setdiff_bench.pipeline.presets import get_benchmark, get_demo_preset
     from setdiff_bench.pipeline.reproduction import Reproduction
     from setdiff_bench.pipeline.stages import StageFailed
     from setdiff_bench.runtime.devices import resolve_device

@@ -24,7 +24,7 @@ from typing import Any
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.atomic import sha256_file, staged_folder, write_text_atomic
-from setdiff_bench.pipeline.demo_layout import REPORT_FILE, SUMMARY_FILE
+from setdiff_bench.pipeline.demo import REPORT_FILE, SUMMARY_FILE
 
 #: The provenance manifest written into a published folder.
 PROVENANCE_FILE = "provenance.json"

@@ -17,8 +17,7 @@ import setdiff_bench.pipeline.stages as stages
 from setdiff_bench.cli.main import main
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.atomic import sha256_file
-from setdiff_bench.pipeline.demo import SUMMARY_FILE
-from setdiff_bench.pipeline.demo_report import threads_line
+from setdiff_bench.pipeline.demo import SUMMARY_FILE, threads_line
 from setdiff_bench.pipeline.publish import PROVENANCE_FILE, publish
 from setdiff_bench.pipeline.stages import LEDGER_FILE, Pipeline, StageFailed, StageRecord
 

@@ -26,7 +26,8 @@ from setdiff_bench.models.setdiff.files import MANIFEST_FILE
 from setdiff_bench.models.setdiff.inference import enhance_packet
 from setdiff_bench.models.setdiff.manifest import record_training_session, synthetic_scene_seeds
 from setdiff_bench.models.setdiff.packaged import packaged_models, packaged_root, verify
-from setdiff_bench.pipeline.demo import DEMO_PRESETS, SHIPPED_MODELS, check_unseen, evaluation_scene_indices
+from setdiff_bench.pipeline.demo import SHIPPED_MODELS, check_unseen, evaluation_scene_indices
+from setdiff_bench.pipeline.presets import DEMO_PRESETS
 from tests.models.setdiff_fixtures import make_packet, perturbed_model
 
 SHIPPED = packaged_models()

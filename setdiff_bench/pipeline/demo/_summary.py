@@ -13,8 +13,8 @@ import pandas as pd
 
 from setdiff_bench.io.run_layout import METRICS_FILE
 from setdiff_bench.metrics.registry import get_metric
-from setdiff_bench.pipeline.demo_layout import REPORT_FILE, SUMMARY_FILE, DemoPaths
-from setdiff_bench.pipeline.demo_stages import METHODS
+from setdiff_bench.pipeline.demo._layout import REPORT_FILE, SUMMARY_FILE, DemoPaths
+from setdiff_bench.pipeline.demo._stages import METHODS
 from setdiff_bench.pipeline.presets import DemoPreset, get_benchmark
 from setdiff_bench.pipeline.stages import Pipeline
 from setdiff_bench.runtime.provenance import git_revision, package_versions

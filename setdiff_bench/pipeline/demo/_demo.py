@@ -1,49 +1,4 @@
-"""The embedded benchmark end to end: synthetic test scenes → 3DGS fits → packets → ``identity``,
-``reproject``, ``difix``, ``setdiff`` → leaderboard, plots, grids.
-
-By default the demo evaluates the models shipped in the package (``tiny_setdiff``, ``tiny_difix``:
-:mod:`setdiff_bench.models.setdiff.packaged`), trained with the toolkit's own commands on synthetic
-scenes whose generator seeds are disjoint from the demo's test scenes (checked before any work).  It
-generates and fits only the preset's **test** scenes (the synthetic protocol's scene split over the
-preset's scene list), declares them the test split of the packet store (``prepare --test-scene``),
-runs the four methods and writes the leaderboard.  ``--train`` keeps the whole path instead: every
-scene, SetDiff and DiFix trained on the training scenes, then the same evaluation (and, on request,
-the two ablations, which need training).
-
-Every stage is an ordinary ``setdiff-bench`` command run in its own process
-(:mod:`setdiff_bench.pipeline.stages`); the demo records each command and its wall time in
-``<out>/README.md`` and ``<out>/demo.json``.  Bulky intermediate data (scenes, packets,
-checkpoints, runs) goes to ``<out>/work``; tables, plots and the report sit in ``<out>``, by default
-the scratch folder ``runs/demo`` (git-ignored).  The project's published results are replaced only
-on purpose, by ``setdiff-bench publish`` (:mod:`setdiff_bench.pipeline.publish`).  Every stage resumes, so an
-interrupted demo continues where it stopped; a stage finished by an earlier run keeps its original
-time in the report, marked resumed (``<work>/stages.json``).
-
-``demo.json`` is written last (and removed when a run starts), so its presence means the outputs
-beside it are complete and from one run; it records the provenance (git revision, command, seed,
-torch thread count, package versions) and the SHA-256 of every output.
-
-Presets (``--preset``):
-
-* ``tiny``: tiny scenes (80×48) — a smoke test (CI runs it with and without ``--train``).  Its
-  numbers mean nothing.
-* ``default``: the ``default`` synthetic preset's 2 test scenes at 256×144 with the shipped models
-  (about 5 minutes on 2 CPU cores, measured in README.md); with ``--train``, all 6 scenes and short CPU
-  training.
-* ``full``: the ``large`` synthetic preset (8 scenes at 512×288); meant for ``--train`` on a GPU.
-
-``--benchmark sparse`` runs the same stages on the sparse-view benchmark
-(:data:`setdiff_bench.pipeline.presets.DEMO_BENCHMARKS`): the ``sparse*`` synthetic presets' walks in
-DL3DV's layout, prepared with the packaged ``dl3dv_sparse_synthetic`` protocol (its listed test scenes
-``sparse_0000_00`` and ``sparse_0000_01``, so seed 0), the shipped ``tiny_setdiff_sparse`` and
-``tiny_difix_sparse``, and the leaderboard in Table 4's layout beside the paper's reported DL3DV rows,
-with the metrics-against-view-count plot.
-
-Modules, in the order a demo uses them: :mod:`.demo_layout` (its folders and files), :mod:`.demo_scenes`
-(the test scenes and the shipped models' unseen check), :mod:`.demo_stages` (every stage's command, as
-data), this module (:func:`run_demo`, which runs them), :mod:`.demo_summary` (``demo.json``) and
-:mod:`.demo_report` (``README.md``).
-"""
+"""``run_demo``: an embedded benchmark end to end, stage by stage (the package's docstring says what it does)."""
 
 from __future__ import annotations
 
@@ -53,63 +8,26 @@ from typing import Any
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.atomic import sha256_file, write_text_atomic
-from setdiff_bench.pipeline.demo_layout import BENCHMARK_FILE, REPORT_FILE, SUMMARY_FILE, DemoPaths
-from setdiff_bench.pipeline.demo_report import report_markdown
-from setdiff_bench.pipeline.demo_scenes import (
-    SHIPPED_MODELS,
+from setdiff_bench.pipeline.demo._layout import BENCHMARK_FILE, REPORT_FILE, SUMMARY_FILE, DemoPaths
+from setdiff_bench.pipeline.demo._report import report_markdown
+from setdiff_bench.pipeline.demo._scenes import (
     check_unseen,
     evaluation_scene_indices,
-    scene_count,
     scene_namer,
 )
-from setdiff_bench.pipeline.demo_stages import METHODS, DemoPlan, DemoStage, DemoStages, demo_stages
-from setdiff_bench.pipeline.demo_summary import (
-    VERDICT_METRICS,
-    better,
-    lane_shift_verdict,
+from setdiff_bench.pipeline.demo._stages import DemoPlan, demo_stages
+from setdiff_bench.pipeline.demo._summary import (
     run_provenance,
     summarize,
 )
 from setdiff_bench.pipeline.presets import (
-    DEMO_PRESETS,
     DemoBenchmark,
     DemoPreset,
     get_benchmark,
-    get_demo_preset,
 )
 from setdiff_bench.pipeline.reproduction import check_reproduction
 from setdiff_bench.pipeline.stages import LEDGER_FILE, Pipeline
 from setdiff_bench.runtime.devices import resolve_device
-
-__all__ = [
-    "DEMO_PRESETS",
-    "METHODS",
-    "REPORT_FILE",
-    "SHIPPED_MODELS",
-    "SUMMARY_FILE",
-    "VERDICT_METRICS",
-    "DemoBenchmark",
-    "DemoPaths",
-    "DemoPlan",
-    "DemoPreset",
-    "DemoStage",
-    "DemoStages",
-    "Pipeline",
-    "better",
-    "check_folder",
-    "check_unseen",
-    "demo_stages",
-    "evaluation_scene_indices",
-    "get_benchmark",
-    "get_demo_preset",
-    "lane_shift_verdict",
-    "report_markdown",
-    "run_demo",
-    "run_provenance",
-    "scene_count",
-    "scene_namer",
-    "summarize",
-]
 
 
 def folder_benchmark(paths: DemoPaths) -> str | None:

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from setdiff_bench.pipeline.demo_layout import DemoPaths
+from setdiff_bench.pipeline.demo._layout import DemoPaths
 from setdiff_bench.pipeline.presets import DemoBenchmark, DemoPreset
 from setdiff_bench.pipeline.stages import relative
 

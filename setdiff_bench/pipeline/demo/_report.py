@@ -6,9 +6,9 @@ from __future__ import annotations
 from typing import Any
 
 from setdiff_bench.metrics.registry import get_metric
-from setdiff_bench.pipeline.demo_layout import DemoPaths
-from setdiff_bench.pipeline.demo_stages import METHODS
-from setdiff_bench.pipeline.demo_summary import VERDICT_METRICS
+from setdiff_bench.pipeline.demo._layout import DemoPaths
+from setdiff_bench.pipeline.demo._stages import METHODS
+from setdiff_bench.pipeline.demo._summary import VERDICT_METRICS
 from setdiff_bench.pipeline.presets import get_benchmark
 
 
