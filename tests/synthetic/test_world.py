@@ -15,8 +15,7 @@ from setdiff_bench.synthetic.generate import build_scene
 from setdiff_bench.synthetic.layout import LANE_WIDTH_M, random_layout
 from setdiff_bench.synthetic.presets import get_preset
 from setdiff_bench.synthetic.rig import RIG, rig_camera
-from setdiff_bench.synthetic.world import CATEGORIES
-from setdiff_bench.synthetic.world_ground import road_texture
+from setdiff_bench.synthetic.world import CATEGORIES, road_texture
 from tests.synthetic.synthetic_fixtures import SEED, small_preset
 
 

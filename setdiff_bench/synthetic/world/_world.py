@@ -1,16 +1,4 @@
-"""The procedural street world as 3D Gaussians: a :class:`StreetLayout` turned into a static
-:class:`GaussianModel` plus vehicle templates that move per timestamp.
-
-Level of detail: surfaces are tiled with a grid whose spacing grows with the distance to the stretch
-of street the cameras drive along (``Detail``), so a ~100 m street stays at a few tens of thousands of
-Gaussians while keeping roughly ``pixels_per_gaussian`` pixels between neighbouring disk centres at
-the benchmark focal length.  Every Gaussian carries a category (ground, façade, object, foliage,
-vehicle, far background, sky) so that the SfM-like point sampler can skip what SfM never triangulates.
-
-The surfaces are built by concept: :mod:`.world_ground` (road, parking, curbs, sidewalks),
-:mod:`.world_buildings` (façades), :mod:`.world_objects` (cars, poles, trees, foliage) and :mod:`.world_sky`
-(far background and sky dome), each tiled with the :mod:`.world_detail` spacing.
-"""
+"""``build_static``: the street world's Gaussians assembled from its surfaces (the package's docstring says how)."""
 
 from __future__ import annotations
 
@@ -22,22 +10,11 @@ import torch
 from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.synthetic.layout import StreetLayout
 from setdiff_bench.synthetic.soup import GaussianSoup
-from setdiff_bench.synthetic.world_buildings import facade_soup
-from setdiff_bench.synthetic.world_detail import FACADE_DETAIL, Detail
-from setdiff_bench.synthetic.world_ground import ground_soup
-from setdiff_bench.synthetic.world_objects import car_soup, foliage_soup, street_object_soup
-from setdiff_bench.synthetic.world_sky import SKY_RADIUS_M, far_background_soup, sky_soup
-
-__all__ = [
-    "CATEGORIES",
-    "FACADE_DETAIL",
-    "SFM_CATEGORIES",
-    "SKY_RADIUS_M",
-    "Detail",
-    "World",
-    "build_static",
-    "car_soup",
-]
+from setdiff_bench.synthetic.world._buildings import facade_soup
+from setdiff_bench.synthetic.world._detail import Detail
+from setdiff_bench.synthetic.world._ground import ground_soup
+from setdiff_bench.synthetic.world._objects import foliage_soup, street_object_soup
+from setdiff_bench.synthetic.world._sky import far_background_soup, sky_soup
 
 CATEGORIES = ("ground", "facade", "object", "foliage", "far", "sky")
 """Category names; ``World.categories`` holds indices into this tuple."""

@@ -12,7 +12,7 @@ import numpy as np
 from setdiff_bench.synthetic import textures as tx
 from setdiff_bench.synthetic.layout import CURB_HEIGHT_M, EGO_LANES, StreetLayout
 from setdiff_bench.synthetic.soup import GaussianSoup, Texture
-from setdiff_bench.synthetic.world_detail import Detail
+from setdiff_bench.synthetic.world._detail import Detail
 
 
 def _chunks(

@@ -13,7 +13,7 @@ import numpy as np
 from setdiff_bench.synthetic import textures as tx
 from setdiff_bench.synthetic.layout import StreetLayout
 from setdiff_bench.synthetic.soup import GaussianSoup
-from setdiff_bench.synthetic.world_detail import Detail
+from setdiff_bench.synthetic.world._detail import Detail
 
 SKY_RADIUS_M = 400.0
 

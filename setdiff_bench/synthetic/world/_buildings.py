@@ -14,7 +14,7 @@ import numpy as np
 from setdiff_bench.synthetic import textures as tx
 from setdiff_bench.synthetic.layout import Building, StreetLayout, random_style
 from setdiff_bench.synthetic.soup import GaussianSoup
-from setdiff_bench.synthetic.world_detail import FACADE_DETAIL, Detail
+from setdiff_bench.synthetic.world._detail import FACADE_DETAIL, Detail
 
 
 def facade_soup(layout: StreetLayout, detail: Detail, rng: np.random.Generator) -> GaussianSoup:

@@ -14,7 +14,7 @@ import numpy as np
 from setdiff_bench.synthetic import textures as tx
 from setdiff_bench.synthetic.layout import CURB_HEIGHT_M, Car, StreetLayout
 from setdiff_bench.synthetic.soup import GaussianSoup, basis_quaternion
-from setdiff_bench.synthetic.world_detail import Detail
+from setdiff_bench.synthetic.world._detail import Detail
 
 
 def car_soup(
