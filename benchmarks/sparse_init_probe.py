@@ -10,7 +10,7 @@ the n fit views alone provide, so that their headroom can be measured before any
   camera box grown by the scene radius, one per 4×4-pixel block), as 3DGS-Enhancer's dataset generator
   fits its low-quality n-view 3DGS (``train.py … --n_sparse n --train_lr --rand_init``, 30 000 iterations,
   xiliu8006/3dgs_dataset_generator ``dataset_generator/utils.py`` ``train_lr``);
-* ``--init views``: SfM-like points of the n fit views only (:func:`~setdiff_bench.synthetic.sparse_writer.
+* ``--init views``: SfM-like points of the n fit views only (:func:`~setdiff_bench.synthetic.sparse.
   fit_view_points`: seen in at least two of them, coloured by them) — what a perfect matcher would
   triangulate.  COLMAP on the views themselves (``fit --init triangulate``) finds 0 / 2 / 30 points at
   n = 3 / 6 / 9 on these 256×144 walks (50° apart at n = 3), below the fit's 100-point floor;
@@ -46,9 +46,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from setdiff_bench.loaders.colmap import read_colmap_model
 from setdiff_bench.synthetic.sfm import SparsePoints
-from setdiff_bench.synthetic.sparse import build_sparse_scene, get_sparse_preset
-from setdiff_bench.synthetic.sparse_names import IMAGES_DIR, fit_views
-from setdiff_bench.synthetic.sparse_writer import fit_view_points, write_sparse_model
+from setdiff_bench.synthetic.sparse import (
+    IMAGES_DIR,
+    build_sparse_scene,
+    fit_view_points,
+    fit_views,
+    get_sparse_preset,
+    write_sparse_model,
+)
 
 INITS = ("random", "views", "video")
 PROTOCOL = "dl3dv_sparse_synthetic"

@@ -40,3 +40,26 @@ def load_attribute(
         return getattr(module, attr)
     except AttributeError:
         raise error(f"{what}: {module_name} has no {attr!r} (from {reference!r})", path) from None
+
+
+def lazy_face(package: str, exports: dict[str, str]) -> tuple[Any, Any]:
+    """``__getattr__`` and ``__dir__`` for a package face whose names load on first use (PEP 562), as diffusers'
+    ``_import_structure``: ``exports`` maps each public name to the private module (``"_settings"``) that defines
+    it, so importing the face (e.g. for a verb's ``--help``) imports none of them, and a name imports only its
+    own module.
+
+    Usage, in ``package/__init__.py``: ``__getattr__, __dir__ = lazy_face(__name__, _EXPORTS)``.
+    """
+
+    def __getattr__(name: str) -> Any:
+        module = exports.get(name)
+        if module is None:
+            raise AttributeError(f"module {package!r} has no attribute {name!r}")
+        value = getattr(importlib.import_module(f"{package}.{module}"), name)
+        setattr(importlib.import_module(package), name, value)  # loaded once
+        return value
+
+    def __dir__() -> list[str]:
+        return sorted(exports)
+
+    return __getattr__, __dir__

@@ -88,10 +88,10 @@ SCENE_KINDS: dict[str, SceneKind] = {
         name="sparse",
         dataset="dl3dv",
         prefix="sparse",
-        presets="setdiff_bench.synthetic.sparse:SPARSE_PRESETS",
+        presets="setdiff_bench.synthetic.sparse._sparse:SPARSE_PRESETS",  # read from source: its defining module
         lookup="setdiff_bench.synthetic.sparse:get_sparse_preset",
-        generator="setdiff_bench.synthetic.sparse_writer:RECIPE",
-        fitter="setdiff_bench.synthetic.sparse_fit:FITTING",
+        generator="setdiff_bench.synthetic.sparse:RECIPE",
+        fitter="setdiff_bench.synthetic.sparse:FITTING",
     ),
 }
 

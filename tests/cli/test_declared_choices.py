@@ -34,7 +34,7 @@ def choices(module: object, flag: str, *words: str) -> tuple[str, ...]:
 
 def test_registry_names_are_the_imported_registries_keys() -> None:
     assert registry_names("setdiff_bench.synthetic.presets", "PRESETS") == tuple(PRESETS)
-    assert registry_names("setdiff_bench.synthetic.sparse", "SPARSE_PRESETS") == tuple(SPARSE_PRESETS)
+    assert registry_names("setdiff_bench.synthetic.sparse._sparse", "SPARSE_PRESETS") == tuple(SPARSE_PRESETS)
 
 
 def test_declared_values_are_the_imported_ones() -> None:

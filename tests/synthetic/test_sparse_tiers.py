@@ -14,10 +14,10 @@ from setdiff_bench.synthetic.sparse import (
     SPARSE_PRESETS,
     build_sparse_scene,
     fit_sparse_scene,
+    fit_view_points,
     generate_sparse_scene,
     get_sparse_preset,
 )
-from setdiff_bench.synthetic.sparse_writer import fit_view_points
 
 
 def test_the_random_init_tier_is_the_sparse_walks_fitted_from_random_points() -> None:

@@ -35,13 +35,26 @@ The package's modules are private (``_site`` builds, ``_settings``, ``_runs``, `
 
 from __future__ import annotations
 
-from setdiff_bench.reporting.site._pictures import pooled_error_map, write_jpeg
-from setdiff_bench.reporting.site._runs import run_folders
-from setdiff_bench.reporting.site._settings import DEFAULT_PANEL_WIDTH, PictureSettings, SiteSettings
-from setdiff_bench.reporting.site._site import build_site
-from setdiff_bench.reporting.site._target_pages import write_target_images
-from setdiff_bench.reporting.site._targets import TargetRecord
-from setdiff_bench.reporting.site._video import VideoError, side_by_side, target_sequences, write_video
+from typing import TYPE_CHECKING
+
+from setdiff_bench.runtime.lazy import lazy_face
+
+#: Public name → the private module that defines it; each loads on first use (``report --help`` imports none).
+_EXPORTS = {
+    "DEFAULT_PANEL_WIDTH": "_settings",
+    "PictureSettings": "_settings",
+    "SiteSettings": "_settings",
+    "TargetRecord": "_targets",
+    "VideoError": "_video",
+    "build_site": "_site",
+    "pooled_error_map": "_pictures",
+    "run_folders": "_runs",
+    "side_by_side": "_video",
+    "target_sequences": "_video",
+    "write_jpeg": "_pictures",
+    "write_target_images": "_target_pages",
+    "write_video": "_video",
+}
 
 __all__ = [
     "DEFAULT_PANEL_WIDTH",
@@ -57,4 +70,14 @@ __all__ = [
     "write_jpeg",
     "write_target_images",
     "write_video",
-]
+]  # = sorted(_EXPORTS)
+__getattr__, __dir__ = lazy_face(__name__, _EXPORTS)
+
+if TYPE_CHECKING:  # for type checkers and IDEs
+    from setdiff_bench.reporting.site._pictures import pooled_error_map, write_jpeg
+    from setdiff_bench.reporting.site._runs import run_folders
+    from setdiff_bench.reporting.site._settings import DEFAULT_PANEL_WIDTH, PictureSettings, SiteSettings
+    from setdiff_bench.reporting.site._site import build_site
+    from setdiff_bench.reporting.site._target_pages import write_target_images
+    from setdiff_bench.reporting.site._targets import TargetRecord
+    from setdiff_bench.reporting.site._video import VideoError, side_by_side, target_sequences, write_video

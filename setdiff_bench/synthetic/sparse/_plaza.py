@@ -14,8 +14,8 @@ import numpy as np
 from setdiff_bench.synthetic import textures as tx
 from setdiff_bench.synthetic.layout import StreetLayout, random_car, random_style
 from setdiff_bench.synthetic.soup import GaussianSoup
-from setdiff_bench.synthetic.sparse_preset import SparsePreset
-from setdiff_bench.synthetic.sparse_walk import Walk
+from setdiff_bench.synthetic.sparse._preset import SparsePreset
+from setdiff_bench.synthetic.sparse._walk import Walk
 from setdiff_bench.synthetic.world import FACADE_DETAIL, Detail, car_soup
 
 

@@ -1,5 +1,5 @@
 """The generation parameters of a sparse-view scene (:class:`SparsePreset`); the named presets are
-``SPARSE_PRESETS`` in :mod:`setdiff_bench.synthetic.sparse`.
+``SPARSE_PRESETS`` in :mod:`setdiff_bench.synthetic.sparse._sparse`.
 """
 
 from __future__ import annotations

@@ -20,13 +20,13 @@ from setdiff_bench.synthetic.capture import CapturedFrame
 from setdiff_bench.synthetic.colmap_writer import ColmapImage, write_colmap_model
 from setdiff_bench.synthetic.rig import intrinsics
 from setdiff_bench.synthetic.sfm import SparsePoints, sample_sparse_points
-from setdiff_bench.synthetic.sparse_build import (
+from setdiff_bench.synthetic.sparse._build import (
     STREAM_TAG,
     SparseBuild,
     build_sparse_scene,
     render_sparse_frames,
 )
-from setdiff_bench.synthetic.sparse_names import (
+from setdiff_bench.synthetic.sparse._names import (
     FORMAT,
     FULL_SCALE,
     IMAGES_DIR,

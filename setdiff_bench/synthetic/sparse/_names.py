@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from setdiff_bench.protocols.rules import sparse_view_indices
 from setdiff_bench.synthetic.kinds import SCENE_KINDS
-from setdiff_bench.synthetic.sparse_preset import SparsePreset
+from setdiff_bench.synthetic.sparse._preset import SparsePreset
 
 FORMAT = "setdiff-synthetic-sparse/1"
 IMAGES_DIR = "images_4"

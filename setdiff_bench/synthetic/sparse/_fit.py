@@ -10,8 +10,8 @@ from typing import Any
 
 from setdiff_bench.synthetic.fits import FitRecipe
 from setdiff_bench.synthetic.kinds import SCENE_KINDS
-from setdiff_bench.synthetic.sparse_names import fit_views
-from setdiff_bench.synthetic.sparse_preset import SparsePreset
+from setdiff_bench.synthetic.sparse._names import fit_views
+from setdiff_bench.synthetic.sparse._preset import SparsePreset
 
 
 def sparse_fit_keys(preset: SparsePreset) -> tuple[str, ...]:

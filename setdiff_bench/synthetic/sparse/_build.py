@@ -19,10 +19,10 @@ from setdiff_bench.gaussians.render import render
 from setdiff_bench.synthetic.capture import CapturedFrame, concat_models, expected_depth
 from setdiff_bench.synthetic.layout import StreetLayout, random_layout
 from setdiff_bench.synthetic.rig import intrinsics
-from setdiff_bench.synthetic.sparse_names import frame_file, sparse_scene_name
-from setdiff_bench.synthetic.sparse_plaza import plaza_objects
-from setdiff_bench.synthetic.sparse_preset import SparsePreset
-from setdiff_bench.synthetic.sparse_walk import Walk, random_walk, walk_camera
+from setdiff_bench.synthetic.sparse._names import frame_file, sparse_scene_name
+from setdiff_bench.synthetic.sparse._plaza import plaza_objects
+from setdiff_bench.synthetic.sparse._preset import SparsePreset
+from setdiff_bench.synthetic.sparse._walk import Walk, random_walk, walk_camera
 from setdiff_bench.synthetic.world import Detail, build_static
 
 STREAM_TAG = 37

@@ -15,8 +15,8 @@ import numpy as np
 from setdiff_bench.cameras import Camera, intrinsics_matrix, look_at
 from setdiff_bench.synthetic.layout import StreetLayout
 from setdiff_bench.synthetic.rig import intrinsics
-from setdiff_bench.synthetic.sparse_names import frame_file
-from setdiff_bench.synthetic.sparse_preset import SparsePreset
+from setdiff_bench.synthetic.sparse._names import frame_file
+from setdiff_bench.synthetic.sparse._preset import SparsePreset
 
 
 @dataclass(frozen=True)
