@@ -26,9 +26,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.common import machine, time_call, write_result
 from setdiff_bench.cli.fit import fit_config
 from setdiff_bench.cli.list import parse_option
-from setdiff_bench.gaussians.fit import initial_model
-from setdiff_bench.gaussians.fit_data import load_fit_scene, load_fit_views, select_fit_frames
-from setdiff_bench.gaussians.fit_trainer import Trainer
+from setdiff_bench.gaussians.fit import (
+    Trainer,
+    initial_model,
+    load_fit_scene,
+    load_fit_views,
+    select_fit_frames,
+)
 from setdiff_bench.gaussians.render import render
 
 

@@ -114,7 +114,7 @@ def dataset_names() -> tuple[str, ...]:
 def declared_field_default(module: str, cls: str, name: str) -> Any:
     """The literal default of field ``name`` of the class ``cls`` defined in ``module`` (or in the module that
     ``module`` imports it from), read from the sources without importing them: ``--help`` may not load torch,
-    which importing :mod:`setdiff_bench.gaussians.fit_config` does through its package
+    which importing :mod:`setdiff_bench.gaussians.fit` does through its package
     (module docstring).
 
     Raises:

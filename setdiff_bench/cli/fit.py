@@ -46,7 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--init",
         default="auto",
-        choices=declared_literal("setdiff_bench.gaussians.triangulate", "InitMode"),
+        choices=declared_literal("setdiff_bench.gaussians.fit._triangulate", "InitMode"),
         help="initial Gaussians: auto = the scene's sparse points, else points triangulated from "
         "the known poses (pycolmap), else random points sized to the scene",
     )
@@ -149,7 +149,7 @@ def run(args: argparse.Namespace) -> int:
     config = fit_config(args.preset, args.iterations, args.seed)
     frames = None
     if args.frames is not None:
-        from setdiff_bench.gaussians.fit_data import parse_frame_list
+        from setdiff_bench.gaussians.fit import parse_frame_list
 
         frames = parse_frame_list(args.frames)
     start = time.perf_counter()

@@ -51,7 +51,7 @@ VERB = "prepare"
 HELP = "turn a dataset and 3DGS fits into render/ground-truth packets for a protocol"
 DESCRIPTION = __doc__
 #: Where the 3DGS fit configuration is declared: ``--fit-iterations``' default is its ``iterations`` field.
-FIT_CONFIG = ("setdiff_bench.gaussians.fit_config", "FitConfig")
+FIT_CONFIG = ("setdiff_bench.gaussians.fit._config", "FitConfig")  # read from source: its defining module
 PREPARE_SETTINGS = ("setdiff_bench.packets.prepare_settings", "PrepareSettings")
 
 

@@ -13,8 +13,7 @@ from collections.abc import Sequence
 
 import torch
 
-from setdiff_bench.gaussians.fit_config import FitConfig
-from setdiff_bench.gaussians.fit_data import FitView
+from setdiff_bench.gaussians.fit import FitConfig, FitView
 from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.gaussians.render import render
 from setdiff_bench.packets.trajectory import shifted
@@ -33,7 +32,7 @@ def cycle_views(
 
     Args:
         model: the scene's fit A (world frame).
-        views: the recorded frames' fit views (:func:`~setdiff_bench.gaussians.fit_data.load_fit_views`: pinhole
+        views: the recorded frames' fit views (:func:`~setdiff_bench.gaussians.fit.load_fit_views`: pinhole
             cameras at the fit's working scale); only their names and cameras are used, never their images.
         shift_m: metres (scene units) along each camera's right axis (OpenCV +x); negative: to the left.
         config: the fit configuration of B; its ``background`` (RGB in [0, 1]) and, on the CPU, ``tile_size``

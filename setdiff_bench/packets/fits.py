@@ -22,9 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from setdiff_bench.errors import DatasetError, UsageError
-from setdiff_bench.gaussians.fit import fit_views_to_ply
-from setdiff_bench.gaussians.fit_config import FitConfig
-from setdiff_bench.gaussians.fit_data import load_fit_views
+from setdiff_bench.gaussians.fit import FitConfig, fit_views_to_ply, load_fit_views
 from setdiff_bench.gaussians.ply import read_ply
 from setdiff_bench.io.atomic import sha256_file
 from setdiff_bench.packets.cycle import cycle_views

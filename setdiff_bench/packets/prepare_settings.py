@@ -12,7 +12,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from setdiff_bench.gaussians.fit_config import FitConfig
+from setdiff_bench.gaussians.fit import FitConfig
 from setdiff_bench.packets.fits import DEFAULT_FIT_ITERATIONS
 from setdiff_bench.packets.shards import Shard
 

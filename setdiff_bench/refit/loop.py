@@ -1,15 +1,15 @@
 """The refit's optimisation state and step, and its checkpoints.
 
-:class:`RefitLoop` keeps a 3DGS fit's :class:`~setdiff_bench.gaussians.fit_trainer.Trainer` (parameters, Adam
+:class:`RefitLoop` keeps a 3DGS fit's :class:`~setdiff_bench.gaussians.fit.Trainer` (parameters, Adam
 moments, the seeded order of the real views) and the pseudo-views: ``(P, 3, H, W)`` enhanced images on the
 8-bit grid and their world cameras.  One step renders one view, real or pseudo as
 :meth:`~setdiff_bench.refit.settings.RefitSettings.is_pseudo_step` says, and takes an Adam step on the
 photometric loss ``(1 − λ)·L1 + λ·(1 − SSIM)`` of the fit
-(:func:`~setdiff_bench.gaussians.fit_trainer.photometric_loss`), weighted by ``pseudo_weight`` for a
+(:func:`~setdiff_bench.gaussians.fit.photometric_loss`), weighted by ``pseudo_weight`` for a
 pseudo-view.  Pseudo-views are visited in a seeded per-epoch permutation drawn from the trainer's generator.
 
 Checkpoints: ``<folder>/step-NNNNNN/`` holds the trainer's fit checkpoint
-(:func:`~setdiff_bench.gaussians.fit_checkpoint.save_checkpoint`) and ``refit_state.safetensors`` /
+(:func:`~setdiff_bench.gaussians.fit.save_checkpoint`) and ``refit_state.safetensors`` /
 ``refit_state.json`` (pseudo-views, their order, the updates done, the refit's identity), and
 ``<folder>/LATEST`` names the newest complete one; it is rewritten atomically only after the step folder is
 complete, so a SIGKILL at any point leaves the previous checkpoint in force.
@@ -28,8 +28,7 @@ import torch
 
 from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import CheckpointError
-from setdiff_bench.gaussians.fit_checkpoint import load_checkpoint, save_checkpoint
-from setdiff_bench.gaussians.fit_trainer import Trainer, photometric_loss
+from setdiff_bench.gaussians.fit import Trainer, load_checkpoint, photometric_loss, save_checkpoint
 from setdiff_bench.gaussians.render import render
 from setdiff_bench.io.atomic import atomic_path, sha256_file, write_text_atomic
 from setdiff_bench.refit.settings import RefitSettings

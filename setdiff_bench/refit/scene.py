@@ -228,8 +228,7 @@ def _inputs(task: RefitTask, settings: RefitSettings) -> _Inputs:
     """Read and check every input (module docstring, steps 1-4)."""
     from setdiff_bench.enhancers.base import ChecksTargets, available_methods, create_enhancer
     from setdiff_bench.evaluation.run import jsonable_options
-    from setdiff_bench.gaussians.fit_config import FitConfig
-    from setdiff_bench.gaussians.fit_data import load_fit_views
+    from setdiff_bench.gaussians.fit import FitConfig, load_fit_views
     from setdiff_bench.gaussians.ply import read_ply
     from setdiff_bench.loaders import list_scenes, load_scenes
     from setdiff_bench.packets.fits import FitSource, gaussian_centres
@@ -382,8 +381,7 @@ def _trainer(
 ) -> tuple[Any, Any]:
     """The refit's trainer: the fit's configuration (the checkpoint's when given) without densification, at the
     fit's final position learning rate, all SH bands active, Adam moments from ``checkpoint`` when given."""
-    from setdiff_bench.gaussians.fit_checkpoint import STATE_JSON, load_checkpoint, saved_config
-    from setdiff_bench.gaussians.fit_trainer import Trainer
+    from setdiff_bench.gaussians.fit import STATE_JSON, Trainer, load_checkpoint, saved_config
 
     names = [v.name for v in views]
     params = None
@@ -417,7 +415,7 @@ def _trainer(
 
 
 def _checkpoint_sha(folder: Path) -> str:
-    from setdiff_bench.gaussians.fit_checkpoint import STATE_JSON
+    from setdiff_bench.gaussians.fit import STATE_JSON
     from setdiff_bench.io.atomic import sha256_file
 
     path = Path(folder) / STATE_JSON

@@ -19,7 +19,7 @@ import torch
 
 from setdiff_bench.evaluation.packet_scoring import check_output
 from setdiff_bench.evaluation.scoring import quantize
-from setdiff_bench.gaussians.fit_data import FitView
+from setdiff_bench.gaussians.fit import FitView
 from setdiff_bench.packets.jobs import PacketJob
 from setdiff_bench.packets.packing import reference_views
 from setdiff_bench.protocols import Protocol

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Generic, Protocol, TypeVar
 
-from setdiff_bench.gaussians.fit_config import FitConfig
+from setdiff_bench.gaussians.fit import FitConfig
 
 #: ``report(fit key, iteration, iterations)``: a fit's progress.
 FitReport = Callable[[str, int, int], None]

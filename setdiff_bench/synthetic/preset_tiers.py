@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import TypedDict
 
-from setdiff_bench.gaussians.fit_config import FitConfig
+from setdiff_bench.gaussians.fit import FitConfig
 
 
 class WorldDetail(TypedDict):

@@ -91,8 +91,8 @@ def test_run_and_prepare_choices_and_defaults_are_the_settings_dataclasses() -> 
 
 def test_fit_init_and_render_backend_choices_are_the_library_literals() -> None:
     from setdiff_bench.cli import fit, prepare, render
+    from setdiff_bench.gaussians.fit import INIT_MODES, InitMode
     from setdiff_bench.gaussians.render import Backend
-    from setdiff_bench.gaussians.triangulate import INIT_MODES, InitMode
 
     assert (
         choices(fit, "--init")

@@ -14,7 +14,7 @@ import pytest
 from setdiff_bench.cli import prepare as prepare_cli
 from setdiff_bench.cli.declared import declared_field_default
 from setdiff_bench.cli.prepare import FIT_CONFIG
-from setdiff_bench.gaussians.fit_config import FitConfig
+from setdiff_bench.gaussians.fit import FitConfig
 from setdiff_bench.packets.fits import DEFAULT_FIT_ITERATIONS, FitSource
 from setdiff_bench.packets.prepare import PrepareSettings
 

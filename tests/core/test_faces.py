@@ -18,6 +18,7 @@ FACES = (
     "setdiff_bench.pipeline.demo",
     "setdiff_bench.synthetic.world",
     "setdiff_bench.synthetic.sparse",
+    "setdiff_bench.gaussians.fit",
 )
 
 

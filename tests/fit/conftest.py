@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from setdiff_bench.gaussians.fit_data import load_fit_scene, load_fit_views, select_fit_frames
+from setdiff_bench.gaussians.fit import load_fit_scene, load_fit_views, select_fit_frames
 from setdiff_bench.runtime.threads import torch_threads
 from setdiff_bench.synthetic.generate import generate_scene
 from setdiff_bench.synthetic.presets import get_preset

@@ -15,12 +15,12 @@ from setdiff_bench.errors import CheckpointError, UsageError
 from setdiff_bench.gaussians.fit import (
     FitConfig,
     FitResult,
+    FitView,
     fit_gaussians,
     initial_model,
     photometric_loss,
     scene_extent,
 )
-from setdiff_bench.gaussians.fit_data import FitView
 from setdiff_bench.gaussians.ply import read_ply, write_ply
 from setdiff_bench.gaussians.render import render
 from setdiff_bench.synthetic.presets import get_preset

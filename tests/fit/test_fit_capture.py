@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from setdiff_bench.cli.main import main
-from setdiff_bench.gaussians.fit_data import load_fit_scene, load_fit_views
+from setdiff_bench.gaussians.fit import load_fit_scene, load_fit_views
 from setdiff_bench.gaussians.ply import read_ply
 
 WIDTH, HEIGHT = 64, 48

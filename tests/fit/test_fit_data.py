@@ -6,7 +6,7 @@ import pytest
 
 from setdiff_bench.cli.main import main
 from setdiff_bench.errors import DatasetError
-from setdiff_bench.gaussians.fit_data import load_fit_scene
+from setdiff_bench.gaussians.fit import load_fit_scene
 
 
 def test_the_registry_reads_the_synthetic_scene(tiny_scene):

@@ -83,7 +83,7 @@ def test_exact_blur_equals_the_convolution(border):
 FIT_SCRIPT = """
 import hashlib, sys
 from setdiff_bench.gaussians.fit import FitConfig, fit_gaussians
-from setdiff_bench.gaussians.fit_data import load_fit_scene, load_fit_views, select_fit_frames
+from setdiff_bench.gaussians.fit import load_fit_scene, load_fit_views, select_fit_frames
 from setdiff_bench.gaussians.ply import write_ply
 from setdiff_bench.runtime.threads import torch_threads
 scene = load_fit_scene(sys.argv[1])

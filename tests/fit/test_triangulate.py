@@ -10,8 +10,7 @@ import torch
 
 from setdiff_bench.cameras import Camera, look_at
 from setdiff_bench.errors import UsageError
-from setdiff_bench.gaussians.fit_data import FitView
-from setdiff_bench.gaussians.triangulate import initial_points, triangulate_views
+from setdiff_bench.gaussians.fit import FitView, initial_points, triangulate_views
 
 WIDTH, HEIGHT = 240, 180
 K = np.array([[200.0, 0.0, 120.0], [0.0, 200.0, 90.0], [0.0, 0.0, 1.0]])

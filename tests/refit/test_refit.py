@@ -206,10 +206,7 @@ def test_sigkill_mid_refit_then_rerun_gives_the_same_bytes(street_root: Path, tm
 def fit_checkpoint(root: Path, folder: Path, model_path: Path) -> None:
     """A fit checkpoint (``fit --checkpoint``) whose parameters are the PLY at ``model_path``: the state a fit of
     the lane+2 group's fit frames ends with."""
-    from setdiff_bench.gaussians.fit_checkpoint import save_checkpoint
-    from setdiff_bench.gaussians.fit_config import FitConfig
-    from setdiff_bench.gaussians.fit_data import load_fit_views
-    from setdiff_bench.gaussians.fit_trainer import Trainer
+    from setdiff_bench.gaussians.fit import FitConfig, Trainer, load_fit_views, save_checkpoint
     from setdiff_bench.loaders import load_scenes
     from setdiff_bench.protocols import load_protocol
 

@@ -35,7 +35,7 @@ class SparsePreset:
         views: the view counts fitted by ``synth`` (``fits/n{k}.ply``).
         gaps: the 3DGS-Enhancer gap rule's gaps (``protocols/dl3dv.toml``).
         fit: the 3DGS fit configuration of each sparse fit.
-        init: the fits' initial points (:func:`setdiff_bench.gaussians.triangulate.initial_points`):
+        init: the fits' initial points (:func:`setdiff_bench.gaussians.fit.initial_points`):
             ``"sparse"``, the scene's ``points3D`` (whole-video points: geometry and colour the n fit views
             never saw), or ``"random"``, the fit's own random points (what 3DGS-Enhancer's n-view fits
             start from, docs/sparse_benchmark.md).

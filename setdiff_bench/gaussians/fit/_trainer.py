@@ -13,9 +13,9 @@ from collections.abc import Sequence
 
 import torch
 
-from setdiff_bench.gaussians.fit_config import FitConfig
-from setdiff_bench.gaussians.fit_data import FitView
-from setdiff_bench.gaussians.fit_init import scene_extent
+from setdiff_bench.gaussians.fit._config import FitConfig
+from setdiff_bench.gaussians.fit._data import FitView
+from setdiff_bench.gaussians.fit._init import scene_extent
 from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.gaussians.optim import GaussianParameters, exponential_lr
 from setdiff_bench.gaussians.render import render

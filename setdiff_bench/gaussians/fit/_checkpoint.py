@@ -1,4 +1,4 @@
-"""Checkpoints of a fit: the :class:`~setdiff_bench.gaussians.fit_trainer.Trainer`'s parameters, Adam
+"""Checkpoints of a fit: the :class:`~setdiff_bench.gaussians.fit._trainer.Trainer`'s parameters, Adam
 moments, density statistics and random state in ``fit_state.safetensors``; iteration, schedule position,
 configuration and view names in ``fit_state.json``, written last with the tensor file's SHA-256 so that a
 torn pair is detected.  Loading restores all of it, so an interrupted fit ends with exactly the model an
@@ -13,8 +13,8 @@ from pathlib import Path
 
 from setdiff_bench.errors import CheckpointError, UsageError
 from setdiff_bench.gaussians.densify import DensityStats
-from setdiff_bench.gaussians.fit_config import FitConfig
-from setdiff_bench.gaussians.fit_trainer import Trainer
+from setdiff_bench.gaussians.fit._config import FitConfig
+from setdiff_bench.gaussians.fit._trainer import Trainer
 from setdiff_bench.io.atomic import atomic_path, sha256_file, write_text_atomic
 
 CHECKPOINT_FORMAT = "setdiff-fit-checkpoint/1"

@@ -1,28 +1,4 @@
-"""3D Gaussian Splatting optimisation (Kerbl et al. 2023), the graphdeco-inria training loop on our renderer.
-
-Per iteration: pick the next view of a seeded per-epoch permutation, render it (torch backend on the
-CPU, gsplat on CUDA), loss ``(1 − λ)·L1 + λ·(1 − SSIM)`` with λ = 0.2 and the 3DGS SSIM (zero-padded
-"same" border, :func:`setdiff_bench.metrics.ssim.ssim`), Adam step with the standard per-parameter
-learning rates (position rate × scene extent, decayed exponentially), then adaptive density control
-(:mod:`.densify`) and opacity resets on the schedule.  The active SH degree grows by one every
-``sh_increase_every`` iterations.  Pixels outside a view's mask (EUVS dynamic masks: 0 = moving
-object) take the ground-truth value in the prediction, so they add neither loss nor gradient.
-
-Initialisation (:func:`fit_gaussians`): the given points — for :func:`fit_scene` the scene's sparse
-points (COLMAP ``points3D``) when present, else points triangulated from the known poses
-(:mod:`setdiff_bench.gaussians.triangulate`) — else :func:`random_init_count` uniform points in the box of the camera centres grown by the scene radius on
-every side (colour grey), each as an isotropic Gaussian (nearest-neighbour scale, opacity 0.1).
-
-Checkpoints (``checkpoint_dir``): parameters, Adam moments, density statistics and the random state in
-``fit_state.safetensors``; iteration, schedule position, config and view names in ``fit_state.json``
-(written last, with the tensor file's SHA-256, so a torn pair is detected).  Resuming restores all
-of it, so an interrupted fit ends with exactly the model an uninterrupted one would.  A checkpoint
-written before the densification settings moved into ``FitConfig.strategy`` (flat keys) still resumes.
-
-The fit by concept: :mod:`.fit_config` (settings and schedule), :mod:`.fit_init` (initial Gaussians),
-:mod:`.fit_trainer` (the optimisation state and step), :mod:`.fit_checkpoint` (checkpoint I/O); this module
-runs the loop (:func:`fit_gaussians`) and fits a scene folder to a PLY (:func:`fit_scene`).
-"""
+"""``fit_gaussians`` and ``fit_scene``: the 3DGS optimisation loop and a scene folder fitted to a PLY (the package's docstring says how)."""
 
 from __future__ import annotations
 
@@ -36,42 +12,20 @@ import numpy as np
 import torch
 
 from setdiff_bench.errors import UsageError
-from setdiff_bench.gaussians.fit_checkpoint import (
-    CHECKPOINT_FORMAT,
+from setdiff_bench.gaussians.fit._checkpoint import (
     STATE_JSON,
-    STATE_TENSORS,
     load_checkpoint,
     save_checkpoint,
-    saved_config,
 )
-from setdiff_bench.gaussians.fit_config import FitConfig, split_settings
-from setdiff_bench.gaussians.fit_data import FitView
-from setdiff_bench.gaussians.fit_init import background_sphere, initial_model, random_init_count, scene_extent
-from setdiff_bench.gaussians.fit_trainer import Trainer, photometric_loss
+from setdiff_bench.gaussians.fit._config import FitConfig
+from setdiff_bench.gaussians.fit._data import FitView
+from setdiff_bench.gaussians.fit._init import (
+    initial_model,
+)
+from setdiff_bench.gaussians.fit._trainer import Trainer
 from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.runtime.devices import resolve_device
 from setdiff_bench.types import Scene
-
-__all__ = [
-    "CHECKPOINT_FORMAT",
-    "STATE_JSON",
-    "STATE_TENSORS",
-    "FitConfig",
-    "FitResult",
-    "Trainer",
-    "background_sphere",
-    "fit_gaussians",
-    "fit_scene",
-    "fit_views_to_ply",
-    "initial_model",
-    "load_checkpoint",
-    "photometric_loss",
-    "random_init_count",
-    "save_checkpoint",
-    "saved_config",
-    "scene_extent",
-    "split_settings",
-]
 
 
 @dataclass
@@ -182,14 +136,14 @@ def fit_scene(
 ) -> FitResult:
     """Fit a scene folder's training frames (or ``frames``) and write the standard 3DGS PLY to ``out_ply``.
 
-    The scene is read through the loaders (:func:`setdiff_bench.gaussians.fit_data.load_fit_scene`;
+    The scene is read through the loaders (:func:`setdiff_bench.gaussians.fit._data.load_fit_scene`;
     with ``dataset``, ``scene_dir`` is its root and ``scene_name`` the scene); images are undistorted
-    and downscaled by ``downscale`` (:func:`~setdiff_bench.gaussians.fit_data.load_fit_views`).  Its
+    and downscaled by ``downscale`` (:func:`~setdiff_bench.gaussians.fit._data.load_fit_views`).  Its
     sparse points, when present, initialise the Gaussians, else points triangulated from the known
-    poses (``init``: :func:`setdiff_bench.gaussians.triangulate.initial_points`).  ``on_iteration(iteration,
+    poses (``init``: :func:`setdiff_bench.gaussians.fit._triangulate.initial_points`).  ``on_iteration(iteration,
     loss)`` is called after every optimiser step (progress reports from worker processes).
     """
-    from setdiff_bench.gaussians.fit_data import load_fit_scene, load_fit_views, select_fit_frames
+    from setdiff_bench.gaussians.fit._data import load_fit_scene, load_fit_views, select_fit_frames
 
     scene = load_fit_scene(scene_dir, dataset=dataset, scene=scene_name, options=loader_options)
     names = select_fit_frames(scene, frames)
@@ -219,10 +173,10 @@ def fit_views_to_ply(
     **fit_options: Any,
 ) -> FitResult:
     """Fit ``views`` of ``scene`` from its initial points (``init``:
-    :func:`setdiff_bench.gaussians.triangulate.initial_points`; sparse points, else triangulated from the poses)
+    :func:`setdiff_bench.gaussians.fit._triangulate.initial_points`; sparse points, else triangulated from the poses)
     and write the standard 3DGS PLY to ``out_ply``; ``fit_options`` go to :func:`fit_gaussians`."""
+    from setdiff_bench.gaussians.fit._triangulate import initial_points
     from setdiff_bench.gaussians.ply import write_ply
-    from setdiff_bench.gaussians.triangulate import initial_points
 
     points, colors = initial_points(scene, views, init)
     result = fit_gaussians(views, config, points=points, colors=colors, **fit_options)

@@ -12,8 +12,8 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
-from setdiff_bench.gaussians.fit_config import FitConfig
-from setdiff_bench.gaussians.fit_data import FitView
+from setdiff_bench.gaussians.fit._config import FitConfig
+from setdiff_bench.gaussians.fit._data import FitView
 from setdiff_bench.gaussians.model import GaussianModel
 
 
