@@ -38,12 +38,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from setdiff_bench.models.setdiff.autoencoder_train import (
-    AutoencoderTraining,
-    FrameSet,
-    fit_autoencoder,
-    save_autoencoder,
-)
+from setdiff_bench.models.setdiff.autoencoder_settings import AutoencoderTraining
+from setdiff_bench.models.setdiff.autoencoder_train import FrameSet, fit_autoencoder, save_autoencoder
 
 
 def export_frames(packets: Path, to: Path, every: dict[str, int]) -> None:

@@ -28,7 +28,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.common import machine, write_result
 from setdiff_bench.io.images import to_numpy_hwc, write_exr, write_png
 from setdiff_bench.packets.prepare import prepare
-from setdiff_bench.packets.store import CMAP_CHANNELS, EXR_ATTRIBUTES, PacketStore
+from setdiff_bench.packets.store import PacketStore
+from setdiff_bench.packets.writer import CMAP_CHANNELS, EXR_ATTRIBUTES
 
 
 def ensure_scenes(data: Path, scenes: int) -> None:

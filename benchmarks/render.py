@@ -18,10 +18,12 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.common import machine, time_call, write_result
-from setdiff_bench.cameras import Camera, intrinsics_matrix, look_at
+from setdiff_bench.cameras import Camera
 from setdiff_bench.gaussians.backends import torch_ref
 from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.gaussians.render import camera_tensors, render
+from setdiff_bench.intrinsics import intrinsics_matrix
+from setdiff_bench.rotations import look_at
 
 
 def street_like_scene(n: int, seed: int = 0) -> GaussianModel:

@@ -40,10 +40,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import machine
 from setdiff_bench.cameras import Camera
-from setdiff_bench.enhancers.reproject import ReprojectEnhancer, cmap_points, snap_to_rays
+from setdiff_bench.enhancers.reproject import ReprojectEnhancer, cmap_points
 from setdiff_bench.gaussians.backends.common import RenderOutput
 from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.gaussians.render import render
+from setdiff_bench.geometry import snap_to_rays
 from setdiff_bench.metrics.psnr import psnr
 from setdiff_bench.packets.store import PacketStore, row_camera
 from setdiff_bench.synthetic.sparse import static_world

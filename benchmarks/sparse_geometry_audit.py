@@ -66,8 +66,8 @@ from benchmarks.reproject_geometry import (
     with_true_geometry,
 )
 from setdiff_bench.cameras import Camera
-from setdiff_bench.enhancers.reproject import ReprojectConfig, ReprojectEnhancer, blend_weights, snap_to_rays
-from setdiff_bench.geometry import denormalize_cmaps, pixel_centers
+from setdiff_bench.enhancers.reproject import ReprojectConfig, ReprojectEnhancer, blend_weights
+from setdiff_bench.geometry import denormalize_cmaps, pixel_centers, snap_to_rays
 from setdiff_bench.io.atomic import write_text_atomic
 from setdiff_bench.models.setdiff.inputs import surface_points
 from setdiff_bench.models.setdiff.set_mixer import pool_token_points, token_grid

@@ -40,8 +40,9 @@ from typing import Literal
 
 import numpy as np
 
-from setdiff_bench.cameras import Camera, intrinsics_from_colmap
+from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import DatasetError
+from setdiff_bench.intrinsics import intrinsics_from_colmap
 from setdiff_bench.io.paths import resolve_inside
 from setdiff_bench.types import Frame, Scene
 

@@ -44,9 +44,10 @@ from typing import Literal
 
 import numpy as np
 
-from setdiff_bench.cameras import Camera, rigid_from_quaternion
+from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import DatasetError
 from setdiff_bench.io.paths import resolve_inside
+from setdiff_bench.rotations import rigid_from_quaternion
 from setdiff_bench.types import Frame, Scene
 
 from .colmap import DistortionPolicy, read_colmap_model

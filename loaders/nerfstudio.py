@@ -38,9 +38,12 @@ from typing import Any, Literal
 
 import numpy as np
 
-from setdiff_bench.cameras import Camera, Distortion, check_rotation, float_errors_raised, intrinsics_matrix
+from setdiff_bench.camera_values import float_errors_raised
+from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import CameraError, DatasetError, DatasetWarning
+from setdiff_bench.intrinsics import Distortion, intrinsics_matrix
 from setdiff_bench.io.paths import resolve_inside
+from setdiff_bench.rotations import check_rotation
 from setdiff_bench.types import Frame, Scene
 
 from .colmap import DISTORTION_POLICIES, DistortionPolicy

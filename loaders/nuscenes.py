@@ -36,23 +36,17 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from setdiff_bench.cameras import Camera, numeric_array, rigid_from_quaternion
+from setdiff_bench.camera_values import numeric_array
+from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import DatasetError, ImageError
 from setdiff_bench.io.paths import resolve_inside
+from setdiff_bench.rotations import rigid_from_quaternion
 from setdiff_bench.types import Frame, Scene
 
 from .common import dataset_root, frames_by_key, image_size, natural_key, select_scenes
-from .nuscenes_tables import FIELD_TYPES, MICROSECOND_FIELDS, Table, check_field_types, load_table
+from .nuscenes_tables import Table, load_table
 
-__all__ = [
-    "FIELD_TYPES",
-    "MICROSECOND_FIELDS",
-    "check_field_types",
-    "list_scenes",
-    "load_scenes",
-    "load_table",
-    "locate",
-]
+__all__ = ["list_scenes", "load_scenes", "locate"]
 
 VERSIONS = ("v1.0-mini", "v1.0-trainval", "v1.0-test")
 REQUIRED_TABLES = ("scene", "sample", "sample_data", "calibrated_sensor", "sensor", "ego_pose")

@@ -22,42 +22,16 @@ from setdiff_bench.intrinsics import (
     Distortion,
     apply_distortion,
     intrinsics_from_colmap,
-    intrinsics_matrix,
     invert_distortion,
 )
 from setdiff_bench.rotations import (
-    ORTHONORMAL_TOLERANCE,
-    QUATERNION_NORM_TOLERANCE,
     QuaternionOrder,
     check_rotation,
     invert_rigid,
-    look_at,
-    matrix_to_quaternion,
     quaternion_to_matrix,
-    rigid_from_quaternion,
 )
 
-__all__ = [
-    "MAX_IMAGE_SIDE",
-    "OPENGL_TO_OPENCV",
-    "ORTHONORMAL_TOLERANCE",
-    "QUATERNION_NORM_TOLERANCE",
-    "Camera",
-    "Distortion",
-    "QuaternionOrder",
-    "apply_distortion",
-    "check_rotation",
-    "float_errors_raised",
-    "intrinsics_from_colmap",
-    "intrinsics_matrix",
-    "invert_distortion",
-    "invert_rigid",
-    "look_at",
-    "matrix_to_quaternion",
-    "numeric_array",
-    "quaternion_to_matrix",
-    "rigid_from_quaternion",
-]
+__all__ = ["MAX_IMAGE_SIDE", "OPENGL_TO_OPENCV", "Camera"]
 
 OPENGL_TO_OPENCV = np.diag([1.0, -1.0, -1.0, 1.0])
 #: Largest image side accepted (pixels).  Larger sizes are corrupt data: pycolmap reads a width of -32 in

@@ -15,13 +15,11 @@ from typing import Any, Self
 import numpy as np
 import torch
 
-from setdiff_bench.cameras import Camera, Distortion
+from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import DatasetError
 
 __all__ = [
     "PACKET_KEY_FIELDS",
-    "Camera",
-    "Distortion",
     "Frame",
     "Packet",
     "PacketKey",

@@ -18,7 +18,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from setdiff_bench.cameras import Camera, apply_distortion
+from setdiff_bench.cameras import Camera
+from setdiff_bench.intrinsics import apply_distortion
 
 
 def is_distorted(camera: Camera) -> bool:

@@ -150,7 +150,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
     from setdiff_bench.packets.fits import DEFAULT_FIT_ITERATIONS
-    from setdiff_bench.packets.prepare import PrepareSettings, prepare
+    from setdiff_bench.packets.prepare import prepare
+    from setdiff_bench.packets.prepare_settings import PrepareSettings
     from setdiff_bench.packets.shards import Shard
     from setdiff_bench.runtime.devices import resolve_device
 

@@ -94,11 +94,8 @@ def _autoencoder_defaults() -> dict[str, int | float]:
 
 
 def run_autoencoder(args: argparse.Namespace) -> int:
-    from setdiff_bench.models.setdiff.autoencoder_train import (
-        AutoencoderTraining,
-        check_settings,
-        train_autoencoder,
-    )
+    from setdiff_bench.models.setdiff.autoencoder_settings import AutoencoderTraining
+    from setdiff_bench.models.setdiff.autoencoder_train import check_settings, train_autoencoder
     from setdiff_bench.packets.store import PacketStore
     from setdiff_bench.runtime.devices import resolve_device
 

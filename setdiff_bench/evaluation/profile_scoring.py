@@ -48,8 +48,8 @@ from setdiff_bench.io.run_layout import (
 from setdiff_bench.loaders import load_scenes
 from setdiff_bench.metrics.dinov2 import final_score, masked_cosine
 from setdiff_bench.metrics.registry import METRICS
-from setdiff_bench.packets.plan import crop_window
 from setdiff_bench.packets.store import PacketStore
+from setdiff_bench.packets.working_view import crop_window
 from setdiff_bench.protocols import load_protocol
 from setdiff_bench.protocols.profiles import (
     PROFILE_COLUMN,

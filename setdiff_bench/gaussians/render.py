@@ -22,7 +22,7 @@ from setdiff_bench.gaussians.model import GaussianModel
 
 Backend = Literal["torch", "gsplat"]
 
-__all__ = ["Backend", "RenderOutput", "camera_tensors", "clip_centres", "render"]
+__all__ = ["Backend", "camera_tensors", "render"]
 
 
 def render(

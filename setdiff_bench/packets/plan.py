@@ -20,53 +20,20 @@ from __future__ import annotations
 from typing import Any
 
 from setdiff_bench.errors import ProtocolError
-from setdiff_bench.packets.jobs import PACKET_FORMAT, GroupPlan, PacketJob, flatten
+from setdiff_bench.packets.jobs import GroupPlan
 from setdiff_bench.packets.packing import (
     applicable_groups,
-    chunk_sizes,
     group_jobs,
     scene_extent,
 )
-from setdiff_bench.packets.plan_pairs import plan_recipe_pairs
-from setdiff_bench.packets.plan_trajectories import (
-    TRAJECTORY_SPLIT,
-    plan_trajectories,
-    trajectory_frame_name,
-    trajectory_group_name,
-)
 from setdiff_bench.packets.working_view import (
-    Crop,
-    ViewJob,
-    crop_window,
-    mask_source,
     scene_resolution,
     view_job,
-    working_camera,
 )
 from setdiff_bench.protocols import GroupSpec, Protocol
 from setdiff_bench.types import Scene
 
-__all__ = [
-    "PACKET_FORMAT",
-    "TRAJECTORY_SPLIT",
-    "Crop",
-    "GroupPlan",
-    "PacketJob",
-    "ViewJob",
-    "applicable_groups",
-    "chunk_sizes",
-    "crop_window",
-    "flatten",
-    "mask_source",
-    "plan_recipe_pairs",
-    "plan_scene",
-    "plan_trajectories",
-    "scene_resolution",
-    "trajectory_frame_name",
-    "trajectory_group_name",
-    "view_job",
-    "working_camera",
-]
+__all__ = ["plan_scene"]
 
 
 def plan_scene(

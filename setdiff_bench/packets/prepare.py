@@ -58,39 +58,21 @@ from setdiff_bench.loaders.common import select_scenes
 from setdiff_bench.packets.execute import execute
 from setdiff_bench.packets.fits import FitSource, gaussian_centres
 from setdiff_bench.packets.index import PACKETS_DIR, group_prefix, merge_index
-from setdiff_bench.packets.plan import (
-    GroupPlan,
-    PacketJob,
-    applicable_groups,
-    plan_recipe_pairs,
-    plan_scene,
-    plan_trajectories,
-)
+from setdiff_bench.packets.jobs import GroupPlan, PacketJob
+from setdiff_bench.packets.packing import applicable_groups
+from setdiff_bench.packets.plan import plan_scene
+from setdiff_bench.packets.plan_pairs import plan_recipe_pairs
+from setdiff_bench.packets.plan_trajectories import plan_trajectories
 from setdiff_bench.packets.prepare_settings import SPLIT_CHOICES, CmapPrecision, PrepareSettings
 from setdiff_bench.packets.recipes import PairRecipe, RecipeFrames, parse_pairs, recipe_frames
-from setdiff_bench.packets.shards import Shard  # the type of PrepareSettings.shard, for callers
 from setdiff_bench.packets.trajectory import TrajectorySpec, parse_trajectory
-from setdiff_bench.packets.worker import JobStats, build_packet, resample
 from setdiff_bench.packets.writer import packet_is_complete, remove_temporaries
 from setdiff_bench.protocols import Protocol, load_protocol
 from setdiff_bench.runtime.devices import resolve_device
 from setdiff_bench.runtime.threads import torch_threads
 from setdiff_bench.types import Scene
 
-__all__ = [
-    "SPLIT_CHOICES",
-    "FitSource",
-    "JobStats",
-    "PrepareSettings",
-    "PrepareSummary",
-    "Shard",
-    "build_packet",
-    "declared_split",
-    "parse_trajectories",
-    "prepare",
-    "resample",
-    "resolve_backend",
-]
+__all__ = ["PrepareSummary", "declared_split", "parse_trajectories", "prepare", "resolve_backend"]
 
 
 @dataclass

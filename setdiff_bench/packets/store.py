@@ -45,33 +45,11 @@ from setdiff_bench.io.images import read_exr, read_mask, read_rgb, to_tensor_chw
 from setdiff_bench.packets.index import INDEX_FILE, SCENE_SPLITS, NoGroundTruthError, merge_index, read_rows
 from setdiff_bench.packets.training_dataset import PacketTrainingDataset
 from setdiff_bench.packets.writer import (
-    CMAP_CHANNELS,
-    EXR_ATTRIBUTES,
-    PacketHeader,
-    ViewContent,
     file_problems,
-    packet_dir,
-    packet_is_complete,
-    remove_temporaries,
-    write_packet,
 )
 from setdiff_bench.types import Packet, PacketKey, ViewSet
 
-__all__ = [
-    "CMAP_CHANNELS",
-    "EXR_ATTRIBUTES",
-    "PacketHeader",
-    "PacketStore",
-    "PacketTrainingDataset",
-    "ViewContent",
-    "packet_dir",
-    "packet_is_complete",
-    "remove_temporaries",
-    "row_camera",
-    "target_has_ground_truth",
-    "timestamp_or_none",
-    "write_packet",
-]
+__all__ = ["PacketStore", "row_camera", "target_has_ground_truth", "timestamp_or_none"]
 
 
 class PacketStore:

@@ -233,7 +233,8 @@ def _inputs(task: RefitTask, settings: RefitSettings) -> _Inputs:
     from setdiff_bench.loaders import list_scenes, load_scenes
     from setdiff_bench.packets.fits import FitSource, gaussian_centres
     from setdiff_bench.packets.packing import applicable_groups, scene_extent
-    from setdiff_bench.packets.plan import plan_scene, plan_trajectories
+    from setdiff_bench.packets.plan import plan_scene
+    from setdiff_bench.packets.plan_trajectories import plan_trajectories
     from setdiff_bench.packets.prepare import parse_trajectories, resolve_backend
     from setdiff_bench.packets.trajectory import check_within_bounds, scene_bounds
     from setdiff_bench.protocols import load_protocol

@@ -31,13 +31,13 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from setdiff_bench.io.atomic import atomic_path, write_text_atomic
+from setdiff_bench.io.run_layout import TARGET_COLUMNS
 from setdiff_bench.loaders.common import natural_key
 from setdiff_bench.metrics.registry import get_metric
 from setdiff_bench.reporting.bootstrap import BootstrapSettings
 from setdiff_bench.reporting.gains import GAIN_CONVENTION, PairedGain
 from setdiff_bench.reporting.leaderboard import ALL, dataset_layout, md_escape, metric_arrow, metric_header
 from setdiff_bench.reporting.paired import (
-    TARGET_COLUMNS,
     PairedDifference,
     PairingError,
     difference_records,
@@ -276,7 +276,6 @@ __all__ = [
     "PAIR_COLUMNS",
     "Comparison",
     "ComparisonRow",
-    "PairingError",
     "compare_frames",
     "render_markdown",
     "to_frame",

@@ -43,31 +43,19 @@ from setdiff_bench.errors import SetDiffBenchError
 from setdiff_bench.io.native_stderr import native_stderr_silenced
 from setdiff_bench.serve import enhancer_pb2 as pb
 from setdiff_bench.serve import enhancer_pb2_grpc as pb_grpc
-from setdiff_bench.serve.auth import UNAUTHENTICATED_PREFIX, TokenInterceptor
-from setdiff_bench.serve.rpc_errors import LOG, Refusal, rpc
+from setdiff_bench.serve.auth import TokenInterceptor
+from setdiff_bench.serve.rpc_errors import LOG
 from setdiff_bench.serve.security import check_bind
-from setdiff_bench.serve.servicer import MAX_ID_CHARS, EnhancerService
-from setdiff_bench.serve.sessions import EXPIRED_MEMORY, FairLock, Session, release_freed_memory
+from setdiff_bench.serve.servicer import EnhancerService
 from setdiff_bench.serve.settings import ServeSettings
 
 __all__ = [
-    "EXPIRED_MEMORY",
-    "LOG",
-    "MAX_ID_CHARS",
     "MAX_MESSAGE_BYTES",
     "SERVICE_NAME",
-    "UNAUTHENTICATED_PREFIX",
-    "EnhancerService",
-    "FairLock",
-    "Refusal",
     "RunningServer",
-    "Session",
-    "TokenInterceptor",
     "bind",
     "grpc_server",
     "pid_line",
-    "release_freed_memory",
-    "rpc",
     "serve_until_signalled",
     "start_server",
 ]

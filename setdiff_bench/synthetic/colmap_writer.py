@@ -18,7 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from setdiff_bench.cameras import Camera, matrix_to_quaternion
+from setdiff_bench.cameras import Camera
+from setdiff_bench.rotations import matrix_to_quaternion
 
 LEGACY_FILES = ("cameras.bin", "images.bin", "points3D.bin")
 

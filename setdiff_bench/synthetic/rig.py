@@ -14,7 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from setdiff_bench.cameras import Camera, intrinsics_matrix, look_at
+from setdiff_bench.cameras import Camera
+from setdiff_bench.intrinsics import intrinsics_matrix
+from setdiff_bench.rotations import look_at
 
 FRAME_RATE_HZ = 10
 CAMERA_HEIGHT_M = 1.6

@@ -19,9 +19,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from setdiff_bench.cameras import matrix_to_quaternion
 from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.gaussians.sh import rgb_to_sh_dc
+from setdiff_bench.rotations import matrix_to_quaternion
 
 Texture = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """``texture(u, v) -> rgb``: ``(P,)`` metres along the patch axes → ``(P, 3)`` colours in [0, 1]."""

@@ -16,7 +16,7 @@ from setdiff_bench.cli.declared import declared_field_default
 from setdiff_bench.cli.prepare import FIT_CONFIG
 from setdiff_bench.gaussians.fit import FitConfig
 from setdiff_bench.packets.fits import DEFAULT_FIT_ITERATIONS, FitSource
-from setdiff_bench.packets.prepare import PrepareSettings
+from setdiff_bench.packets.prepare_settings import PrepareSettings
 
 
 def test_the_declared_default_is_the_fit_configurations() -> None:

@@ -6,14 +6,10 @@ import numpy as np
 import pycolmap
 import pytest
 
-from setdiff_bench.cameras import (
-    Camera,
-    intrinsics_matrix,
-    look_at,
-    matrix_to_quaternion,
-    quaternion_to_matrix,
-)
+from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import CameraError
+from setdiff_bench.intrinsics import intrinsics_matrix
+from setdiff_bench.rotations import look_at, matrix_to_quaternion, quaternion_to_matrix
 
 
 def rotation_z(angle: float) -> np.ndarray:
@@ -124,7 +120,7 @@ def test_resize_and_crop_keep_projection_consistent() -> None:
 
 
 def test_distortion_round_trip() -> None:
-    from setdiff_bench.cameras import Distortion
+    from setdiff_bench.intrinsics import Distortion
 
     camera = Camera(
         intrinsics_matrix(100, 100, 50, 40),

@@ -3,13 +3,19 @@ of its private modules until a name is used."""
 
 from __future__ import annotations
 
+import ast
 import importlib
 import json
 import subprocess
 import sys
 import types
+from pathlib import Path
 
 import pytest
+
+from tests.core.test_import_graph import _modules
+
+ROOT = Path(__file__).resolve().parents[2]
 
 FACES = (
     "setdiff_bench.evaluation.run",
@@ -47,3 +53,63 @@ def test_a_lazy_face_loads_only_what_is_used() -> None:
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     before, after, all_matches = json.loads(result.stdout)
     assert before == [] and after == ["setdiff_bench.reporting.site._settings"] and all_matches
+
+
+def _top_level_names(tree: ast.Module) -> tuple[set[str], dict[str, str]]:
+    """Names a module defines at its top level, and those it imports from first-party modules (name → module)."""
+    defined: set[str] = set()
+    imported: dict[str, str] = {}
+    for node in tree.body:
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
+            defined.add(node.name)
+        elif isinstance(node, ast.Assign):
+            defined.update(t.id for t in node.targets if isinstance(t, ast.Name))
+        elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
+            defined.add(node.target.id)
+        elif isinstance(node, ast.ImportFrom) and (node.module or "").startswith("setdiff_bench"):
+            imported.update({alias.asname or alias.name: str(node.module) for alias in node.names})
+    return defined, imported
+
+
+def _sources() -> list[Path]:
+    return [
+        path
+        for folder in ("setdiff_bench", "loaders", "protocols", "tests", "benchmarks", "examples")
+        for path in sorted((ROOT / folder).rglob("*.py"))
+    ]
+
+
+def test_one_name_one_address() -> None:
+    """A name is imported from the module that defines it or from a package face, never through a sibling
+    module that imports it (a re-export); and no module but a face lists a foreign name in ``__all__``."""
+    modules = _modules()
+    names = {
+        module: _top_level_names(ast.parse(path.read_text(encoding="utf-8")))
+        for module, path in modules.items()
+    }
+    faces = {module for module, path in modules.items() if path.name == "__init__.py"}
+    through_sibling = []
+    for path in _sources():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom) and node.module in modules and node.module not in faces:
+                defined, imported = names[node.module]
+                through_sibling += [
+                    f"{path.relative_to(ROOT)}: {alias.name} from {node.module} (defined in {imported[alias.name]})"
+                    for alias in node.names
+                    if alias.name not in defined
+                    and alias.name in imported
+                    and f"{node.module}.{alias.name}" not in modules
+                ]
+    assert through_sibling == []
+    foreign_exports = []
+    for module, path in modules.items():
+        if module in faces:
+            continue
+        for node in ast.parse(path.read_text(encoding="utf-8")).body:
+            targets = [t.id for t in getattr(node, "targets", []) if isinstance(t, ast.Name)]
+            if "__all__" in targets and isinstance(node.value, ast.List | ast.Tuple):
+                listed = [element.value for element in node.value.elts if isinstance(element, ast.Constant)]
+                foreign_exports += [
+                    f"{module}.__all__: {name}" for name in listed if name not in names[module][0]
+                ]
+    assert foreign_exports == []

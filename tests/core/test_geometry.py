@@ -6,13 +6,15 @@ import numpy as np
 import pytest
 import torch
 
-from setdiff_bench.cameras import Camera, intrinsics_matrix, look_at
+from setdiff_bench.cameras import Camera
 from setdiff_bench.geometry import (
     normalize_packet,
     plucker_rays,
     select_references,
     view_overlap_score,
 )
+from setdiff_bench.intrinsics import intrinsics_matrix
+from setdiff_bench.rotations import look_at
 
 
 def camera_at(center, target, width=16, height=12) -> Camera:

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import torch
 
-from setdiff_bench.cameras import Camera, intrinsics_matrix, look_at
+from setdiff_bench.cameras import Camera
 from setdiff_bench.geometry import denormalize_cmaps, normalize_packet
+from setdiff_bench.intrinsics import intrinsics_matrix
+from setdiff_bench.rotations import look_at
 
 
 def camera_at(center, target, width=16, height=12) -> Camera:

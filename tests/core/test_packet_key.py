@@ -5,11 +5,10 @@ from __future__ import annotations
 
 from dataclasses import fields
 
-from setdiff_bench.enhancers.base import TargetRef
 from setdiff_bench.io.run_layout import KEY_COLUMNS
-from setdiff_bench.packets.plan import PacketJob
-from setdiff_bench.packets.store import PacketHeader
-from setdiff_bench.types import PACKET_KEY_FIELDS, Packet, PacketKey
+from setdiff_bench.packets.jobs import PacketJob
+from setdiff_bench.packets.writer import PacketHeader
+from setdiff_bench.types import PACKET_KEY_FIELDS, Packet, PacketKey, TargetRef
 
 
 def test_everything_that_names_a_packet_extends_the_key() -> None:

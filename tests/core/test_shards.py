@@ -25,7 +25,7 @@ def test_bad_shard_is_one_line_usage_error(text: str) -> None:
 
 def test_prepare_and_run_share_the_parser() -> None:
     from setdiff_bench.evaluation.run import _method
-    from setdiff_bench.packets import prepare
+    from setdiff_bench.packets import prepare, prepare_settings
 
-    assert _method.Shard is Shard and prepare.Shard is Shard
+    assert _method.Shard is Shard and prepare_settings.Shard is Shard
     assert not hasattr(prepare, "parse_shard")

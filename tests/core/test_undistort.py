@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from setdiff_bench.cameras import Camera, Distortion
+from setdiff_bench.cameras import Camera
+from setdiff_bench.intrinsics import Distortion
 from setdiff_bench.undistort import undistort_image, undistortion_maps
 
 WIDTH, HEIGHT = 160, 120

@@ -8,12 +8,14 @@ import numpy as np
 import pytest
 import torch
 
-from setdiff_bench.cameras import Camera, intrinsics_matrix, look_at
+from setdiff_bench.cameras import Camera
 from setdiff_bench.gaussians.densify import DensificationStrategy, reset_opacity
 from setdiff_bench.gaussians.fit import photometric_loss
 from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.gaussians.optim import GaussianParameters, exponential_lr
 from setdiff_bench.gaussians.render import render
+from setdiff_bench.intrinsics import intrinsics_matrix
+from setdiff_bench.rotations import look_at
 
 RATES = {
     "means": 1e-2,

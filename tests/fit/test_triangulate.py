@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 import torch
 
-from setdiff_bench.cameras import Camera, look_at
+from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import UsageError
 from setdiff_bench.gaussians.fit import FitView, initial_points, triangulate_views
+from setdiff_bench.rotations import look_at
 
 WIDTH, HEIGHT = 240, 180
 K = np.array([[200.0, 0.0, 120.0], [0.0, 200.0, 90.0], [0.0, 0.0, 1.0]])

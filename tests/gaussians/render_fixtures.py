@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pycolmap
 
-from setdiff_bench.cameras import look_at, matrix_to_quaternion
 from setdiff_bench.gaussians.ply import write_ply
+from setdiff_bench.rotations import look_at, matrix_to_quaternion
 from tests.gaussians.gaussian_fixtures import random_scene
 
 

@@ -8,10 +8,12 @@ import numpy as np
 import pytest
 import torch
 
-from setdiff_bench.cameras import Camera, intrinsics_matrix, look_at
+from setdiff_bench.cameras import Camera
 from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.gaussians.render import render
 from setdiff_bench.gaussians.sh import SH_C0
+from setdiff_bench.intrinsics import intrinsics_matrix
+from setdiff_bench.rotations import look_at
 from tests.gaussians.gaussian_fixtures import random_scene
 
 F = 50.0

@@ -24,7 +24,7 @@ from setdiff_bench.models.setdiff.inputs import TrainingSet, training_set
 from setdiff_bench.models.setdiff.model import SetDiffModel
 from setdiff_bench.models.setdiff.presets import TINY_UNET, TINY_VAE
 from setdiff_bench.packets.index import merge_index
-from setdiff_bench.packets.store import PacketHeader, ViewContent, write_packet
+from setdiff_bench.packets.writer import PacketHeader, ViewContent, write_packet
 from setdiff_bench.types import Packet, TrainingSample, ViewSet
 
 

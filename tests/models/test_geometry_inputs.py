@@ -6,10 +6,12 @@ import numpy as np
 import pytest
 import torch
 
-from setdiff_bench.cameras import Camera, intrinsics_matrix, look_at
+from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import UsageError
+from setdiff_bench.intrinsics import intrinsics_matrix
 from setdiff_bench.models.setdiff.config import ModelConfig
 from setdiff_bench.models.setdiff.geometry_encoder import geometry_input
+from setdiff_bench.rotations import look_at
 
 
 def cameras(offset: float) -> list[Camera]:

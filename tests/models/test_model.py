@@ -10,9 +10,10 @@ import pytest
 import torch
 
 from setdiff_bench.errors import PacketError
+from setdiff_bench.geometry import renormalize
 from setdiff_bench.models.setdiff.config import model_config_from_dict
 from setdiff_bench.models.setdiff.inference import enhance_packet, set_packets
-from setdiff_bench.models.setdiff.inputs import SetBatch, renormalize, view_tensors
+from setdiff_bench.models.setdiff.inputs import SetBatch, view_tensors
 from setdiff_bench.models.setdiff.model import SetDiffModel
 from tests.models.setdiff_fixtures import DIFIX, make_packet
 

@@ -6,9 +6,10 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from setdiff_bench.cameras import Camera, Distortion
-from setdiff_bench.packets.plan import Crop, ViewJob
+from setdiff_bench.cameras import Camera
+from setdiff_bench.intrinsics import Distortion
 from setdiff_bench.packets.worker import _mask, capture_image
+from setdiff_bench.packets.working_view import Crop, ViewJob
 
 WIDTH, HEIGHT = 160, 120
 K = np.array([[100.0, 0.0, 80.0], [0.0, 100.0, 60.0], [0.0, 0.0, 1.0]])

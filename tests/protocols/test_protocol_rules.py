@@ -7,7 +7,7 @@ import pytest
 
 from setdiff_bench.errors import ProtocolError
 from setdiff_bench.loaders import load_scenes
-from setdiff_bench.packets.plan import applicable_groups
+from setdiff_bench.packets.packing import applicable_groups
 from setdiff_bench.protocols import load_protocol
 from setdiff_bench.protocols.rules import sparse_view_indices, uniform_indices
 from tests.protocols.protocol_fixtures import (

@@ -18,7 +18,7 @@ import numpy as np
 
 from setdiff_bench.cameras import Camera
 from setdiff_bench.packets.index import merge_index, packet_id
-from setdiff_bench.packets.store import PacketHeader, ViewContent, write_packet
+from setdiff_bench.packets.writer import PacketHeader, ViewContent, write_packet
 
 HEIGHT, WIDTH = 32, 48
 

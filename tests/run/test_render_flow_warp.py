@@ -23,7 +23,7 @@ from setdiff_bench.evaluation.run import RunSettings, run_method
 from setdiff_bench.io.run_layout import MANIFEST_FILE, METRICS_FILE, SEQUENCES_FILE
 from setdiff_bench.metrics.warp import warp_error, warp_reference
 from setdiff_bench.packets.index import merge_index, packet_id
-from setdiff_bench.packets.store import PacketHeader, ViewContent, write_packet
+from setdiff_bench.packets.writer import PacketHeader, ViewContent, write_packet
 from setdiff_bench.protocols import Block
 from setdiff_bench.reporting.leaderboard.cells import measured_row
 from setdiff_bench.reporting.leaderboard.columns import ALL

@@ -23,7 +23,7 @@ from setdiff_bench.gaussians.render import render
 from setdiff_bench.geometry import normalize_packet
 from setdiff_bench.io.images import uint8_to_float, write_png
 from setdiff_bench.packets.index import packet_id
-from setdiff_bench.packets.store import PacketHeader, ViewContent, write_packet
+from setdiff_bench.packets.writer import PacketHeader, ViewContent, write_packet
 from setdiff_bench.serve.sensorsim import common_pb2 as common
 from setdiff_bench.serve.sensorsim import sensorsim_pb2 as pb
 from setdiff_bench.serve.sensorsim import sensorsim_pb2_grpc as pb_grpc

@@ -22,7 +22,8 @@ from setdiff_bench.enhancers.setdiff import load_enhancer
 from setdiff_bench.evaluation.stream import StreamSession
 from setdiff_bench.serve import enhancer_pb2 as pb
 from setdiff_bench.serve.client import EnhancerClient, view_messages
-from setdiff_bench.serve.server import FairLock, RunningServer, start_server
+from setdiff_bench.serve.server import RunningServer, start_server
+from setdiff_bench.serve.sessions import FairLock
 from setdiff_bench.serve.settings import ServeSettings
 from setdiff_bench.serve.wire import to_array
 from tests.serve.serve_fixtures import start_driver

@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from setdiff_bench.enhancers.setdiff import load_enhancer
-from setdiff_bench.evaluation.stream import DEFAULT_REFERENCES_PER_TICK, StreamSession
+from setdiff_bench.evaluation.stream import StreamSession
+from setdiff_bench.evaluation.tick_limits import DEFAULT_REFERENCES_PER_TICK
 from setdiff_bench.io.images import read_rgb
 from setdiff_bench.io.run_layout import IMAGES_DIR
 from setdiff_bench.serve.client import EnhancerClient

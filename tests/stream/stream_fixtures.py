@@ -15,7 +15,7 @@ from setdiff_bench.evaluation.stream import Views
 from setdiff_bench.geometry import normalize_packet
 from setdiff_bench.io.images import uint8_to_float
 from setdiff_bench.packets.index import merge_index, packet_id
-from setdiff_bench.packets.store import PacketHeader, ViewContent, write_packet
+from setdiff_bench.packets.writer import PacketHeader, ViewContent, write_packet
 
 HEIGHT, WIDTH = 32, 48
 #: The rig: (name, yaw in degrees) of the three cameras of every tick.

@@ -259,7 +259,7 @@ def test_a_yaw_turns_each_fit_camera_in_place(street: tuple[Path, StreetScene], 
 
 
 def test_names_of_trajectory_frames_and_groups() -> None:
-    from setdiff_bench.packets.plan import trajectory_frame_name, trajectory_group_name
+    from setdiff_bench.packets.plan_trajectories import trajectory_frame_name, trajectory_group_name
 
     assert trajectory_frame_name("lane0_front_000.png", "shift+3m") == "lane0_front_000@shift+3m.png"
     assert trajectory_frame_name("CAM_FRONT/a.b.jpg", "yaw-5deg") == "CAM_FRONT/a.b@yaw-5deg.jpg"

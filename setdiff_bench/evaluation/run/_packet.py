@@ -6,7 +6,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from setdiff_bench.enhancers.base import Enhancer, TargetRef
+from setdiff_bench.enhancers.base import Enhancer
 from setdiff_bench.evaluation.packet_scoring import score_packet
 from setdiff_bench.evaluation.run._folder import fragment_path
 from setdiff_bench.evaluation.run._rows import write_rows
@@ -17,6 +17,7 @@ from setdiff_bench.io.images import write_png
 from setdiff_bench.io.run_layout import KEY_COLUMNS, image_relative
 from setdiff_bench.metrics.registry import MetricSpec
 from setdiff_bench.packets.store import PacketStore, timestamp_or_none
+from setdiff_bench.types import TargetRef
 
 
 def target_ref(row: Mapping[str, Any]) -> TargetRef:

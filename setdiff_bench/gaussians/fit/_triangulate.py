@@ -23,9 +23,9 @@ from typing import Literal, get_args
 import cv2
 import numpy as np
 
-from setdiff_bench.cameras import matrix_to_quaternion
 from setdiff_bench.errors import DatasetError, FallbackWarning, UsageError
 from setdiff_bench.gaussians.fit._data import FitView
+from setdiff_bench.rotations import matrix_to_quaternion
 from setdiff_bench.types import Scene
 
 InitMode = Literal["auto", "sparse", "triangulate", "random"]

@@ -19,13 +19,8 @@ from dataclasses import replace
 
 import torch
 
-from setdiff_bench.models.setdiff.inputs import (
-    SetBatch,
-    check_packet,
-    renormalize,
-    surface_points,
-    view_tensors,
-)
+from setdiff_bench.geometry import renormalize
+from setdiff_bench.models.setdiff.inputs import SetBatch, check_packet, surface_points, view_tensors
 from setdiff_bench.models.setdiff.model import SetDiffModel
 from setdiff_bench.types import Packet
 

@@ -16,10 +16,11 @@ from typing import Generic, TypeVar
 import pandas as pd
 
 from setdiff_bench.errors import SetDiffBenchError
+from setdiff_bench.io.run_layout import TARGET_COLUMNS
 from setdiff_bench.metrics.registry import get_metric
 from setdiff_bench.reporting.ablation._design import METRICS
 from setdiff_bench.reporting.bootstrap import BootstrapSettings
-from setdiff_bench.reporting.paired import TARGET_COLUMNS, PairedDifference, pair_targets, paired_differences
+from setdiff_bench.reporting.paired import PairedDifference, pair_targets, paired_differences
 
 Key = TypeVar("Key", bound=Hashable)
 

@@ -42,7 +42,7 @@ and :mod:`.render` (Parquet, LaTeX, Markdown).  Every public name is importable 
 """
 
 from setdiff_bench.protocols import Block, Layout
-from setdiff_bench.reporting.leaderboard.aggregate import DISTRIBUTION_METRICS, build_leaderboard, scored_size
+from setdiff_bench.reporting.leaderboard.aggregate import build_leaderboard, scored_size
 from setdiff_bench.reporting.leaderboard.columns import (
     ALL,
     COST,
@@ -55,6 +55,7 @@ from setdiff_bench.reporting.leaderboard.columns import (
     metric_decimals,
     metric_header,
 )
+from setdiff_bench.reporting.leaderboard.distribution import DISTRIBUTION_METRICS
 from setdiff_bench.reporting.leaderboard.inputs import (
     UnfinishedRun,
     UnfinishedRunWarning,

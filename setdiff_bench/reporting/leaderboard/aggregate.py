@@ -39,7 +39,7 @@ from setdiff_bench.reporting.leaderboard.selection import select_rows
 from setdiff_bench.reporting.leaderboard.table import Leaderboard, best_cells
 from setdiff_bench.reporting.paired import few_scenes_note
 
-__all__ = ["DISTRIBUTION_METRICS", "build_leaderboard", "scored_size"]
+__all__ = ["build_leaderboard", "scored_size"]
 
 
 def build_leaderboard(

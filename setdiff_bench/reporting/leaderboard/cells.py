@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 
 from setdiff_bench.errors import UsageError
+from setdiff_bench.io.run_layout import TARGET_COLUMNS
 from setdiff_bench.protocols import Block
 from setdiff_bench.reporting.bootstrap import BootstrapSettings
 from setdiff_bench.reporting.leaderboard.columns import (
@@ -21,7 +22,7 @@ from setdiff_bench.reporting.leaderboard.columns import (
 )
 from setdiff_bench.reporting.leaderboard.selection import name_list
 from setdiff_bench.reporting.leaderboard.table import SECTIONS, Row
-from setdiff_bench.reporting.paired import TARGET_COLUMNS, PairedDifference, pair_targets, paired_differences
+from setdiff_bench.reporting.paired import PairedDifference, pair_targets, paired_differences
 
 
 def cost_column(rows: Sequence[Row], frame: pd.DataFrame) -> tuple[Block, tuple[str, ...]]:

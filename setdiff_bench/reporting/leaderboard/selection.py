@@ -9,12 +9,12 @@ from collections.abc import Sequence
 import pandas as pd
 
 from setdiff_bench.errors import UsageError
+from setdiff_bench.io.run_layout import TARGET_COLUMNS
 from setdiff_bench.loaders import DATASETS
 from setdiff_bench.metrics.registry import METRICS
 from setdiff_bench.protocols import Layout
 from setdiff_bench.protocols.profiles import DEFAULT_PROFILE, PROFILE_COLUMN, get_profile
 from setdiff_bench.reporting.leaderboard.columns import LeaderboardError
-from setdiff_bench.reporting.paired import TARGET_COLUMNS
 
 
 def select_rows(

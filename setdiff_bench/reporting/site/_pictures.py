@@ -24,7 +24,6 @@ from setdiff_bench.reporting.targets import error_map
 __all__ = [
     "ERROR_MAP_POOL",
     "THUMBNAIL_HEIGHT",
-    "PictureSettings",
     "pooled_error_map",
     "thumbnail",
     "write_jpeg",

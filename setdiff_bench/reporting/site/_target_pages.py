@@ -20,12 +20,8 @@ from setdiff_bench.reporting.site._html import (
     signed,
     video_players,
 )
-from setdiff_bench.reporting.site._pictures import (
-    PictureSettings,
-    pooled_error_map,
-    write_picture,
-    write_thumbnail,
-)
+from setdiff_bench.reporting.site._pictures import pooled_error_map, write_picture, write_thumbnail
+from setdiff_bench.reporting.site._settings import PictureSettings
 from setdiff_bench.reporting.site._targets import TargetRecord, target_gain
 from setdiff_bench.reporting.site._video import VideoRecord, slug
 from setdiff_bench.reporting.targets import ERROR_MAP_FULL_SCALE, TargetImages, error_map

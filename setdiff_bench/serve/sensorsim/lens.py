@@ -30,9 +30,10 @@ import cv2
 import numpy as np
 import torch
 
-from setdiff_bench.cameras import Camera, intrinsics_matrix
+from setdiff_bench.cameras import Camera
 from setdiff_bench.errors import CameraError
 from setdiff_bench.evaluation.stream import StreamInputError
+from setdiff_bench.intrinsics import intrinsics_matrix
 from setdiff_bench.rotations import matrix_to_quaternion, quaternion_to_matrix
 from setdiff_bench.serve.sensorsim import common_pb2 as common
 from setdiff_bench.serve.sensorsim import sensorsim_pb2 as pb

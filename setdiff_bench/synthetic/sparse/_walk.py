@@ -12,7 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from setdiff_bench.cameras import Camera, intrinsics_matrix, look_at
+from setdiff_bench.cameras import Camera
+from setdiff_bench.intrinsics import intrinsics_matrix
+from setdiff_bench.rotations import look_at
 from setdiff_bench.synthetic.layout import StreetLayout
 from setdiff_bench.synthetic.rig import intrinsics
 from setdiff_bench.synthetic.sparse._names import frame_file
