@@ -63,22 +63,12 @@ def differences(a: Any, b: Any) -> dict[str, dict[str, float]]:
     return rows
 
 
-def gsplat_forward_backward(g: GaussianModel, cam: Any) -> None:
-    params = [
-        t.detach().clone().requires_grad_(True) for t in (g.means, g.log_scales, g.opacity_logits, g.sh)
-    ]
+def cuda_forward_backward(g: GaussianModel, cam: Any, backend: str) -> None:
+    """RGB render by ``backend`` (``gsplat`` or ``torch``) on CUDA, loss = weighted sum, gradients of means,
+    scales, opacities and SH (the CPU kernel's counterpart: ``benchmarks.rasterizer.forward_backward``)."""
+    params = [t.detach().clone().requires_grad_(True) for t in (g.means, g.log_scales, g.opacity_logits, g.sh)]
     model = GaussianModel(params[0], g.quats, params[1], params[2], params[3])
-    out = render(model, cam, with_geometry=False, backend="gsplat")
-    weights = torch.linspace(-1.0, 1.0, out.rgb.numel(), device=out.rgb.device).reshape(out.rgb.shape)
-    (out.rgb * weights).sum().backward()
-
-
-def torch_cuda_forward_backward(g: GaussianModel, cam: Any) -> None:
-    params = [
-        t.detach().clone().requires_grad_(True) for t in (g.means, g.log_scales, g.opacity_logits, g.sh)
-    ]
-    model = GaussianModel(params[0], g.quats, params[1], params[2], params[3])
-    out = render(model, cam, with_geometry=False, backend="torch")
+    out = render(model, cam, with_geometry=False, backend=backend)
     weights = torch.linspace(-1.0, 1.0, out.rgb.numel(), device=out.rgb.device).reshape(out.rgb.shape)
     (out.rgb * weights).sum().backward()
 
