@@ -66,7 +66,9 @@ def differences(a: Any, b: Any) -> dict[str, dict[str, float]]:
 def cuda_forward_backward(g: GaussianModel, cam: Any, backend: str) -> None:
     """RGB render by ``backend`` (``gsplat`` or ``torch``) on CUDA, loss = weighted sum, gradients of means,
     scales, opacities and SH (the CPU kernel's counterpart: ``benchmarks.rasterizer.forward_backward``)."""
-    params = [t.detach().clone().requires_grad_(True) for t in (g.means, g.log_scales, g.opacity_logits, g.sh)]
+    params = [
+        t.detach().clone().requires_grad_(True) for t in (g.means, g.log_scales, g.opacity_logits, g.sh)
+    ]
     model = GaussianModel(params[0], g.quats, params[1], params[2], params[3])
     out = render(model, cam, with_geometry=False, backend=backend)
     weights = torch.linspace(-1.0, 1.0, out.rgb.numel(), device=out.rgb.device).reshape(out.rgb.shape)
@@ -93,10 +95,10 @@ def compare_at(scene: GaussianModel, on_gpu: GaussianModel, cam: Any, repeats: i
     backward = {
         "native": time_call(lambda: forward_backward(scene, cam), repeats=repeats, warmup=1),
         "torch_cuda": time_call(
-            lambda: torch_cuda_forward_backward(on_gpu, cam), repeats=repeats, warmup=1, cuda=True
+            lambda: cuda_forward_backward(on_gpu, cam, "torch"), repeats=repeats, warmup=1, cuda=True
         ),
         "gsplat": time_call(
-            lambda: gsplat_forward_backward(on_gpu, cam), repeats=repeats, warmup=1, cuda=True
+            lambda: cuda_forward_backward(on_gpu, cam, "gsplat"), repeats=repeats, warmup=1, cuda=True
         ),
     }
     return {
