@@ -290,62 +290,19 @@ def run_shipped(args: argparse.Namespace) -> int:
 def export(args: argparse.Namespace) -> int:
     """``weights export RUN --name NAME``: the run's newest checkpoint + its training manifest."""
     from setdiff_bench.errors import UsageError
-    from setdiff_bench.models.setdiff.averaging import check_average_count, run_checkpoints
-    from setdiff_bench.models.setdiff.checkpoint import resolve_checkpoint, saved_step
-    from setdiff_bench.models.setdiff.config import check_guidance_scale
-    from setdiff_bench.models.setdiff.export import export_enhancer
-    from setdiff_bench.models.setdiff.manifest import read_manifest
-    from setdiff_bench.models.setdiff.packaged import packaged_root
+    from setdiff_bench.models.setdiff.export import export_run
 
     if len(args.names) != 1 or not args.name:
         raise UsageError("export needs one training run folder and --name NAME", "export")
-    if not args.name.replace("_", "").replace("-", "").isalnum():
-        raise UsageError(f"--name must be letters, digits, '_' or '-', got {args.name!r}", "--name")
-    scale = (
-        None if args.guidance_scale is None else check_guidance_scale(args.guidance_scale, "--guidance-scale")
-    )
-    if args.average is not None:
-        check_average_count(args.average, "--average")
-    if args.to is None and (packaged_root() / args.name).exists() and not args.force:
-        raise UsageError(
-            f"{args.name!r} is a shipped model: exporting would replace it in the package; give --to DIR "
-            "to export elsewhere, or --force to replace it",
-            "--name",
-        )
     run = Path(args.names[0])
-    checkpoint = resolve_checkpoint(run)
-    manifest = read_manifest(run)
-    step = saved_step(checkpoint)
-    if step != manifest["steps"]:
-        raise UsageError(
-            f"the run's newest checkpoint is at step {step} of {manifest['steps']}: finish the "
-            "training first",
-            checkpoint,
-        )
-    averaged: list[tuple[int, Path]] = []
-    if args.average is not None:
-        kept = run_checkpoints(run)
-        if len(kept) < args.average or kept[-1][0] != step:
-            steps = ", ".join(str(s) for s, _ in kept)
-            raise UsageError(
-                f"--average {args.average} needs the run's {args.average} newest checkpoints up to step "
-                f"{step}; it keeps steps {steps}",
-                run,
-            )
-        averaged = kept[-args.average :]
-    destination = (args.to or packaged_root()) / args.name
-    record = {"command": args.command_line, "checkpoint_step": step, "dtype": "float32"}
-    if scale is not None:
-        record["guidance_scale"] = scale
-    if averaged:
-        record["averaged_steps"] = [s for s, _ in averaged]
-    export_enhancer(
-        checkpoint,
-        manifest,
-        destination,
-        extra={"export": record},
-        guidance_scale=scale,
-        average=[folder for _, folder in averaged],
+    destination, step = export_run(
+        run,
+        args.name,
+        to=args.to,
+        average=args.average,
+        guidance_scale=args.guidance_scale,
+        force=args.force,
+        command=args.command_line,
     )
     print(f"exported {run} (step {step}) as {destination}")
     return 0

@@ -12,14 +12,15 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from setdiff_bench.errors import CheckpointError
+from setdiff_bench.errors import CheckpointError, UsageError
 from setdiff_bench.io.atomic import sha256_file, staged_folder, write_text_atomic
-from setdiff_bench.models.setdiff.averaging import average_weights
-from setdiff_bench.models.setdiff.checkpoint import read_config, resolve_checkpoint, write_weights
-from setdiff_bench.models.setdiff.config import Config
+from setdiff_bench.models.setdiff.averaging import average_weights, check_average_count, run_checkpoints
+from setdiff_bench.models.setdiff.checkpoint import read_config, resolve_checkpoint, saved_step, write_weights
+from setdiff_bench.models.setdiff.config import Config, check_guidance_scale
 from setdiff_bench.models.setdiff.distill import distillation_record
 from setdiff_bench.models.setdiff.files import CONFIG_FILE, MANIFEST_FILE, WEIGHTS_FILE
-from setdiff_bench.models.setdiff.packaged import file_table
+from setdiff_bench.models.setdiff.manifest import read_manifest
+from setdiff_bench.models.setdiff.packaged import file_table, packaged_root
 
 
 def initialisation_record(config: Config) -> dict[str, Any] | None:
@@ -87,3 +88,78 @@ def export_enhancer(
             manifest["initialised_from"] = origin
         write_text_atomic(staging / MANIFEST_FILE, json.dumps(manifest, indent=2, sort_keys=True) + "\n")
     return destination
+
+
+def export_run(
+    run: Path,
+    name: str,
+    *,
+    to: Path | None = None,
+    average: int | None = None,
+    guidance_scale: float | None = None,
+    force: bool = False,
+    command: str | None = None,
+) -> tuple[Path, int]:
+    """Export a finished training run as the model ``name`` (``weights export``): its newest checkpoint, or the
+    uniform mean of its ``average`` newest ones, with its training manifest and an ``export`` record.
+
+    Args:
+        run: the training run folder (``setdiff-bench train --out``).
+        name: the model's name (letters, digits, ``_``, ``-``).
+        to: the folder the model goes into; ``None`` = the package's shipped weights (refused for an existing
+            shipped model unless ``force``).
+        average, guidance_scale: see :func:`export_enhancer`.
+        command: the command line recorded in the manifest.
+
+    Returns:
+        The model folder and the checkpoint step exported.
+
+    Raises:
+        UsageError: a bad name, scale or count; a shipped model without ``force``; an unfinished run; too few
+            kept checkpoints for ``average``.
+    """
+    if not name.replace("_", "").replace("-", "").isalnum():
+        raise UsageError(f"--name must be letters, digits, '_' or '-', got {name!r}", "--name")
+    scale = None if guidance_scale is None else check_guidance_scale(guidance_scale, "--guidance-scale")
+    if average is not None:
+        check_average_count(average, "--average")
+    if to is None and (packaged_root() / name).exists() and not force:
+        raise UsageError(
+            f"{name!r} is a shipped model: exporting would replace it in the package; give --to DIR "
+            "to export elsewhere, or --force to replace it",
+            "--name",
+        )
+    checkpoint = resolve_checkpoint(run)
+    manifest = read_manifest(run)
+    step = saved_step(checkpoint)
+    if step != manifest["steps"]:
+        raise UsageError(
+            f"the run's newest checkpoint is at step {step} of {manifest['steps']}: finish the training first",
+            checkpoint,
+        )
+    averaged: list[tuple[int, Path]] = []
+    if average is not None:
+        kept = run_checkpoints(run)
+        if len(kept) < average or kept[-1][0] != step:
+            steps = ", ".join(str(s) for s, _ in kept)
+            raise UsageError(
+                f"--average {average} needs the run's {average} newest checkpoints up to step {step}; it keeps "
+                f"steps {steps}",
+                run,
+            )
+        averaged = kept[-average:]
+    destination = (to or packaged_root()) / name
+    record: dict[str, Any] = {"command": command, "checkpoint_step": step, "dtype": "float32"}
+    if scale is not None:
+        record["guidance_scale"] = scale
+    if averaged:
+        record["averaged_steps"] = [s for s, _ in averaged]
+    export_enhancer(
+        checkpoint,
+        manifest,
+        destination,
+        extra={"export": record},
+        guidance_scale=scale,
+        average=[folder for _, folder in averaged],
+    )
+    return destination, step
