@@ -41,7 +41,7 @@ def paired_by_scene(model: Path, render: Path) -> dict[str, dict[str, Any]]:
     keys = ["packet_id", "view"]
     a = pd.read_parquet(model / "metrics.parquet").set_index(keys)
     b = pd.read_parquet(render / "metrics.parquet").set_index(keys)
-    joined = a[["group", "scene", "psnr"]].join(b[["psnr"]], rsuffix="_render")
+    joined = a[["group", "scene", "psnr"]].join(b[["psnr"]].rename(columns={"psnr": "psnr_render"}))
     joined["gain"] = joined["psnr"] - joined["psnr_render"]
     return {
         str(group): {

@@ -119,12 +119,12 @@ def test_demo_examples_pass_their_checks(
 ) -> None:
     """Each ``demo`` example passes every check the demo makes before its first stage (where
     ``demo --setdiff-steps 1000 --difix-steps 1000 --ablations`` stopped with "add --train")."""
-    import setdiff_bench.pipeline.demo as demo
+    from setdiff_bench.pipeline.stages import Pipeline
 
     def first_stage(*_: object, **__: object) -> None:
         raise FirstStage
 
-    monkeypatch.setattr(demo.Pipeline, "run", first_stage)
+    monkeypatch.setattr(Pipeline, "run", first_stage)
     monkeypatch.chdir(tmp_path)
     with pytest.raises(FirstStage):
         main(words(small(example)))

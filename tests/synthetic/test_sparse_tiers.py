@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-import setdiff_bench.gaussians.fit as fit_module
+from setdiff_bench.gaussians.fit import _fit as fit_module  # where fit_views_to_ply calls fit_gaussians
 from setdiff_bench.runtime.threads import torch_threads
 from setdiff_bench.synthetic.sparse import (
     SPARSE_PRESETS,
