@@ -49,9 +49,8 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.common import add_device_and_size, machine, time_call, write_result
-from benchmarks.enhance import apply_step, inputs
+from benchmarks.enhance import apply_step, build, inputs
 from benchmarks.profile_enhance import all_views_per_call, total_per_frame
-from setdiff_bench.models.setdiff.config_io import load_config
 from setdiff_bench.models.setdiff.model import SetDiffModel
 
 
@@ -80,16 +79,10 @@ RESULT_PREFIX = "RESULT "
 def build_case(
     case: Case, device: torch.device, dtype: torch.dtype, config: str | None = None
 ) -> SetDiffModel:
-    """The case's model with random weights (seed 0), in eval mode; ``config`` replaces the packaged config's
-    name (a test's small architecture)."""
-    model_config = load_config(config or case.config).model
-    if case.set_attention:
-        model_config = dataclasses.replace(model_config, set_attention=case.set_attention)
-    torch.manual_seed(0)
-    model = SetDiffModel(model_config, load_pretrained=False)
-    if model.geometry_encoder is not None:  # a trained Ψ is not zero: give it weights so it does real work
-        torch.nn.init.normal_(model.geometry_encoder.out.weight, std=1e-3)
-    return model.to(device=device, dtype=dtype).eval()
+    """The case's model with random weights (:func:`benchmarks.enhance.build`); ``config`` replaces the packaged
+    config's name (a test's small architecture)."""
+    changes = {"set_attention": case.set_attention} if case.set_attention else {}
+    return build(config or case.config, device, dtype, **changes)
 
 
 def wait_for_siblings(sync: Path, expected: int, deadline: float) -> bool:

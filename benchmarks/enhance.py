@@ -47,10 +47,11 @@ GOAL_MS_PER_FRAME_H100 = 100.0
 LADDER = ("baseline", "+sdpa_flash", "+batched_cfg", "+channels_last", "+torch_compile", "+cuda_graphs")
 
 
-def build(name: str, device: torch.device, dtype: torch.dtype) -> SetDiffModel:
-    """The SD-Turbo-architecture model of a packaged config, random weights, in eval mode."""
+def build(name: str, device: torch.device, dtype: torch.dtype, **changes: Any) -> SetDiffModel:
+    """The model of a packaged config (``changes`` replace fields of its model config, e.g. ``set_attention``),
+    random weights (seed 0), in eval mode."""
     torch.manual_seed(0)
-    model = SetDiffModel(load_config(name).model, load_pretrained=False)
+    model = SetDiffModel(dataclasses.replace(load_config(name).model, **changes), load_pretrained=False)
     if model.geometry_encoder is not None:  # a trained Ψ is not zero: give it weights so it does real work
         torch.nn.init.normal_(model.geometry_encoder.out.weight, std=1e-3)
     return model.to(device=device, dtype=dtype).eval()
