@@ -1,7 +1,7 @@
 """Serve benchmark: the stream API in-process against the gRPC round trip on 127.0.0.1, same run.
 
 Latency per tick (p50 / p99, ms) and frames per second for a 3-camera rig driven along a synthetic
-recorded trajectory (``tests/stream/stream_fixtures``), for
+recorded trajectory (``tests/evaluation/stream/stream_fixtures``), for
 
 * ``in_process``: :class:`setdiff_bench.evaluation.stream.StreamSession` called directly (uint8 in, uint8 out);
 * ``grpc``: ``setdiff-bench serve`` in its own process, called through
@@ -54,7 +54,7 @@ from setdiff_bench.evaluation.stream import StreamSession
 from setdiff_bench.io.images import read_rgb
 from setdiff_bench.io.run_layout import IMAGES_DIR
 from setdiff_bench.serve.client import EnhancerClient, view_messages
-from tests.stream.stream_fixtures import (
+from tests.evaluation.stream.stream_fixtures import (
     RIG,
     recorded_references,
     run_batch,
@@ -330,7 +330,7 @@ def full_sessions(address: str, pid: int, sessions: int, idle_timeout: float) ->
     from setdiff_bench.serve import enhancer_pb2 as pb
     from setdiff_bench.serve.client import EnhancerClient
     from setdiff_bench.serve.settings import reference_bytes
-    from tests.stream.stream_fixtures import rig_camera, views
+    from tests.evaluation.stream.stream_fixtures import rig_camera, views
 
     references = views([rig_camera(0.5 * i, 0.0, size=FULL_SIZE) for i in range(FULL_REFERENCES)], seed=7)
     request = pb.StartSessionRequest(references=view_messages(references))

@@ -9,7 +9,7 @@ functions compute the same quantities from element-wise IEEE operations (one rou
 add, division, square root or ``exp``, no fused multiply-add, no reduction whose order follows the
 vector width), which every vector width rounds identically; their autograd backward is made of the
 same operations.  Measured: a tiny scene's fit is byte-identical under every ``ATEN_CPU_CAPABILITY``,
-``ONEDNN_MAX_CPU_ISA`` and ``MKL_ENABLE_INSTRUCTIONS`` setting (tests/fit/test_portable_fit.py).
+``ONEDNN_MAX_CPU_ISA`` and ``MKL_ENABLE_INSTRUCTIONS`` setting (tests/gaussians/fit/test_portable_fit.py).
 
 Written by hand because no library offers ISA-independent CPU kernels; the cost is a few element-wise
 passes over ``(N, 3)`` / ``(N, 4)`` tensors per step, small beside rasterisation.

@@ -10,7 +10,7 @@ import numpy as np
 import torch
 
 from benchmarks.reference_ceiling import reference_samples
-from tests.run.store_fixtures import HEIGHT, WIDTH, camera_at, plane_view, texture
+from tests.evaluation.run.store_fixtures import HEIGHT, WIDTH, camera_at, plane_view, texture
 
 DEPTH = 2.5
 

@@ -21,7 +21,7 @@ from benchmarks.sparse_geometry_audit import (
     relative_errors,
 )
 from setdiff_bench.geometry import normalize_packet
-from tests.run.store_fixtures import HEIGHT, WIDTH, camera_at, plane_view
+from tests.evaluation.run.store_fixtures import HEIGHT, WIDTH, camera_at, plane_view
 
 REPO = Path(__file__).resolve().parents[2]
 DEPTH = 2.5

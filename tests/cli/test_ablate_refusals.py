@@ -13,7 +13,7 @@ import pytest
 
 from setdiff_bench.cli.main import main
 from setdiff_bench.runtime.threads import torch_threads
-from tests.run.store_fixtures import StoreSpec, build_store
+from tests.evaluation.run.store_fixtures import StoreSpec, build_store
 
 
 @pytest.fixture(scope="module")

@@ -23,7 +23,7 @@ from setdiff_bench.models.setdiff.packaged import packaged_names
 from setdiff_bench.packets.store import PacketStore
 from setdiff_bench.protocols import list_protocols, load_protocol
 from setdiff_bench.runtime.threads import torch_threads
-from tests.run.store_fixtures import StoreSpec, build_store
+from tests.evaluation.run.store_fixtures import StoreSpec, build_store
 
 SHIPPED = ", ".join(packaged_names("enhancer"))
 METHODS = ", ".join(sorted(available_methods()))

@@ -18,9 +18,9 @@ from setdiff_bench.protocols.profiles import get_profile
 from setdiff_bench.runtime.threads import torch_threads
 from tests.cli.conftest import IndexedFakeStore
 from tests.cli.helpers import extract_examples, help_texts
+from tests.evaluation.run.store_fixtures import StoreSpec, build_store
 from tests.models.setdiff_fixtures import CLI_TRAIN_CONFIG as CONFIG
 from tests.models.setdiff_fixtures import train_argv
-from tests.run.store_fixtures import StoreSpec, build_store
 
 
 @pytest.fixture(scope="module")

@@ -47,7 +47,7 @@ inline names of the program or a verb (```setdiff-bench serve``` ...)          t
 ``pip install ...`` / ``python3 -m pip install ...``                           not run: they install packages (the
                                                                                environment under test is that install)
 ``setdiff-bench demo --benchmark sparse``                                      not run here: run at ``--preset tiny``
-                                                                               by tests/demo/test_demo_sparse.py
+                                                                               by tests/pipeline/demo/test_demo_sparse.py
 ``python3 -m pytest -q``, ``.ci/run``                                          not run: they are this test suite
 ``ruff check .``, ``ruff format --check .``                                    not run here: tests/core/test_style.py
 =============================================================================  =========================================
@@ -118,7 +118,7 @@ NOT_RUN = {
     'python3 -m pip install torch==2.13.0 -e ".[model,test]"': "installs packages",
     "pip install -e .": "installs packages",
     'pip install -e ".[serve]"': "installs packages",
-    "setdiff-bench demo --benchmark sparse": "run at --preset tiny by tests/demo/test_demo_sparse.py",
+    "setdiff-bench demo --benchmark sparse": "run at --preset tiny by tests/pipeline/demo/test_demo_sparse.py",
     "python3 examples/alpasim_rollout.py": "its renderer and proxy calls are tests/serve/test_sensorsim.py's",
     "python3 -m pytest -q": "this test suite",
     ".ci/run": "CI's entry point: this test suite",

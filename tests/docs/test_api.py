@@ -16,7 +16,7 @@ import pytest
 
 import setdiff_bench as sb
 from setdiff_bench.evaluation.run import RunSettings, run_method
-from tests.run.store_fixtures import StoreSpec, build_store
+from tests.evaluation.run.store_fixtures import StoreSpec, build_store
 
 ROOT = Path(__file__).resolve().parents[2]
 API_DOC = ROOT / "docs" / "api.md"

@@ -23,7 +23,7 @@ from setdiff_bench.enhancers.base import (
 from setdiff_bench.enhancers.identity import IdentityEnhancer
 from setdiff_bench.errors import UsageError
 from tests.enhancers.plugin_fixtures import install_plugin
-from tests.run.store_fixtures import camera_at, plane_view
+from tests.evaluation.run.store_fixtures import camera_at, plane_view
 
 
 def test_builtins_are_listed_without_importing_model_code() -> None:

@@ -15,7 +15,7 @@ from setdiff_bench.enhancers.base import create_enhancer
 from setdiff_bench.enhancers.reproject import ReprojectConfig, ReprojectEnhancer
 from setdiff_bench.errors import UsageError
 from setdiff_bench.types import Packet, ViewSet
-from tests.run.store_fixtures import HEIGHT, WIDTH, camera_at, degrade, plane_view
+from tests.evaluation.run.store_fixtures import HEIGHT, WIDTH, camera_at, degrade, plane_view
 
 DEPTH = 2.5
 

@@ -5,7 +5,7 @@ same global sample sequence (each step's two samples split between the ranks), t
 float summation order, the same validation scores (each rank scores half of the validation packets and the
 sums are reduced), and the files written once.  A run killed with SIGKILL on both ranks and started again
 resumes the sample sequence at its last checkpoint.  The store is a small real packet store
-(:func:`tests.run.store_fixtures.build_store`).
+(:func:`tests.evaluation.run.store_fixtures.build_store`).
 """
 
 from __future__ import annotations
@@ -31,8 +31,8 @@ from setdiff_bench.models.setdiff.files import (
     VALIDATION_FILE,
     WEIGHTS_FILE,
 )
+from tests.evaluation.run.store_fixtures import StoreSpec, build_store
 from tests.models.setdiff_fixtures import tiny_config_toml, train_argv
-from tests.run.store_fixtures import StoreSpec, build_store
 
 STEPS = 8
 

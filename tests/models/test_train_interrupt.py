@@ -46,7 +46,7 @@ def latest_step(out: Path) -> int:
 
 
 def test_interrupted_training_checkpoints_and_resumes(tmp_path: Path) -> None:
-    """SIGTERM (a job scheduler's stop) mid-run; SIGINT takes the same path (tests/core/test_interrupts.py)."""
+    """SIGTERM (a job scheduler's stop) mid-run; SIGINT takes the same path (tests/runtime/test_interrupts.py)."""
     write_store(tmp_path / "packets")
     (tmp_path / "tiny.toml").write_text(CONFIG)
     out = tmp_path / "run"

@@ -35,9 +35,9 @@ from setdiff_bench.io.run_layout import ENHANCER_FILE, FRAGMENTS_DIR, MANIFEST_F
 from setdiff_bench.packets.index import PACKETS_DIR
 from setdiff_bench.packets.prepare import prepare
 from setdiff_bench.runtime.threads import torch_threads
+from tests.evaluation.run.store_fixtures import StoreSpec, build_store, files_of
 from tests.packets.packet_fixtures import prepare_argv, tree_bytes
 from tests.reliability.world import World, run_argv, tree_state
-from tests.run.store_fixtures import StoreSpec, build_store, files_of
 
 REPO = Path(__file__).parents[2]
 ENV = {**os.environ, "OMP_NUM_THREADS": "1"}

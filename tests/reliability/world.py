@@ -28,8 +28,8 @@ import torch
 from setdiff_bench.io.atomic import sha256_file
 from setdiff_bench.packets.index import FILE_COLUMNS, INDEX_FILE, PACKETS_DIR, merge_index, write_rows
 from setdiff_bench.runtime.threads import torch_threads
+from tests.evaluation.run.store_fixtures import StoreSpec, build_store
 from tests.packets.packet_fixtures import write_dataset
-from tests.run.store_fixtures import StoreSpec, build_store
 
 STREET_SCENE = "street_00"
 

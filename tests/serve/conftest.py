@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 
 from setdiff_bench.runtime.threads import torch_threads
+from tests.evaluation.stream.stream_fixtures import save_tiny_checkpoint
 from tests.serve.serve_fixtures import Certificates, make_certificates
-from tests.stream.stream_fixtures import save_tiny_checkpoint
 
 
 @pytest.fixture(scope="package")

@@ -27,7 +27,7 @@ from setdiff_bench.packets.writer import PacketHeader, ViewContent, write_packet
 from setdiff_bench.serve.sensorsim import common_pb2 as common
 from setdiff_bench.serve.sensorsim import sensorsim_pb2 as pb
 from setdiff_bench.serve.sensorsim import sensorsim_pb2_grpc as pb_grpc
-from tests.stream.stream_fixtures import hwc, rig_camera
+from tests.evaluation.stream.stream_fixtures import hwc, rig_camera
 
 SCENE_ID = "street"
 #: AlpaSim's two default cameras (``wizard/configs/cameras/2cam.yaml``) and the yaw we give them (degrees).

@@ -26,8 +26,8 @@ from setdiff_bench.serve.server import RunningServer, start_server
 from setdiff_bench.serve.sessions import FairLock
 from setdiff_bench.serve.settings import ServeSettings
 from setdiff_bench.serve.wire import to_array
+from tests.evaluation.stream.stream_fixtures import HEIGHT, WIDTH, recorded_references, tick_frames
 from tests.serve.serve_fixtures import start_driver
-from tests.stream.stream_fixtures import HEIGHT, WIDTH, recorded_references, tick_frames
 
 #: The tests' 48×32 frames are smaller than the shipped models' 256×144: the domain warning is expected.
 pytestmark = pytest.mark.filterwarnings("ignore::setdiff_bench.errors.OutOfDistributionWarning")
@@ -333,8 +333,8 @@ def test_session_ids_that_cannot_be_ours_are_refused_without_echo(enhancer: Any)
 def test_sigterm_right_after_the_serving_line_stops_gracefully() -> None:
     """The "serving on" line is printed only once the SIGTERM handler is installed: a supervisor that
     signals as soon as it reads the line gets a graceful stop (exit 0, "stopped"), not a kill (-15)."""
+    from tests.evaluation.stream.stream_fixtures import serve_argv
     from tests.serve.serve_fixtures import served
-    from tests.stream.stream_fixtures import serve_argv
 
     with served(serve_argv("tiny_difix", "--method", "difix")) as (process, _):
         process.send_signal(signal.SIGTERM)

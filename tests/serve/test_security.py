@@ -21,8 +21,8 @@ from setdiff_bench.serve.client import EnhancerClient
 from setdiff_bench.serve.security import TOKEN_ENV, ServerTls, TokenSource, check_bind, is_loopback
 from setdiff_bench.serve.server import RunningServer, start_server
 from setdiff_bench.serve.settings import ServeSettings
+from tests.evaluation.stream.stream_fixtures import HEIGHT, WIDTH, recorded_references, tick_frames
 from tests.serve.serve_fixtures import Certificates, environment
-from tests.stream.stream_fixtures import HEIGHT, WIDTH, recorded_references, tick_frames
 
 #: The tests' 48×32 frames are smaller than the shipped models' 256×144: the domain warning is expected.
 pytestmark = pytest.mark.filterwarnings("ignore::setdiff_bench.errors.OutOfDistributionWarning")
@@ -307,8 +307,8 @@ def test_example_client_takes_the_same_options(
     """examples/drive_packets.py against a mutual-TLS server with a token: the client side of the options."""
     from setdiff_bench.evaluation.stream import StreamSession
     from setdiff_bench.packets.index import merge_index
+    from tests.evaluation.stream.stream_fixtures import write_tick_store
     from tests.serve.serve_fixtures import ROOT
-    from tests.stream.stream_fixtures import write_tick_store
 
     references, frames = recorded_references(), tick_frames(0)
     chosen = StreamSession(enhancer, references).select(frames.cameras)

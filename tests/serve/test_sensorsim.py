@@ -38,6 +38,7 @@ from setdiff_bench.serve.sensorsim.server import RunningSensorsim, start_sensors
 from setdiff_bench.serve.sensorsim.service import parse_server_timing
 from setdiff_bench.serve.sensorsim.settings import SensorsimSettings
 from setdiff_bench.serve.settings import ServeSettings
+from tests.evaluation.stream.stream_fixtures import run_batch
 from tests.serve.sensorsim_fixtures import (
     CAMERAS,
     SCENE_ID,
@@ -51,7 +52,6 @@ from tests.serve.sensorsim_fixtures import (
     write_tick_packet,
 )
 from tests.serve.serve_fixtures import Certificates
-from tests.stream.stream_fixtures import run_batch
 
 #: Small frames (48×32): the domain warning is expected.
 pytestmark = pytest.mark.filterwarnings("ignore::setdiff_bench.errors.OutOfDistributionWarning")

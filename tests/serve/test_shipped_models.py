@@ -20,8 +20,7 @@ from setdiff_bench.evaluation.tick_limits import DEFAULT_REFERENCES_PER_TICK
 from setdiff_bench.io.images import read_rgb
 from setdiff_bench.io.run_layout import IMAGES_DIR
 from setdiff_bench.serve.client import EnhancerClient
-from tests.serve.serve_fixtures import ROOT, SHIPPED_ENHANCERS, environment, served
-from tests.stream.stream_fixtures import (
+from tests.evaluation.stream.stream_fixtures import (
     RIG,
     recorded_references,
     run_batch,
@@ -29,6 +28,7 @@ from tests.stream.stream_fixtures import (
     tick_frames,
     write_tick_store,
 )
+from tests.serve.serve_fixtures import ROOT, SHIPPED_ENHANCERS, environment, served
 
 #: The tests' 48×32 frames are smaller than the shipped models' 256×144: the domain warning is expected.
 pytestmark = pytest.mark.filterwarnings("ignore::setdiff_bench.errors.OutOfDistributionWarning")
