@@ -27,7 +27,7 @@ from types import FrameType
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from benchmarks.common import write_result  # noqa: E402
+from benchmarks.common import write_result
 
 
 def _own_file(path: str, roots: list[Path]) -> str | None:
