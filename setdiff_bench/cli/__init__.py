@@ -7,13 +7,15 @@ Options that several verbs share are declared here, once, so that they are spell
 explained alike: :func:`add_device_argument` (``--device``, default ``auto``),
 :func:`add_progress_argument` (``--no-progress``) and :func:`add_option_argument` (``-o KEY=VALUE``).
 Older spellings stay accepted, hidden from ``--help``, for one release.  :func:`settings_from` turns
-parsed arguments into a verb's settings dataclass (fields read by their own names, the rest derived).
+parsed arguments into a verb's settings dataclass (fields read by their own names, the rest derived);
+:func:`method_options` gathers an enhancer's options from ``-o`` and the flags that stand for some of them.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+from pathlib import Path
 from typing import Any, TypeVar
 
 SettingsT = TypeVar("SettingsT")
@@ -56,3 +58,29 @@ def settings_from(cls: type[SettingsT], args: argparse.Namespace, **derived: Any
                 raise TypeError(f"{cls.__name__}.{field.name}: neither derived nor a parsed argument")
             values[field.name] = getattr(args, field.name)
     return cls(**values)
+
+
+def method_options(args: argparse.Namespace, *flags: str, path_flags: tuple[str, ...] = ()) -> dict[str, Any]:
+    """An enhancer's options: the ``-o KEY=VALUE`` list (``args.option``) plus the flags that stand for one of
+    them (``flags``: option names, read from ``args`` by the same name; None: not given).  A ``path_flags``
+    value naming an existing path is made absolute, so that a resumed run matches its record whatever the
+    working folder; anything else is kept as given (a shipped model's name such as ``tiny_setdiff``).
+
+    Raises:
+        UsageError: an option given both as a flag and with ``-o``.
+    """
+    from setdiff_bench.cli.list import parse_option
+    from setdiff_bench.errors import UsageError
+
+    options = dict(parse_option(text) for text in args.option)
+    for key in (*flags, *path_flags):
+        value = getattr(args, key)
+        if value is None:
+            continue
+        if key in options:
+            raise UsageError(f"{key} given twice (flag and -o)", "--option")
+        if key in path_flags:
+            path = Path(value).expanduser()
+            value = str(path.resolve()) if path.exists() else value
+        options[key] = value
+    return options

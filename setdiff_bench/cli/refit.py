@@ -23,7 +23,7 @@ import argparse
 import dataclasses
 from pathlib import Path
 
-from setdiff_bench.cli import add_device_argument, add_option_argument, add_progress_argument
+from setdiff_bench.cli import add_device_argument, add_option_argument, add_progress_argument, method_options
 from setdiff_bench.refit.settings import SCHEDULE_PRESETS, RefitSettings
 
 VERB = "refit"
@@ -108,17 +108,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from setdiff_bench.cli.list import parse_option
-    from setdiff_bench.errors import UsageError
     from setdiff_bench.refit import RefitTask, refit_scene
 
-    options = dict(parse_option(text) for text in args.option)
-    for key, value in (("checkpoint", args.checkpoint), ("source", args.source)):
-        if value is not None:
-            if key in options:
-                raise UsageError(f"{key} given twice (flag and -o)", "--option")
-            path = Path(value).expanduser()
-            options[key] = str(path.resolve()) if path.exists() else value
+    options = method_options(args, path_flags=("checkpoint", "source"))
     overrides = {
         f.name: getattr(args, f.name) for f in dataclasses.fields(RefitSettings) if f.name != "schedule"
     }

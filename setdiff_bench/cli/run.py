@@ -31,7 +31,13 @@ import argparse
 import sys
 from pathlib import Path
 
-from setdiff_bench.cli import add_device_argument, add_option_argument, add_progress_argument, settings_from
+from setdiff_bench.cli import (
+    add_device_argument,
+    add_option_argument,
+    add_progress_argument,
+    method_options,
+    settings_from,
+)
 from setdiff_bench.cli.declared import declared_field_default, declared_literal
 from setdiff_bench.models.setdiff.packaged import SPEEDS
 
@@ -136,8 +142,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
 
     # lazy: every verb module loads at each CLI start (--help too); what the verb needs loads when it runs
-    from setdiff_bench.cli.list import parse_option
-    from setdiff_bench.errors import UsageError
     from setdiff_bench.evaluation.run import RunSettings, run_method
     from setdiff_bench.evaluation.scoring import resolve_metrics
     from setdiff_bench.io.run_layout import MANIFEST_FILE, METRICS_FILE
@@ -146,19 +150,7 @@ def run(args: argparse.Namespace) -> int:
 
     shard = Shard.parse(args.shard)
     device = resolve_device(args.device)
-    options = dict(parse_option(text) for text in args.option)
-    if args.speed is not None:
-        if "speed" in options:
-            raise UsageError("speed given twice (flag and -o)", "--option")
-        options["speed"] = args.speed
-    for key, value in (("checkpoint", args.checkpoint), ("source", args.source)):
-        if value is not None:
-            if key in options:
-                raise UsageError(f"{key} given twice (flag and -o)", "--option")
-            # an existing path made absolute, so that a resumed run matches run.json whatever the working
-            # folder; anything else as given (a shipped model's name such as tiny_setdiff)
-            path = Path(value).expanduser()
-            options[key] = str(path.resolve()) if path.exists() else value
+    options = method_options(args, "speed", path_flags=("checkpoint", "source"))
     metrics = tuple(spec.name for spec in resolve_metrics(args.metrics))
     settings = settings_from(
         RunSettings,

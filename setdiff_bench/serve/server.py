@@ -34,7 +34,7 @@ import time
 from collections.abc import Callable
 from concurrent import futures
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Self
 
 import grpc
 from grpc_health.v1 import health, health_pb2, health_pb2_grpc
@@ -76,6 +76,27 @@ class RunningServer:
     health: health.HealthServicer
     reaper_stop: threading.Event = field(default_factory=threading.Event)
 
+    @classmethod
+    def go_live(
+        cls,
+        server: grpc.Server,
+        port: int,
+        service: Any,
+        health_servicer: health.HealthServicer,
+        service_name: str,
+        reaper_name: str,
+    ) -> Self:
+        """Start ``server``, report it and ``service_name`` SERVING to health checks, and expire ``service``'s idle
+        sessions from a daemon thread named ``reaper_name`` until :meth:`stop`; the running server."""
+        server.start()
+        for name in ("", service_name):
+            health_servicer.set(name, health_pb2.HealthCheckResponse.SERVING)
+        running = cls(server, port, service, health_servicer)
+        threading.Thread(
+            target=_reap, args=(service, running.reaper_stop), name=reaper_name, daemon=True
+        ).start()
+        return running
+
     def stop(self, grace: float | None) -> None:
         """Refuse new RPCs, let in-flight ones finish for up to ``grace`` seconds, and wait."""
         self.reaper_stop.set()
@@ -115,14 +136,7 @@ def start_server(
     health_servicer = health.HealthServicer()
     health_pb2_grpc.add_HealthServicer_to_server(health_servicer, server)
     port = bind(server, settings)
-    server.start()
-    for name in ("", SERVICE_NAME):
-        health_servicer.set(name, health_pb2.HealthCheckResponse.SERVING)
-    running = RunningServer(server, port, service, health_servicer)
-    threading.Thread(
-        target=_reap, args=(service, running.reaper_stop), name="session-reaper", daemon=True
-    ).start()
-    return running
+    return RunningServer.go_live(server, port, service, health_servicer, SERVICE_NAME, "session-reaper")
 
 
 def serve_until_signalled(

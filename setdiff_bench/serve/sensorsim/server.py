@@ -4,13 +4,12 @@ non-loopback host needs TLS and a token, or ``insecure``), TLS / mutual TLS, the
 
 from __future__ import annotations
 
-import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from grpc_health.v1 import health, health_pb2, health_pb2_grpc
+from grpc_health.v1 import health, health_pb2_grpc
 
 from setdiff_bench.errors import SetDiffBenchError
 from setdiff_bench.serve.security import check_bind
@@ -18,7 +17,7 @@ from setdiff_bench.serve.sensorsim import sensorsim_pb2 as pb
 from setdiff_bench.serve.sensorsim import sensorsim_pb2_grpc as pb_grpc
 from setdiff_bench.serve.sensorsim.service import ProxyService, RendererService, SensorsimBase
 from setdiff_bench.serve.sensorsim.settings import MAX_MESSAGE_BYTES, SensorsimSettings
-from setdiff_bench.serve.server import RunningServer, _reap, bind, grpc_server
+from setdiff_bench.serve.server import RunningServer, bind, grpc_server
 
 #: The fully qualified service name (AlpaSim's and NuRec's).
 SERVICE_NAME = pb.DESCRIPTOR.services_by_name["SensorsimService"].full_name
@@ -72,14 +71,7 @@ def start_sensorsim(
         if isinstance(service, ProxyService):
             service.close()
         raise
-    server.start()
-    for name in ("", SERVICE_NAME):
-        health_servicer.set(name, health_pb2.HealthCheckResponse.SERVING)
-    running = RunningSensorsim(server, port, service, health_servicer)
-    threading.Thread(
-        target=_reap, args=(service, running.reaper_stop), name="sensorsim-reaper", daemon=True
-    ).start()
-    return running
+    return RunningSensorsim.go_live(server, port, service, health_servicer, SERVICE_NAME, "sensorsim-reaper")
 
 
 def sensorsim_pid_line(running: RunningSensorsim, host: str) -> str:
