@@ -24,8 +24,8 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.common import machine, time_call, write_result
+from setdiff_bench.cli import parse_option
 from setdiff_bench.cli.fit import fit_config
-from setdiff_bench.cli.list import parse_option
 from setdiff_bench.gaussians.fit import (
     Trainer,
     initial_model,

@@ -8,15 +8,19 @@ explained alike: :func:`add_device_argument` (``--device``, default ``auto``),
 :func:`add_progress_argument` (``--no-progress``) and :func:`add_option_argument` (``-o KEY=VALUE``).
 Older spellings stay accepted, hidden from ``--help``, for one release.  :func:`settings_from` turns
 parsed arguments into a verb's settings dataclass (fields read by their own names, the rest derived);
-:func:`method_options` gathers an enhancer's options from ``-o`` and the flags that stand for some of them.
+:func:`parse_option` reads one ``KEY=VALUE`` and :func:`method_options` gathers an enhancer's options from ``-o``
+and the flags that stand for some of them.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 from pathlib import Path
 from typing import Any, TypeVar
+
+from setdiff_bench.errors import UsageError
 
 SettingsT = TypeVar("SettingsT")
 
@@ -40,7 +44,7 @@ def add_option_argument(
     parser: argparse.ArgumentParser, help: str, names: tuple[str, ...] = ("-o", "--option")
 ) -> None:
     """A repeatable ``KEY=VALUE`` flag (``-o/--option`` unless ``names`` says otherwise), collected as a list
-    of strings (``args.option``) for :func:`setdiff_bench.cli.list.parse_option`; ``help`` explains it."""
+    of strings (``args.option``) for :func:`parse_option`; ``help`` explains it."""
     parser.add_argument(*names, action="append", default=[], metavar="KEY=VALUE", help=help)
 
 
@@ -69,9 +73,6 @@ def method_options(args: argparse.Namespace, *flags: str, path_flags: tuple[str,
     Raises:
         UsageError: an option given both as a flag and with ``-o``.
     """
-    from setdiff_bench.cli.list import parse_option
-    from setdiff_bench.errors import UsageError
-
     options = dict(parse_option(text) for text in args.option)
     for key in (*flags, *path_flags):
         value = getattr(args, key)
@@ -84,3 +85,20 @@ def method_options(args: argparse.Namespace, *flags: str, path_flags: tuple[str,
             value = str(path.resolve()) if path.exists() else value
         options[key] = value
     return options
+
+
+def parse_option(text: str, flag: str = "-o/--option") -> tuple[str, Any]:
+    """``KEY=VALUE`` → ``(key, value)``; the value is parsed as JSON when it is valid JSON, else kept as text.
+
+    ``level=1`` → 1, ``sweeps=false`` → False, ``channels=["CAM_FRONT"]`` → list, ``version=v1.0-mini`` → str.
+    The one parser of every ``KEY=VALUE`` flag (loader options: :func:`setdiff_bench.cli.list.loader_options`; ``run -o``'s method
+    options); ``flag`` is the argument a malformed ``text`` is reported against.
+    """
+    key, sep, raw = text.partition("=")
+    if not sep or not key.strip():
+        raise UsageError(f"option {text!r} must look like KEY=VALUE", flag)
+    try:
+        value = json.loads(raw)
+    except json.JSONDecodeError:
+        value = raw
+    return key.strip(), value

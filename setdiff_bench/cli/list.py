@@ -21,8 +21,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from setdiff_bench.cli import add_option_argument
-from setdiff_bench.errors import UsageError
+from setdiff_bench.cli import add_option_argument, parse_option
 
 VERB = "list"
 HELP = "list datasets, methods, or the scenes of a dataset on disk"
@@ -99,23 +98,6 @@ def _methods_run(args: argparse.Namespace) -> int:
 
 
 # ---------------------------------------------------------------------- list scenes
-def parse_option(text: str, flag: str = "-o/--option") -> tuple[str, Any]:
-    """``KEY=VALUE`` → ``(key, value)``; the value is parsed as JSON when it is valid JSON, else kept as text.
-
-    ``level=1`` → 1, ``sweeps=false`` → False, ``channels=["CAM_FRONT"]`` → list, ``version=v1.0-mini`` → str.
-    The one parser of every ``KEY=VALUE`` flag (loader options: :func:`loader_options`; ``run -o``'s method
-    options); ``flag`` is the argument a malformed ``text`` is reported against.
-    """
-    key, sep, raw = text.partition("=")
-    if not sep or not key.strip():
-        raise UsageError(f"option {text!r} must look like KEY=VALUE", flag)
-    try:
-        value = json.loads(raw)
-    except json.JSONDecodeError:
-        value = raw
-    return key.strip(), value
-
-
 #: The loader-option flag's spellings, the same on every verb that reads a dataset (``list scenes``, ``fit``,
 #: ``prepare``): ``-o KEY=VALUE`` or ``--loader-option KEY=VALUE`` (``--option``: an older name, hidden).
 LOADER_OPTION_FLAGS = ("-o", "--loader-option")

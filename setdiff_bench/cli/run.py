@@ -85,6 +85,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "one table; letters, digits, _ . + -",
     )
     parser.add_argument(
+        "--refit",
+        default=None,
+        metavar="DIR",
+        help="the `setdiff-bench refit --out` folder whose refitted fits these packets were cut from (an X 3D "
+        "run): each scene's refit manifest must be there; its time and memory join the run's manifest and "
+        "leaderboard --cost",
+    )
+    parser.add_argument(
         "--speed",
         choices=SPEEDS,
         default=None,
@@ -161,6 +169,7 @@ def run(args: argparse.Namespace) -> int:
         flow_method=args.flow,
         device=device,
         warp_cache=None if args.warp_cache == "none" else args.warp_cache,
+        refit=None if args.refit is None else str(Path(args.refit).expanduser().resolve()),
     )
     out = args.out or Path("results") / "runs" / Path(args.packets).resolve().name / settings.label
     inception = None

@@ -4,7 +4,7 @@ An enhancer ``X`` is scored three ways (docs/refit.md): ``X`` post-processes the
 (``run``), ``X 3D`` is the render of the fit refitted with ``X``'s enhanced novel views (this package), and
 ``X 3D+`` is ``X`` applied to that render.  :func:`refit_scene` runs one scene's refit with a
 :class:`RefitSettings` schedule — ``progressive`` (Difix3D+) or ``one-shot`` (3DGS-Enhancer) — and writes the
-refit PLY where ``prepare --fits`` finds it, with a manifest beside it (:func:`refit_paths`).
+refit PLY where ``prepare --fits`` finds it, with a manifest beside it (:func:`setdiff_bench.io.refit_layout.refit_paths`).
 
 Example::
 
@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 from setdiff_bench.refit.settings import SCHEDULE_PRESETS, RefitSettings, Schedule
 
 if TYPE_CHECKING:
-    from setdiff_bench.refit.scene import RefitResult, RefitTask, refit_paths, refit_scene
+    from setdiff_bench.refit.scene import RefitResult, RefitTask, refit_scene
 
 __all__ = [
     "SCHEDULE_PRESETS",
@@ -32,11 +32,10 @@ __all__ = [
     "RefitSettings",
     "RefitTask",
     "Schedule",
-    "refit_paths",
     "refit_scene",
 ]
 
-_LAZY = {"RefitResult", "RefitTask", "refit_paths", "refit_scene"}
+_LAZY = {"RefitResult", "RefitTask", "refit_scene"}
 
 
 def __getattr__(name: str) -> Any:

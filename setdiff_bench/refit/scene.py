@@ -42,21 +42,8 @@ import numpy as np
 import torch
 
 from setdiff_bench.errors import CheckpointError, PlyError, UsageError
+from setdiff_bench.io.refit_layout import REFIT_FORMAT, refit_paths
 from setdiff_bench.refit.settings import RefitSettings
-
-REFIT_FORMAT = "setdiff-refit/1"
-MANIFEST_SUFFIX = ".refit.json"
-CHECKPOINT_SUFFIX = ".refit-checkpoint"
-
-
-def refit_paths(out: str | os.PathLike[str], scene: str, fit_key: str) -> tuple[Path, Path, Path]:
-    """``(PLY, manifest, checkpoint folder)`` of ``scene``'s refit of fit ``fit_key`` in ``out``."""
-    base = Path(out) / scene
-    return (
-        base / f"{fit_key}.ply",
-        base / f"{fit_key}{MANIFEST_SUFFIX}",
-        base / f"{fit_key}{CHECKPOINT_SUFFIX}",
-    )
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from setdiff_bench.cli.list import parse_option
+from setdiff_bench.cli import parse_option
 from setdiff_bench.errors import UsageError
 
 

@@ -15,8 +15,9 @@ from setdiff_bench.cli.main import main
 from setdiff_bench.enhancers.base import BUILTIN_METHODS, MethodSpec
 from setdiff_bench.errors import CheckpointError
 from setdiff_bench.gaussians.ply import read_ply, write_ply
+from setdiff_bench.io.refit_layout import refit_paths
 from setdiff_bench.packets.store import PacketStore
-from setdiff_bench.refit import RefitSettings, RefitTask, refit_paths, refit_scene
+from setdiff_bench.refit import RefitSettings, RefitTask, refit_scene
 from setdiff_bench.refit.loop import RefitLoop
 from setdiff_bench.runtime.threads import torch_threads
 from setdiff_bench.types import Packet

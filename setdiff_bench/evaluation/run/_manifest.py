@@ -13,7 +13,7 @@ import pandas as pd
 import pyarrow as pa
 
 from setdiff_bench.enhancers.base import available_methods
-from setdiff_bench.evaluation.run._settings import RUN_FORMAT, RunSettings, jsonable_options
+from setdiff_bench.evaluation.run._settings import RUN_FORMAT, RunSettings, jsonable_options, refit_costs
 from setdiff_bench.io.atomic import sha256_file
 from setdiff_bench.io.run_layout import ENHANCER_FILE, IMAGES_DIR, METRICS_FILE, SEQUENCES_FILE
 from setdiff_bench.metrics.registry import MetricSpec
@@ -44,7 +44,7 @@ def run_manifest(
         if "peak_memory_mb" in frame.columns
         else np.array([], dtype=np.float64)
     )
-    return {
+    manifest: dict[str, Any] = {
         "format": RUN_FORMAT,
         "method": {
             # the name every table shows (``run --name``, else the registry name) and the registry name
@@ -115,3 +115,10 @@ def run_manifest(
             "images": f"{IMAGES_DIR}/<protocol>/<group>/<scene>/<frame stem>.png",
         },
     }
+    if settings.refit is not None:  # an X 3D run: what the refits its packets were cut from cost
+        manifest["refit"] = {
+            "fits": refit_costs(settings, store.index, frame["packet_id"].unique()),
+            "note": "wall_s: the whole refit of one scene's fit (steps, updates, the enhancer inside them); "
+            "from each <scene>/<fit_key>.refit.json of run --refit",
+        }
+    return manifest

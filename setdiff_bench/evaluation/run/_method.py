@@ -29,6 +29,7 @@ from setdiff_bench.evaluation.run._result import RunResult, skipped_metrics, tar
 from setdiff_bench.evaluation.run._settings import (
     RunSettings,
     check_run_name,
+    refit_costs,
 )
 from setdiff_bench.evaluation.scoring import resolve_metrics
 from setdiff_bench.io.atomic import sha256_file
@@ -92,7 +93,10 @@ def run_method(
     index_sha256 = sha256_file(Path(store.root) / INDEX_FILE)
     spec = available_methods().get(settings.method)
     model_files = spec.model_files(settings.options) if spec is not None else {}
-    identity = settings.identity(index_sha256, model_files)
+    refits = refit_costs(settings, store.index, selection)  # every manifest there before any work
+    identity = settings.identity(
+        index_sha256, model_files, {key: cost["manifest_sha256"] for key, cost in refits.items()}
+    )
     check_folder(out, identity)
     if merge_only:
         return replace(

@@ -13,9 +13,11 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Literal
 
 import numpy as np
+import pandas as pd
 
 from setdiff_bench.errors import UsageError
 from setdiff_bench.io.jsonable import jsonable
+from setdiff_bench.io.refit_layout import refit_cost
 from setdiff_bench.metrics.registry import PRESETS
 
 RUN_FORMAT = "setdiff-run/1"
@@ -56,6 +58,9 @@ class RunSettings:
             ``compare`` and the report show it; two runs of one method (e.g. two ``precomputed`` folders of two
             external methods) with different names share one table.  Recorded in ``run.json`` (when given)
             and in the manifest beside the registry name; :data:`RUN_NAME_PATTERN`.
+        refit: the ``setdiff-bench refit --out`` folder whose refitted fits the packets were cut from (an
+            ``X 3D`` run), or ``None``.  Each scene's refit manifest must be there; what it cost (time, peak
+            memory) goes into the run's manifest and ``leaderboard --cost``, its SHA-256 into ``run.json``.
     """
 
     method: str
@@ -68,18 +73,26 @@ class RunSettings:
     batch_size: int = 8
     warp_cache: str | None = "auto"
     name: str | None = None
+    refit: str | None = None
 
     @property
     def label(self) -> str:
         """The name the run's rows carry: :attr:`name` when given, else :attr:`method`."""
         return self.name if self.name is not None else self.method
 
-    def identity(self, index_sha256: str, model_files: Mapping[str, str] | None = None) -> dict[str, Any]:
+    def identity(
+        self,
+        index_sha256: str,
+        model_files: Mapping[str, str] | None = None,
+        refit_manifests: Mapping[str, str] | None = None,
+    ) -> dict[str, Any]:
         """The ``run.json`` content: what must not change between a run and its resumption.
 
         ``model_files`` (``{file: SHA-256}`` from the method's fingerprint, e.g. a checkpoint's weights and
         config) is recorded when the method has one, so that the same ``--checkpoint`` naming other weights
         (retrained, re-exported, a newer shipped model) does not resume into stale results.
+        ``refit_manifests`` (``{"<scene>/<fit_key>": SHA-256}`` of the refit manifests, with :attr:`refit`)
+        likewise ties the run to the refits whose cost it records.
         """
         identity = {
             "format": RUN_FORMAT,
@@ -96,7 +109,26 @@ class RunSettings:
             identity["name"] = self.name
         if model_files:
             identity["model_files"] = dict(sorted(model_files.items()))
+        if self.refit is not None:  # absent when not given: every other run's run.json is unchanged
+            identity["refit_manifests"] = dict(sorted((refit_manifests or {}).items()))
         return identity
+
+
+def refit_costs(
+    settings: RunSettings, index: pd.DataFrame, packet_ids: Collection[str]
+) -> dict[str, dict[str, Any]]:
+    """``{"<scene>/<fit_key>": cost}`` of every scene and fit of the packets ``packet_ids`` in the store's
+    ``index``, read from :attr:`RunSettings.refit` (:func:`setdiff_bench.io.refit_layout.refit_cost`); ``{}``
+    without it.
+
+    Raises:
+        UsageError: a refit manifest missing or unreadable (the message names the file).
+    """
+    if settings.refit is None:
+        return {}
+    rows = index[index["packet_id"].isin(set(packet_ids))]
+    fits = sorted({(str(scene), str(fit_key)) for scene, fit_key in zip(rows["scene"], rows["fit_key"])})
+    return {f"{scene}/{fit_key}": refit_cost(settings.refit, scene, fit_key) for scene, fit_key in fits}
 
 
 def check_run_name(settings: RunSettings, registered: Collection[str]) -> None:

@@ -247,6 +247,12 @@ def _notes(board: Leaderboard, frame: pd.DataFrame, seq: pd.DataFrame | None) ->
             "scoring) and its peak memory (CUDA: most allocated while enhancing a packet; CPU: the peak "
             "resident memory of the process, model included), as `run` recorded them on its machine: "
             "compare methods run on the same machine."
+            + (
+                " refit s/scene: the wall time of the refit each scene's render came from (`run --refit`: "
+                "steps, updates and the enhancer inside them; mean over the row's scenes)."
+                if any((COST, "refit_s") in row.values for row in board.rows)
+                else ""
+            )
         )
     if board.against is not None:
         notes.append(

@@ -32,10 +32,12 @@ def cost_column(rows: Sequence[Row], frame: pd.DataFrame) -> tuple[Block, tuple[
         if row.source == "measured":
             own = frame[frame["method"] == row.method]
             for name in recorded:
-                values = own[name].to_numpy(dtype=np.float64)
+                aggregate = COST_COLUMNS[name].aggregate
+                per = own.groupby("scene")[name].first() if aggregate == "scene_mean" else own[name]
+                values = per.to_numpy(dtype=np.float64)
                 values = values[~np.isnan(values)]
                 if len(values):
-                    reduce = np.median if COST_COLUMNS[name].aggregate == "median" else np.max
+                    reduce = {"median": np.median, "max": np.max, "scene_mean": np.mean}[aggregate]
                     row.values[(COST, name)] = float(reduce(values))
                     row.decimals[(COST, name)] = COST_COLUMNS[name].decimals
                     row.counts[(COST, name)] = len(values)

@@ -40,7 +40,8 @@ class CostColumn:
 
     Attributes:
         label: column header; decimals: digits printed; aggregate: how a method's targets reduce to one
-            value (``median``: robust to the first packet's warm-up; ``max``: the peak).
+            value (``median``: robust to the first packet's warm-up; ``max``: the peak; ``scene_mean``: the
+            mean over scenes of a value each scene's targets share).
     """
 
     label: str
@@ -49,10 +50,12 @@ class CostColumn:
 
 
 #: The cost block: ms per target frame (median over the method's targets, warm) and peak memory (CUDA max
-#: allocated or peak resident memory, the largest over its packets), as ``run`` records them.
+#: allocated or peak resident memory, the largest over its packets), as ``run`` records them; for the runs of
+#: refitted scenes (``run --refit``), the refit's wall seconds per scene (``refit_s``, from the run's manifest).
 COST_COLUMNS: dict[str, CostColumn] = {
     "ms_per_frame": CostColumn("ms/frame", 0, "median"),
     "peak_memory_mb": CostColumn("peak MiB", 0, "max"),
+    "refit_s": CostColumn("refit s/scene", 0, "scene_mean"),
 }
 
 

@@ -134,7 +134,11 @@ def load_runs(runs: str | Path | Sequence[Path]) -> tuple[pd.DataFrame, pd.DataF
     images, sequences = [], []
     for folder in folders:
         try:
-            images.append(pd.read_parquet(folder / METRICS_FILE).assign(run=str(folder)))
+            rows = pd.read_parquet(folder / METRICS_FILE).assign(run=str(folder))
+            refit_seconds = _refit_seconds(folder)
+            if refit_seconds:  # an X 3D run (run --refit): each scene's refit time, for leaderboard --cost
+                rows["refit_s"] = rows["scene"].map(refit_seconds).astype("float64")
+            images.append(rows)
             if (folder / SEQUENCES_FILE).is_file():
                 sequences.append(pd.read_parquet(folder / SEQUENCES_FILE).assign(run=str(folder)))
         except (OSError, pa.ArrowException) as error:
@@ -142,6 +146,22 @@ def load_runs(runs: str | Path | Sequence[Path]) -> tuple[pd.DataFrame, pd.DataF
     image_frame = pd.concat(images, ignore_index=True) if images else pd.DataFrame()
     sequence_frame = pd.concat(sequences, ignore_index=True) if sequences else pd.DataFrame()
     return image_frame, sequence_frame
+
+
+def _refit_seconds(folder: Path) -> dict[str, float]:
+    """Scene → wall seconds of the refits (all of the scene's fits) that a ``run --refit`` run records in its
+    manifest; ``{}`` for every other run (or a manifest that cannot be read: the run's rows still load)."""
+    try:
+        fits = (
+            json.loads((folder / MANIFEST_FILE).read_text(encoding="utf-8")).get("refit", {}).get("fits", {})
+        )
+        seconds: dict[str, float] = {}
+        for key, cost in fits.items():
+            scene = key.rsplit("/", 1)[0]
+            seconds[scene] = seconds.get(scene, 0.0) + float(cost["wall_s"])
+    except (OSError, ValueError, AttributeError, KeyError, TypeError):
+        return {}
+    return seconds
 
 
 def run_names(folders: Sequence[Path]) -> dict[Path, set[str]]:
