@@ -5,6 +5,8 @@ Per arm (``--arm NAME=WORK``; WORK holds what these commands wrote):
 
 * ``runs/sets-NAME`` and ``runs/render-NAME``: ``setdiff-bench run`` of the model and of ``identity`` on the arm's
   store (test split) — means per group and the paired gain per group and per scene (``reporting.paired``);
+* ``runs/sets4-NAME`` (optional): the model run with ``-o targets_per_set=4``, the largest target count of its
+  training sets (the default enhances a packet's 13 targets in one set);
 * ``abl/ablation_setsize.md``: ``setdiff-bench ablate setsize --sizes 1+1,2+1,3+1`` on the arm's n3 test packets;
 * ``usage.json``: ``benchmarks/diagnose_set_usage.py --group n3 --other-scene --true-packets TWIN``.
 
@@ -90,8 +92,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--arm", action="append", required=True, help="NAME=WORK")
     parser.add_argument("--out", default="sparse_set_arms")
+    parser.add_argument("--step", type=int, default=None, help="training step of the arms' checkpoints")
     args = parser.parse_args()
     payload: dict[str, Any] = {"benchmark": "sparse_set_arms", "arms": {}}
+    if args.step is not None:
+        payload["training_step"] = args.step
     for item in args.arm:
         name, _, work = item.partition("=")
         root = Path(work)
@@ -101,6 +106,10 @@ def main() -> None:
             "render": group_means(render),
             "gain_over_render": paired_by_scene(model, render),
         }
+        sets_of_4 = root / "runs" / f"sets4-{name}"
+        if (sets_of_4 / "metrics.parquet").is_file():
+            arm["setdiff_targets_per_set_4"] = group_means(sets_of_4)
+            arm["gain_over_render_targets_per_set_4"] = paired_by_scene(sets_of_4, render)
         table = root / "abl" / "ablation_setsize.md"
         if table.is_file():
             arm["setsize_table"] = [
