@@ -9,6 +9,7 @@ refit's cost with the runs of its renders, so that ``leaderboard --cost`` shows 
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 from pathlib import Path
@@ -43,8 +44,6 @@ def refit_cost(out: str | os.PathLike[str], scene: str, fit_key: str) -> dict[st
         UsageError: no manifest there (the refit is missing or unfinished), or a file that is not a refit
             manifest; the message names the file.
     """
-    import hashlib
-
     path = refit_paths(out, scene, fit_key)[1]
     try:
         raw = path.read_bytes()

@@ -193,11 +193,7 @@ def _geometry(settings: AblationSettings, pipeline: Pipeline, work: Path, invoca
     from setdiff_bench.models.setdiff.config_io import config_toml_data, write_config_toml
     from setdiff_bench.reporting import ablation
 
-    base = config_toml_data(settings.config)
-    if base["model"].get("method", "setdiff") != "setdiff":
-        from setdiff_bench.errors import UsageError
-
-        raise UsageError('the geometry ablation needs a SetDiff config (method = "setdiff")', settings.config)
+    base = config_toml_data(settings.config)  # a SetDiff config: check_ablation_inputs refused any other
     variants = ablation.parse_variants(settings.variants)
     seeds: list[int | None] = list(settings.seed or [None])
     per_model: list[dict[str, dict[str, float]]] = []

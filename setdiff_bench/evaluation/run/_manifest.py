@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import json
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -13,7 +13,7 @@ import pandas as pd
 import pyarrow as pa
 
 from setdiff_bench.enhancers.base import available_methods
-from setdiff_bench.evaluation.run._settings import RUN_FORMAT, RunSettings, jsonable_options, refit_costs
+from setdiff_bench.evaluation.run._settings import RUN_FORMAT, RunSettings, jsonable_options
 from setdiff_bench.io.atomic import sha256_file
 from setdiff_bench.io.run_layout import ENHANCER_FILE, IMAGES_DIR, METRICS_FILE, SEQUENCES_FILE
 from setdiff_bench.metrics.registry import MetricSpec
@@ -30,7 +30,10 @@ def run_manifest(
     frame: pd.DataFrame,
     sequences: pa.Table | None,
     fragments_sha256: str,
+    refits: Mapping[str, Mapping[str, Any]] | None = None,
 ) -> dict[str, Any]:
+    """The run's ``manifest.json``; ``refits`` (``run --refit``: :func:`refit_costs` as ``run_method`` read and
+    recorded them in ``run.json``) become its ``refit`` section."""
     methods = available_methods()
     spec = methods.get(settings.method)
     enhancer_info: dict[str, Any] = {}
@@ -117,7 +120,7 @@ def run_manifest(
     }
     if settings.refit is not None:  # an X 3D run: what the refits its packets were cut from cost
         manifest["refit"] = {
-            "fits": refit_costs(settings, store.index, frame["packet_id"].unique()),
+            "fits": {key: dict(cost) for key, cost in (refits or {}).items()},
             "note": "wall_s: the whole refit of one scene's fit (steps, updates, the enhancer inside them); "
             "from each <scene>/<fit_key>.refit.json of run --refit",
         }

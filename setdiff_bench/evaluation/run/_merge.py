@@ -9,8 +9,9 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -34,8 +35,10 @@ def merge_run(
     settings: RunSettings,
     specs: Sequence[MetricSpec],
     selection: Sequence[str],
+    refits: Mapping[str, Mapping[str, Any]] | None = None,
 ) -> None:
-    """Merge every fragment into ``metrics.parquet`` (+ ``sequences.parquet``) and write ``manifest.json``.
+    """Merge every fragment into ``metrics.parquet`` (+ ``sequences.parquet``) and write ``manifest.json``
+    (``refits``: the refit costs ``run_method`` recorded, for ``run --refit``).
 
     Idempotent: nothing is rewritten when the manifest already records the same fragments.  Lock-free:
     every output depends only on the fragments and is written by atomic rename, so two shards merging
@@ -70,7 +73,7 @@ def merge_run(
         sequences = sequence_table(store, out, frame, settings)
         with atomic_path(out / SEQUENCES_FILE) as tmp:
             pq.write_table(sequences, tmp, compression="zstd")
-    manifest = run_manifest(store, out, settings, specs, frame, sequences, fragments_sha256)
+    manifest = run_manifest(store, out, settings, specs, frame, sequences, fragments_sha256, refits)
     skipped = skipped_metrics(store, selection, settings, specs)
     if skipped is not None:  # only then, so the manifests of runs with ground truth are unchanged
         manifest["skipped"] = skipped.record()
@@ -83,6 +86,7 @@ def merge_finished(
     settings: RunSettings,
     specs: Sequence[MetricSpec],
     selection: Sequence[str],
+    refits: Mapping[str, Mapping[str, Any]] | None = None,
 ) -> RunResult:
     """``--merge``: merge a run whose shards have all finished; one line naming what is missing otherwise."""
     if not (out / RUN_FILE).is_file():
@@ -95,5 +99,5 @@ def merge_finished(
             "rerun the shards that hold them (the same command resumes), then merge again",
             out,
         )
-    merge_run(store, out, settings, specs, selection)
+    merge_run(store, out, settings, specs, selection, refits)
     return RunResult(out, 0, len(selection), 0, True)

@@ -100,7 +100,7 @@ def run_method(
     check_folder(out, identity)
     if merge_only:
         return replace(
-            merge_finished(store, out, settings, specs, selection),
+            merge_finished(store, out, settings, specs, selection, refits),
             skipped_metrics=skipped_metrics(store, selection, settings, specs),
         )
     mine = shard.select(selection)
@@ -154,7 +154,7 @@ def run_method(
     remaining = sum(not fragment_path(out, pid).is_file() for pid in selection)
     merged = False
     if remaining == 0:
-        merge_run(store, out, settings, specs, selection)
+        merge_run(store, out, settings, specs, selection, refits)
         merged = True
     skipped = skipped_metrics(store, selection, settings, specs)
     return RunResult(out, len(todo), len(mine) - len(todo), remaining, merged, skipped)
