@@ -163,7 +163,12 @@ def read_transforms(
     if absent:
         counted = f"{len(absent)} of {len(meta['frames'])} frames name an image that does not exist"
         if missing == "error" or not out:
-            hint = "; pass -o missing=skip to leave them out" if missing == "error" else ""
+            hint = (
+                "; pass the loader option missing=skip to leave them out (-o missing=skip; refit: "
+                "--loader-option missing=skip)"
+                if missing == "error"
+                else ""
+            )
             raise DatasetError(f"{counted} (first: {absent[0]}){hint}", transforms)
         warnings.warn(
             f"{transforms}: {counted}; skipped (first: {absent[0].name})", DatasetWarning, stacklevel=2

@@ -114,9 +114,10 @@ def add_loader_option_argument(parser: argparse.ArgumentParser, examples: str) -
     parser.add_argument("--option", dest="loader_option", action="append", help=argparse.SUPPRESS)
 
 
-def loader_options(args: argparse.Namespace) -> dict[str, Any]:
-    """``{key: value}`` of the loader-option flags given (:func:`parse_option`; a malformed one names the flag)."""
-    return dict(parse_option(text, "/".join(LOADER_OPTION_FLAGS)) for text in args.loader_option)
+def loader_options(args: argparse.Namespace, flags: tuple[str, ...] = LOADER_OPTION_FLAGS) -> dict[str, Any]:
+    """``{key: value}`` of the loader-option flags given (:func:`parse_option`; a malformed one names ``flags``,
+    the spellings the verb declared)."""
+    return dict(parse_option(text, "/".join(flags)) for text in args.loader_option)
 
 
 def _scenes_arguments(parser: argparse.ArgumentParser) -> None:

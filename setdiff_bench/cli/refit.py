@@ -26,6 +26,9 @@ from pathlib import Path
 from setdiff_bench.cli import add_device_argument, add_option_argument, add_progress_argument, method_options
 from setdiff_bench.refit.settings import SCHEDULE_PRESETS, RefitSettings
 
+#: ``-o`` is the enhancer's option here (as in ``run``), so the loader's is spelt out in full.
+REFIT_LOADER_OPTION_FLAGS = ("--loader-option",)
+
 VERB = "refit"
 HELP = "distil an enhancer's novel views back into a scene's 3DGS (X 3D); progressive or one-shot schedule"
 DESCRIPTION = __doc__
@@ -49,6 +52,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--root", required=True, type=Path, help="dataset root")
     parser.add_argument("--scene", required=True, help="the scene's name under the root")
     parser.add_argument("--protocol", default=None, help="packaged protocol or TOML (default: the dataset's)")
+    add_option_argument(
+        parser,
+        "loader option, value parsed as JSON when valid, as prepare's -o (overrides the protocol's; e.g. "
+        "--loader-option missing=skip); repeatable",
+        REFIT_LOADER_OPTION_FLAGS,
+    )
     parser.add_argument(
         "--group", default=None, help="protocol group whose targets are distilled (e.g. lane+2)"
     )
@@ -108,6 +117,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from setdiff_bench.cli.list import loader_options
     from setdiff_bench.refit import RefitTask, refit_scene
 
     options = method_options(args, path_flags=("checkpoint", "source"))
@@ -125,6 +135,7 @@ def run(args: argparse.Namespace) -> int:
         group=args.group,
         trajectory=args.trajectory,
         protocol=args.protocol,
+        loader_options=loader_options(args, REFIT_LOADER_OPTION_FLAGS),
         fits=args.fits,
         fit_iterations=args.fit_iterations,
         fit_checkpoint=args.fit_checkpoint,

@@ -59,6 +59,8 @@ class RefitTask:
             whose fit frames are walked (default: the scene's only fit).
         trajectory: a novel trajectory (``shift:3``, ``yaw:10``, a pose ``.json``) instead of the group's targets.
         protocol: packaged protocol name or TOML path (default: the dataset's own).
+        loader_options: override the protocol's ``[loader]`` options, as ``prepare -o`` does (e.g.
+            ``{"missing": "skip"}`` for a ``transforms.json`` that lists frames without a photo).
         fits: folder of fit PLYs (``DIR/<scene>/<fit_key>.ply``); or ``fit_iterations`` to fit here.
         fit_checkpoint: the fit's checkpoint folder (``fit --checkpoint``), for its Adam moments.
         device, backend: torch device and renderer (``auto``: as ``prepare``).
@@ -73,6 +75,7 @@ class RefitTask:
     group: str | None = None
     trajectory: str | None = None
     protocol: str | None = None
+    loader_options: Mapping[str, Any] = field(default_factory=dict)
     fits: Path | None = None
     fit_iterations: int | None = None
     fit_checkpoint: Path | None = None
@@ -235,7 +238,7 @@ def _inputs(task: RefitTask, settings: RefitSettings) -> _Inputs:
             f"protocol {protocol.name!r} is for dataset {protocol.dataset!r}, not {task.dataset!r}",
             "--protocol",
         )
-    options = dict(protocol.loader_options)
+    options = {**protocol.loader_options, **task.loader_options}
     assignment = protocol.split.assign(list_scenes(task.dataset, task.root, **options))
     if task.scene not in assignment:
         shown = ", ".join(sorted(assignment)[:5])
@@ -317,6 +320,8 @@ def _inputs(task: RefitTask, settings: RefitSettings) -> _Inputs:
         "settings": {k: v for k, v in settings.to_json().items() if k != "checkpoint_every"},
         "backend": backend,
     }
+    if task.loader_options:  # only when given, so that refits made before the option keep their identity
+        identity["loader_options"] = jsonable_options(dict(task.loader_options))
     from setdiff_bench.refit.updates import PseudoViewUpdater
 
     updater = PseudoViewUpdater(protocol, plan.fit_frames, jobs, d_max, enhancer, backend, settings, views)
