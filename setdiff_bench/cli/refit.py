@@ -42,6 +42,8 @@ SETTING_HELP = {
     "real_ratio": "share r of the steps that take a real training view",
     "seed": "seed of the real and pseudo-view orders",
     "checkpoint_every": "save a resumable checkpoint every this many steps",
+    "snapshot_every": "also write the model every this many steps to OUT/snapshots/step-NNNNNN/ (0: never); "
+    "each is the PLY of a refit with that many --steps",
     "min_fit_correlation": "refuse a fit whose renders' detail correlates less with the training views (another "
     "scene's fit)",
 }

@@ -2,7 +2,9 @@
 
 ``setdiff-bench refit --out OUT`` writes, per scene and fit, ``OUT/<scene>/<fit_key>.ply`` (where
 ``prepare --fits OUT`` finds it), the manifest ``OUT/<scene>/<fit_key>.refit.json`` beside it (written last,
-atomically) and, while it runs, the resumable ``OUT/<scene>/<fit_key>.refit-checkpoint/``.  Declared here, on
+atomically) and, while it runs, the resumable ``OUT/<scene>/<fit_key>.refit-checkpoint/``; with
+``--snapshot-every N`` also ``OUT/snapshots/step-NNNNNN/<scene>/<fit_key>.ply``, the model after that many steps
+(each snapshot folder is a fits folder ``prepare --fits`` reads).  Declared here, on
 the I/O floor, for :mod:`setdiff_bench.refit` (which writes them) and ``run --refit OUT`` (which records the
 refit's cost with the runs of its renders, so that ``leaderboard --cost`` shows it on the ``X 3D`` rows).
 """
@@ -20,6 +22,7 @@ from setdiff_bench.errors import UsageError
 REFIT_FORMAT = "setdiff-refit/1"
 MANIFEST_SUFFIX = ".refit.json"
 CHECKPOINT_SUFFIX = ".refit-checkpoint"
+SNAPSHOTS_FOLDER = "snapshots"
 
 
 def refit_paths(out: str | os.PathLike[str], scene: str, fit_key: str) -> tuple[Path, Path, Path]:
@@ -30,6 +33,11 @@ def refit_paths(out: str | os.PathLike[str], scene: str, fit_key: str) -> tuple[
         base / f"{fit_key}{MANIFEST_SUFFIX}",
         base / f"{fit_key}{CHECKPOINT_SUFFIX}",
     )
+
+
+def snapshot_folder(out: str | os.PathLike[str], step: int) -> Path:
+    """The fits folder of the refit models of ``out`` after ``step`` steps (``prepare --fits`` it)."""
+    return Path(out) / SNAPSHOTS_FOLDER / f"step-{step:06d}"
 
 
 def refit_cost(out: str | os.PathLike[str], scene: str, fit_key: str) -> dict[str, Any]:

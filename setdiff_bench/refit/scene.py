@@ -42,7 +42,7 @@ import numpy as np
 import torch
 
 from setdiff_bench.errors import CheckpointError, PlyError, UsageError
-from setdiff_bench.io.refit_layout import REFIT_FORMAT, refit_paths
+from setdiff_bench.io.refit_layout import REFIT_FORMAT, refit_paths, snapshot_folder
 from setdiff_bench.refit.settings import RefitSettings
 
 
@@ -123,7 +123,10 @@ def refit_scene(task: RefitTask, settings: RefitSettings, *, progress: bool = Tr
     resumed_at = loop.step_count if loop.load(checkpoints) else 0
     timing = {"steps_s": 0.0, "updates_s": 0.0, "enhance_s": 0.0}
     updates = settings.update_steps()
+    snapshots = set(settings.snapshot_steps())
     from tqdm.auto import tqdm
+
+    from setdiff_bench.gaussians.ply import write_ply
 
     bar = tqdm(
         total=settings.steps,
@@ -147,12 +150,15 @@ def refit_scene(task: RefitTask, settings: RefitSettings, *, progress: bool = Tr
             bar.update(1)
             if loop.step_count % 10 == 0:
                 bar.set_postfix(loss=f"{loss:.4f}", update=loop.updates_done, refresh=False)
+            if loop.step_count in snapshots:  # before the checkpoint: a resume past it finds it written
+                snapshot = snapshot_folder(out, loop.step_count) / inputs.scene_name / ply.name
+                snapshot.parent.mkdir(parents=True, exist_ok=True)
+                write_ply(snapshot, loop.trainer.params.model().detach())
             if loop.step_count % settings.checkpoint_every == 0 or loop.step_count == settings.steps:
                 loop.save(checkpoints)
     finally:
         bar.close()
     from setdiff_bench.evaluation.packet_scoring import peak_memory_bytes
-    from setdiff_bench.gaussians.ply import write_ply
     from setdiff_bench.io.atomic import sha256_file, write_text_atomic
 
     ply.parent.mkdir(parents=True, exist_ok=True)
@@ -172,6 +178,11 @@ def refit_scene(task: RefitTask, settings: RefitSettings, *, progress: bool = Tr
             "sha256": sha256_file(ply),
             "gaussians": len(loop.trainer.params),
         },
+        "snapshots": [
+            {"step": step, "path": os.path.relpath(path, out), "sha256": sha256_file(path)}
+            for step in settings.snapshot_steps()
+            for path in [snapshot_folder(out, step) / inputs.scene_name / ply.name]
+        ],
         "enhancer": inputs.identity["enhancer"],
         "schedule": settings.to_json(),
         "seed": settings.seed,
@@ -316,8 +327,13 @@ def _inputs(task: RefitTask, settings: RefitSettings) -> _Inputs:
             "options": jsonable_options(dict(task.method_options)),
             "files": files,
         },
-        # the checkpoint cadence does not change the result: a resume may use another
-        "settings": {k: v for k, v in settings.to_json().items() if k != "checkpoint_every"},
+        # the checkpoint cadence does not change the result: a resume may use another; snapshots are recorded
+        # only when asked for, so that refits made before they existed keep their identity
+        "settings": {
+            k: v
+            for k, v in settings.to_json().items()
+            if k != "checkpoint_every" and (k != "snapshot_every" or v)
+        },
         "backend": backend,
     }
     if task.loader_options:  # only when given, so that refits made before the option keep their identity

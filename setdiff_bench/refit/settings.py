@@ -44,6 +44,9 @@ class RefitSettings:
         update_every, pose_fraction, pseudo_weight, real_ratio: the schedule (module docstring).
         seed: seeds the order of the real and pseudo-views.
         checkpoint_every: save a resumable checkpoint every this many steps (and after the last one).
+        snapshot_every: also write the model every this many steps (``0``: never) where ``prepare --fits`` reads
+            it (:func:`setdiff_bench.io.refit_layout.snapshot_folder`); the snapshot at step ``k`` is the PLY a
+            refit with ``steps = k`` ends with, so one refit gives the curve of a score against refit steps.
         min_fit_correlation: the fit's renders of its training views must correlate with the captures' detail
             (Pearson correlation of the high-pass images, mean over views) at least this much, else it is refused
             as the fit of another scene (measured on the tiny preset: own fits 0.38 and 0.52, the other scene's
@@ -58,6 +61,7 @@ class RefitSettings:
     real_ratio: float = 0.7
     seed: int = 0
     checkpoint_every: int = 50
+    snapshot_every: int = 0
     min_fit_correlation: float = 0.2
 
     @classmethod
@@ -93,6 +97,7 @@ class RefitSettings:
                 "must be in [0, 1) (1 would never use a pseudo-view)",
             ),
             (self.checkpoint_every >= 1, "checkpoint_every", "must be >= 1"),
+            (self.snapshot_every >= 0, "snapshot_every", "must be >= 0 (0: no snapshots)"),
         )
         for ok, name, problem in rules:
             if not ok:
@@ -111,6 +116,14 @@ class RefitSettings:
         evenly (exact rational arithmetic on the decimal ``r``, no random draw)."""
         share = 1 - Fraction(str(self.real_ratio))
         return (step * share).__floor__() > ((step - 1) * share).__floor__()
+
+    def snapshot_steps(self) -> list[int]:
+        """The steps (1-based: after that many steps) whose model is written as a snapshot."""
+        return (
+            list(range(self.snapshot_every, self.steps + 1, self.snapshot_every))
+            if self.snapshot_every
+            else []
+        )
 
     def to_json(self) -> dict[str, Any]:
         return dataclasses.asdict(self)

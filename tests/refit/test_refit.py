@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 from pathlib import Path
@@ -245,3 +246,49 @@ def test_refit_fits_the_scene_first_without_fits(street_root: Path, tmp_path: Pa
     result = refit_scene(task(street_root, out, fits=None, fit_iterations=2), settings, progress=False)
     assert Path(result.manifest["fit"]["path"]) == (out / "base" / "fits" / SCENE / "lane0.ply").resolve()
     assert (out / SCENE / "lane0.ply").is_file()
+
+
+def test_snapshots_are_the_plys_of_shorter_refits(finished: Path, street_root: Path, tmp_path: Path) -> None:
+    """A snapshot after k steps is what a refit of k steps ends with (the schedule's prefix does not depend on its
+    length), also when the refit was interrupted after it and resumed; the last one is the refit itself."""
+    from setdiff_bench.io.refit_layout import snapshot_folder
+
+    out = tmp_path / "snap"
+    with_snapshots = dataclasses.replace(SETTINGS, snapshot_every=3)
+    save = RefitLoop.save
+    stopped = []
+
+    def stop_once(loop: RefitLoop, folder: Path) -> None:
+        save(loop, folder)
+        if loop.step_count == 4 and not stopped:
+            stopped.append(True)
+            raise KeyboardInterrupt
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(RefitLoop, "save", stop_once)
+        with pytest.raises(KeyboardInterrupt):
+            refit_scene(task(street_root, out), with_snapshots, progress=False)
+    result = refit_scene(task(street_root, out), with_snapshots, progress=False)
+    assert result.resumed_at == 4
+    short = tmp_path / "short"
+    refit_scene(task(street_root, short), dataclasses.replace(SETTINGS, steps=3), progress=False)
+    at_3 = snapshot_folder(out, 3) / SCENE / "lane0.ply"
+    assert at_3.read_bytes() == (short / SCENE / "lane0.ply").read_bytes()
+    at_6 = snapshot_folder(out, 6) / SCENE / "lane0.ply"
+    assert at_6.read_bytes() == (finished / SCENE / "lane0.ply").read_bytes() != at_3.read_bytes()
+    assert [(s["step"], s["path"]) for s in result.manifest["snapshots"]] == [
+        (3, f"snapshots/step-000003/{SCENE}/lane0.ply"),
+        (6, f"snapshots/step-000006/{SCENE}/lane0.ply"),
+    ]
+    # a snapshot folder is a fits folder
+    from setdiff_bench.packets.prepare import prepare
+
+    prepare(
+        "synthetic",
+        street_root,
+        tmp_path / "store",
+        fits=snapshot_folder(out, 3),
+        groups=["lane+2"],
+        progress=False,
+    )
+    assert len(PacketStore(tmp_path / "store")) == 1
