@@ -76,7 +76,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="evaluation profile to tabulate (paper = plain runs; others come from "
         "`setdiff-bench evaluate`); named in every caption",
     )
-    parser.add_argument("--plots", action="store_true", help="also write the dataset's metric plots (PNG)")
+    parser.add_argument(
+        "--plots",
+        action="store_true",
+        help="also write the dataset's metric plots (PNG), and metrics vs refit steps when runs score refits",
+    )
     parser.add_argument(
         "--grids",
         type=int,
@@ -284,7 +288,7 @@ def run(args: argparse.Namespace) -> int:
     if args.plots and len(images):
         from setdiff_bench.reporting.plots import write_plots
 
-        for path in write_plots(args.dataset, images, args.out, split=split):
+        for path in write_plots(args.dataset, images, args.out, split=split, sequences=sequences):
             print(f"plot: {path}")
     if grid is not None:
         from setdiff_bench.reporting.grids import qualitative_grid

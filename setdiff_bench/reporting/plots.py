@@ -5,6 +5,9 @@ Each point is a method's mean of per-image values over the targets of one group,
 of ±1 standard error of that mean (``std / sqrt(n)``, ddof 1).  The x position of a group comes from
 its name: ``10-11s`` → the bucket's start offset 10 s (label "10–11 s"); ``single``/``double`` → 1/2
 lanes, ``lane+K`` → K, ``interp`` → 0; ``nK`` → K fit views.  Groups without a position are left out of that plot.
+
+:func:`plot_refit_steps` draws the ``X 3D`` / ``X 3D+`` rows (``run --refit``, docs/refit.md) against the refit
+model's steps: one panel per group and metric, plus the warp error when the runs scored it.
 """
 
 from __future__ import annotations
@@ -178,6 +181,124 @@ def plot_view_count(images: pd.DataFrame, out: str | Path, **kwargs: object) -> 
     return plot_metric_by_group(images, out, position=view_count, xlabel="fit views", **kwargs)  # type: ignore[arg-type]
 
 
+def refit_curves(images: pd.DataFrame) -> pd.DataFrame:
+    """Per run: the refit curve it belongs to and its x position, for :func:`plot_refit_steps`.
+
+    A ``run --refit`` run is a point of the curve ``"<X> 3D"`` (scored with ``identity``) or ``"<X> 3D+"``
+    (scored with ``X``), ``X`` the refit's enhancer, suffixed by the schedule when the runs hold more than one, at
+    x = the refit model's steps.  A run without a refit is the curve's point at x = 0 (a refit of 0 steps is the
+    fit itself): the one named ``identity`` for every ``3D`` curve, the one named ``X`` for ``X 3D+``.
+
+    Returns:
+        Columns ``run``, ``curve``, ``x`` and ``base`` (``3D`` or ``3D+``), one row per (run, curve): a 0-step
+        run may open several curves; empty when no run scores a refit.
+    """
+    if "refit_steps" not in images.columns:
+        return pd.DataFrame(columns=["run", "curve", "x"])
+    refitted = images.dropna(subset=["refit_steps"]).drop_duplicates("run")
+    schedules = refitted["refit_schedule"].nunique() > 1
+    records = []
+    for row in refitted.itertuples():
+        kind = "3D" if row.run_method == "identity" else "3D+"
+        curve = f"{row.refit_method} {kind}" + (f" ({row.refit_schedule})" if schedules else "")
+        records.append({"run": row.run, "curve": curve, "x": float(row.refit_steps), "base": kind})
+        origin = "identity" if kind == "3D" else str(row.refit_method)
+        plain = images[images["refit_steps"].isna() & (images["method"] == origin)]["run"].unique()
+        records.extend({"run": run, "curve": curve, "x": 0.0, "base": kind} for run in plain)
+    return pd.DataFrame.from_records(records, columns=["run", "curve", "x", "base"]).drop_duplicates()
+
+
+def plot_refit_steps(
+    images: pd.DataFrame,
+    out: str | Path,
+    *,
+    sequences: pd.DataFrame | None = None,
+    metrics: Sequence[str] = ("psnr", "ssim", "lpips"),
+    title: str = "",
+) -> Path:
+    """Metric vs refit steps (:func:`refit_curves`): one row of panels per metric (and one for the warp error
+    when ``sequences`` hold it for these runs), one column per group; points are means over the group's targets
+    (warp: over the runs' sequences) with ±1 standard error; saved as PNG at ``out``.
+
+    Raises:
+        UsageError: no run of ``images`` is a refit (``run --refit``).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    curves = refit_curves(images)
+    if curves.empty:
+        raise UsageError("no run here scores a refit (`run --refit`): nothing to plot against refit steps")
+    refit_groups = sorted(images.dropna(subset=["refit_steps"])["group"].unique())
+    panels = [(metric, group) for metric in metrics for group in refit_groups]
+    warp = None
+    if sequences is not None and not sequences.empty and "warp" in sequences.columns:
+        warp = sequences[sequences["run"].isin(curves["run"]) & sequences["scene"].isin(images["scene"])]
+        warp = warp if warp["warp"].notna().any() else None
+    rows = len(metrics) + (warp is not None)
+    figure, axes = plt.subplots(
+        rows, len(refit_groups), figsize=(4.0 * len(refit_groups), 3.0 * rows), squeeze=False
+    )
+
+    def draw(axis, values_of) -> None:  # type: ignore[no-untyped-def]
+        for curve, points in curves.groupby("curve", sort=True):
+            xs, means, errors = [], [], []
+            for x, runs in points.groupby("x", sort=True):
+                values = values_of(runs["run"])
+                values = values[np.isfinite(values)]
+                if len(values):
+                    xs.append(x)
+                    means.append(float(values.mean()))
+                    errors.append(
+                        float(values.std(ddof=1) / np.sqrt(len(values))) if len(values) > 1 else 0.0
+                    )
+            if xs:
+                axis.errorbar(xs, means, yerr=errors, marker="o", capsize=3, label=curve)
+        axis.set_xticks(sorted(curves["x"].unique()))
+        axis.set_xlabel("refit steps")
+        axis.grid(alpha=0.3)
+
+    for index, (metric, group) in enumerate(panels):
+        axis = axes[index // len(refit_groups)][index % len(refit_groups)]
+        in_group = images[images["group"] == group]
+        draw(
+            axis,
+            lambda runs, rows=in_group, metric=metric: rows[rows["run"].isin(runs)][metric].to_numpy(
+                np.float64
+            ),
+        )
+        arrow = "↑" if higher_is_better(metric) else "↓"
+        axis.set_title(f"{group}: {metric_header(metric)} {arrow}")
+    if warp is not None:
+        for column in range(len(refit_groups)):
+            axis = axes[-1][column]
+            if column:
+                axis.axis("off")
+                continue
+            draw(axis, lambda runs: warp[warp["run"].isin(runs)]["warp"].to_numpy(np.float64))
+            axis.set_title("warp error ↓ (per sequence)")
+    axes[0][0].legend(fontsize="small")
+    if title:
+        figure.suptitle(title)
+    figure.text(
+        0.5,
+        0.01,
+        "mean over targets (warp: sequences), ±1 s.e.;\n0 steps: the fit itself",
+        ha="center",
+        va="bottom",
+        fontsize="small",
+    )
+    figure.tight_layout(rect=(0.0, 0.05, 1.0, 1.0))
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(out) as tmp:
+        figure.savefig(tmp, dpi=120, format="png", metadata={"Software": "setdiff-bench"})
+    plt.close(figure)
+    return out
+
+
 #: Plots :func:`write_plots` makes per dataset: (file suffix, plotting function).
 PLOTS: dict[str, tuple[str, Callable[..., Path]]] = {
     "dl3dv": ("view_count", plot_view_count),
@@ -194,14 +315,32 @@ def write_plots(
     *,
     split: str | None = "test",
     metrics: Sequence[str] = ("psnr", "ssim", "lpips"),
+    sequences: pd.DataFrame | None = None,
+    refit_steps: bool = True,
 ) -> list[Path]:
-    """The dataset's standard plots (:data:`PLOTS`) into ``out``; ``[]`` when it has none."""
-    if dataset not in PLOTS:
-        return []
-    frame = images[images["dataset"] == dataset]
-    if split is not None:
+    """The dataset's standard plots (:data:`PLOTS`) into ``out``, and with ``refit_steps``
+    ``<dataset>_refit_steps.png`` (:func:`plot_refit_steps`, with the warp error of ``sequences``) when some run
+    scores a refit; ``[]`` when there is nothing to plot."""
+    frame = images[images["dataset"] == dataset] if "dataset" in images.columns else images
+    if split is not None and not frame.empty:
         frame = frame[frame["split"] == split]
     if frame.empty:
         return []
-    suffix, plot = PLOTS[dataset]
-    return [plot(frame, Path(out) / f"{dataset}_{suffix}.png", metrics=metrics, title=dataset)]
+    written = []
+    if dataset in PLOTS:
+        suffix, plot = PLOTS[dataset]
+        written.append(plot(frame, Path(out) / f"{dataset}_{suffix}.png", metrics=metrics, title=dataset))
+    if refit_steps and not refit_curves(frame).empty:
+        runs = (
+            sequences if sequences is None or sequences.empty else sequences[sequences["dataset"] == dataset]
+        )
+        written.append(
+            plot_refit_steps(
+                frame,
+                Path(out) / f"{dataset}_refit_steps.png",
+                sequences=runs,
+                metrics=metrics,
+                title=dataset,
+            )
+        )
+    return written

@@ -135,9 +135,12 @@ def load_runs(runs: str | Path | Sequence[Path]) -> tuple[pd.DataFrame, pd.DataF
     for folder in folders:
         try:
             rows = pd.read_parquet(folder / METRICS_FILE).assign(run=str(folder))
-            refit_seconds = _refit_seconds(folder)
-            if refit_seconds:  # an X 3D run (run --refit): each scene's refit time, for leaderboard --cost
-                rows["refit_s"] = rows["scene"].map(refit_seconds).astype("float64")
+            refits = _refits(folder)
+            if refits:  # an X 3D run (run --refit): each scene's refit, for --cost and the refit-steps plot
+                for column in REFIT_COLUMNS:
+                    rows[column] = rows["scene"].map({scene: r[column] for scene, r in refits.items()})
+                rows["refit_s"] = rows["refit_s"].astype("float64")
+                rows["refit_steps"] = rows["refit_steps"].astype("float64")
             images.append(rows)
             if (folder / SEQUENCES_FILE).is_file():
                 sequences.append(pd.read_parquet(folder / SEQUENCES_FILE).assign(run=str(folder)))
@@ -148,20 +151,36 @@ def load_runs(runs: str | Path | Sequence[Path]) -> tuple[pd.DataFrame, pd.DataF
     return image_frame, sequence_frame
 
 
-def _refit_seconds(folder: Path) -> dict[str, float]:
-    """Scene → wall seconds of the refits (all of the scene's fits) that a ``run --refit`` run records in its
-    manifest; ``{}`` for every other run (or a manifest that cannot be read: the run's rows still load)."""
+#: The columns an ``X 3D`` run's rows get from its manifest (``run --refit``): the scene's refit wall seconds
+#: (all its fits), the refit model's steps, the refit's enhancer and schedule, and the run's own enhancer
+#: (``identity`` scores ``X 3D``, ``X`` scores ``X 3D+``).
+REFIT_COLUMNS = ("refit_s", "refit_steps", "refit_method", "refit_schedule", "run_method")
+
+
+def _refits(folder: Path) -> dict[str, dict[str, object]]:
+    """Scene → :data:`REFIT_COLUMNS` of a ``run --refit`` run, from its manifest; ``{}`` for every other run (or
+    a manifest that cannot be read: the run's rows still load)."""
     try:
-        fits = (
-            json.loads((folder / MANIFEST_FILE).read_text(encoding="utf-8")).get("refit", {}).get("fits", {})
-        )
-        seconds: dict[str, float] = {}
-        for key, cost in fits.items():
+        manifest = json.loads((folder / MANIFEST_FILE).read_text(encoding="utf-8"))
+        run_method = str(manifest["method"]["id"]) if "refit" in manifest else ""
+        refits: dict[str, dict[str, object]] = {}
+        for key, cost in manifest.get("refit", {}).get("fits", {}).items():
             scene = key.rsplit("/", 1)[0]
-            seconds[scene] = seconds.get(scene, 0.0) + float(cost["wall_s"])
+            entry = refits.setdefault(
+                scene,
+                {
+                    "refit_s": 0.0,
+                    # manifests of runs made before the refit's steps were recorded: the steps it ran
+                    "refit_steps": float(cost.get("refit_steps", cost["steps"])),
+                    "refit_method": str(cost["method"]),
+                    "refit_schedule": str(cost["schedule"]),
+                    "run_method": run_method,
+                },
+            )
+            entry["refit_s"] = float(entry["refit_s"]) + float(cost["wall_s"])  # type: ignore[arg-type]
     except (OSError, ValueError, AttributeError, KeyError, TypeError):
         return {}
-    return seconds
+    return refits
 
 
 def run_names(folders: Sequence[Path]) -> dict[Path, set[str]]:

@@ -158,7 +158,12 @@ def build_site(
             (path, plot_caption(dataset, PLOT_METRICS))
             for dataset in sorted(set(plain["dataset"]))
             for path in write_plots(
-                dataset, plain, staging / "plots", split=settings.split, metrics=PLOT_METRICS
+                dataset,
+                plain,
+                staging / "plots",
+                split=settings.split,
+                metrics=PLOT_METRICS,
+                refit_steps=False,
             )
         ]
         scenes = (

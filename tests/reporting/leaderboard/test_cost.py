@@ -85,7 +85,7 @@ def _refit_manifest(wall_s: float, peak_mb: float) -> dict[str, object]:
         "time": {"wall_s": wall_s, "s_per_step": wall_s / 300, "steps_run": 300, "enhance_s": 10.0},
         "peak_memory_mb": peak_mb,
         "enhancer": {"method": "difix"},
-        "schedule": {"schedule": "progressive"},
+        "schedule": {"schedule": "progressive", "steps": 300},
         "ply": {"sha256": "0" * 64},
     }
 
