@@ -142,11 +142,19 @@ def compare_tables(ours: pd.DataFrame, published: pd.DataFrame, tolerance: dict[
 
 
 def check_reproduction(
-    benchmark: DemoBenchmark, preset: str, seed: int, out: Path, results: Path = RESULTS_FOLDER
+    benchmark: DemoBenchmark,
+    preset: str,
+    seed: int,
+    out: Path,
+    results: Path = RESULTS_FOLDER,
+    *,
+    refit: bool = False,
 ) -> Reproduction:
-    """Compare the demo table in ``out`` with ``results/<benchmark.published>`` when they are comparable."""
-    folder = results / benchmark.published
-    shown = f"results/{benchmark.published}"
+    """Compare the demo table in ``out`` with ``results/<benchmark.published>`` (``refit``: the ``demo --refit``
+    folder, ``benchmark.refit.published``) when they are comparable."""
+    published = benchmark.refit.published if refit else benchmark.published
+    folder = results / published
+    shown = f"results/{published}"
     tolerance = dict(benchmark.tolerance)
     table_name = f"{benchmark.leaderboard}.parquet"
     provenance_file = folder / "provenance.json"

@@ -242,6 +242,10 @@ def plot_refit_steps(
         rows, len(refit_groups), figsize=(4.0 * len(refit_groups), 3.0 * rows), squeeze=False
     )
 
+    # one colour per enhancer (and schedule), solid for X 3D, dashed for X 3D+
+    families = sorted({str(c).replace(" 3D+", " 3D") for c in curves["curve"]})
+    colours = {family: f"C{index % 10}" for index, family in enumerate(families)}
+
     def draw(axis, values_of) -> None:  # type: ignore[no-untyped-def]
         for curve, points in curves.groupby("curve", sort=True):
             xs, means, errors = [], [], []
@@ -255,7 +259,17 @@ def plot_refit_steps(
                         float(values.std(ddof=1) / np.sqrt(len(values))) if len(values) > 1 else 0.0
                     )
             if xs:
-                axis.errorbar(xs, means, yerr=errors, marker="o", capsize=3, label=curve)
+                plus = " 3D+" in str(curve)
+                axis.errorbar(
+                    xs,
+                    means,
+                    yerr=errors,
+                    marker="s" if plus else "o",
+                    linestyle="--" if plus else "-",
+                    color=colours[str(curve).replace(" 3D+", " 3D")],
+                    capsize=3,
+                    label=curve,
+                )
         axis.set_xticks(sorted(curves["x"].unique()))
         axis.set_xlabel("refit steps")
         axis.grid(alpha=0.3)

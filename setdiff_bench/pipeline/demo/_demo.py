@@ -15,7 +15,14 @@ from setdiff_bench.pipeline.demo._scenes import (
     evaluation_scene_indices,
     scene_namer,
 )
-from setdiff_bench.pipeline.demo._stages import DemoPlan, demo_stages
+from setdiff_bench.pipeline.demo._stages import (
+    METHODS,
+    DemoPlan,
+    DemoStage,
+    DemoStages,
+    demo_stages,
+    refit_rows,
+)
 from setdiff_bench.pipeline.demo._summary import (
     run_provenance,
     summarize,
@@ -48,16 +55,42 @@ def folder_benchmark(paths: DemoPaths) -> str | None:
     return None
 
 
-def check_folder(paths: DemoPaths, benchmark: DemoBenchmark) -> None:
-    """Refuse, before any work, a folder that holds another benchmark's outputs (its store and runs stay
-    untouched); :class:`UsageError` naming the option to pass."""
-    other = folder_benchmark(paths)
-    if other is not None and other != benchmark.name:
+def folder_kind(benchmark: DemoBenchmark, refit: bool) -> str:
+    """What a demo folder holds, as ``<work>/benchmark`` records it: the benchmark's name, ``+refit`` for
+    ``demo --refit`` (its store holds fewer groups and its runs more rows)."""
+    return f"{benchmark.name}+refit" if refit else benchmark.name
+
+
+def check_folder(paths: DemoPaths, benchmark: DemoBenchmark, refit: bool = False) -> None:
+    """Refuse, before any work, a folder that holds another benchmark's outputs, or the other kind of demo's
+    (with or without ``--refit``): its store and runs stay untouched; :class:`UsageError` naming the option."""
+    other, kind = folder_benchmark(paths), folder_kind(benchmark, refit)
+    if other is not None and other != kind:
+        default = benchmark.refit.default_out if refit else benchmark.default_out
         raise UsageError(
-            f"{paths.out} holds the {other} demo's outputs; pass --out for the {benchmark.name} benchmark "
-            f"(its default is {benchmark.default_out})",
+            f"{paths.out} holds the {other} demo's outputs; pass --out for the {kind} demo (its default is "
+            f"{default})",
             "--out",
         )
+
+
+def _run_refits(pipeline: Pipeline, stages: DemoStages, *, parallel: bool) -> None:
+    """The refits and their scoring; on a CPU with two jobs in two lanes of whole enhancers (each enhancer's
+    refits before its scoring): SetDiff and ``identity`` in one, DiFix and ``reproject`` in the other."""
+
+    def of(method: str) -> list[DemoStage]:
+        own = [s for s in stages.refits if s.name.split()[1] == method]
+        rows = (f"{method}-3D", f"{method}-3D+", f"{method}-3D-")
+        own += [s for s in stages.refit_scoring if s.name.split()[1].startswith(rows)]
+        return own
+
+    first = ("setdiff", "identity")
+    lanes = [[s for m in first for s in of(m)], [s for m in METHODS if m not in first for s in of(m)]]
+    if parallel:
+        pipeline.run_concurrently(lanes)
+    else:
+        for stage in lanes[0] + lanes[1]:
+            pipeline.run(*stage)
 
 
 def run_demo(
@@ -71,6 +104,7 @@ def run_demo(
     setdiff_steps: int | None = None,
     difix_steps: int | None = None,
     ablations: bool = False,
+    refit: bool = False,
     progress: bool = True,
     invocation: str = "",
 ) -> dict[str, Any]:
@@ -80,6 +114,8 @@ def run_demo(
         train: train SetDiff and DiFix on the preset's training scenes (else evaluate the shipped models
             on its test scenes only).
         setdiff_steps, difix_steps, ablations: with ``train`` only.
+        refit: score every enhancer also distilled into the test scenes' 3DGS (``X 3D``, ``X 3D+``; the
+            benchmark's :class:`~setdiff_bench.pipeline.presets.RefitDemo`), with the shipped models.
 
     Raises:
         UsageError: training options without ``train``; a shipped model trained on a test scene.
@@ -89,8 +125,13 @@ def run_demo(
         raise UsageError(
             "--setdiff-steps, --difix-steps and --ablations train models: add --train", "--train"
         )
+    if refit and train:
+        raise UsageError(
+            "--refit scores the shipped models (a refit per enhancer and test scene); run it without --train",
+            "--refit",
+        )
     benchmark = get_benchmark(preset.benchmark)
-    check_folder(paths, benchmark)
+    check_folder(paths, benchmark, refit)
     scene_name = scene_namer(preset)
     test_indices = evaluation_scene_indices(preset, seed)
     shipped = (
@@ -101,7 +142,7 @@ def run_demo(
     base = Path.cwd()
     (paths.out / SUMMARY_FILE).unlink(missing_ok=True)  # until this run completes, the folder is not a run
     paths.work.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(paths.work / BENCHMARK_FILE, benchmark.name + "\n")
+    write_text_atomic(paths.work / BENCHMARK_FILE, folder_kind(benchmark, refit) + "\n")
     pipeline = Pipeline(cwd=base, quiet=not progress, ledger=paths.work / LEDGER_FILE)
     plan = DemoPlan(
         preset,
@@ -117,6 +158,7 @@ def run_demo(
         scene_name,
         steps={"setdiff": setdiff_steps or preset.setdiff_steps, "difix": difix_steps or preset.difix_steps},
         configs={"setdiff": preset.setdiff_config, "difix": preset.difix_config},
+        refit=refit,
     )
     stages = demo_stages(plan, ablations=ablations)
     for stage in stages.setup:
@@ -128,11 +170,15 @@ def run_demo(
     else:
         for stage in stages.runs:
             pipeline.run(*stage)
+    if refit:
+        _run_refits(pipeline, stages, parallel=jobs >= 2 and resolve_device(device) == "cpu")
     pipeline.run(*stages.leaderboard)
-    for stage in stages.ablations:
+    for stage in [*stages.ablations, *stages.compares]:
         pipeline.run(*stage)
     steps, configs, checkpoints = plan.steps, plan.configs, plan.checkpoints
-    summary = summarize(paths, preset, steps if train else {}, pipeline, invocation)
+    summary = summarize(
+        paths, preset, steps if train else {}, pipeline, invocation, refit_rows(plan) if refit else None
+    )
     summary["models"] = (
         {method: {"checkpoint": checkpoints[method]} for method in configs}
         if train
@@ -149,7 +195,9 @@ def run_demo(
     summary["test_scenes"] = [scene_name(seed, index) for index in test_indices]
     summary["provenance"] = run_provenance(seed)
     summary["provenance"]["tolerance"] = dict(benchmark.tolerance)
-    summary["reproduction"] = check_reproduction(benchmark, preset.name, seed, paths.out).as_json()
+    summary["reproduction"] = check_reproduction(
+        benchmark, preset.name, seed, paths.out, refit=refit
+    ).as_json()
     write_text_atomic(paths.out / REPORT_FILE, report_markdown(summary, paths))
     summary["files"] = {
         p.name: sha256_file(p)

@@ -35,3 +35,11 @@ class DemoPaths:
     @property
     def runs(self) -> Path:
         return self.work / "runs"
+
+    def refits(self, method: str) -> Path:
+        """``demo --refit``: the ``refit --out`` folder of one enhancer's refits (every test scene's)."""
+        return self.work / "refit" / method
+
+    def refit_packets(self, name: str) -> Path:
+        """``demo --refit``: the packets of the refit scenes a row (``X-3D``, ``X-3D-000100``) is scored on."""
+        return self.work / "refit_packets" / name

@@ -92,6 +92,7 @@ def report_markdown(summary: dict[str, Any], paths: DemoPaths) -> str:
                 said = ", ".join(f"{k.upper()} {'yes' if v else 'no'}" for k, v in wins.items())
                 lines.append(f"\nSetDiff beats `{other}` {benchmark.verdict_title.lower()}: {said}.")
         lines.append("")
+    lines += refit_section(summary, paths, benchmark.leaderboard)
     for name, title in (
         ("ablation_geometry.md", "Geometry ablation"),
         ("ablation_setsize.md", "Set-size ablation"),
@@ -114,3 +115,48 @@ def report_markdown(summary: dict[str, Any], paths: DemoPaths) -> str:
         "",
     ]
     return "\n".join(lines)
+
+
+def refit_section(summary: dict[str, Any], paths: DemoPaths, leaderboard: str) -> list[str]:
+    """``demo --refit``: the ``X`` / ``X 3D`` / ``X 3D+`` table on the verdict group, which row wins each metric
+    per enhancer, and links to the refit-steps plot and the paired comparisons; ``[]`` for other demos."""
+    verdict = summary.get("refit") or {}
+    if not verdict.get("means"):
+        return []
+    specs = [get_metric(name) for name in VERDICT_METRICS]
+    warp = verdict.get("warp") or {}
+    lines = [
+        f"## X, X 3D and X 3D+ on {verdict['group']} ({verdict['targets']} targets)",
+        "",
+        "`X`: the enhancer on the fit's render; `X-3D`: the render of the fit refitted on `X`'s enhanced novel "
+        "views (progressive schedule, docs/refit.md); `X-3D+`: `X` on that render; `identity-3D`: the refit "
+        "on un-enhanced renders, the schedule alone."
+        + (
+            " warp: mean warp error of the row's camera sequences (all scored groups, MSE on the 0-255 scale)."
+            if warp
+            else ""
+        ),
+        "",
+        "| row | "
+        + " | ".join(f"{spec.label} {spec.arrow}" for spec in specs)
+        + (" | warp ↓ |" if warp else " |"),
+        "|---|" + "---:|" * (len(specs) + bool(warp)),
+    ]
+    for method in METHODS:
+        for name in (method, f"{method}-3D", f"{method}-3D+"):
+            if name in verdict["means"]:
+                m = verdict["means"][name]
+                cells = [f"{m[spec.name]:.{spec.decimals}f}" for spec in specs]
+                cells += [f"{warp[name]:.1f}" if name in warp else "–"] if warp else []
+                lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    lines.append("")
+    for method, best in verdict.get("best", {}).items():
+        said = ", ".join(f"{metric.upper()} `{name}`" for metric, name in best.items())
+        lines.append(f"- Best of `{method}`'s rows: {said}.")
+    plot = f"{leaderboard}_refit_steps.png"
+    if (paths.out / plot).is_file():
+        lines.append(f"- Metrics and warp error against refit steps: [{plot}]({plot}).")
+    compares = sorted(p.name for p in paths.out.glob("compare_*.md"))
+    if compares:
+        lines.append("- Paired gains by scene: " + ", ".join(f"[{n}]({n})" for n in compares) + ".")
+    return [*lines, ""]

@@ -7,10 +7,17 @@ anything runs.
 :func:`setdiff_bench.pipeline.demo.run_demo` may run in two lanes), ``leaderboard`` and, on request,
 ``ablations``.  Each :class:`DemoStage` is ``(name, argv)``: the name the ledger and the report use and the
 arguments after ``setdiff-bench`` (numbers are passed as text by :class:`~setdiff_bench.pipeline.stages.Pipeline`).
+
+With ``--refit`` (:class:`~setdiff_bench.pipeline.presets.RefitDemo`) the store holds only the scored groups, every
+run scores the warp error where the scenes have timestamps, and three more tables follow the runs: ``refits``
+(one ``refit`` per enhancer, test scene and refitted group, with snapshots), ``refit_scoring`` (per enhancer
+``X``: the packets of its refit scenes and of each snapshot, scored as ``X-3D``, ``X-3D+`` and
+``X-3D-NNNNNN``) and ``compares`` (the paired gains docs/refit.md reads the rows by).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,6 +47,7 @@ class DemoPlan:
         test_indices: generator indices of the preset's test scenes (``(seed, index)`` names them).
         scene_name: ``(seed, index) → scene name`` of the benchmark's scenes.
         steps, configs: training steps and config per learned method (``setdiff``, ``difix``).
+        refit: ``demo --refit``: score every enhancer as ``X``, ``X 3D`` and ``X 3D+`` (module docstring).
     """
 
     preset: DemoPreset
@@ -55,6 +63,7 @@ class DemoPlan:
     scene_name: Callable[[int, int], str]
     steps: dict[str, int]
     configs: dict[str, str]
+    refit: bool = False
 
     def rel(self, path: Path) -> str:
         """``path`` as the commands name it: relative to :attr:`base` when inside it."""
@@ -64,6 +73,16 @@ class DemoPlan:
     def quiet(self) -> list[str]:
         """``--no-progress`` when progress bars are off (for the verbs that take it)."""
         return [] if self.progress else ["--no-progress"]
+
+    @property
+    def test_scenes(self) -> list[str]:
+        """The test scenes' names."""
+        return [self.scene_name(self.seed, index) for index in self.test_indices]
+
+    @property
+    def device_flag(self) -> list[str]:
+        """``--device D`` when the demo was given one."""
+        return ["--device", self.device] if self.device else []
 
     @property
     def checkpoints(self) -> dict[str, str]:
@@ -84,6 +103,9 @@ class DemoStages:
     runs: list[DemoStage]
     leaderboard: DemoStage
     ablations: list[DemoStage]
+    refits: list[DemoStage] = dataclasses.field(default_factory=list)
+    refit_scoring: list[DemoStage] = dataclasses.field(default_factory=list)
+    compares: list[DemoStage] = dataclasses.field(default_factory=list)
 
 
 def synth_stage(plan: DemoPlan) -> DemoStage:
@@ -133,6 +155,8 @@ def prepare_stage(plan: DemoPlan) -> DemoStage:
             for index in plan.test_indices
             for part in ("--test-scene", plan.scene_name(plan.seed, index))
         ]
+    if plan.refit:
+        prepare += [part for group in benchmark.refit.scored for part in ("--group", group)]
     return DemoStage("prepare", prepare + plan.quiet)
 
 
@@ -175,9 +199,112 @@ def run_stages(plan: DemoPlan) -> list[DemoStage]:
             plan.rel(plan.paths.runs / method),
         ]
         run += ["--checkpoint", checkpoints[method]] if method in checkpoints else []
-        run += ["--device", plan.device] if plan.device else []
+        run += plan.device_flag + _warp(plan)
         runs.append(DemoStage(f"run {method}", run + plan.quiet))
     return runs
+
+
+def _warp(plan: DemoPlan) -> list[str]:
+    """``--warp on`` for the runs of ``demo --refit`` on a benchmark whose frames carry timestamps."""
+    return ["--warp", "on"] if plan.refit and plan.benchmark.refit.warp else []
+
+
+def _scene_source(plan: DemoPlan) -> list[Any]:
+    """The dataset, protocol and root every ``prepare`` / ``refit`` of the demo reads the scenes with."""
+    protocol = ["--protocol", plan.benchmark.protocol] if plan.benchmark.protocol else []
+    return [plan.benchmark.dataset, *protocol, "--root", plan.rel(plan.paths.scenes)]
+
+
+def refit_steps(plan: DemoPlan) -> list[int]:
+    """The refit steps the rows are scored at: every snapshot and the refit's last step (progressive preset)."""
+    from setdiff_bench.refit.settings import RefitSettings
+
+    every = plan.benchmark.refit.snapshot_every
+    return RefitSettings.preset("progressive", snapshot_every=every).snapshot_steps()
+
+
+def refit_stages(plan: DemoPlan) -> list[DemoStage]:
+    """``demo --refit``: one progressive ``refit`` per enhancer, test scene and refitted group."""
+    checkpoints, refit = plan.checkpoints, plan.benchmark.refit
+    stages = []
+    for method in METHODS:
+        for scene in plan.test_scenes:
+            for group in refit.groups:
+                command = [
+                    "refit",
+                    *_scene_source(plan),
+                    "--scene",
+                    scene,
+                    "--fits",
+                    plan.rel(plan.paths.scenes),
+                ]
+                command += ["--group", group, "--method", method]
+                command += ["--checkpoint", checkpoints[method]] if method in checkpoints else []
+                command += [
+                    "--snapshot-every",
+                    refit.snapshot_every,
+                    "--out",
+                    plan.rel(plan.paths.refits(method)),
+                ]
+                stages.append(
+                    DemoStage(f"refit {method} {scene} {group}", command + plan.device_flag + plan.quiet)
+                )
+    return stages
+
+
+def refit_rows(plan: DemoPlan) -> list[str]:
+    """The leaderboard's rows under ``demo --refit``, in table order: per enhancer ``X``, ``X-3D``, ``X-3D+``
+    (not for ``identity``) and ``X-3D-NNNNNN`` at each snapshot."""
+    steps = refit_steps(plan)
+    rows = []
+    for method in METHODS:
+        rows += [method, f"{method}-3D"] + ([f"{method}-3D+"] if method != "identity" else [])
+        rows += [f"{method}-3D-{step:06d}" for step in steps[:-1]]
+    return rows
+
+
+def refit_scoring_stages(plan: DemoPlan) -> list[DemoStage]:
+    """``demo --refit``: per enhancer, the packets of its refit scenes (and of each snapshot) and their runs."""
+    checkpoints, steps = plan.checkpoints, refit_steps(plan)
+    from setdiff_bench.io.refit_layout import snapshot_folder
+
+    stages = []
+    for method in METHODS:
+        out = plan.paths.refits(method)
+        for step in steps:
+            last = step == steps[-1]
+            name = f"{method}-3D" if last else f"{method}-3D-{step:06d}"
+            fits = plan.rel(out if last else snapshot_folder(out, step))
+            packets = plan.rel(plan.paths.refit_packets(name))
+            prepare = ["prepare", *_scene_source(plan), "--fits", fits, "--out", packets, "--split", "test"]
+            prepare += [part for scene in plan.test_scenes for part in ("--test-scene", scene)]
+            prepare += [part for group in plan.benchmark.refit.scored for part in ("--group", group)]
+            prepare += ["--workers", plan.jobs]
+            stages.append(DemoStage(f"prepare {name}", prepare + plan.quiet))
+            scored = [("identity", name)]
+            scored += [(method, f"{method}-3D+")] if last and method != "identity" else []
+            for enhancer, row in scored:
+                run = ["run", "--method", enhancer, "--name", row, "--packets", packets, "--split", "test"]
+                run += ["--out", plan.rel(plan.paths.runs / row), "--refit", fits]
+                run += ["--checkpoint", checkpoints[enhancer]] if enhancer in checkpoints else []
+                stages.append(DemoStage(f"run {row}", run + plan.device_flag + _warp(plan) + plan.quiet))
+    return stages
+
+
+#: The paired comparisons ``demo --refit`` writes (``compare A B``), by enhancer ``X``: what the refit adds
+#: over its own schedule, what post-processing the refit render adds, and refit against post-process.
+REFIT_COMPARISONS = (("{x}-3D", "identity-3D"), ("{x}-3D+", "{x}"), ("{x}-3D", "{x}"))
+
+
+def compare_stages(plan: DemoPlan) -> list[DemoStage]:
+    """``demo --refit``: ``identity-3D`` against ``identity`` (the schedule alone), then
+    :data:`REFIT_COMPARISONS` for every other enhancer, into ``<out>``."""
+    pairs = [("identity-3D", "identity")]
+    pairs += [
+        (a.format(x=m), b.format(x=m)) for m in METHODS if m != "identity" for a, b in REFIT_COMPARISONS
+    ]
+    runs, out = plan.rel(plan.paths.runs), plan.rel(plan.paths.out)
+    return [DemoStage(f"compare {a} {b}", ["compare", a, b, "--runs", runs, "--out", out]) for a, b in pairs]
 
 
 def leaderboard_stage(plan: DemoPlan) -> DemoStage:
@@ -195,7 +322,8 @@ def leaderboard_stage(plan: DemoPlan) -> DemoStage:
             "--out",
             rel(plan.paths.out),
             "--methods",
-            ",".join(METHODS),
+            ",".join(refit_rows(plan) if plan.refit else METHODS),
+            *(["--cost"] if plan.refit else []),
             "--plots",
             "--grids",
             plan.preset.grid_frames,
@@ -246,4 +374,7 @@ def demo_stages(plan: DemoPlan, *, ablations: bool = False) -> DemoStages:
         runs=run_stages(plan),
         leaderboard=leaderboard_stage(plan),
         ablations=ablation_stages(plan) if ablations else [],
+        refits=refit_stages(plan) if plan.refit else [],
+        refit_scoring=refit_scoring_stages(plan) if plan.refit else [],
+        compares=compare_stages(plan) if plan.refit else [],
     )

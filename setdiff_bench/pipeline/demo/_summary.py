@@ -11,7 +11,7 @@ from typing import Any
 
 import pandas as pd
 
-from setdiff_bench.io.run_layout import METRICS_FILE
+from setdiff_bench.io.run_layout import METRICS_FILE, SEQUENCES_FILE
 from setdiff_bench.metrics.registry import get_metric
 from setdiff_bench.pipeline.demo._layout import REPORT_FILE, SUMMARY_FILE, DemoPaths
 from setdiff_bench.pipeline.demo._stages import METHODS
@@ -73,19 +73,66 @@ def lane_shift_verdict(metrics: pd.DataFrame, group: str) -> dict[str, Any]:
     return verdict
 
 
+def refit_verdict(metrics: pd.DataFrame, group: str) -> dict[str, Any]:
+    """``demo --refit``: per enhancer ``X``, the means of ``X``, ``X-3D`` and ``X-3D+`` on ``group`` and which
+    of them is best in each metric (its direction), with ``identity`` and ``identity-3D`` (the schedule alone).
+
+    Args:
+        metrics: per-target rows of the demo's runs (``metrics.parquet`` concatenated; ``method`` holds each
+            run's name).
+    """
+    rows = metrics[metrics["group"] == group]
+    means = rows.groupby("method")[list(VERDICT_METRICS)].mean()
+    verdict: dict[str, Any] = {
+        "group": group,
+        "targets": int((rows["method"] == "identity").sum()),
+        "means": {m: {k: float(v) for k, v in means.loc[m].items()} for m in means.index},
+        "best": {},
+    }
+    for method in METHODS:
+        names = [n for n in (method, f"{method}-3D", f"{method}-3D+") if n in means.index]
+        if len(names) < 2:
+            continue
+        verdict["best"][method] = {
+            metric: max(
+                names, key=lambda n, m=metric: means.loc[n, m] * (1 if get_metric(m).higher_is_better else -1)
+            )
+            for metric in VERDICT_METRICS
+        }
+    return verdict
+
+
 def summarize(
-    paths: DemoPaths, preset: DemoPreset, steps: dict[str, int], pipeline: Pipeline, invocation: str
+    paths: DemoPaths,
+    preset: DemoPreset,
+    steps: dict[str, int],
+    pipeline: Pipeline,
+    invocation: str,
+    refit_rows: list[str] | None = None,
 ) -> dict[str, Any]:
     """The demo's machine-readable summary: preset, stage commands and times, the verdict on the benchmark's
-    verdict group (under its ``verdict_key``: ``lane_plus_2``, ``views_3``)."""
+    verdict group (under its ``verdict_key``: ``lane_plus_2``, ``views_3``) and, for ``demo --refit`` (its rows
+    ``refit_rows``), the refit verdict on that group (``refit``: :func:`refit_verdict`)."""
     benchmark = get_benchmark(preset.benchmark)
+    runs = refit_rows or list(METHODS)
     frames = [
         pd.read_parquet(paths.runs / m / METRICS_FILE)
-        for m in METHODS
+        for m in runs
         if (paths.runs / m / METRICS_FILE).is_file()
     ]
     metrics = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+    extra = {}
+    if refit_rows and len(metrics):
+        extra["refit"] = refit_verdict(metrics, benchmark.verdict_group)
+        warp = {
+            name: float(pd.read_parquet(paths.runs / name / SEQUENCES_FILE)["warp"].mean())
+            for name in refit_rows
+            if (paths.runs / name / SEQUENCES_FILE).is_file()
+        }
+        if warp:  # mean over each run's camera sequences (every scored group's targets in frame order)
+            extra["refit"]["warp"] = warp
     return {
+        **extra,
         "invocation": invocation,
         "preset": asdict(preset),
         "training_steps": steps,
