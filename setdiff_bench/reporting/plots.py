@@ -15,6 +15,7 @@ from __future__ import annotations
 import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -147,17 +148,18 @@ def plot_metric_by_group(
         axis.set_xlabel(xlabel)
         axis.grid(alpha=0.3)
     axes[0][0].legend(fontsize="small")
+    return _save(figure, out, title, error_bar_caption(pd.concat(list(summaries.values()))), 0.06)
+
+
+def _save(figure: Any, out: str | Path, title: str, caption: str, bottom: float) -> Path:
+    """Title ``figure``, put ``caption`` under its panels (``bottom``: the share of its height kept for it) and
+    write it as PNG at ``out``, atomically; the figure is closed."""
+    import matplotlib.pyplot as plt
+
     if title:
         figure.suptitle(title)
-    figure.text(
-        0.5,
-        0.01,
-        error_bar_caption(pd.concat(list(summaries.values()))),
-        ha="center",
-        va="bottom",
-        fontsize="small",
-    )
-    figure.tight_layout(rect=(0.0, 0.06, 1.0, 1.0))
+    figure.text(0.5, 0.01, caption, ha="center", va="bottom", fontsize="small")
+    figure.tight_layout(rect=(0.0, bottom, 1.0, 1.0))
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(out) as tmp:
@@ -294,23 +296,8 @@ def plot_refit_steps(
             draw(axis, lambda runs: warp[warp["run"].isin(runs)]["warp"].to_numpy(np.float64))
             axis.set_title("warp error ↓ (per sequence)")
     axes[0][0].legend(fontsize="small")
-    if title:
-        figure.suptitle(title)
-    figure.text(
-        0.5,
-        0.01,
-        "mean over targets (warp: sequences), ±1 s.e.;\n0 steps: the fit itself",
-        ha="center",
-        va="bottom",
-        fontsize="small",
-    )
-    figure.tight_layout(rect=(0.0, 0.05, 1.0, 1.0))
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(out) as tmp:
-        figure.savefig(tmp, dpi=120, format="png", metadata={"Software": "setdiff-bench"})
-    plt.close(figure)
-    return out
+    caption = "mean over targets (warp: sequences), ±1 s.e.;\n0 steps: the fit itself"
+    return _save(figure, out, title, caption, 0.05)
 
 
 #: Plots :func:`write_plots` makes per dataset: (file suffix, plotting function).

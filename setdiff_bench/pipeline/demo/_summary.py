@@ -48,6 +48,18 @@ def better(metric: str, value: float, other: float) -> bool:
     return value > other if get_metric(metric).higher_is_better else value < other
 
 
+def _group_means(metrics: pd.DataFrame, group: str, counted: str) -> tuple[pd.DataFrame, dict[str, Any]]:
+    """Each run's mean of :data:`VERDICT_METRICS` on ``group``, and the verdict's common fields: the group, its
+    number of targets (those of run ``counted``) and the means."""
+    rows = metrics[metrics["group"] == group]
+    means = rows.groupby("method")[list(VERDICT_METRICS)].mean()
+    return means, {
+        "group": group,
+        "targets": int((rows["method"] == counted).sum()),
+        "means": {m: {k: float(v) for k, v in means.loc[m].items()} for m in means.index},
+    }
+
+
 def lane_shift_verdict(metrics: pd.DataFrame, group: str) -> dict[str, Any]:
     """SetDiff against ``identity`` and ``difix`` on one group (the benchmark's verdict group: +2 lanes,
     3 views): means and who wins each metric.
@@ -56,13 +68,7 @@ def lane_shift_verdict(metrics: pd.DataFrame, group: str) -> dict[str, Any]:
         metrics: per-target rows of the four runs (``metrics.parquet`` concatenated).
         group: the benchmark's ``verdict_group`` (:data:`setdiff_bench.pipeline.presets.DEMO_BENCHMARKS`).
     """
-    rows = metrics[metrics["group"] == group]
-    means = rows.groupby("method")[list(VERDICT_METRICS)].mean()
-    verdict: dict[str, Any] = {
-        "group": group,
-        "targets": int((rows["method"] == "setdiff").sum()),
-        "means": {m: {k: float(v) for k, v in means.loc[m].items()} for m in means.index},
-    }
+    means, verdict = _group_means(metrics, group, counted="setdiff")
     if "setdiff" in means.index:
         for other in ("identity", "difix"):
             if other in means.index:
@@ -81,14 +87,8 @@ def refit_verdict(metrics: pd.DataFrame, group: str) -> dict[str, Any]:
         metrics: per-target rows of the demo's runs (``metrics.parquet`` concatenated; ``method`` holds each
             run's name).
     """
-    rows = metrics[metrics["group"] == group]
-    means = rows.groupby("method")[list(VERDICT_METRICS)].mean()
-    verdict: dict[str, Any] = {
-        "group": group,
-        "targets": int((rows["method"] == "identity").sum()),
-        "means": {m: {k: float(v) for k, v in means.loc[m].items()} for m in means.index},
-        "best": {},
-    }
+    means, verdict = _group_means(metrics, group, counted="identity")
+    verdict["best"] = {}
     for method in METHODS:
         names = [n for n in (method, f"{method}-3D", f"{method}-3D+") if n in means.index]
         if len(names) < 2:
