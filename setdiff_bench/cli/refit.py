@@ -61,6 +61,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         REFIT_LOADER_OPTION_FLAGS,
     )
     parser.add_argument(
+        "--test-scene",
+        action="append",
+        dest="test_scenes",
+        metavar="NAME",
+        help="declare this scene a test scene (repeatable; every scene not named is then a train scene), in "
+        "place of the protocol's scene split, as for the prepare whose packets the refit is scored on",
+    )
+    parser.add_argument(
         "--group", default=None, help="protocol group whose targets are distilled (e.g. lane+2)"
     )
     parser.add_argument(
@@ -138,6 +146,7 @@ def run(args: argparse.Namespace) -> int:
         trajectory=args.trajectory,
         protocol=args.protocol,
         loader_options=loader_options(args, REFIT_LOADER_OPTION_FLAGS),
+        test_scenes=tuple(args.test_scenes) if args.test_scenes else None,
         fits=args.fits,
         fit_iterations=args.fit_iterations,
         fit_checkpoint=args.fit_checkpoint,

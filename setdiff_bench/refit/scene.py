@@ -61,6 +61,10 @@ class RefitTask:
         protocol: packaged protocol name or TOML path (default: the dataset's own).
         loader_options: override the protocol's ``[loader]`` options, as ``prepare -o`` does (e.g.
             ``{"missing": "skip"}`` for a ``transforms.json`` that lists frames without a photo).
+        test_scenes: declare these scenes the test scenes (every other one train) in place of the protocol's
+            scene split, as ``prepare --test-scene`` does: the scene's split chooses its packets' shape and
+            reference count (the protocol's ``[references]`` train / test), so a refit must use the split of the
+            packets it is scored on.
         fits: folder of fit PLYs (``DIR/<scene>/<fit_key>.ply``); or ``fit_iterations`` to fit here.
         fit_checkpoint: the fit's checkpoint folder (``fit --checkpoint``), for its Adam moments.
         device, backend: torch device and renderer (``auto``: as ``prepare``).
@@ -76,6 +80,7 @@ class RefitTask:
     trajectory: str | None = None
     protocol: str | None = None
     loader_options: Mapping[str, Any] = field(default_factory=dict)
+    test_scenes: tuple[str, ...] | None = None
     fits: Path | None = None
     fit_iterations: int | None = None
     fit_checkpoint: Path | None = None
@@ -236,7 +241,7 @@ def _inputs(task: RefitTask, settings: RefitSettings) -> _Inputs:
     from setdiff_bench.packets.packing import applicable_groups, scene_extent
     from setdiff_bench.packets.plan import plan_scene
     from setdiff_bench.packets.plan_trajectories import plan_trajectories
-    from setdiff_bench.packets.prepare import parse_trajectories, resolve_backend
+    from setdiff_bench.packets.prepare import declared_split, parse_trajectories, resolve_backend
     from setdiff_bench.packets.trajectory import check_within_bounds, scene_bounds
     from setdiff_bench.protocols import load_protocol
     from setdiff_bench.refit.loop import RefitLoop
@@ -251,6 +256,8 @@ def _inputs(task: RefitTask, settings: RefitSettings) -> _Inputs:
         )
     options = {**protocol.loader_options, **task.loader_options}
     assignment = protocol.split.assign(list_scenes(task.dataset, task.root, **options))
+    if task.test_scenes is not None:
+        assignment = declared_split(assignment, task.test_scenes)
     if task.scene not in assignment:
         shown = ", ".join(sorted(assignment)[:5])
         raise UsageError(f"no scene {task.scene!r} under the root (scenes: {shown})", "--scene")
@@ -318,6 +325,7 @@ def _inputs(task: RefitTask, settings: RefitSettings) -> _Inputs:
         "dataset": task.dataset,
         "scene": scene.name,
         "protocol": protocol.name,
+        "split": assignment[scene.name],
         "group": plan.group,
         "trajectory": task.trajectory,
         "fit_sha256": fit_sha,

@@ -292,3 +292,26 @@ def test_snapshots_are_the_plys_of_shorter_refits(finished: Path, street_root: P
         progress=False,
     )
     assert len(PacketStore(tmp_path / "store")) == 1
+
+
+def test_the_refit_takes_the_split_of_the_packets_it_is_scored_on(street_root: Path, tmp_path: Path) -> None:
+    """A scene's split chooses its packets' shape and reference count; ``--test-scene`` declares it as
+    ``prepare --test-scene`` does, and the manifest records which split the refit used."""
+    from setdiff_bench.errors import UsageError
+    from setdiff_bench.loaders import list_scenes
+    from setdiff_bench.packets.prepare import declared_split
+    from setdiff_bench.protocols import load_protocol
+
+    settings = dataclasses.replace(SETTINGS, steps=1)
+    protocol_split = load_protocol("synthetic").split.assign(list_scenes("synthetic", street_root))[SCENE]
+    plain = refit_scene(task(street_root, tmp_path / "plain"), settings, progress=False)
+    assert plain.manifest["identity"]["split"] == protocol_split
+    other = "test" if protocol_split == "train" else "train"
+    declared = (SCENE,) if other == "test" else ()
+    assert declared_split({SCENE: protocol_split}, declared)[SCENE] == other
+    result = refit_scene(
+        task(street_root, tmp_path / "declared", test_scenes=declared), settings, progress=False
+    )
+    assert result.manifest["identity"]["split"] == other
+    with pytest.raises(UsageError, match="no scene 'elsewhere'"):
+        refit_scene(task(street_root, tmp_path / "x", test_scenes=("elsewhere",)), settings, progress=False)

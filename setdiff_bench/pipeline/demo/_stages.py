@@ -148,13 +148,7 @@ def prepare_stage(plan: DemoPlan) -> DemoStage:
         "--workers",
         plan.jobs,
     ]
-    if not plan.train and benchmark.protocol is None:
-        # only the test scenes exist here: the synthetic protocol's interleaved split over them would differ
-        prepare += [
-            part
-            for index in plan.test_indices
-            for part in ("--test-scene", plan.scene_name(plan.seed, index))
-        ]
+    prepare += _declared_test_scenes(plan)
     if plan.refit:
         prepare += [part for group in benchmark.refit.scored for part in ("--group", group)]
     return DemoStage("prepare", prepare + plan.quiet)
@@ -209,6 +203,16 @@ def _warp(plan: DemoPlan) -> list[str]:
     return ["--warp", "on"] if plan.refit and plan.benchmark.refit.warp else []
 
 
+def _declared_test_scenes(plan: DemoPlan) -> list[str]:
+    """``--test-scene`` for each test scene when only the test scenes exist (the shipped-model demo of a benchmark
+    without a packaged protocol: the synthetic protocol's interleaved split over them would differ); every
+    ``prepare`` and ``refit`` of the demo takes them, so that a refit's packets have the shape and references of
+    the packets it is scored on."""
+    if plan.train or plan.benchmark.protocol is not None:
+        return []
+    return [part for scene in plan.test_scenes for part in ("--test-scene", scene)]
+
+
 def _scene_source(plan: DemoPlan) -> list[Any]:
     """The dataset, protocol and root every ``prepare`` / ``refit`` of the demo reads the scenes with."""
     protocol = ["--protocol", plan.benchmark.protocol] if plan.benchmark.protocol else []
@@ -237,6 +241,7 @@ def refit_stages(plan: DemoPlan) -> list[DemoStage]:
                     scene,
                     "--fits",
                     plan.rel(plan.paths.scenes),
+                    *_declared_test_scenes(plan),
                 ]
                 command += ["--group", group, "--method", method]
                 command += ["--checkpoint", checkpoints[method]] if method in checkpoints else []
@@ -277,7 +282,7 @@ def refit_scoring_stages(plan: DemoPlan) -> list[DemoStage]:
             fits = plan.rel(out if last else snapshot_folder(out, step))
             packets = plan.rel(plan.paths.refit_packets(name))
             prepare = ["prepare", *_scene_source(plan), "--fits", fits, "--out", packets, "--split", "test"]
-            prepare += [part for scene in plan.test_scenes for part in ("--test-scene", scene)]
+            prepare += _declared_test_scenes(plan)
             prepare += [part for group in plan.benchmark.refit.scored for part in ("--group", group)]
             prepare += ["--workers", plan.jobs]
             stages.append(DemoStage(f"prepare {name}", prepare + plan.quiet))

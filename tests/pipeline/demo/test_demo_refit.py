@@ -59,6 +59,9 @@ def test_driving_refits_every_enhancer_on_each_test_scene_and_scores_three_rows(
         for a in setdiff
     )
     assert all(flags(a, "--out") == ["out/work/refit/setdiff"] for a in setdiff)
+    # only the test scenes exist: each refit and prepare declares them, so all share the packets' split
+    assert all(flags(a, "--test-scene") == ["scene_0000_02", "scene_0000_04"] for a in setdiff)
+    assert flags(prepare, "--test-scene") == ["scene_0000_02", "scene_0000_04"]
     runs = {s.name: s.argv for s in stages.refit_scoring if s.name.startswith("run ")}
     assert sorted(runs) == sorted(
         f"run {m}-3D{suffix}"
@@ -91,6 +94,7 @@ def test_sparse_refits_each_view_counts_fit_without_warp(tmp_path: Path) -> None
     assert {flags(s.argv, "--group")[0] for s in stages.refits} == {"n3", "n6", "n9"}
     assert not any("--warp" in s.argv for s in [*stages.runs, *stages.refit_scoring])
     assert all(flags(s.argv, "--protocol") == ["dl3dv_sparse_synthetic"] for s in stages.refits)
+    assert not any("--test-scene" in s.argv for s in [*stages.setup, *stages.refits, *stages.refit_scoring])
 
 
 def test_refit_verdict_and_report(tmp_path: Path) -> None:
