@@ -108,4 +108,12 @@ def test_each_benchmark_has_its_own_folder_and_a_published_run(name):
     assert (RESULTS_FOLDER / benchmark.published / f"{benchmark.leaderboard}.parquet").is_file()
     assert set(benchmark.tolerance) == {"psnr", "ssim", "lpips"}
     others = [b.default_out for b in DEMO_BENCHMARKS.values() if b is not benchmark]
+    others += [b.refit.default_out for b in DEMO_BENCHMARKS.values()]
     assert benchmark.default_out not in others
+    assert benchmark.refit.default_out.startswith("runs/") and benchmark.refit.published != benchmark.published
+
+
+def test_the_driving_refit_demo_is_published():
+    refit = DEMO_BENCHMARKS["driving"].refit
+    assert (RESULTS_FOLDER / refit.published / "synthetic.parquet").is_file()
+    assert (RESULTS_FOLDER / refit.published / "synthetic_refit_steps.png").is_file()
