@@ -110,7 +110,9 @@ def test_each_benchmark_has_its_own_folder_and_a_published_run(name):
     others = [b.default_out for b in DEMO_BENCHMARKS.values() if b is not benchmark]
     others += [b.refit.default_out for b in DEMO_BENCHMARKS.values()]
     assert benchmark.default_out not in others
-    assert benchmark.refit.default_out.startswith("runs/") and benchmark.refit.published != benchmark.published
+    assert (
+        benchmark.refit.default_out.startswith("runs/") and benchmark.refit.published != benchmark.published
+    )
 
 
 def test_the_driving_refit_demo_is_published():
