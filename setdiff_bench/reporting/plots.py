@@ -57,6 +57,14 @@ def view_count(group: str) -> tuple[float, str] | None:
     return float(match.group(1)), match.group(1)
 
 
+def mean_and_error(values: np.ndarray) -> tuple[float, float, int]:
+    """``(mean, standard error of the mean, count)`` of the finite ``values`` (error ``std / sqrt(n)``, ddof 1;
+    0 for one value; mean NaN for none)."""
+    values = values[np.isfinite(values)]
+    sem = float(values.std(ddof=1) / np.sqrt(len(values))) if len(values) > 1 else 0.0
+    return (float(values.mean()) if len(values) else np.nan), sem, len(values)
+
+
 def group_summary(
     images: pd.DataFrame, metric: str, position: Callable[[str], tuple[float, str] | None]
 ) -> pd.DataFrame:
@@ -66,18 +74,16 @@ def group_summary(
         where = position(str(group))
         if where is None:
             continue
-        values = rows[metric].to_numpy(dtype=np.float64)
-        values = values[np.isfinite(values)]
-        sem = float(values.std(ddof=1) / np.sqrt(len(values))) if len(values) > 1 else 0.0
+        mean, sem, count = mean_and_error(rows[metric].to_numpy(dtype=np.float64))
         records.append(
             {
                 "method": method,
                 "group": group,
                 "x": where[0],
                 "label": where[1],
-                "mean": float(values.mean()) if len(values) else np.nan,
+                "mean": mean,
                 "sem": sem,
-                "count": len(values),
+                "count": count,
             }
         )
     return pd.DataFrame.from_records(
@@ -187,27 +193,30 @@ def refit_curves(images: pd.DataFrame) -> pd.DataFrame:
     """Per run: the refit curve it belongs to and its x position, for :func:`plot_refit_steps`.
 
     A ``run --refit`` run is a point of the curve ``"<X> 3D"`` (scored with ``identity``) or ``"<X> 3D+"``
-    (scored with ``X``), ``X`` the refit's enhancer, suffixed by the schedule when the runs hold more than one, at
-    x = the refit model's steps.  A run without a refit is the curve's point at x = 0 (a refit of 0 steps is the
+    (scored with ``X``), ``X`` the refit's enhancer (with its schedule in brackets when the runs hold more than
+    one), at x = the refit model's steps.  A run without a refit is the curve's point at x = 0 (a refit of 0 steps is the
     fit itself): the one named ``identity`` for every ``3D`` curve, the one named ``X`` for ``X 3D+``.
 
     Returns:
-        Columns ``run``, ``curve``, ``x`` and ``base`` (``3D`` or ``3D+``), one row per (run, curve): a 0-step
-        run may open several curves; empty when no run scores a refit.
+        Columns ``run``, ``enhancer`` (``X``, with the schedule when there are several), ``kind`` (``3D`` or
+        ``3D+``) and ``x``, one row per (run, curve): a 0-step run may open several curves; empty when no run
+        scores a refit.
     """
+    columns = ["run", "enhancer", "kind", "x"]
     if "refit_steps" not in images.columns:
-        return pd.DataFrame(columns=["run", "curve", "x"])
+        return pd.DataFrame(columns=columns)
     refitted = images.dropna(subset=["refit_steps"]).drop_duplicates("run")
+    plain = images[images["refit_steps"].isna()].groupby("method")["run"].unique()
     schedules = refitted["refit_schedule"].nunique() > 1
     records = []
     for row in refitted.itertuples():
         kind = "3D" if row.run_method == "identity" else "3D+"
-        curve = f"{row.refit_method} {kind}" + (f" ({row.refit_schedule})" if schedules else "")
-        records.append({"run": row.run, "curve": curve, "x": float(row.refit_steps), "base": kind})
+        enhancer = f"{row.refit_method}" + (f" ({row.refit_schedule})" if schedules else "")
+        records.append({"run": row.run, "enhancer": enhancer, "kind": kind, "x": float(row.refit_steps)})
         origin = "identity" if kind == "3D" else str(row.refit_method)
-        plain = images[images["refit_steps"].isna() & (images["method"] == origin)]["run"].unique()
-        records.extend({"run": run, "curve": curve, "x": 0.0, "base": kind} for run in plain)
-    return pd.DataFrame.from_records(records, columns=["run", "curve", "x", "base"]).drop_duplicates()
+        runs = plain.get(origin, [])
+        records.extend({"run": run, "enhancer": enhancer, "kind": kind, "x": 0.0} for run in runs)
+    return pd.DataFrame.from_records(records, columns=columns).drop_duplicates()
 
 
 def plot_refit_steps(
@@ -245,32 +254,25 @@ def plot_refit_steps(
     )
 
     # one colour per enhancer (and schedule), solid for X 3D, dashed for X 3D+
-    families = sorted({str(c).replace(" 3D+", " 3D") for c in curves["curve"]})
-    colours = {family: f"C{index % 10}" for index, family in enumerate(families)}
+    colours = {enhancer: f"C{i % 10}" for i, enhancer in enumerate(sorted(curves["enhancer"].unique()))}
 
     def draw(axis, values_of) -> None:  # type: ignore[no-untyped-def]
-        for curve, points in curves.groupby("curve", sort=True):
-            xs, means, errors = [], [], []
-            for x, runs in points.groupby("x", sort=True):
-                values = values_of(runs["run"])
-                values = values[np.isfinite(values)]
-                if len(values):
-                    xs.append(x)
-                    means.append(float(values.mean()))
-                    errors.append(
-                        float(values.std(ddof=1) / np.sqrt(len(values))) if len(values) > 1 else 0.0
-                    )
-            if xs:
-                plus = " 3D+" in str(curve)
+        for (enhancer, kind), points in curves.groupby(["enhancer", "kind"], sort=True):
+            summary = [
+                (x, *mean_and_error(values_of(runs["run"]))) for x, runs in points.groupby("x", sort=True)
+            ]
+            summary = [point for point in summary if point[3]]  # steps with a finite value
+            if summary:
+                plus = kind == "3D+"
                 axis.errorbar(
-                    xs,
-                    means,
-                    yerr=errors,
+                    [point[0] for point in summary],
+                    [point[1] for point in summary],
+                    yerr=[point[2] for point in summary],
                     marker="s" if plus else "o",
                     linestyle="--" if plus else "-",
-                    color=colours[str(curve).replace(" 3D+", " 3D")],
+                    color=colours[enhancer],
                     capsize=3,
-                    label=curve,
+                    label=f"{enhancer} {kind}",
                 )
         axis.set_xticks(sorted(curves["x"].unique()))
         axis.set_xlabel("refit steps")

@@ -52,7 +52,7 @@ def images(*extra: pd.DataFrame) -> pd.DataFrame:
 
 
 def points(curves: pd.DataFrame) -> set[tuple[str, float, str]]:
-    return {(row.curve, row.x, row.run) for row in curves.itertuples()}
+    return {(f"{row.enhancer} {row.kind}", row.x, row.run) for row in curves.itertuples()}
 
 
 def test_each_refit_run_is_a_point_and_the_plain_runs_open_the_curves() -> None:
@@ -68,9 +68,9 @@ def test_each_refit_run_is_a_point_and_the_plain_runs_open_the_curves() -> None:
 def test_two_schedules_are_told_apart_and_plain_runs_alone_make_no_curve() -> None:
     one_shot = rows("runs/s3d-os", "setdiff-os-3D", [15.5, 15.5], (300.0, "setdiff", "one-shot", "identity"))
     curves = points(refit_curves(images(one_shot)))
-    assert ("setdiff 3D (one-shot)", 300.0, "runs/s3d-os") in curves
-    assert ("setdiff 3D (one-shot)", 0.0, "runs/identity") in curves
-    assert ("setdiff 3D (progressive)", 100.0, "runs/s3d-100") in curves
+    assert ("setdiff (one-shot) 3D", 300.0, "runs/s3d-os") in curves
+    assert ("setdiff (one-shot) 3D", 0.0, "runs/identity") in curves
+    assert ("setdiff (progressive) 3D", 100.0, "runs/s3d-100") in curves
     plain = (
         images()
         .query("run in ['runs/identity', 'runs/setdiff']")

@@ -15,14 +15,7 @@ from setdiff_bench.pipeline.demo._scenes import (
     evaluation_scene_indices,
     scene_namer,
 )
-from setdiff_bench.pipeline.demo._stages import (
-    METHODS,
-    DemoPlan,
-    DemoStage,
-    DemoStages,
-    demo_stages,
-    refit_rows,
-)
+from setdiff_bench.pipeline.demo._stages import DemoPlan, DemoStages, demo_stages, refit_rows
 from setdiff_bench.pipeline.demo._summary import (
     run_provenance,
     summarize,
@@ -75,17 +68,13 @@ def check_folder(paths: DemoPaths, benchmark: DemoBenchmark, refit: bool = False
 
 
 def _run_refits(pipeline: Pipeline, stages: DemoStages, *, parallel: bool) -> None:
-    """The refits and their scoring; on a CPU with two jobs in two lanes of whole enhancers (each enhancer's
-    refits before its scoring): SetDiff and ``identity`` in one, DiFix and ``reproject`` in the other."""
-
-    def of(method: str) -> list[DemoStage]:
-        own = [s for s in stages.refits if s.name.split()[1] == method]
-        rows = (f"{method}-3D", f"{method}-3D+", f"{method}-3D-")
-        own += [s for s in stages.refit_scoring if s.name.split()[1].startswith(rows)]
-        return own
-
+    """The refits and their scoring (each enhancer's refits before its scoring); on a CPU with two jobs in two
+    lanes of whole enhancers: SetDiff and ``identity`` in one, DiFix and ``reproject`` in the other."""
     first = ("setdiff", "identity")
-    lanes = [[s for m in first for s in of(m)], [s for m in METHODS if m not in first for s in of(m)]]
+    lanes = [
+        [s for m in first for s in stages.refits[m]],
+        [s for m, own in stages.refits.items() if m not in first for s in own],
+    ]
     if parallel:
         pipeline.run_concurrently(lanes)
     else:

@@ -9,10 +9,10 @@ anything runs.
 arguments after ``setdiff-bench`` (numbers are passed as text by :class:`~setdiff_bench.pipeline.stages.Pipeline`).
 
 With ``--refit`` (:class:`~setdiff_bench.pipeline.presets.RefitDemo`) the store holds only the scored groups, every
-run scores the warp error where the scenes have timestamps, and three more tables follow the runs: ``refits``
-(one ``refit`` per enhancer, test scene and refitted group, with snapshots), ``refit_scoring`` (per enhancer
-``X``: the packets of its refit scenes and of each snapshot, scored as ``X-3D``, ``X-3D+`` and
-``X-3D-NNNNNN``) and ``compares`` (the paired gains docs/refit.md reads the rows by).
+run scores the warp error where the scenes have timestamps, and two more tables follow the runs: ``refits``
+(per enhancer ``X``: one ``refit`` per test scene and refitted group, with snapshots, then the packets of its
+refit scenes and of each snapshot, scored as ``X-3D``, ``X-3D+`` and ``X-3D-NNNNNN``) and ``compares`` (the
+paired gains docs/refit.md reads the rows by).
 """
 
 from __future__ import annotations
@@ -23,9 +23,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
 
+from setdiff_bench.io.refit_layout import snapshot_folder
 from setdiff_bench.pipeline.demo._layout import DemoPaths
 from setdiff_bench.pipeline.presets import DemoBenchmark, DemoPreset
 from setdiff_bench.pipeline.stages import relative
+from setdiff_bench.refit.settings import RefitSettings
 
 #: The methods every demo runs and tabulates, in table order.
 METHODS = ("identity", "reproject", "difix", "setdiff")
@@ -103,8 +105,8 @@ class DemoStages:
     runs: list[DemoStage]
     leaderboard: DemoStage
     ablations: list[DemoStage]
-    refits: list[DemoStage] = dataclasses.field(default_factory=list)
-    refit_scoring: list[DemoStage] = dataclasses.field(default_factory=list)
+    #: ``demo --refit``: per enhancer, its refits and then the stages that score them, in order
+    refits: dict[str, list[DemoStage]] = dataclasses.field(default_factory=dict)
     compares: list[DemoStage] = dataclasses.field(default_factory=list)
 
 
@@ -221,39 +223,36 @@ def _scene_source(plan: DemoPlan) -> list[Any]:
 
 def refit_steps(plan: DemoPlan) -> list[int]:
     """The refit steps the rows are scored at: every snapshot and the refit's last step (progressive preset)."""
-    from setdiff_bench.refit.settings import RefitSettings
-
     every = plan.benchmark.refit.snapshot_every
     return RefitSettings.preset("progressive", snapshot_every=every).snapshot_steps()
 
 
-def refit_stages(plan: DemoPlan) -> list[DemoStage]:
-    """``demo --refit``: one progressive ``refit`` per enhancer, test scene and refitted group."""
+def refit_stages(plan: DemoPlan, method: str) -> list[DemoStage]:
+    """``demo --refit``: one progressive ``refit`` with ``method`` per test scene and refitted group."""
     checkpoints, refit = plan.checkpoints, plan.benchmark.refit
     stages = []
-    for method in METHODS:
-        for scene in plan.test_scenes:
-            for group in refit.groups:
-                command = [
-                    "refit",
-                    *_scene_source(plan),
-                    "--scene",
-                    scene,
-                    "--fits",
-                    plan.rel(plan.paths.scenes),
-                    *_declared_test_scenes(plan),
-                ]
-                command += ["--group", group, "--method", method]
-                command += ["--checkpoint", checkpoints[method]] if method in checkpoints else []
-                command += [
-                    "--snapshot-every",
-                    refit.snapshot_every,
-                    "--out",
-                    plan.rel(plan.paths.refits(method)),
-                ]
-                stages.append(
-                    DemoStage(f"refit {method} {scene} {group}", command + plan.device_flag + plan.quiet)
-                )
+    for scene in plan.test_scenes:
+        for group in refit.groups:
+            command = [
+                "refit",
+                *_scene_source(plan),
+                "--scene",
+                scene,
+                "--fits",
+                plan.rel(plan.paths.scenes),
+                *_declared_test_scenes(plan),
+            ]
+            command += ["--group", group, "--method", method]
+            command += ["--checkpoint", checkpoints[method]] if method in checkpoints else []
+            command += [
+                "--snapshot-every",
+                refit.snapshot_every,
+                "--out",
+                plan.rel(plan.paths.refits(method)),
+            ]
+            stages.append(
+                DemoStage(f"refit {method} {scene} {group}", command + plan.device_flag + plan.quiet)
+            )
     return stages
 
 
@@ -268,31 +267,28 @@ def refit_rows(plan: DemoPlan) -> list[str]:
     return rows
 
 
-def refit_scoring_stages(plan: DemoPlan) -> list[DemoStage]:
-    """``demo --refit``: per enhancer, the packets of its refit scenes (and of each snapshot) and their runs."""
+def refit_scoring_stages(plan: DemoPlan, method: str) -> list[DemoStage]:
+    """``demo --refit``: the packets of ``method``'s refit scenes (and of each snapshot) and their runs."""
     checkpoints, steps = plan.checkpoints, refit_steps(plan)
-    from setdiff_bench.io.refit_layout import snapshot_folder
-
     stages = []
-    for method in METHODS:
-        out = plan.paths.refits(method)
-        for step in steps:
-            last = step == steps[-1]
-            name = f"{method}-3D" if last else f"{method}-3D-{step:06d}"
-            fits = plan.rel(out if last else snapshot_folder(out, step))
-            packets = plan.rel(plan.paths.refit_packets(name))
-            prepare = ["prepare", *_scene_source(plan), "--fits", fits, "--out", packets, "--split", "test"]
-            prepare += _declared_test_scenes(plan)
-            prepare += [part for group in plan.benchmark.refit.scored for part in ("--group", group)]
-            prepare += ["--workers", plan.jobs]
-            stages.append(DemoStage(f"prepare {name}", prepare + plan.quiet))
-            scored = [("identity", name)]
-            scored += [(method, f"{method}-3D+")] if last and method != "identity" else []
-            for enhancer, row in scored:
-                run = ["run", "--method", enhancer, "--name", row, "--packets", packets, "--split", "test"]
-                run += ["--out", plan.rel(plan.paths.runs / row), "--refit", fits]
-                run += ["--checkpoint", checkpoints[enhancer]] if enhancer in checkpoints else []
-                stages.append(DemoStage(f"run {row}", run + plan.device_flag + _warp(plan) + plan.quiet))
+    out = plan.paths.refits(method)
+    for step in steps:
+        last = step == steps[-1]
+        name = f"{method}-3D" if last else f"{method}-3D-{step:06d}"
+        fits = plan.rel(out if last else snapshot_folder(out, step))
+        packets = plan.rel(plan.paths.refit_packets(name))
+        prepare = ["prepare", *_scene_source(plan), "--fits", fits, "--out", packets, "--split", "test"]
+        prepare += _declared_test_scenes(plan)
+        prepare += [part for group in plan.benchmark.refit.scored for part in ("--group", group)]
+        prepare += ["--workers", plan.jobs]
+        stages.append(DemoStage(f"prepare {name}", prepare + plan.quiet))
+        scored = [("identity", name)]
+        scored += [(method, f"{method}-3D+")] if last and method != "identity" else []
+        for enhancer, row in scored:
+            run = ["run", "--method", enhancer, "--name", row, "--packets", packets, "--split", "test"]
+            run += ["--out", plan.rel(plan.paths.runs / row), "--refit", fits]
+            run += ["--checkpoint", checkpoints[enhancer]] if enhancer in checkpoints else []
+            stages.append(DemoStage(f"run {row}", run + plan.device_flag + _warp(plan) + plan.quiet))
     return stages
 
 
@@ -379,7 +375,8 @@ def demo_stages(plan: DemoPlan, *, ablations: bool = False) -> DemoStages:
         runs=run_stages(plan),
         leaderboard=leaderboard_stage(plan),
         ablations=ablation_stages(plan) if ablations else [],
-        refits=refit_stages(plan) if plan.refit else [],
-        refit_scoring=refit_scoring_stages(plan) if plan.refit else [],
+        refits={m: refit_stages(plan, m) + refit_scoring_stages(plan, m) for m in METHODS}
+        if plan.refit
+        else {},
         compares=compare_stages(plan) if plan.refit else [],
     )

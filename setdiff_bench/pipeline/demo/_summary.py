@@ -4,6 +4,7 @@ provenance the numbers depend on, and the verdict on the benchmark's verdict gro
 
 from __future__ import annotations
 
+import functools
 import os
 import platform
 from dataclasses import asdict
@@ -94,8 +95,8 @@ def refit_verdict(metrics: pd.DataFrame, group: str) -> dict[str, Any]:
         if len(names) < 2:
             continue
         verdict["best"][method] = {
-            metric: max(
-                names, key=lambda n, m=metric: means.loc[n, m] * (1 if get_metric(m).higher_is_better else -1)
+            metric: functools.reduce(
+                lambda a, b, m=metric: b if better(m, means.loc[b, m], means.loc[a, m]) else a, names
             )
             for metric in VERDICT_METRICS
         }

@@ -51,8 +51,15 @@ def test_driving_refits_every_enhancer_on_each_test_scene_and_scores_three_rows(
     assert flags(prepare, "--group") == ["lane+2", "interp"]  # the store holds the scored groups only
     assert all(flags(s.argv, "--warp") == ["on"] for s in stages.runs)
     # 4 enhancers x the 2 test scenes x lane+2, snapshots every 100 steps, the shipped models
-    assert len(stages.refits) == 8
-    setdiff = [s.argv for s in stages.refits if s.name.startswith("refit setdiff ")]
+    refits = [s for own in stages.refits.values() for s in own if s.name.startswith("refit ")]
+    scoring = [s for own in stages.refits.values() for s in own if not s.name.startswith("refit ")]
+    assert len(refits) == 8
+    # each enhancer's refits come before the stages that score them
+    assert all(
+        own[0].name.startswith("refit ") and own[2].name.startswith("prepare ")
+        for own in stages.refits.values()
+    )
+    setdiff = [s.argv for s in stages.refits["setdiff"] if s.name.startswith("refit ")]
     assert [flags(a, "--scene") for a in setdiff] == [["scene_0000_02"], ["scene_0000_04"]]
     assert all(
         flags(a, "--checkpoint") == ["tiny_setdiff"] and flags(a, "--snapshot-every") == ["100"]
@@ -62,7 +69,7 @@ def test_driving_refits_every_enhancer_on_each_test_scene_and_scores_three_rows(
     # only the test scenes exist: each refit and prepare declares them, so all share the packets' split
     assert all(flags(a, "--test-scene") == ["scene_0000_02", "scene_0000_04"] for a in setdiff)
     assert flags(prepare, "--test-scene") == ["scene_0000_02", "scene_0000_04"]
-    runs = {s.name: s.argv for s in stages.refit_scoring if s.name.startswith("run ")}
+    runs = {s.name: s.argv for s in scoring if s.name.startswith("run ")}
     assert sorted(runs) == sorted(
         f"run {m}-3D{suffix}"
         for m in ("identity", "reproject", "difix", "setdiff")
@@ -90,11 +97,13 @@ def test_driving_refits_every_enhancer_on_each_test_scene_and_scores_three_rows(
 
 def test_sparse_refits_each_view_counts_fit_without_warp(tmp_path: Path) -> None:
     stages = demo_stages(plan("sparse", tmp_path))
-    assert len(stages.refits) == 4 * 2 * 3  # enhancers x walks x (n3, n6, n9)
-    assert {flags(s.argv, "--group")[0] for s in stages.refits} == {"n3", "n6", "n9"}
-    assert not any("--warp" in s.argv for s in [*stages.runs, *stages.refit_scoring])
-    assert all(flags(s.argv, "--protocol") == ["dl3dv_sparse_synthetic"] for s in stages.refits)
-    assert not any("--test-scene" in s.argv for s in [*stages.setup, *stages.refits, *stages.refit_scoring])
+    refit_work = [s for own in stages.refits.values() for s in own]
+    refits = [s for s in refit_work if s.name.startswith("refit ")]
+    assert len(refits) == 4 * 2 * 3  # enhancers x walks x (n3, n6, n9)
+    assert {flags(s.argv, "--group")[0] for s in refits} == {"n3", "n6", "n9"}
+    assert not any("--warp" in s.argv for s in [*stages.runs, *refit_work])
+    assert all(flags(s.argv, "--protocol") == ["dl3dv_sparse_synthetic"] for s in refits)
+    assert not any("--test-scene" in s.argv for s in [*stages.setup, *refit_work])
 
 
 def test_refit_verdict_and_report(tmp_path: Path) -> None:
