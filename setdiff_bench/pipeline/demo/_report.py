@@ -118,41 +118,59 @@ def report_markdown(summary: dict[str, Any], paths: DemoPaths) -> str:
 
 
 def refit_section(summary: dict[str, Any], paths: DemoPaths, leaderboard: str) -> list[str]:
-    """``demo --refit``: the ``X`` / ``X 3D`` / ``X 3D+`` table on the verdict group, which row wins each metric
-    per enhancer, and links to the refit-steps plot and the paired comparisons; ``[]`` for other demos."""
-    verdict = summary.get("refit") or {}
-    if not verdict.get("means"):
+    """``demo --refit``: per refitted group the ``X`` / ``X 3D`` / ``X 3D+`` table, the row with the best mean in
+    each metric per enhancer and the rows the paired intervals show winning; then links to the refit-steps plot
+    and the paired comparisons; ``[]`` for other demos."""
+    refit = summary.get("refit") or {}
+    verdicts = [v for v in refit.get("groups", []) if v.get("means")]
+    if not verdicts:
         return []
     specs = [get_metric(name) for name in VERDICT_METRICS]
-    warp = verdict.get("warp") or {}
+    warp = refit.get("warp") or {}
     lines = [
-        f"## X, X 3D and X 3D+ on {verdict['group']} ({verdict['targets']} targets)",
+        "## X, X 3D and X 3D+",
         "",
         "`X`: the enhancer on the fit's render; `X-3D`: the render of the fit refitted on `X`'s enhanced novel "
         "views (progressive schedule, docs/refit.md); `X-3D+`: `X` on that render; `identity-3D`: the refit "
-        "on un-enhanced renders, the schedule alone."
+        "on un-enhanced renders, the schedule alone. Best mean: the row with the best mean of the group; "
+        "paired intervals: the rows no other row beats with a paired interval by scene that excludes 0 "
+        "(one row: a winner; several: rows the intervals do not separate)."
         + (
             " warp: mean warp error of the row's camera sequences (all scored groups, MSE on the 0-255 scale)."
             if warp
             else ""
         ),
         "",
-        "| row | "
-        + " | ".join(f"{spec.label} {spec.arrow}" for spec in specs)
-        + (" | warp ↓ |" if warp else " |"),
-        "|---|" + "---:|" * (len(specs) + bool(warp)),
     ]
-    for method in METHODS:
-        for name in (method, f"{method}-3D", f"{method}-3D+"):
-            if name in verdict["means"]:
-                m = verdict["means"][name]
-                cells = [f"{m[spec.name]:.{spec.decimals}f}" for spec in specs]
-                cells += [f"{warp[name]:.1f}" if name in warp else "–"] if warp else []
-                lines.append(f"| {name} | " + " | ".join(cells) + " |")
-    lines.append("")
-    for method, best in verdict.get("best", {}).items():
-        said = ", ".join(f"{metric.upper()} `{name}`" for metric, name in best.items())
-        lines.append(f"- Best of `{method}`'s rows: {said}.")
+    for verdict in verdicts:
+        lines += [
+            f"### {verdict['group']} ({verdict['targets']} targets)",
+            "",
+            "| row | "
+            + " | ".join(f"{spec.label} {spec.arrow}" for spec in specs)
+            + (" | warp ↓ |" if warp else " |"),
+            "|---|" + "---:|" * (len(specs) + bool(warp)),
+        ]
+        for method in METHODS:
+            for name in (method, f"{method}-3D", f"{method}-3D+"):
+                if name in verdict["means"]:
+                    m = verdict["means"][name]
+                    cells = [f"{m[spec.name]:.{spec.decimals}f}" for spec in specs]
+                    cells += [f"{warp[name]:.1f}" if name in warp else "–"] if warp else []
+                    lines.append(f"| {name} | " + " | ".join(cells) + " |")
+        lines.append("")
+        winners = verdict.get("winners", {})
+        for method, best in verdict.get("best", {}).items():
+            said = ", ".join(f"{metric.upper()} `{name}`" for metric, name in best.items())
+            line = f"- `{method}`: best mean {said}"
+            if method in winners:
+                shown = "; ".join(
+                    f"{metric.upper()} " + ", ".join(f"`{n}`" for n in names)
+                    for metric, names in winners[method].items()
+                )
+                line += f"; paired intervals: {shown}"
+            lines.append(line + ".")
+        lines.append("")
     plot = f"{leaderboard}_refit_steps.png"
     if (paths.out / plot).is_file():
         lines.append(f"- Metrics and warp error against refit steps: [{plot}]({plot}).")

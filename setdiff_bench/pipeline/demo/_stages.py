@@ -293,8 +293,14 @@ def refit_scoring_stages(plan: DemoPlan, method: str) -> list[DemoStage]:
 
 
 #: The paired comparisons ``demo --refit`` writes (``compare A B``), by enhancer ``X``: what the refit adds
-#: over its own schedule, what post-processing the refit render adds, and refit against post-process.
-REFIT_COMPARISONS = (("{x}-3D", "identity-3D"), ("{x}-3D+", "{x}"), ("{x}-3D", "{x}"))
+#: over its own schedule, what post-processing the refit render adds, refit against post-process, and the
+#: last pair of X / X 3D / X 3D+ (so the report can say which of the three the intervals show winning).
+REFIT_COMPARISONS = (
+    ("{x}-3D", "identity-3D"),
+    ("{x}-3D+", "{x}"),
+    ("{x}-3D", "{x}"),
+    ("{x}-3D+", "{x}-3D"),
+)
 
 
 def compare_stages(plan: DemoPlan) -> list[DemoStage]:

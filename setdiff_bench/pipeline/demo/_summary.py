@@ -8,6 +8,7 @@ import functools
 import os
 import platform
 from dataclasses import asdict
+from pathlib import Path
 from typing import Any
 
 import pandas as pd
@@ -80,16 +81,41 @@ def lane_shift_verdict(metrics: pd.DataFrame, group: str) -> dict[str, Any]:
     return verdict
 
 
-def refit_verdict(metrics: pd.DataFrame, group: str) -> dict[str, Any]:
-    """``demo --refit``: per enhancer ``X``, the means of ``X``, ``X-3D`` and ``X-3D+`` on ``group`` and which
-    of them is best in each metric (its direction), with ``identity`` and ``identity-3D`` (the schedule alone).
+def interval_winners(comparisons: pd.DataFrame, group: str, names: list[str], metric: str) -> list[str]:
+    """The rows of ``names`` that no other row of ``names`` beats on ``group`` in ``metric`` with a paired
+    interval excluding 0 (``compare``'s ``holds``), in ``names``' order: one name is a winner the intervals
+    show, several are rows the intervals do not separate.
+
+    Args:
+        comparisons: ``compare`` tables (``compare_<a>_vs_<b>.parquet``) concatenated; their group-level rows
+            (``level == "group"``, ``key``: the group) are read, ``gain`` > 0 meaning ``a`` is better.
+    """
+    rows = comparisons[
+        (comparisons["level"] == "group") & (comparisons["key"] == group) & (comparisons["metric"] == metric)
+    ]
+    beaten = {
+        r.b if r.gain > 0 else r.a
+        for r in rows.itertuples()
+        if r.a in names and r.b in names and r.a != r.b and bool(r.holds)
+    }
+    return [name for name in names if name not in beaten]
+
+
+def refit_verdict(
+    metrics: pd.DataFrame, group: str, comparisons: pd.DataFrame | None = None
+) -> dict[str, Any]:
+    """``demo --refit``: per enhancer ``X``, the means of ``X``, ``X-3D`` and ``X-3D+`` on ``group``, which of
+    them has the best mean in each metric (its direction; ``best``) and, given the demo's paired comparisons,
+    which the intervals show winning (``winners``: :func:`interval_winners`), with ``identity`` and
+    ``identity-3D`` (the schedule alone).
 
     Args:
         metrics: per-target rows of the demo's runs (``metrics.parquet`` concatenated; ``method`` holds each
             run's name).
+        comparisons: the demo's ``compare`` tables concatenated (``None``: no ``winners``).
     """
     means, verdict = _group_means(metrics, group, counted="identity")
-    verdict["best"] = {}
+    verdict["best"], verdict["winners"] = {}, {}
     for method in METHODS:
         names = [n for n in (method, f"{method}-3D", f"{method}-3D+") if n in means.index]
         if len(names) < 2:
@@ -100,7 +126,17 @@ def refit_verdict(metrics: pd.DataFrame, group: str) -> dict[str, Any]:
             )
             for metric in VERDICT_METRICS
         }
+        if comparisons is not None and len(comparisons):
+            verdict["winners"][method] = {
+                metric: interval_winners(comparisons, group, names, metric) for metric in VERDICT_METRICS
+            }
     return verdict
+
+
+def read_comparisons(folder: Path) -> pd.DataFrame:
+    """Every ``compare`` table (``compare_*.parquet``) in ``folder``, concatenated (empty when there is none)."""
+    tables = [pd.read_parquet(p) for p in sorted(folder.glob("compare_*.parquet"))]
+    return pd.concat(tables, ignore_index=True) if tables else pd.DataFrame()
 
 
 def summarize(
@@ -113,7 +149,8 @@ def summarize(
 ) -> dict[str, Any]:
     """The demo's machine-readable summary: preset, stage commands and times, the verdict on the benchmark's
     verdict group (under its ``verdict_key``: ``lane_plus_2``, ``views_3``) and, for ``demo --refit`` (its rows
-    ``refit_rows``), the refit verdict on that group (``refit``: :func:`refit_verdict`)."""
+    ``refit_rows``), ``refit``: the refit verdict on each refitted group (``groups``: :func:`refit_verdict`, with
+    the winners the compare tables in ``paths.out`` show) and each row's mean warp error (``warp``)."""
     benchmark = get_benchmark(preset.benchmark)
     runs = refit_rows or list(METHODS)
     frames = [
@@ -124,14 +161,16 @@ def summarize(
     metrics = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
     extra = {}
     if refit_rows and len(metrics):
-        extra["refit"] = refit_verdict(metrics, benchmark.verdict_group)
-        warp = {
-            name: float(pd.read_parquet(paths.runs / name / SEQUENCES_FILE)["warp"].mean())
-            for name in refit_rows
-            if (paths.runs / name / SEQUENCES_FILE).is_file()
+        comparisons = read_comparisons(paths.out)
+        extra["refit"] = {
+            "groups": [refit_verdict(metrics, group, comparisons) for group in benchmark.refit.groups],
+            # mean over each run's camera sequences (every scored group's targets in frame order)
+            "warp": {
+                name: float(pd.read_parquet(paths.runs / name / SEQUENCES_FILE)["warp"].mean())
+                for name in refit_rows
+                if (paths.runs / name / SEQUENCES_FILE).is_file()
+            },
         }
-        if warp:  # mean over each run's camera sequences (every scored group's targets in frame order)
-            extra["refit"]["warp"] = warp
     return {
         **extra,
         "invocation": invocation,

@@ -17,7 +17,7 @@ from setdiff_bench.pipeline.demo._demo import check_folder
 from setdiff_bench.pipeline.demo._report import refit_section
 from setdiff_bench.pipeline.demo._scenes import scene_namer
 from setdiff_bench.pipeline.demo._stages import DemoPlan, demo_stages
-from setdiff_bench.pipeline.demo._summary import refit_verdict
+from setdiff_bench.pipeline.demo._summary import interval_winners, refit_verdict
 from setdiff_bench.pipeline.presets import DEMO_BENCHMARKS, get_demo_preset
 
 
@@ -87,11 +87,12 @@ def test_driving_refits_every_enhancer_on_each_test_scene_and_scores_three_rows(
         "identity-3D-000200",
         "reproject",
     ]
-    assert [s.name for s in stages.compares][:4] == [
+    assert [s.name for s in stages.compares][:5] == [
         "compare identity-3D identity",
         "compare reproject-3D identity-3D",
         "compare reproject-3D+ reproject",
         "compare reproject-3D reproject",
+        "compare reproject-3D+ reproject-3D",
     ]
 
 
@@ -104,6 +105,41 @@ def test_sparse_refits_each_view_counts_fit_without_warp(tmp_path: Path) -> None
     assert not any("--warp" in s.argv for s in [*stages.runs, *refit_work])
     assert all(flags(s.argv, "--protocol") == ["dl3dv_sparse_synthetic"] for s in refits)
     assert not any("--test-scene" in s.argv for s in [*stages.setup, *refit_work])
+
+
+def comparison(a: str, b: str, group: str, gains: dict[str, tuple[float, bool]]) -> pd.DataFrame:
+    """Group-level rows of a ``compare a b`` table: ``{metric: (gain, interval excludes 0)}``."""
+    return pd.DataFrame(
+        {
+            "a": a,
+            "b": b,
+            "level": "group",
+            "key": group,
+            "metric": list(gains),
+            "gain": [g for g, _ in gains.values()],
+            "holds": [h for _, h in gains.values()],
+        }
+    )
+
+
+def test_interval_winners_are_the_rows_no_interval_beats() -> None:
+    names = ["setdiff", "setdiff-3D", "setdiff-3D+"]
+    comparisons = pd.concat(
+        [
+            # 3D+ beats X and 3D on PSNR; on SSIM only 3D > X holds (3D+ and 3D not separated)
+            comparison("setdiff-3D+", "setdiff", "n3", {"psnr": (0.5, True), "ssim": (0.01, False)}),
+            comparison("setdiff-3D", "setdiff", "n3", {"psnr": (-0.2, True), "ssim": (0.02, True)}),
+            comparison("setdiff-3D+", "setdiff-3D", "n3", {"psnr": (0.7, True), "ssim": (-0.01, False)}),
+            # another group's rows and pairs outside the three do not count
+            comparison("setdiff", "setdiff-3D+", "n6", {"psnr": (1.0, True)}),
+            comparison("setdiff-3D", "identity-3D", "n3", {"psnr": (-3.0, True)}),
+        ]
+    )
+    assert interval_winners(comparisons, "n3", names, "psnr") == ["setdiff-3D+"]
+    assert interval_winners(comparisons, "n3", names, "ssim") == ["setdiff-3D", "setdiff-3D+"]
+    # on n6 only X vs X 3D+ was compared: X 3D, never compared, is not shown to lose either
+    assert interval_winners(comparisons, "n6", names, "psnr") == ["setdiff", "setdiff-3D"]
+    assert interval_winners(comparisons, "n3", names, "lpips") == names  # no comparison: nothing shown
 
 
 def test_refit_verdict_and_report(tmp_path: Path) -> None:
@@ -124,17 +160,32 @@ def test_refit_verdict_and_report(tmp_path: Path) -> None:
             ),
         ]
     )
-    verdict = refit_verdict(metrics, "lane+2")
+    comparisons = pd.concat(
+        [
+            comparison("setdiff-3D+", "setdiff", "lane+2", {"psnr": (0.5, False), "lpips": (0.05, True)}),
+            comparison("setdiff-3D", "setdiff", "lane+2", {"psnr": (-0.5, False), "lpips": (-0.05, True)}),
+            comparison("setdiff-3D+", "setdiff-3D", "lane+2", {"psnr": (1.0, True), "lpips": (0.1, True)}),
+        ]
+    )
+    verdict = refit_verdict(metrics, "lane+2", comparisons)
     assert verdict["targets"] == 2 and verdict["means"]["setdiff"]["psnr"] == 19.0  # interp left out
     assert verdict["best"]["setdiff"] == {"psnr": "setdiff-3D+", "ssim": "setdiff", "lpips": "setdiff-3D+"}
     assert verdict["best"]["identity"]["lpips"] == "identity-3D"
-    verdict["warp"] = {"setdiff": 800.0, "setdiff-3D": 700.0}
-    section = "\n".join(
-        refit_section({"refit": verdict}, DemoPaths(tmp_path, tmp_path / "work"), "synthetic")
-    )
+    assert verdict["winners"]["setdiff"] == {
+        "psnr": ["setdiff", "setdiff-3D+"],  # 3D+ - X does not hold
+        "ssim": ["setdiff", "setdiff-3D", "setdiff-3D+"],
+        "lpips": ["setdiff-3D+"],
+    }
+    assert refit_verdict(metrics, "lane+2")["winners"] == {}  # no comparisons: no winners said
+    refit = {"groups": [verdict], "warp": {"setdiff": 800.0, "setdiff-3D": 700.0}}
+    section = "\n".join(refit_section({"refit": refit}, DemoPaths(tmp_path, tmp_path / "work"), "synthetic"))
+    assert "### lane+2 (2 targets)" in section
     assert "| setdiff-3D | 18.50 | 0.500 | 0.250 | 700.0 |" in section
     assert "| setdiff-3D+ | 19.50 | 0.500 | 0.150 | – |" in section
-    assert "Best of `setdiff`'s rows: PSNR `setdiff-3D+`, SSIM `setdiff`, LPIPS `setdiff-3D+`." in section
+    assert (
+        "- `setdiff`: best mean PSNR `setdiff-3D+`, SSIM `setdiff`, LPIPS `setdiff-3D+`; paired intervals: "
+        "PSNR `setdiff`, `setdiff-3D+`; SSIM `setdiff`, `setdiff-3D`, `setdiff-3D+`; LPIPS `setdiff-3D+`."
+    ) in section
     assert refit_section({}, DemoPaths(tmp_path, tmp_path / "work"), "synthetic") == []
 
 
@@ -159,9 +210,9 @@ def test_tiny_refit_demo_end_to_end(tmp_path: Path) -> None:
     out = tmp_path / "refit"
     assert main(["demo", "--preset", "tiny", "--refit", "--out", str(out), "--no-progress"]) == 0
     board = pd.read_parquet(out / "synthetic.parquet")
-    assert (out / "synthetic_refit_steps.png").is_file() and len(list(out.glob("compare_*.md"))) == 10
+    assert (out / "synthetic_refit_steps.png").is_file() and len(list(out.glob("compare_*.md"))) == 13
     readme = (out / "README.md").read_text()
-    assert "## X, X 3D and X 3D+ on lane+2" in readme and "setdiff-3D+" in readme
+    assert "### lane+2 (" in readme and "paired intervals:" in readme and "setdiff-3D+" in readme
     rows = set(board["method"])
     assert {"identity", "identity-3D", "setdiff", "setdiff-3D", "setdiff-3D+", "difix-3D-000100"} <= rows
     assert len(rows) == 19  # 4 enhancers x (X, X-3D, 2 snapshots) + 3 X-3D+
