@@ -173,7 +173,8 @@ def refit_section(summary: dict[str, Any], paths: DemoPaths, leaderboard: str) -
         lines.append("")
     plot = f"{leaderboard}_refit_steps.png"
     if (paths.out / plot).is_file():
-        lines.append(f"- Metrics and warp error against refit steps: [{plot}]({plot}).")
+        against = "Metrics and warp error" if warp else "Metrics"
+        lines.append(f"- {against} against refit steps: [{plot}]({plot}).")
     compares = sorted(p.name for p in paths.out.glob("compare_*.md"))
     if compares:
         lines.append("- Paired gains by scene: " + ", ".join(f"[{n}]({n})" for n in compares) + ".")

@@ -187,6 +187,10 @@ def test_refit_verdict_and_report(tmp_path: Path) -> None:
         "PSNR `setdiff`, `setdiff-3D+`; SSIM `setdiff`, `setdiff-3D`, `setdiff-3D+`; LPIPS `setdiff-3D+`."
     ) in section
     assert refit_section({}, DemoPaths(tmp_path, tmp_path / "work"), "synthetic") == []
+    (tmp_path / "synthetic_refit_steps.png").write_bytes(b"")  # the plot is linked, warp named only if scored
+    for scored, said in ((refit["warp"], "Metrics and warp error against"), ({}, "- Metrics against")):
+        summary = {"refit": {**refit, "warp": scored}}
+        assert said in "\n".join(refit_section(summary, DemoPaths(tmp_path, tmp_path / "work"), "synthetic"))
 
 
 def test_refit_demo_refuses_train_and_another_demos_folder(
