@@ -115,7 +115,13 @@ def test_each_benchmark_has_its_own_folder_and_a_published_run(name):
     )
 
 
-def test_the_driving_refit_demo_is_published():
-    refit = DEMO_BENCHMARKS["driving"].refit
-    assert (RESULTS_FOLDER / refit.published / "synthetic.parquet").is_file()
-    assert (RESULTS_FOLDER / refit.published / "synthetic_refit_steps.png").is_file()
+@pytest.mark.parametrize("name", sorted(DEMO_BENCHMARKS))
+def test_each_refit_demo_is_published_with_every_comparison(name):
+    benchmark = DEMO_BENCHMARKS[name]
+    published = RESULTS_FOLDER / benchmark.refit.published
+    assert (published / f"{benchmark.leaderboard}.parquet").is_file()
+    assert (published / f"{benchmark.leaderboard}_refit_steps.png").is_file()
+    # identity-3D vs identity, and four per other enhancer (demo._stages.REFIT_COMPARISONS)
+    assert len(list(published.glob("compare_*.parquet"))) == 13
+    readme = (published / "README.md").read_text(encoding="utf-8")
+    assert all(f"### {group} (" in readme for group in benchmark.refit.groups)
