@@ -29,7 +29,9 @@ and, per set-mixer layer (one pass without guidance, the whole packet as one set
   true-geometry twin, ``benchmarks/true_geometry_store.py``): lift on true correspondences.
 
 The C-map bias is the model's own: absolute (``cmap_distance``) or relative to the query token's
-footprint (``cmap_relative``, on ray-snapped points).
+footprint (``cmap_relative``, on ray-snapped points).  A ``knn`` layer's weights are its own restricted
+softmax (own view, k nearest reference tokens, "no match" key; :func:`knn_weights`), so its ``reference_mass``
+and lifts count only the k neighbours it may reach, and its rows leave out the "no match" share.
 
 Usage (on the demo's packets and the shipped model)::
 
@@ -156,6 +158,43 @@ def correspondence(
     }
 
 
+def knn_weights(
+    processor: Any,
+    attn: Any,
+    logits: torch.Tensor,
+    query: torch.Tensor,
+    kwargs: dict[str, Any],
+    sets: int,
+    views: int,
+    tokens: int,
+) -> torch.Tensor:
+    """The attention weights ``(T, T)`` (mean over sets and heads) of a ``knn`` set-mixing layer, as
+    :func:`~setdiff_bench.models.setdiff.set_mixer.nearest_reference_attention` computes them: each query's
+    softmax over its own view's tokens, its ``k`` nearest reference tokens of the other views and the learned
+    "no match" key; ``logits`` ``(S, h, T, T)`` already hold the C-map bias.  The "no match" key's share is
+    left out, so a row sums to one minus it."""
+    total = views * tokens
+    references = int(kwargs.get("num_references") or 0)
+    view_of = torch.arange(total) // tokens
+    allowed = (view_of[:, None] == view_of[None, :]).expand(sets, total, total).clone()
+    if kwargs.get("token_points") is not None and references > 0:
+        geometry = set_mixer.pool_token_geometry(kwargs["token_points"], tokens).grouped(sets)
+        index_of = torch.arange(total)
+        set_index = torch.arange(sets)[:, None, None]
+        for view in range(views):
+            rows = slice(view * tokens, (view + 1) * tokens)
+            candidates = index_of[(index_of < references * tokens) & (view_of != view)]
+            index, found = set_mixer.nearest_reference_keys(geometry, rows, candidates, processor.neighbours)
+            row_index = index_of[rows].expand(sets, -1)[..., None].expand_as(index)
+            allowed[set_index.expand_as(index)[found], row_index[found], index[found]] = True
+    heads, head_dim = query.shape[1], query.shape[-1]
+    spare_key = getattr(attn, set_mixer.NO_MATCH_KEY).reshape(heads, head_dim).to(query.dtype)
+    spare = (query * spare_key[None, :, None]).sum(-1, keepdim=True) / head_dim**0.5  # (S, h, T, 1)
+    masked = logits.float().masked_fill(~allowed[:, None], -math.inf)
+    weights = torch.softmax(torch.cat([masked, spare.float()], dim=-1), dim=-1)[..., :total]
+    return weights.mean(dim=(0, 1))
+
+
 def attention_stats(
     record: list[dict[str, float]],
     points: torch.Tensor,
@@ -186,7 +225,12 @@ def attention_stats(
                     logits = logits + set_mixer.distance_bias(
                         geometry.points, geometry.valid, log_scale.exp()
                     )
-            weights = torch.softmax(logits.float(), dim=-1).mean(dim=(0, 1))  # (T, T), over sets and heads
+            if getattr(self, "attention", "full") == "knn":
+                weights = knn_weights(self, attn, logits, query, kwargs, sets, views, tokens)
+            else:
+                weights = torch.softmax(logits.float(), dim=-1).mean(
+                    dim=(0, 1)
+                )  # (T, T), over sets and heads
             total = views * tokens
             view_of = torch.arange(total) // tokens
             own = (view_of[:, None] == view_of[None, :]).float()
