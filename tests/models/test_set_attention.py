@@ -155,6 +155,25 @@ def test_knn_without_points_is_own_view_and_no_match() -> None:
         SetSelfAttnProcessor("knn")(attn, tokens, **set_kwargs(3))
 
 
+def test_knn_with_a_bias_and_no_references_is_own_view_and_no_match() -> None:
+    """A set without references (the usage control "references removed") has no neighbour to fetch, also in
+    a layer with a C-map bias: every token at the same point, so the bias is 0 and the own view is exact."""
+    attn = attention_layer()
+    generator = torch.Generator().manual_seed(7)
+    for name in (NO_MATCH_KEY, NO_MATCH_VALUE):
+        attn.register_parameter(name, torch.nn.Parameter(torch.randn(32, generator=generator)))
+    attn.register_parameter(set_mixer.BIAS_PARAMETER, torch.nn.Parameter(torch.tensor(0.5)))
+    tokens = torch.randn(3, 4, 32, generator=generator)
+    points = cell_points([[(1.0, 2.0, 3.0)] * 4] * 3, [[1] * 4] * 3)
+    allowed = {t: list(range(t // 4 * 4, t // 4 * 4 + 4)) for t in range(12)}
+    with torch.no_grad():
+        mixed = SetSelfAttnProcessor("knn", neighbours=2)(
+            attn, tokens, **set_kwargs(3, points, num_references=0)
+        )
+        expected = naive_knn(attn, tokens, allowed)
+    torch.testing.assert_close(mixed, expected, atol=1e-5, rtol=1e-5)
+
+
 def test_relative_bias_by_hand() -> None:
     """Query at the origin with footprint 0.5; keys at x = 1 (r² = 4), x = 10 (r² = 400 → cap 64)."""
     geometry = TokenGeometry(

@@ -268,7 +268,9 @@ def pair_bias(
     def gathered(x: torch.Tensor, index: torch.Tensor) -> torch.Tensor:  # (S, T, ...) at (S, Q, K)
         flat = index.reshape(index.shape[0], -1)
         if x.ndim == 3:
-            return torch.gather(x, 1, flat[..., None].expand(-1, -1, x.shape[-1])).reshape(*index.shape, -1)
+            return torch.gather(x, 1, flat[..., None].expand(-1, -1, x.shape[-1])).reshape(
+                *index.shape, x.shape[-1]
+            )
         return torch.gather(x, 1, flat).reshape(index.shape)
 
     difference = gathered(geometry.points, query_index) - gathered(geometry.points, key_index)
