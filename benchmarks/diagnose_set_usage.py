@@ -84,9 +84,10 @@ ProcessorBody = Callable[[Any, Any, torch.Tensor, int | None, dict[str, Any]], t
 
 
 def processor_call(body: ProcessorBody) -> ProcessorCall:
-    """A processor ``__call__`` with the parameters diffusers looks for (it passes ``num_views`` and
-    ``token_points`` only to named parameters) that calls ``body(self, attn, hidden_states, num_views,
-    kwargs)``; ``kwargs`` holds ``token_points`` when the model sends them (the C-map distance bias)."""
+    """A processor ``__call__`` with the parameters diffusers looks for (it passes ``num_views``,
+    ``token_points`` and ``num_references`` only to named parameters) that calls ``body(self, attn,
+    hidden_states, num_views, kwargs)``; ``kwargs`` holds ``token_points`` (the C-map distance bias) and
+    ``num_references`` (``knn`` layers) when the model sends them."""
 
     def call(
         self: Any,
@@ -97,10 +98,13 @@ def processor_call(body: ProcessorBody) -> ProcessorCall:
         temb: Any = None,
         num_views: int | None = None,
         token_points: torch.Tensor | None = None,
+        num_references: int | None = None,
         **kwargs: Any,
     ) -> torch.Tensor:
         if token_points is not None:
             kwargs["token_points"] = token_points
+        if num_references is not None:
+            kwargs["num_references"] = num_references
         return body(self, attn, hidden_states, num_views, kwargs)
 
     return call
@@ -112,7 +116,7 @@ def zeroed(original: ProcessorCall) -> ProcessorCall:
     def body(
         self: Any, attn: Any, hidden_states: torch.Tensor, num_views: int | None, kwargs: dict[str, Any]
     ) -> torch.Tensor:
-        return 0.0 * original(self, attn, hidden_states, num_views=num_views)
+        return 0.0 * original(self, attn, hidden_states, num_views=num_views, **kwargs)
 
     return processor_call(body)
 
