@@ -7,7 +7,8 @@ Per arm (``--arm NAME=WORK``; WORK holds what these commands wrote):
   store (test split) — means per group and the paired gain per group and per scene (``reporting.paired``);
 * ``runs/sets4-NAME`` (optional): the model run with ``-o targets_per_set=4``, the largest target count of its
   training sets (the default enhances a packet's 13 targets in one set);
-* ``abl/ablation_setsize.md``: ``setdiff-bench ablate setsize --sizes 1+1,2+1,3+1`` on the arm's n3 test packets;
+* ``abl/ablation_setsize.md``: ``setdiff-bench ablate setsize --sizes 1+1,2+1,3+1`` on the arm's n3 test packets
+  (and, from its ``abl/work/ablation_setsize/runs``, the PSNR steps between set sizes per scene);
 * ``usage.json``: ``benchmarks/diagnose_set_usage.py --group n3 --other-scene --true-packets TWIN``.
 
     python benchmarks/sparse_set_arms.py --arm fit=WORK_FIT --arm true=WORK_TRUE --out sparse_set_arms
@@ -54,6 +55,33 @@ def paired_by_scene(model: Path, render: Path) -> dict[str, dict[str, Any]]:
         }
         for group, rows in joined.groupby("group")
     }
+
+
+def setsize_steps(runs: Path, render: Path) -> dict[str, dict[str, Any]]:
+    """The set-size ablation's PSNR steps on the n3 targets (``runs/<N+1>/metrics.parquet``, paired by target):
+    2+1 − 1+1, 3+1 − 2+1, 3+1 − 1+1 and 3+1 − the render, each as the mean and per scene."""
+    keys = ["packet_id", "view"]
+    frames = {
+        size: pd.read_parquet(runs / size / "metrics.parquet").set_index(keys)
+        for size in ("1+1", "2+1", "3+1")
+    }
+    rendered = pd.read_parquet(render / "metrics.parquet").set_index(keys)
+    psnr = pd.DataFrame({size: frame["psnr"] for size, frame in frames.items()})
+    psnr["render"] = rendered["psnr"].reindex(psnr.index)
+    scene = frames["3+1"]["scene"]
+    steps = {}
+    for name, (a, b) in {
+        "2+1 - 1+1": ("2+1", "1+1"),
+        "3+1 - 2+1": ("3+1", "2+1"),
+        "3+1 - 1+1": ("3+1", "1+1"),
+        "3+1 - render": ("3+1", "render"),
+    }.items():
+        gain = psnr[a] - psnr[b]
+        steps[name] = {
+            "psnr_gain": round(float(gain.mean()), 4),
+            "psnr_gain_per_scene": {str(s): round(float(g.mean()), 4) for s, g in gain.groupby(scene)},
+        }
+    return steps
 
 
 def usage_summary(path: Path) -> dict[str, Any]:
@@ -117,6 +145,9 @@ def main() -> None:
                 for line in table.read_text().splitlines()
                 if line.startswith(("| ", "- PSNR", "- SSIM", "- LPIPS"))
             ]
+        ablation_runs = root / "abl" / "work" / "ablation_setsize" / "runs"
+        if (ablation_runs / "3+1" / "metrics.parquet").is_file():
+            arm["setsize_steps_n3"] = setsize_steps(ablation_runs, render)
         usage = root / "usage.json"
         if usage.is_file():
             arm["set_usage_n3"] = usage_summary(usage)
