@@ -231,10 +231,8 @@ def attention_stats(
                     )
             if getattr(self, "attention", "full") == "knn":
                 weights = knn_weights(self, attn, logits, query, kwargs, sets, views, tokens)
-            else:
-                weights = torch.softmax(logits.float(), dim=-1).mean(
-                    dim=(0, 1)
-                )  # (T, T), over sets and heads
+            else:  # (T, T), the mean over sets and heads
+                weights = torch.softmax(logits.float(), dim=-1).mean(dim=(0, 1))
             total = views * tokens
             view_of = torch.arange(total) // tokens
             own = (view_of[:, None] == view_of[None, :]).float()
