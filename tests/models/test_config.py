@@ -76,6 +76,8 @@ AB_CONFIGS: dict[str, tuple[str, dict[tuple[str, str], object]]] = {
         f"{teacher}_finetune.toml": ("tiny_setdiff", {**FINE_TUNE, ("train", "init_from"): teacher})
         for teacher in ("tiny_setdiff", "tiny_setdiff_sparse")
     },
+    # issue 52: the test-shaped sets recipe with kNN attention at the 576-token layers (bias vs kNN)
+    "tiny_setdiff_sparse_sets_knn.toml": ("tiny_setdiff_sparse_sets", {("model", "set_attention"): ["knn"]}),
     "tiny_setdiff_student_view0.toml": ("tiny_setdiff_student", {("model", "set_attention"): ["view"]}),
     "tiny_setdiff_sparse_student_view0.toml": (
         "tiny_setdiff_sparse_student",
