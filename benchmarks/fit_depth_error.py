@@ -75,11 +75,10 @@ def ray_peak_depth(model: GaussianModel, camera: Camera, tile_size: int = 8) -> 
     gradient = -pulled[:, :2] * (z.square() / (mean * pulled).sum(-1).clamp_min(1e-30))[:, None]
     offset = z - gradient[:, 0] * mean[:, 0] / z - gradient[:, 1] * mean[:, 1] / z
     features = torch.stack([offset, gradient[:, 0], gradient[:, 1]], dim=1).float()
-    w2c32, K32 = w2c.float(), K.float()
+    parameters = (model.means, model.quats, model.scales, model.opacities)
     projection = torch_ref.project(
-        model.means.detach(), model.quats.detach(), model.scales.detach(), model.opacities.detach(),
-        w2c32, K32, camera.width, camera.height,
-    )  # fmt: skip
+        *(p.detach() for p in parameters), w2c.float(), K.float(), camera.width, camera.height
+    )
     rasterize = cpu_rasterizer.rasterize if cpu_rasterizer.handles(features) else torch_ref.rasterize
     image, alpha = rasterize(projection, features, camera.width, camera.height, tile_size=tile_size)
     fx, fy, cx, cy = (float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2]))
