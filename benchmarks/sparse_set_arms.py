@@ -39,49 +39,46 @@ def group_means(run: Path) -> dict[str, dict[str, float]]:
     }
 
 
+#: A run's metrics rows are one target view each.
+KEYS = ["packet_id", "view"]
+
+
+def target_metrics(run: Path) -> pd.DataFrame:
+    """A run's ``metrics.parquet``, indexed by target."""
+    return pd.read_parquet(run / "metrics.parquet").set_index(KEYS)
+
+
+def gain_summary(gain: pd.Series, scene: pd.Series) -> dict[str, Any]:
+    """Per-target PSNR gains (dB): their mean and the mean per scene."""
+    return {
+        "psnr_gain": round(float(gain.mean()), 4),
+        "psnr_gain_per_scene": {str(s): round(float(g.mean()), 4) for s, g in gain.groupby(scene)},
+    }
+
+
 def paired_by_scene(model: Path, render: Path) -> dict[str, dict[str, Any]]:
     """Per group: the mean PSNR gain over the render, and per scene (positive = the model better)."""
-    keys = ["packet_id", "view"]
-    a = pd.read_parquet(model / "metrics.parquet").set_index(keys)
-    b = pd.read_parquet(render / "metrics.parquet").set_index(keys)
+    a, b = target_metrics(model), target_metrics(render)
     joined = a[["group", "scene", "psnr"]].join(b[["psnr"]].rename(columns={"psnr": "psnr_render"}))
-    joined["gain"] = joined["psnr"] - joined["psnr_render"]
+    gain = joined["psnr"] - joined["psnr_render"]
     return {
-        str(group): {
-            "psnr_gain": round(float(rows["gain"].mean()), 4),
-            "psnr_gain_per_scene": {
-                str(s): round(float(r["gain"].mean()), 4) for s, r in rows.groupby("scene")
-            },
-        }
-        for group, rows in joined.groupby("group")
+        str(group): gain_summary(gain[rows.index], rows["scene"]) for group, rows in joined.groupby("group")
     }
 
 
 def setsize_steps(runs: Path, render: Path) -> dict[str, dict[str, Any]]:
     """The set-size ablation's PSNR steps on the n3 targets (``runs/<N+1>/metrics.parquet``, paired by target):
     2+1 − 1+1, 3+1 − 2+1, 3+1 − 1+1 and 3+1 − the render, each as the mean and per scene."""
-    keys = ["packet_id", "view"]
-    frames = {
-        size: pd.read_parquet(runs / size / "metrics.parquet").set_index(keys)
-        for size in ("1+1", "2+1", "3+1")
-    }
-    rendered = pd.read_parquet(render / "metrics.parquet").set_index(keys)
+    frames = {size: target_metrics(runs / size) for size in ("1+1", "2+1", "3+1")}
     psnr = pd.DataFrame({size: frame["psnr"] for size, frame in frames.items()})
-    psnr["render"] = rendered["psnr"].reindex(psnr.index)
-    scene = frames["3+1"]["scene"]
-    steps = {}
-    for name, (a, b) in {
+    psnr["render"] = target_metrics(render)["psnr"].reindex(psnr.index)
+    pairs = {
         "2+1 - 1+1": ("2+1", "1+1"),
         "3+1 - 2+1": ("3+1", "2+1"),
         "3+1 - 1+1": ("3+1", "1+1"),
         "3+1 - render": ("3+1", "render"),
-    }.items():
-        gain = psnr[a] - psnr[b]
-        steps[name] = {
-            "psnr_gain": round(float(gain.mean()), 4),
-            "psnr_gain_per_scene": {str(s): round(float(g.mean()), 4) for s, g in gain.groupby(scene)},
-        }
-    return steps
+    }
+    return {name: gain_summary(psnr[a] - psnr[b], frames["3+1"]["scene"]) for name, (a, b) in pairs.items()}
 
 
 def usage_summary(path: Path) -> dict[str, Any]:
