@@ -45,6 +45,7 @@ from benchmarks.reference_ceiling import true_depths
 from benchmarks.reproject_geometry import packet_and_world
 from benchmarks.sparse_geometry_audit import Histogram
 from setdiff_bench.cameras import Camera
+from setdiff_bench.errors import SetDiffBenchError
 from setdiff_bench.gaussians.backends import cpu_rasterizer, torch_ref
 from setdiff_bench.gaussians.model import GaussianModel
 from setdiff_bench.gaussians.ply import read_ply
@@ -118,32 +119,31 @@ class RoleErrors:
         }
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--packets", required=True, type=Path, help="packet store (test split)")
-    parser.add_argument("--scenes", required=True, type=Path, help="the walks' folders (with fits/)")
-    parser.add_argument("--group", action="append", help="view groups (default n3)")
-    parser.add_argument("--packets-max", type=int, default=4, help="packets per walk and group")
-    parser.add_argument("--out", default="sparse_fit_depth_error", help="result name in benchmarks/results/")
-    args = parser.parse_args()
-    torch.set_num_threads(1)
-    groups = args.group or ["n3"]
-    store = PacketStore(args.packets)
+def choose_packets(store: PacketStore, groups: list[str], per_walk: int) -> dict[tuple[str, str], list[str]]:
+    """The first ``per_walk`` test packets of each walk in each of ``groups``, by ``(group, walk)``."""
     chosen: dict[tuple[str, str], list[str]] = {}
     for packet_id in store.packet_ids("test"):
         _, walk, group, _ = packet_id.split("__")
-        if group in groups and len(chosen.setdefault((group, walk), [])) < args.packets_max:
+        if group in groups and len(chosen.setdefault((group, walk), [])) < per_walk:
             chosen[(group, walk)].append(packet_id)
-    if not chosen:
-        parser.error(f"--packets {args.packets}: no test packets of groups {groups}")
-    errors = {g: {d: {r: RoleErrors() for r in ("references", "targets")} for d in DEPTHS} for g in groups}
+    return chosen
+
+
+def measure(
+    store: PacketStore, scenes: Path, chosen: dict[tuple[str, str], list[str]]
+) -> dict[str, dict[str, dict[str, RoleErrors]]]:
+    """The pooled errors by group, depth definition and role of the ``chosen`` packets."""
+    errors: dict[str, dict[str, dict[str, RoleErrors]]] = {}
     worlds: dict[str, GaussianModel] = {}
     fits: dict[Path, GaussianModel] = {}
     ids = [(group, pid) for (group, _), pids in sorted(chosen.items()) for pid in pids]
     for group, packet_id in tqdm(ids, desc="packets"):
-        packet, _, _, cameras, world = packet_and_world(store, packet_id, args.scenes, worlds)
+        by_depth = errors.setdefault(
+            group, {d: {r: RoleErrors() for r in ("references", "targets")} for d in DEPTHS}
+        )
+        packet, _, _, cameras, world = packet_and_world(store, packet_id, scenes, worlds)
         fit_key = str(store.rows(packet_id)["fit_key"].iloc[0])
-        ply = args.scenes / packet.scene / "fits" / f"{fit_key}.ply"
+        ply = scenes / packet.scene / "fits" / f"{fit_key}.ply"
         if ply not in fits:
             fits[ply] = read_ply(ply)
         model = fits[ply]
@@ -159,7 +159,29 @@ def main() -> int:
             role = "references" if view < len(packet.references) else "targets"
             keep = surface[view]
             for name in DEPTHS:
-                errors[group][name][role].add(depth[name][view][keep], depth_true[view][keep])
+                by_depth[name][role].add(depth[name][view][keep], depth_true[view][keep])
+    return errors
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--packets", required=True, type=Path, help="packet store (test split)")
+    parser.add_argument("--scenes", required=True, type=Path, help="the walks' folders (with fits/)")
+    parser.add_argument("--group", action="append", help="view groups (default n3)")
+    parser.add_argument("--packets-max", type=int, default=4, help="packets per walk and group")
+    parser.add_argument("--out", default="sparse_fit_depth_error", help="result name in benchmarks/results/")
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    groups = args.group or ["n3"]
+    try:
+        store = PacketStore(args.packets)
+        chosen = choose_packets(store, groups, args.packets_max)
+        if not chosen:
+            parser.error(f"--packets {args.packets}: no test packets of groups {groups}")
+        errors = measure(store, args.scenes, chosen)
+    except (SetDiffBenchError, OSError) as error:  # a missing store, scene, fit or image: one line, exit 2
+        print(f"fit_depth_error: error: {error}", file=sys.stderr)
+        return 2
     payload = {
         "benchmark": "sparse_fit_depth_error",
         "command": "python benchmarks/fit_depth_error.py " + " ".join(sys.argv[1:]),
